@@ -1,0 +1,31 @@
+# Unit tests: every test/unit/*_test.cpp is its own GoogleTest target linked against both
+# cores and the shared main (Debian's catkin links catkin_add_gtest targets without gtest_main).
+file(GLOB GEAR_UNIT_TESTS CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test/unit/*_test.cpp)
+add_library(gear_test_main STATIC ${CMAKE_CURRENT_SOURCE_DIR}/test/unit/support/gtest_main.cpp)
+target_link_libraries(gear_test_main PUBLIC ${GTEST_LIBRARIES})
+target_include_directories(gear_test_main PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/test/unit/support)
+foreach(src IN LISTS GEAR_UNIT_TESTS)
+  get_filename_component(name ${src} NAME_WE)
+  catkin_add_gtest(${name} ${src} WORKING_DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR})
+  target_link_libraries(${name} gear_test_main gear_damping_id_core gear_sim_io)
+  target_compile_options(${name} PRIVATE ${GEAR_WARNINGS})
+  target_compile_definitions(${name} PRIVATE GEAR_SOURCE_DIR="${CMAKE_CURRENT_SOURCE_DIR}")
+endforeach()
+
+# Integration tests (rostest): tester executables in test/rostest/*_tester.cpp, reused by
+# the .test files beside them. Each .test file is registered with add_rostest.
+find_package(rostest REQUIRED)
+file(GLOB GEAR_ROSTEST_TESTERS CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test/rostest/*_tester.cpp)
+foreach(src IN LISTS GEAR_ROSTEST_TESTERS)
+  get_filename_component(name ${src} NAME_WE)
+  add_executable(${name} EXCLUDE_FROM_ALL ${src})
+  target_link_libraries(${name} gear_damping_id_core gear_sim_io ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+  target_compile_options(${name} PRIVATE ${GEAR_WARNINGS})
+  add_dependencies(${name} ${PROJECT_NAME}_generate_messages_cpp)
+  add_dependencies(tests ${name})
+endforeach()
+file(GLOB GEAR_ROSTESTS CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test/rostest/*.test)
+foreach(t IN LISTS GEAR_ROSTESTS)
+  file(RELATIVE_PATH rel ${CMAKE_CURRENT_SOURCE_DIR} ${t})
+  add_rostest(${rel})
+endforeach()
