@@ -1,0 +1,100 @@
+// Options and results of the integral-method damping identification (DESIGN.md §4).
+// Shared by the integral method (integral_method.hpp), the modeled response / output-error
+// refinement and the `analyze` tool and nodes. No ROS; SI units.
+#pragma once
+
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace gear_damping_id {
+
+/// What is known about stiffness and forcing (DESIGN §4):
+/// - Known:   K(t), F(t) known series; unknowns per window y_T, alpha; per segment C.
+/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per segment.
+/// - Paper:   eqs. (11)-(16) as printed: K_i and F_i unknown constants per segment.
+/// - Legacy:  the earlier constant-load formulation (forcing = its mean, one unknown constant
+///            stiffness), kept to reproduce the paper's §4.1 failure.
+enum class Formulation { Known, Greybox, Paper, Legacy };
+
+/// How C varies: one per segment, one shared by all segments, or c(t) = c0 + c1*T1(t).
+enum class DampingModel { Piecewise, Constant, LoadLaw };
+
+std::string toString(Formulation f);
+std::string toString(DampingModel m);
+/// Parses "known|greybox|paper|legacy" / "piecewise|constant|load_law"; false if unknown.
+bool parseFormulation(const std::string& s, Formulation* out);
+bool parseDampingModel(const std::string& s, DampingModel* out);
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct IdentificationOptions {
+  Formulation formulation = Formulation::Known;
+  DampingModel model = DampingModel::Piecewise;
+  /// Damping segment length dT [s] on which C is constant. <= 0: the whole analysed record.
+  double segment_length = 1e-3;
+  /// Integration window [s]: integrals restart with fresh (y_T, alpha) after this span.
+  /// 0 = automatic: about two natural periods, derived from the data (mean K) or the gear
+  /// parameters. Clipped to the segment length.
+  double window_length = 0.0;
+  /// Analysed time range [s]; defaults cover the whole record.
+  double t_start = -std::numeric_limits<double>::infinity();
+  double t_end = std::numeric_limits<double>::infinity();
+  /// A segment whose scaled least-squares problem has a condition number above this (or a
+  /// rank deficiency) is reported as not identifiable.
+  double max_condition = 1e10;
+
+  /// Empty when valid; otherwise names the field, the value and the rule broken.
+  std::string validate() const;
+};
+
+/// One damping segment's estimate. Every number is NaN when `identifiable` is false.
+struct SegmentEstimate {
+  double t_start = kNaN;  ///< [s]
+  double t_end = kNaN;    ///< [s]
+  double C = kNaN;        ///< [1/s]
+  double C_std = kNaN;    ///< [1/s] standard error
+  double c = kNaN;        ///< [N*s/m] = C * Me
+  double xi = kNaN;       ///< [-] = C / (2*omega0)
+  double k_min = kNaN;    ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
+  double k_max = kNaN;    ///< [N/m]
+  double k_min_std = kNaN, k_max_std = kNaN;  ///< [N/m] standard errors (greybox)
+  long samples = 0;       ///< samples used
+  int windows = 0;        ///< integration windows in the segment
+  bool identifiable = false;
+  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input", "rank deficient", ...)
+};
+
+/// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).
+struct LoadLawEstimate {
+  double c0 = kNaN, c0_std = kNaN;  ///< [N*s/m]
+  double c1 = kNaN, c1_std = kNaN;  ///< [N*s/m per N*m]
+  bool identifiable = false;
+  std::string reason;
+};
+
+/// Per-window nuisance estimates; the first window of the record gives the initial state for
+/// the modeled response: y(T) = y_T, y'(T) = alpha - C*y_T.
+struct WindowEstimate {
+  double t_start = kNaN, t_end = kNaN;  ///< [s]
+  double y_T = kNaN;                    ///< [m]
+  double alpha = kNaN;                  ///< [m/s]
+  double velocity = kNaN;               ///< [m/s] y'(T) = alpha - C(T)*y_T
+};
+
+struct IdentificationResult {
+  Formulation formulation = Formulation::Known;
+  DampingModel model = DampingModel::Piecewise;
+  double equivalent_mass = kNaN;  ///< [kg] Me used for c = C*Me
+  double omega0 = kNaN;           ///< [rad/s] sqrt(mean K) used for xi
+  double window_length = kNaN;    ///< [s] effective integration window
+  /// Piecewise: one per segment. Constant: one spanning the analysed range. LoadLaw: per
+  /// segment, C evaluated at the segment's mean torque (for plots), plus `load_law`.
+  std::vector<SegmentEstimate> segments;
+  std::optional<SegmentEstimate> constant;  ///< set for DampingModel::Constant
+  std::optional<LoadLawEstimate> load_law;  ///< set for DampingModel::LoadLaw
+  std::vector<WindowEstimate> windows;
+};
+
+}  // namespace gear_damping_id
