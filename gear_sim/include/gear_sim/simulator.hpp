@@ -1,0 +1,29 @@
+// The spur-gear-pair simulator (DESIGN.md §3): integrates eq. (4) (or the torsional eq. 1)
+// with RK4/RK2, stepping exactly onto every stiffness switch, load kink and damping change,
+// and fills a SignalTable with every DESIGN §6 column. No ROS.
+#pragma once
+
+#include <string>
+
+#include "gear_sim/signal_table.hpp"
+#include "gear_sim/sim_config.hpp"
+
+namespace gear_sim {
+
+/// Runs the simulation. Output columns: time, dte (with measurement noise when
+/// simulation.noise_snr_db is finite: white Gaussian, sigma = std(y - mean y) / 10^(SNR/20),
+/// std::mt19937_64 seeded with simulation.seed), dte_velocity (noise-free), stiffness (value
+/// holding from each sample's instant on), torque, mesh_state, mesh_phase, damping (true c(t));
+/// theta1, theta2 for the torsional model. Samples n = 0..N-1, N = round(duration*fs), at
+/// t = n/fs. `out` is resized only when its size differs, so a caller can reuse its buffers.
+/// Returns false with `*error` set (naming the YAML key) when the configuration is invalid.
+bool simulate(const SimConfig& config, SignalTable* out, std::string* error);
+
+/// Natural frequency sqrt(k_mean/Me) / (2 pi) [Hz] of the gear model.
+double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh);
+
+/// Adds white Gaussian noise to `y` at the given SNR [dB] (SNR = 20 log10(std(y - mean)/sigma));
+/// returns sigma. Deterministic for a given seed.
+double addNoise(Eigen::VectorXd* y, double snr_db, unsigned long seed);
+
+}  // namespace gear_sim

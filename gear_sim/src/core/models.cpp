@@ -1,0 +1,246 @@
+#include "gear_sim/models.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace gear_sim {
+
+// ----------------------------------------------------------------------------- stiffness
+MeshStiffness::MeshStiffness(const MeshOptions& o) : o_(o) {
+  const double e = o.contact_ratio - 1.0;  // double-contact fraction of the mesh period
+  switch (o.model) {
+    case StiffnessModel::Square:
+      mean_ = o.k_max * e + o.k_min * (1.0 - e);
+      breaks_ = {0.0, e};
+      piecewise_constant_ = true;
+      break;
+    case StiffnessModel::Trapezoid: {
+      // Linear ramps of width w centred on the square wave's switch instants: same mean.
+      const double w = o.transition_fraction;
+      mean_ = o.k_max * e + o.k_min * (1.0 - e);
+      breaks_ = {0.5 * w, e - 0.5 * w, e + 0.5 * w, 1.0 - 0.5 * w};
+      break;
+    }
+    case StiffnessModel::Fourier:
+      mean_ = o.k_mean;
+      break;
+    case StiffnessModel::Constant:
+      mean_ = o.k_mean;
+      piecewise_constant_ = true;
+      break;
+  }
+}
+
+double MeshStiffness::at(double u, double u_ref) const {
+  const double e = o_.contact_ratio - 1.0;
+  switch (o_.model) {
+    case StiffnessModel::Square: {
+      const double f = u_ref - std::floor(u_ref);
+      return f < e ? o_.k_max : o_.k_min;
+    }
+    case StiffnessModel::Trapezoid: {
+      // Continuous, so the piece does not matter: evaluate at u.
+      const double w = o_.transition_fraction, dk = o_.k_max - o_.k_min;
+      double f = u - std::floor(u);
+      if (f >= 1.0 - 0.5 * w) f -= 1.0;  // the ramp up straddles the cycle start
+      if (f < 0.5 * w) return o_.k_min + dk * (f + 0.5 * w) / w;
+      if (f < e - 0.5 * w) return o_.k_max;
+      if (f < e + 0.5 * w) return o_.k_max - dk * (f - (e - 0.5 * w)) / w;
+      return o_.k_min;
+    }
+    case StiffnessModel::Fourier: {
+      double k = o_.k_mean;
+      const double f = u - std::floor(u);
+      for (size_t h = 0; h < o_.fourier_cos.size(); ++h) {
+        const double a = 2.0 * M_PI * static_cast<double>(h + 1) * f;
+        k += o_.fourier_cos[h] * std::cos(a) + o_.fourier_sin[h] * std::sin(a);
+      }
+      return k;
+    }
+    case StiffnessModel::Constant:
+      return o_.k_mean;
+  }
+  return o_.k_mean;
+}
+
+int MeshStiffness::state(double u) const {
+  const double f = u - std::floor(u);
+  return f < o_.contact_ratio - 1.0 ? 1 : 0;
+}
+
+// ----------------------------------------------------------------------------- timing
+MeshTiming::MeshTiming(const SpeedOptions& s, int pinion_teeth, double initial_phase)
+    : u0_(initial_phase),
+      z1_(pinion_teeth),
+      f0_(s.pinion_rpm / 60.0),
+      f1_((s.profile == SpeedProfile::Ramp ? s.end_rpm : s.pinion_rpm) / 60.0),
+      t_ramp_(s.profile == SpeedProfile::Ramp ? s.ramp_time : 1.0),
+      ramp_(s.profile == SpeedProfile::Ramp) {}
+
+double MeshTiming::phase(double t) const {
+  if (!ramp_) return u0_ + z1_ * f0_ * t;
+  if (t <= t_ramp_) return u0_ + z1_ * (f0_ * t + 0.5 * (f1_ - f0_) / t_ramp_ * t * t);
+  return u0_ + z1_ * (0.5 * (f0_ + f1_) * t_ramp_ + f1_ * (t - t_ramp_));
+}
+
+double MeshTiming::meshFrequency(double t) const {
+  if (!ramp_ || t >= t_ramp_) return z1_ * (ramp_ ? f1_ : f0_);
+  return z1_ * (f0_ + (f1_ - f0_) * t / t_ramp_);
+}
+
+double MeshTiming::timeOfPhase(double u) const {
+  const double r = (u - u0_) / z1_;  // pinion revolutions
+  if (!ramp_) return r / f0_;
+  const double r_ramp = 0.5 * (f0_ + f1_) * t_ramp_;
+  if (r > r_ramp) return t_ramp_ + (r - r_ramp) / f1_;
+  // 0.5 a t^2 + f0 t - r = 0, a = (f1 - f0)/T: the root without cancellation.
+  const double a = (f1_ - f0_) / t_ramp_;
+  return 2.0 * r / (f0_ + std::sqrt(std::max(0.0, f0_ * f0_ + 2.0 * a * r)));
+}
+
+// ----------------------------------------------------------------------------- load
+LoadTorque::LoadTorque(const LoadOptions& o) : o_(o) {}
+
+double LoadTorque::at(double t) const {
+  switch (o_.profile) {
+    case LoadProfile::Constant:
+      return o_.mean;
+    case LoadProfile::Sine:
+      return o_.mean + o_.amplitude * std::sin(2.0 * M_PI * o_.frequency * t + o_.phase);
+    case LoadProfile::Step:
+      return t < o_.step_time ? o_.initial : o_.final_value;
+    case LoadProfile::Ramp:
+      if (t <= o_.ramp_start) return o_.initial;
+      if (t >= o_.ramp_end) return o_.final_value;
+      return o_.initial +
+             (o_.final_value - o_.initial) * (t - o_.ramp_start) / (o_.ramp_end - o_.ramp_start);
+    case LoadProfile::Trapezoid: {
+      double tau = std::fmod(t, o_.period);
+      if (tau < 0) tau += o_.period;
+      const double d = o_.high - o_.low;
+      if (tau < o_.rise) return o_.low + d * tau / o_.rise;
+      tau -= o_.rise;
+      if (tau < o_.hold) return o_.high;
+      tau -= o_.hold;
+      if (tau < o_.fall) return o_.high - d * tau / o_.fall;
+      return o_.low;
+    }
+    case LoadProfile::Table: {
+      const auto& x = o_.times;
+      if (t <= x.front()) return o_.values.front();
+      if (t >= x.back()) return o_.values.back();
+      const size_t i = std::upper_bound(x.begin(), x.end(), t) - x.begin();  // x[i-1] <= t < x[i]
+      const double w = (t - x[i - 1]) / (x[i] - x[i - 1]);
+      return o_.values[i - 1] + w * (o_.values[i] - o_.values[i - 1]);
+    }
+  }
+  return 0.0;
+}
+
+void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
+  if (o_.profile != LoadProfile::Sine) {
+    for (long i = 0; i < n; ++i) out[i] = at(t0 + i * dt);
+    return;
+  }
+  // Rotate the phasor (cos, sin) by the step angle; re-anchor on the exact value every
+  // kAnchor samples so rounding cannot accumulate (error stays ~kAnchor * 1e-16).
+  constexpr long kAnchor = 256;
+  const double w = 2.0 * M_PI * o_.frequency;
+  const double cd = std::cos(w * dt), sd = std::sin(w * dt);
+  for (long i0 = 0; i0 < n; i0 += kAnchor) {
+    const double th = w * (t0 + i0 * dt) + o_.phase;
+    double c = std::cos(th), s = std::sin(th);
+    const long i1 = std::min(n, i0 + kAnchor);
+    for (long i = i0; i < i1; ++i) {
+      out[i] = o_.mean + o_.amplitude * s;
+      const double c2 = c * cd - s * sd;
+      s = s * cd + c * sd;
+      c = c2;
+    }
+  }
+}
+
+std::vector<double> LoadTorque::breakpoints(double duration) const {
+  std::vector<double> b;
+  switch (o_.profile) {
+    case LoadProfile::Step:
+      b = {o_.step_time};
+      break;
+    case LoadProfile::Ramp:
+      b = {o_.ramp_start, o_.ramp_end};
+      break;
+    case LoadProfile::Trapezoid:
+      for (double c = 0.0; c < duration; c += o_.period)
+        for (double d : {0.0, o_.rise, o_.rise + o_.hold, o_.rise + o_.hold + o_.fall})
+          b.push_back(c + d);
+      break;
+    case LoadProfile::Table:
+      b = o_.times;
+      break;
+    default:
+      break;
+  }
+  b.erase(std::remove_if(b.begin(), b.end(), [&](double t) { return !(t > 0.0 && t < duration); }),
+          b.end());
+  return b;
+}
+
+double LoadTorque::mean(double duration) const {
+  if (o_.profile == LoadProfile::Constant) return o_.mean;
+  if (o_.profile == LoadProfile::Sine) {
+    const double w = 2.0 * M_PI * o_.frequency;
+    if (w * duration == 0.0) return at(0.0);
+    return o_.mean +
+           o_.amplitude * (std::cos(o_.phase) - std::cos(w * duration + o_.phase)) / (w * duration);
+  }
+  // Piecewise linear between breakpoints: the midpoint rule is exact on each piece.
+  std::vector<double> pts = breakpoints(duration);
+  pts.insert(pts.begin(), 0.0);
+  pts.push_back(duration);
+  std::sort(pts.begin(), pts.end());
+  double integral = 0.0;
+  for (size_t i = 0; i + 1 < pts.size(); ++i)
+    integral += (pts[i + 1] - pts[i]) * at(0.5 * (pts[i] + pts[i + 1]));
+  return integral / duration;
+}
+
+// ----------------------------------------------------------------------------- damping
+DampingLaw::DampingLaw(const DampingOptions& o, double k_mean, double me, double t1_mean) {
+  const double critical = 2.0 * std::sqrt(k_mean * me);  // c = xi * critical
+  switch (o.model) {
+    case DampingModel::ConstantRatio:
+      pieces_ = {{0.0, o.ratio * critical, 0.0}};
+      break;
+    case DampingModel::ConstantCoefficient:
+      pieces_ = {{0.0, o.coefficient, 0.0}};
+      break;
+    case DampingModel::Piecewise:
+      for (size_t i = 0; i < o.times.size(); ++i)
+        pieces_.push_back({o.times[i], o.ratios[i] * critical, 0.0});
+      break;
+    case DampingModel::LoadDependent: {
+      // xi = r (1 + beta (T1/Tm - 1)) = r (1 - beta) + (r beta / Tm) T1
+      const double r = o.ratio, beta = o.load_sensitivity;
+      pieces_ = {{0.0, critical * r * (1.0 - beta), critical * r * beta / t1_mean}};
+      break;
+    }
+    case DampingModel::LoadLinear:
+      pieces_ = {{0.0, o.c0, o.c1}};
+      break;
+  }
+}
+
+const DampingLaw::Piece& DampingLaw::piece(double t) const {
+  auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t,
+                             [](double x, const Piece& p) { return x < p.start; });
+  return it == pieces_.begin() ? pieces_.front() : *(it - 1);
+}
+
+std::vector<double> DampingLaw::breakpoints(double duration) const {
+  std::vector<double> b;
+  for (const Piece& p : pieces_)
+    if (p.start > 0.0 && p.start < duration) b.push_back(p.start);
+  return b;
+}
+
+}  // namespace gear_sim
