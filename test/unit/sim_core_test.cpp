@@ -113,6 +113,35 @@ TEST(Simulator, FastPathAgreesWithTheGenericIntegrator) {
   EXPECT_LT((y - t.dte).cwiseAbs().maxCoeff() / t.dte.cwiseAbs().maxCoeff(), kRelTol);
 }
 
+// The sampled columns hold "from each sample's instant on" (DESIGN §6), computed here from
+// their definitions, independently of the simulator's piece-wise fill: square wave eq. (2)
+// with switches between samples (2950 rpm), and the default load-dependent damping
+// xi = 0.05 (1 + 0.6 (T1/100 - 1)) (the 100 Hz sine over 10 ms has mean exactly 100 N*m).
+TEST(Simulator, SampledColumnsFollowTheirDefinitions) {
+  SimConfig c;
+  c.speed.pinion_rpm = 2950.0;
+  const SignalTable t = run(c);
+  const double me = c.gears.equivalentMass();
+  const double k_mean = 0.6 * 4e8 + 0.4 * 2e8, critical = 2.0 * std::sqrt(k_mean * me);
+  int switches = 0;
+  for (Eigen::Index n = 0; n < t.size(); ++n) {
+    const double tt = static_cast<double>(n) / 1e6;
+    ASSERT_DOUBLE_EQ(t.time[n], tt);
+    const double u = 20.0 * 2950.0 / 60.0 * tt;  // mesh cycles
+    ASSERT_NEAR(t.mesh_phase[n], u, 1e-12);
+    const double frac = u - std::floor(u);
+    ASSERT_EQ(t.stiffness[n], frac < 0.6 ? 4e8 : 2e8) << "n = " << n;
+    ASSERT_EQ(t.mesh_state[n], frac < 0.6 ? 1.0 : 0.0) << "n = " << n;
+    const double torque = 100.0 + 50.0 * std::sin(2 * M_PI * 100.0 * tt);
+    ASSERT_NEAR(t.torque[n], torque, 1e-12 * 100.0);
+    const double xi = 0.05 * (1.0 + 0.6 * (torque / 100.0 - 1.0));
+    ASSERT_NEAR(t.damping[n], xi * critical, 1e-12 * critical) << "n = " << n;
+    if (n > 0 && t.stiffness[n] != t.stiffness[n - 1]) ++switches;
+  }
+  // 20 * 2950/60 * 0.01 = 9.83 mesh cycles: switches at u = 0.6, 1, 1.6, ..., 9, 9.6.
+  EXPECT_EQ(switches, 19);
+}
+
 TEST(Simulator, TorsionalAndReducedModelsGiveTheSameDte) {
   SimConfig c;
   c.speed.pinion_rpm = 2950.0;

@@ -142,21 +142,22 @@ void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
     for (long i = 0; i < n; ++i) out[i] = at(t0 + i * dt);
     return;
   }
-  // Rotate the phasor (cos, sin) by the step angle; re-anchor on the exact value every
-  // kAnchor samples so rounding cannot accumulate (error stays ~kAnchor * 1e-16).
-  constexpr long kAnchor = 256;
+  // sin(th0 + j w dt) = sin(th0) cos(j w dt) + cos(th0) sin(j w dt): exact sin/cos once per
+  // block of kBlock samples and a table of the rotations cos/sin(j w dt), so the samples of a
+  // block are independent of each other (no recurrence chain, no accumulated rounding).
+  constexpr long kBlock = 256;
   const double w = 2.0 * M_PI * o_.frequency;
-  const double cd = std::cos(w * dt), sd = std::sin(w * dt);
-  for (long i0 = 0; i0 < n; i0 += kAnchor) {
+  double rc[kBlock], rs[kBlock];
+  for (long j = 0; j < kBlock; ++j) {
+    rc[j] = std::cos(w * dt * j);
+    rs[j] = std::sin(w * dt * j);
+  }
+  for (long i0 = 0; i0 < n; i0 += kBlock) {
     const double th = w * (t0 + i0 * dt) + o_.phase;
-    double c = std::cos(th), s = std::sin(th);
-    const long i1 = std::min(n, i0 + kAnchor);
-    for (long i = i0; i < i1; ++i) {
-      out[i] = o_.mean + o_.amplitude * s;
-      const double c2 = c * cd - s * sd;
-      s = s * cd + c * sd;
-      c = c2;
-    }
+    const double c = o_.amplitude * std::cos(th), s = o_.amplitude * std::sin(th);
+    const long m = std::min(n - i0, kBlock);
+    double* dst = out + i0;
+    for (long j = 0; j < m; ++j) dst[j] = o_.mean + (s * rc[j] + c * rs[j]);
   }
 }
 
