@@ -20,3 +20,27 @@ if(GEAR_SIM_IO_SOURCES)
 else()
   target_link_libraries(gear_sim_io INTERFACE gear_sim_core yaml-cpp)
 endif()
+
+# ROS side: message <-> core conversions shared by the tools and nodes.
+add_library(gear_ros_conversions gear_sim/ros/conversions.cpp)
+target_include_directories(gear_ros_conversions PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/gear_sim/ros/include
+                           ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
+target_link_libraries(gear_ros_conversions PUBLIC gear_sim_io ${catkin_LIBRARIES})
+target_compile_options(gear_ros_conversions PRIVATE ${GEAR_WARNINGS})
+add_dependencies(gear_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
+
+# `rosrun gear_damping simulate`: the simulator from the command line (CSV or bag output).
+add_executable(simulate gear_sim/tools/simulate.cpp)
+target_link_libraries(simulate gear_sim_io gear_ros_conversions CLI11::CLI11 ${catkin_LIBRARIES})
+target_compile_options(simulate PRIVATE ${GEAR_WARNINGS})
+
+# gear_sim_node: publishes the simulated signal as chunks, the gear parameters latched.
+add_executable(gear_sim_node gear_sim/nodes/gear_sim_node.cpp)
+target_link_libraries(gear_sim_node gear_sim_io gear_ros_conversions ${catkin_LIBRARIES})
+target_compile_options(gear_sim_node PRIVATE ${GEAR_WARNINGS})
+
+install(TARGETS gear_sim_core gear_sim_io gear_ros_conversions simulate gear_sim_node
+        ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(DIRECTORY gear_sim/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_DESTINATION})

@@ -1,0 +1,34 @@
+// The DESIGN.md §6 CSV: a header row naming the columns (any order, any subset of the known
+// names), then one row per sample, SI units. Part of gear_sim_io; no ROS.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "gear_sim/signal_table.hpp"
+
+namespace gear_sim {
+
+/// Column names in their canonical order: time, dte, dte_velocity, stiffness, torque,
+/// mesh_state, mesh_phase, damping, theta1, theta2.
+const std::vector<std::string>& signalColumnNames();
+
+/// Writes the present columns of `table` (time and dte always) in canonical order with the
+/// shortest text that reads back to the same double (std::to_chars), so a write/read round trip
+/// is bit-exact. False with `*error` if the file cannot be written or columns differ in length.
+bool writeSignalCsv(const std::string& path, const SignalTable& table, std::string* error);
+
+/// Reads a CSV into `out`. Accepts any order/subset of the known columns; `required` columns
+/// must be present (default time and dte). Errors name the line and column: cannot open, empty
+/// file, missing header, unknown or duplicate column, wrong field count, malformed number,
+/// NaN/Inf, time not strictly increasing, fewer than two rows. (Uniformity of the time step is
+/// the analysers' check.)
+bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
+                   const std::vector<std::string>& required = {"time", "dte"});
+
+/// A load-torque file for the simulator's `load.profile: csv`: columns time and torque.
+inline bool readTorqueCsv(const std::string& path, SignalTable* out, std::string* error) {
+  return readSignalCsv(path, out, error, {"time", "torque"});
+}
+
+}  // namespace gear_sim

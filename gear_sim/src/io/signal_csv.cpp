@@ -1,0 +1,175 @@
+#include "gear_sim/signal_csv.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <sstream>
+
+namespace gear_sim {
+
+const std::vector<std::string>& signalColumnNames() {
+  static const std::vector<std::string> names{"time",   "dte",        "dte_velocity", "stiffness",
+                                              "torque", "mesh_state", "mesh_phase",   "damping",
+                                              "theta1", "theta2"};
+  return names;
+}
+
+namespace {
+
+// The column vectors of a table in canonical order (matches signalColumnNames()).
+std::vector<Eigen::VectorXd*> columns(SignalTable& t) {
+  return {&t.time,       &t.dte,        &t.dte_velocity, &t.stiffness, &t.torque,
+          &t.mesh_state, &t.mesh_phase, &t.damping,      &t.theta1,    &t.theta2};
+}
+
+std::string trim(const std::string& s) {
+  const size_t a = s.find_first_not_of(" \t\r");
+  if (a == std::string::npos) return "";
+  const size_t b = s.find_last_not_of(" \t\r");
+  return s.substr(a, b - a + 1);
+}
+
+}  // namespace
+
+bool writeSignalCsv(const std::string& path, const SignalTable& table, std::string* error) {
+  SignalTable& t = const_cast<SignalTable&>(table);  // columns() only reads through it here
+  const auto cols = columns(t);
+  const auto& names = signalColumnNames();
+  std::vector<const Eigen::VectorXd*> present;
+  std::string header;
+  for (size_t c = 0; c < cols.size(); ++c) {
+    if (c >= 2 && cols[c]->size() == 0) continue;
+    if (cols[c]->size() != table.time.size()) {
+      if (error)
+        *error = "column " + names[c] + " has " + std::to_string(cols[c]->size()) +
+                 " values, time has " + std::to_string(table.time.size());
+      return false;
+    }
+    present.push_back(cols[c]);
+    header += (header.empty() ? "" : ",") + names[c];
+  }
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (!f) {
+    if (error) *error = path + ": cannot open for writing";
+    return false;
+  }
+  std::fputs((header + "\n").c_str(), f.get());
+  std::string line;
+  char buf[32];
+  for (Eigen::Index i = 0; i < table.time.size(); ++i) {
+    line.clear();
+    for (size_t c = 0; c < present.size(); ++c) {
+      if (c) line += ',';
+      const auto r = std::to_chars(buf, buf + sizeof buf, (*present[c])[i]);
+      line.append(buf, r.ptr);
+    }
+    line += '\n';
+    std::fwrite(line.data(), 1, line.size(), f.get());
+  }
+  if (std::fflush(f.get()) != 0 || std::ferror(f.get())) {
+    if (error) *error = path + ": write failed";
+    return false;
+  }
+  return true;
+}
+
+bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
+                   const std::vector<std::string>& required) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = path + ": " + what;
+    return false;
+  };
+  std::ifstream f(path);
+  if (!f) return fail("cannot open");
+  std::string line;
+  long line_no = 0;
+  // Header: the first non-empty line.
+  while (std::getline(f, line)) {
+    ++line_no;
+    if (!trim(line).empty()) break;
+  }
+  if (trim(line).empty()) return fail("empty file (no header row)");
+  const auto& names = signalColumnNames();
+  std::vector<int> map;  // field -> canonical column
+  {
+    std::stringstream ss(line);
+    std::string name;
+    int field = 0;
+    std::vector<bool> seen(names.size(), false);
+    while (std::getline(ss, name, ',')) {
+      ++field;
+      name = trim(name);
+      size_t c = 0;
+      while (c < names.size() && names[c] != name) ++c;
+      if (c == names.size()) {
+        std::string list;
+        for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+        return fail("line " + std::to_string(line_no) + ", column " + std::to_string(field) +
+                    ": unknown column '" + name + "' (known: " + list + ")");
+      }
+      if (seen[c])
+        return fail("line " + std::to_string(line_no) + ": duplicate column '" + name + "'");
+      seen[c] = true;
+      map.push_back(static_cast<int>(c));
+    }
+    for (const auto& r : required) {
+      size_t c = 0;
+      while (c < names.size() && names[c] != r) ++c;
+      if (c == names.size() || !seen[c]) return fail("missing required column '" + r + "'");
+    }
+  }
+  std::vector<std::vector<double>> data(names.size());
+  std::vector<long> row_line;  // file line of each data row, for messages
+  while (std::getline(f, line)) {
+    ++line_no;
+    if (trim(line).empty()) continue;
+    row_line.push_back(line_no);
+    const char* p = line.data();
+    const char* end = p + line.size();
+    while (end > p && (end[-1] == '\r' || end[-1] == ' ')) --end;
+    for (size_t field = 0; field < map.size(); ++field) {
+      while (p < end && *p == ' ') ++p;
+      double v;
+      const auto r = std::from_chars(p, end, v);
+      const std::string where = "line " + std::to_string(line_no) + ", column " +
+                                std::to_string(field + 1) + " (" + names[map[field]] + ")";
+      if (r.ec != std::errc() || (r.ptr < end && *r.ptr != ',' && *r.ptr != ' ')) {
+        const char* q = p;
+        while (q < end && *q != ',') ++q;
+        return fail(where + ": malformed number '" + std::string(p, q) + "'");
+      }
+      if (!std::isfinite(v))
+        return fail(where + ": value is not finite (" + std::string(p, r.ptr) + ")");
+      data[map[field]].push_back(v);
+      p = r.ptr;
+      while (p < end && *p == ' ') ++p;
+      if (field + 1 < map.size()) {
+        if (p >= end || *p != ',')
+          return fail("line " + std::to_string(line_no) + ": " + std::to_string(field + 1) +
+                      " fields, the header has " + std::to_string(map.size()));
+        ++p;
+      } else if (p != end) {
+        return fail("line " + std::to_string(line_no) + ": more fields than the header's " +
+                    std::to_string(map.size()));
+      }
+    }
+  }
+  const std::vector<double>& time = data[0];
+  if (time.size() < 2) return fail("fewer than two data rows");
+  for (size_t i = 1; i < time.size(); ++i)
+    if (!(time[i] > time[i - 1]))
+      return fail("line " + std::to_string(row_line[i]) + ": time " + std::to_string(time[i]) +
+                  " is not greater than the previous " + std::to_string(time[i - 1]) +
+                  " (time must be strictly increasing)");
+  SignalTable t;
+  const auto cols = columns(t);
+  for (size_t c = 0; c < names.size(); ++c)
+    if (!data[c].empty())
+      *cols[c] = Eigen::Map<const Eigen::VectorXd>(data[c].data(), data[c].size());
+  *out = std::move(t);
+  return true;
+}
+
+}  // namespace gear_sim

@@ -1,0 +1,178 @@
+// gear_sim_io: YAML configuration and the DESIGN §6 CSV.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/signal_csv.hpp"
+#include "gear_sim/simulator.hpp"
+
+namespace {
+
+std::string tempPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / ("gear_sim_io_test_" + name)).string();
+}
+
+std::string writeFile(const std::string& name, const std::string& text) {
+  const std::string p = tempPath(name);
+  std::ofstream(p) << text;
+  return p;
+}
+
+std::string loadError(const std::string& yaml) {
+  gear_sim::SimConfig c;
+  std::string e;
+  EXPECT_FALSE(gear_sim::loadSimConfig(YAML::Load(yaml), &c, &e)) << yaml;
+  return e;
+}
+
+TEST(ConfigYaml, EveryShippedConfigurationLoadsAndValidates) {
+  int n = 0;
+  for (const auto& f :
+       std::filesystem::directory_iterator(std::string(GEAR_SOURCE_DIR) + "/config")) {
+    if (f.path().extension() != ".yaml") continue;
+    ++n;
+    YAML::Node root = YAML::LoadFile(f.path().string());
+    std::string e;
+    // Simulator files have a simulation section; node/analysis files are checked by their users.
+    if (!root["simulation"]) continue;
+    gear_sim::SimConfig c;
+    EXPECT_TRUE(gear_sim::loadSimConfigFile(f.path().string(), &c, &e)) << f.path() << ": " << e;
+  }
+  EXPECT_GE(n, 1);
+}
+
+TEST(ConfigYaml, Table1FileIsTheDefaultCase) {
+  gear_sim::SimConfig c;
+  std::string e;
+  ASSERT_TRUE(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
+      << e;
+  const gear_sim::SimConfig d;
+  EXPECT_EQ(c.gears.pinion.inertia, d.gears.pinion.inertia);
+  EXPECT_EQ(c.gears.gear.base_radius, d.gears.gear.base_radius);
+  EXPECT_EQ(c.mesh.k_max, 4e8);
+  EXPECT_EQ(c.speed.pinion_rpm, 3000);
+  EXPECT_EQ(c.load.amplitude, 50);
+  EXPECT_EQ(c.damping.load_sensitivity, 0.6);
+  EXPECT_TRUE(std::isinf(c.simulation.noise_snr_db));
+}
+
+TEST(ConfigYaml, MisspeltKeysWrongTypesAndUnknownNamesAreErrorsNamingTheKey) {
+  EXPECT_NE(loadError("mesh: {k_maxx: 1}").find("mesh.k_maxx: unknown key"), std::string::npos);
+  EXPECT_NE(loadError("loads: {mean: 1}").find("loads: unknown section"), std::string::npos);
+  EXPECT_NE(loadError("load: {profile: sinus}").find("load.profile: unknown name 'sinus'"),
+            std::string::npos);
+  EXPECT_NE(loadError("simulation: {duration: abc}").find("simulation.duration: expected a number"),
+            std::string::npos);
+  EXPECT_NE(loadError("damping: {model: constant, ratio: 0.1, coefficient: 3}")
+                .find("damping.coefficient"),
+            std::string::npos);
+  EXPECT_NE(loadError("mesh: {contact_ratio: 2.5}").find("mesh.contact_ratio = 2.5"),
+            std::string::npos);
+  EXPECT_NE(loadError("simulation: {sample_rate: 1.0e5}").find("simulation.sample_rate"),
+            std::string::npos);
+}
+
+TEST(ConfigYaml, YamlRoundTripKeepsEveryValue) {
+  gear_sim::SimConfig c;
+  c.damping.model = gear_sim::DampingModel::Piecewise;
+  c.damping.times = {0.0, 0.004};
+  c.damping.ratios = {0.02, 0.04};
+  c.speed.profile = gear_sim::SpeedProfile::Ramp;
+  c.speed.end_rpm = 4000;
+  gear_sim::SimConfig back;
+  std::string e;
+  ASSERT_TRUE(gear_sim::loadSimConfig(gear_sim::toYaml(c), &back, &e)) << e;
+  EXPECT_EQ(back.damping.ratios, c.damping.ratios);
+  EXPECT_EQ(back.speed.end_rpm, 4000);
+  EXPECT_EQ(back.speed.profile, gear_sim::SpeedProfile::Ramp);
+}
+
+TEST(ConfigYaml, GearModelLoaderNeedsOnlyTheGearSectionsAndIgnoresTheRest) {
+  const std::string p =
+      writeFile("gm.yaml",
+                "pinion: {teeth: 20, inertia: 0.00026, base_radius: 0.05}\n"
+                "gear: {teeth: 40, inertia: 0.0045, base_radius: 0.11}\n"
+                "mesh: {k_max: 4.0e8}\nspeed: {pinion_rpm: 2500}\nanything: {x: 1}\n");
+  gear_sim::GearModel m;
+  std::string e;
+  ASSERT_TRUE(gear_sim::loadGearModelFile(p, &m, &e)) << e;
+  EXPECT_EQ(m.speed.pinion_rpm, 2500);
+  const std::string q =
+      writeFile("gm2.yaml", "pinion: {teeth: 20, inertia: 0.00026, base_radius: 0.05}\n");
+  EXPECT_FALSE(gear_sim::loadGearModelFile(q, &m, &e));
+  EXPECT_NE(e.find("gear: missing section"), std::string::npos) << e;
+}
+
+TEST(ConfigYaml, LoadFromCsvFileBecomesATable) {
+  writeFile("torque.csv", "time,torque\n0,10\n0.005,20\n0.01,10\n");
+  gear_sim::SimConfig c;
+  std::string e;
+  const std::string p =
+      writeFile("csvload.yaml", "load: {profile: csv, file: gear_sim_io_test_torque.csv}\n");
+  ASSERT_TRUE(gear_sim::loadSimConfigFile(p, &c, &e)) << e;
+  EXPECT_EQ(c.load.profile, gear_sim::LoadProfile::Table);
+  EXPECT_EQ(c.load.values, (std::vector<double>{10, 20, 10}));
+}
+
+TEST(SignalCsv, WriteThenReadIsBitExact) {
+  gear_sim::SimConfig c;
+  c.simulation.noise_snr_db = 20;
+  gear_sim::SignalTable t, back;
+  std::string e;
+  ASSERT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  const std::string p = tempPath("roundtrip.csv");
+  ASSERT_TRUE(gear_sim::writeSignalCsv(p, t, &e)) << e;
+  ASSERT_TRUE(gear_sim::readSignalCsv(p, &back, &e)) << e;
+  EXPECT_EQ(back.time, t.time);
+  EXPECT_EQ(back.dte, t.dte);
+  EXPECT_EQ(back.dte_velocity, t.dte_velocity);
+  EXPECT_EQ(back.stiffness, t.stiffness);
+  EXPECT_EQ(back.torque, t.torque);
+  EXPECT_EQ(back.mesh_state, t.mesh_state);
+  EXPECT_EQ(back.mesh_phase, t.mesh_phase);
+  EXPECT_EQ(back.damping, t.damping);
+  EXPECT_EQ(back.theta1.size(), 0);
+}
+
+TEST(SignalCsv, AnySubsetAndOrderOfKnownColumnsIsAccepted) {
+  gear_sim::SignalTable t;
+  std::string e;
+  ASSERT_TRUE(
+      gear_sim::readSignalCsv(writeFile("sub.csv", "dte, time\n1e-6,0\n2e-6,1e-6\n"), &t, &e))
+      << e;
+  EXPECT_EQ(t.time[1], 1e-6);
+  EXPECT_EQ(t.dte[1], 2e-6);
+  EXPECT_EQ(t.torque.size(), 0);
+}
+
+TEST(SignalCsv, BadFilesAreRejectedNamingLineAndColumn) {
+  auto err = [](const std::string& name, const std::string& text) {
+    gear_sim::SignalTable t;
+    std::string e;
+    EXPECT_FALSE(gear_sim::readSignalCsv(writeFile(name, text), &t, &e)) << text;
+    return e;
+  };
+  EXPECT_NE(err("e1.csv", "").find("empty file"), std::string::npos);
+  EXPECT_NE(err("e2.csv", "time,dte\n0,1\n1e-6,abc\n")
+                .find("line 3, column 2 (dte): malformed number 'abc'"),
+            std::string::npos);
+  EXPECT_NE(err("e3.csv", "time,dte\n0,1\n1e-6\n").find("line 3"), std::string::npos);
+  EXPECT_NE(err("e4.csv", "time,dtee\n0,1\n").find("column 2: unknown column 'dtee'"),
+            std::string::npos);
+  EXPECT_NE(err("e5.csv", "time,torque\n0,1\n1,2\n").find("missing required column 'dte'"),
+            std::string::npos);
+  EXPECT_NE(err("e6.csv", "time,dte\n0,1\n0,2\n").find("line 3: time"), std::string::npos);
+  EXPECT_NE(err("e7.csv", "time,dte\n0,nan\n1,2\n").find("not finite"), std::string::npos);
+  EXPECT_NE(err("e8.csv", "time,dte\n0,1\n1,2,3\n").find("line 3: more fields"), std::string::npos);
+  EXPECT_NE(err("e9.csv", "time,dte\n0,1\n").find("fewer than two data rows"), std::string::npos);
+  gear_sim::SignalTable t;
+  std::string e;
+  EXPECT_FALSE(gear_sim::readSignalCsv("/nonexistent/x.csv", &t, &e));
+  EXPECT_NE(e.find("cannot open"), std::string::npos);
+}
+
+}  // namespace
