@@ -19,7 +19,7 @@ file(GLOB GEAR_ROSTEST_TESTERS CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/tes
 foreach(src IN LISTS GEAR_ROSTEST_TESTERS)
   get_filename_component(name ${src} NAME_WE)
   add_executable(${name} EXCLUDE_FROM_ALL ${src})
-  target_link_libraries(${name} gear_damping_id_core gear_sim_io ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+  target_link_libraries(${name} gear_damping_id_core gear_sim_io gear_ros_conversions ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
   target_compile_options(${name} PRIVATE ${GEAR_WARNINGS})
   add_dependencies(${name} ${PROJECT_NAME}_generate_messages_cpp)
   add_dependencies(tests ${name})

@@ -1,0 +1,117 @@
+// Integration test of gear_sim_node (started by the .test file from launch/sim.launch):
+// the chunks on /gear/signal cover the configured record contiguously, the latched
+// /gear/params describe the configured gears, and the samples equal the core's own
+// simulation of the same YAML. With ~bad_params_check, also checks that invalid parameters keep
+// a second node from coming up (non-zero exit, message naming the parameter).
+#include <gtest/gtest.h>
+#include <ros/package.h>
+#include <ros/ros.h>
+
+#include <array>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "gear_damping/GearParams.h"
+#include "gear_damping/SignalChunk.h"
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/simulator.hpp"
+#include "gear_sim_ros/conversions.hpp"
+
+namespace {
+
+std::string configPath() { return ros::package::getPath("gear_damping") + "/config/table1.yaml"; }
+
+TEST(GearSimNode, PublishesTheWholeRecordContiguouslyWithLatchedParameters) {
+  ros::NodeHandle nh;
+  std::vector<gear_damping::SignalChunk> chunks;
+  gear_damping::GearParams params;
+  bool got_params = false;
+  auto s1 = nh.subscribe<gear_damping::SignalChunk>(
+      "/gear/signal", 2000,
+      [&](const gear_damping::SignalChunk::ConstPtr& m) { chunks.push_back(*m); });
+  auto s2 = nh.subscribe<gear_damping::GearParams>(
+      "/gear/params", 1, [&](const gear_damping::GearParams::ConstPtr& m) {
+        params = *m;
+        got_params = true;
+      });
+  gear_sim::SimConfig cfg;
+  std::string e;
+  ASSERT_TRUE(gear_sim::loadSimConfigFile(configPath(), &cfg, &e)) << e;
+  gear_sim::SignalTable expected;
+  ASSERT_TRUE(gear_sim::simulate(cfg, &expected, &e)) << e;
+
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(30.0);
+  size_t samples = 0;
+  while (ros::ok() && ros::WallTime::now() < deadline &&
+         (samples < static_cast<size_t>(expected.size()) || !got_params)) {
+    ros::spinOnce();
+    ros::WallDuration(0.005).sleep();
+    samples = 0;
+    for (const auto& c : chunks) samples += c.dte.size();
+  }
+  ASSERT_TRUE(got_params) << "no /gear/params within 30 s";
+  ASSERT_EQ(samples, static_cast<size_t>(expected.size()))
+      << "received " << chunks.size() << " chunks";
+  EXPECT_EQ(params.pinion_teeth, 20u);
+  EXPECT_DOUBLE_EQ(params.equivalent_mass, cfg.gears.equivalentMass());
+  EXPECT_DOUBLE_EQ(params.k_max, 4e8);
+
+  gear_sim::SignalTable received;
+  ASSERT_TRUE(gear_sim_ros::chunksToTable(chunks, &received, &e))
+      << e;  // contiguity is checked here
+  EXPECT_EQ(chunks.front().first_index, 0u);
+  EXPECT_EQ(chunks.front().sample_rate, 1e6);
+  EXPECT_EQ(chunks.front().dte.size(), 1000u);  // launch default chunk size
+  EXPECT_EQ(received.dte, expected.dte);        // bit-identical: same core, same configuration
+  EXPECT_EQ(received.stiffness, expected.stiffness);
+  EXPECT_EQ(received.mesh_state, expected.mesh_state);
+  EXPECT_EQ(received.torque, expected.torque);
+}
+
+// Runs a command, returns (exit status, combined output).
+std::pair<int, std::string> run(const std::string& cmd) {
+  std::array<char, 512> buf;
+  std::string out;
+  std::unique_ptr<FILE, int (*)(FILE*)> p(popen((cmd + " 2>&1").c_str(), "r"), &pclose);
+  if (!p) return {-1, ""};
+  while (fgets(buf.data(), buf.size(), p.get())) out += buf.data();
+  const int status = pclose(p.release());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+TEST(GearSimNode, InvalidParametersStopTheNodeNamingTheParameter) {
+  // Missing configuration.
+  auto r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_a");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.first, 124) << "timed out instead of exiting";
+  EXPECT_NE(r.second.find("~pinion: missing"), std::string::npos) << r.second;
+  // A valid configuration with one invalid value.
+  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_b").first, 0);
+  ros::param::set("/bad_sim_b/mesh/contact_ratio", 2.5);
+  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_b");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.first, 124);
+  EXPECT_NE(r.second.find("mesh.contact_ratio = 2.5"), std::string::npos) << r.second;
+  // An unknown key (a typo must not fall back to a default).
+  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_c").first, 0);
+  ros::param::set("/bad_sim_c/load/amplitud", 10.0);
+  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_c");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("load.amplitud: unknown key"), std::string::npos) << r.second;
+  ros::param::set("/bad_sim_d/chunk_size", 0);
+  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_d").first, 0);
+  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_d");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("~chunk_size = 0"), std::string::npos) << r.second;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "sim_node_tester");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}
