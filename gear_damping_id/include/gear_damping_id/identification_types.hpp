@@ -32,7 +32,8 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 struct IdentificationOptions {
   Formulation formulation = Formulation::Known;
   DampingModel model = DampingModel::Piecewise;
-  /// Damping segment length dT [s] on which C is constant. <= 0: the whole analysed record.
+  /// Damping segment length dT [s] on which C is constant; 0 or inf: the whole analysed record.
+  /// Negative is invalid.
   double segment_length = 1e-3;
   /// Integration window [s]: integrals restart with fresh (y_T, alpha) after this span.
   /// 0 = automatic: about two natural periods, derived from the data (mean K) or the gear
@@ -41,9 +42,19 @@ struct IdentificationOptions {
   /// Analysed time range [s]; defaults cover the whole record.
   double t_start = -std::numeric_limits<double>::infinity();
   double t_end = std::numeric_limits<double>::infinity();
-  /// A segment whose scaled least-squares problem has a condition number above this (or a
-  /// rank deficiency) is reported as not identifiable.
-  double max_condition = 1e10;
+  /// A segment whose equilibrated least-squares problem has a 2-norm condition number above
+  /// this (or a rank deficiency) is reported as not identifiable. <= 1e7 so that the condition
+  /// estimate itself (from the Gram matrix, whose condition is the square) stays meaningful.
+  double max_condition = 1e6;
+  /// Relative tolerance on the uniformity of the time step (|dt_i - dt| <= tol * dt).
+  double time_tolerance = 1e-6;
+  /// Output-error refinement of the integral-method estimate (output_error.hpp): Auto refines
+  /// when the data are noisy enough for it to matter (the integral method's relative standard
+  /// error of C above `refine_threshold`), Always / Never force it. Only the `known` and
+  /// `greybox` formulations are refined (paper and legacy are kept as printed, for comparison).
+  enum class Refine { Auto, Always, Never } refine = Refine::Auto;
+  double refine_threshold = 2e-4;
+  int max_iterations = 30;  ///< Gauss-Newton iterations of the refinement
 
   /// Empty when valid; otherwise names the field, the value and the rule broken.
   std::string validate() const;
@@ -64,6 +75,10 @@ struct SegmentEstimate {
   int windows = 0;        ///< integration windows in the segment
   bool identifiable = false;
   std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input", "rank deficient", ...)
+  double forcing = kNaN;      ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
+  double mean_torque = kNaN;  ///< [N*m] time-mean T1 over the segment (when known)
+  double condition = kNaN;    ///< 2-norm condition number of the equilibrated problem
+  bool refined = false;       ///< C (and k levels) from the output-error refinement
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).
@@ -95,6 +110,11 @@ struct IdentificationResult {
   std::optional<SegmentEstimate> constant;  ///< set for DampingModel::Constant
   std::optional<LoadLawEstimate> load_law;  ///< set for DampingModel::LoadLaw
   std::vector<WindowEstimate> windows;
+  /// "integral" or "output_error" (the estimator whose numbers are reported).
+  std::string estimator = "integral";
+  int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
+  double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
+  std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
 };
 
 }  // namespace gear_damping_id

@@ -1,0 +1,205 @@
+// The generalised integral method of DESIGN.md §4 (paper §3): least-squares identification of
+// the damping of
+//
+//     y'' + C(t) y' + K(t) y = F(t)                                            (eq. 4)
+//
+// from the sampled DTE y. Integrating eq. (4) twice from the start T of an integration window to
+// t gives, for every sample t of the window,
+//
+//     y(t) = y_T + alpha (t - T) - C P(t) - IIKy(t) + IIF(t)
+//     P(t) = int_T^t y,  IIKy(t) = int_T^t int_T^s K y,  IIF(t) = int_T^t int_T^s F,
+//     alpha = y'(T) + C(T) y(T)
+//
+// which is linear in the unknowns. Each window has its own nuisance unknowns (y_T, alpha); each
+// damping segment of length dT holds one or more windows sharing its damping. The formulations
+// differ in what is known of K and F (every unknown below is constant on the set named):
+//
+//   known    b = y + IIKy - IIF;     columns -P [C]                        K, F known series
+//   greybox  b = y - IIF;            columns -P [C], -IIy [K0], -IIsy [dK]  K = K0 + dK s(t),
+//                                     s = mesh state (0/1) known, K0, dK unknown per segment
+//   paper    b = y;                  columns -P [C], -IIy [K_i], (t-T)^2/2 [F_i]  per segment
+//                                     (paper eqs. 11-16 as printed)
+//   legacy   b = y - Fbar (t-T)^2/2; columns -P [C], -IIy [K] with one K for the whole record
+//                                     and Fbar the record-mean forcing (the constant-load method
+//                                     that the paper's §4.1 shows failing)
+//
+// and the damping models in what C(t) is:
+//   piecewise  C_i per segment;  constant  one C for all segments;
+//   load_law   C(t) = theta0 + theta1 T1(t), i.e. c(t) = c0 + c1 T1(t) with c = C Me. For a
+//              time-varying C the damping term integrates by parts to
+//              int_T^t int_T^s C y' = theta0 (P - y_T (t-T)) + theta1 (T_c (P - y_T (t-T)) + D_r)
+//              with T_c = T1(T) and D_r = int int (T1 - T_c) dy (Stieltjes trapezoid; T1 - T_c is
+//              small within a window, so its second-order error is negligible); the y_T terms are
+//              absorbed by alpha, so alpha = y'(T) + C(T) y_T as before.
+//
+// Quadrature (see quadrature.hpp): the samples are interpolated by local cubics and integrated
+// exactly; where K or s changes between two samples the interval is split at the switch instant
+// (from `mesh_phase` when given; otherwise the new value holds from the sample where it is first
+// seen, DESIGN §6) and each part gets its own K. This keeps the method fourth-order accurate.
+//
+// Solution (numerically sound without forming the full design matrix): within each window the
+// nuisance columns 1 and (t - T) are removed exactly by projecting every data column onto the
+// orthogonal complement of the discrete orthogonal polynomials {1, t - tbar}, in a second pass over
+// the window's cached rows (modified Gram-Schmidt = the first two Householder steps of a QR of the
+// window's design matrix, so no cancellation between large trend terms). What remains per segment
+// is a tiny Gram matrix of the projected columns (1-3 local + 0-2 shared unknowns). It is
+// equilibrated (unit diagonal) and factored by a symmetric eigendecomposition, which gives both
+// the solution and the 2-norm condition number used for the identifiability check; squaring the
+// condition of an equilibrated <= 5-column problem whose condition is checked to be <=
+// max_condition (default 1e6) leaves >= 4 significant digits in the worst accepted case and
+// ~12 on the default case (cond ~ 1e2). A test checks the result against a column-pivoting
+// Householder QR of the explicit full design matrix. Shared unknowns (constant, load_law, legacy
+// K) are found by eliminating each segment's local unknowns (Schur complement), so the method
+// streams over segments with memory bounded by one segment.
+//
+// Standard errors: the least-squares covariance sigma^2 (X^T X)^-1 of the reduced problem (which
+// equals that of the full problem including nuisance unknowns), sigma^2 = RSS / (rows - unknowns),
+// per segment for segment-local unknowns and pooled for shared ones. They describe the equation
+// error of the integral equations; with measurement noise the integral method is biased (noise
+// enters the regressors) and the output-error refinement (output_error.hpp) supplies the
+// maximum-likelihood estimate and honest standard errors.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "gear_damping_id/identification_types.hpp"
+#include "gear_damping_id/quadrature.hpp"
+#include "gear_sim/signal_table.hpp"
+#include "gear_sim/sim_config.hpp"
+
+namespace gear_damping_id {
+
+/// What the identification needs of the gear pair (from the simulator's YAML or the latched
+/// GearParams message).
+struct GearConstants {
+  double equivalent_mass = kNaN;  ///< Me [kg]
+  double force_factor = kNaN;     ///< R1/I1 + R2/I2 [1/(kg*m)]: F = force_factor * T1
+  double contact_ratio = kNaN;    ///< eps [-]: switch phases n and n + eps - 1 (square model)
+  double mean_stiffness = kNaN;   ///< [N/m] model time-mean stiffness
+  /// true for the square and constant stiffness models: K is held between switch instants and
+  /// the quadrature splits intervals there. false (trapezoid, fourier): K y is integrated as a
+  /// smooth product of the samples.
+  bool piecewise_constant_stiffness = true;
+  std::string validate() const;
+};
+
+/// Constants of a gear model (validated GearModel).
+GearConstants gearConstants(const gear_sim::GearModel& model);
+
+/// Pointers into one contiguous, gap-free, uniformly sampled record: sample n at t0 + n*dt.
+/// Optional channels are null when absent. Values are read, never written.
+struct SignalView {
+  double t0 = 0.0;  ///< [s]
+  double dt = 0.0;  ///< [s]
+  Eigen::Index n = 0;
+  const double* dte = nullptr;         ///< [m] required
+  const double* stiffness = nullptr;   ///< [N/m] held from each sample on (known)
+  const double* torque = nullptr;      ///< [N*m] (known, greybox, load_law, legacy's mean)
+  const double* mesh_state = nullptr;  ///< [0/1] (greybox)
+  const double* mesh_phase = nullptr;  ///< [mesh cycles] locates switches between samples
+  double time(Eigen::Index i) const { return t0 + static_cast<double>(i) * dt; }
+  /// View of a table's columns (dt from the first and last time stamps).
+  static SignalView of(const gear_sim::SignalTable& table);
+};
+
+/// Checks that `table` can be analysed: uniform time step within `rel_tolerance` of the mean step
+/// (names the first offending row), the channels `formulation`/`model` need present (names the
+/// missing column), finite values. Returns an empty string when fine.
+std::string checkSignalTable(const gear_sim::SignalTable& table, Formulation formulation,
+                             DampingModel model, double rel_tolerance = 1e-6);
+
+/// The sample ranges of the damping segments of [t_start, t_end] within a record: segment i starts
+/// at the first sample at or after t_start + i*dT. A final partial segment shorter than half dT
+/// is merged into the previous one. Returns pairs [begin, end) of sample indices.
+std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalView& signal,
+                                                                 const IdentificationOptions& o);
+
+/// Default integration window [s]: two natural periods 2 * 2 pi / sqrt(Kbar), Kbar the mean
+/// normalised stiffness (from the stiffness samples when present, else from the gear model).
+double defaultWindowLength(const SignalView& signal, const GearConstants& gear);
+
+/// The streaming integral method. Feed the damping segments in time order with addSegment (the
+/// node does so as data arrives, `analyze` over a whole record); finish() solves the shared
+/// unknowns and returns the result. Memory: one segment's rows plus a few numbers per window.
+class IntegralMethod {
+ public:
+  /// `options` and `gear` must be valid (validate()); window_length 0 is resolved by the caller
+  /// (defaultWindowLength) or, if still 0 at the first segment, from that segment's data.
+  IntegralMethod(const IdentificationOptions& options, const GearConstants& gear);
+
+  /// Processes samples [begin, end) of `signal` as one damping segment (samples begin - 1 and
+  /// end, when inside the view, serve the interpolation stencils only). Returns the segment's
+  /// estimate: final for the piecewise model; for shared-damping models a provisional estimate
+  /// of the segment alone is not formed, and the segment reports identifiable = true with NaN C
+  /// until finish(). A segment with NaN/Inf input, too few samples or no motion is reported as
+  /// not identifiable with the reason, and takes no part in shared estimates.
+  SegmentEstimate addSegment(const SignalView& signal, Eigen::Index begin, Eigen::Index end);
+
+  /// Solves the shared unknowns and fills every estimate. Can be called repeatedly (e.g. for a
+  /// cumulative live estimate); later addSegment calls continue the same problem.
+  IdentificationResult finish() const;
+
+  /// Forgets every segment (keeps options, constants and the window length).
+  void reset();
+
+  /// Legacy formulation: the mean forcing Fbar = force_factor * mean(T1) [m/s^2] of the analysed
+  /// record. When never set (no torque channel), Fbar is an extra shared unknown.
+  void setLegacyForcing(double fbar);
+
+  const IdentificationOptions& options() const { return options_; }
+  /// Effective integration window [s] (0 until resolved by the first segment).
+  double windowLength() const { return window_length_; }
+  size_t segmentCount() const { return segments_.size(); }
+
+ private:
+  enum class Column { DampC, DampLoad, StiffK0, StiffDK, ForceConst };
+  struct WindowRecord {
+    double t_start = 0, t_end = 0, dt = 0;  // [s]
+    Eigen::Index rows = 0;
+    double torque_T = kNaN;           // T1 at the window start (load law)
+    std::vector<double> mean, slope;  // per column and b: mean and p1 coefficient
+  };
+  struct SegmentRecord {
+    SegmentEstimate estimate;
+    Eigen::MatrixXd gram;  // (q+1)x(q+1) projected Gram over [locals, shared, b]
+    long rows = 0;
+    int windows = 0;
+    double mean_torque = kNaN;
+    double mean_state = kNaN;  // time-mean of the mesh state (greybox)
+    double k_integral = 0.0;   // integral of K over the segment [1/s] (known: for omega0)
+    double duration = 0.0;     // [s]
+    std::vector<WindowRecord> window_records;
+  };
+
+  void buildColumns();
+  int columnIndex(Column c) const;
+  void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
+  double splitFraction(const SignalView& s, Eigen::Index j, bool rising) const;
+  double switchFraction(Eigen::Index j) const;  // from the current segment's switch list
+  IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
+
+  IdentificationOptions options_;
+  GearConstants gear_;
+  double window_length_ = 0.0;
+  CubicRules rules_;
+  int n_local_ = 0, n_shared_ = 0;
+  std::vector<Column> columns_;  // locals first, then shared
+  std::vector<SegmentRecord> segments_;
+  Eigen::MatrixXd rows_;             // one window's rows (scratch, reused)
+  Eigen::MatrixXd inc_;              // one window's per-interval increments (scratch)
+  std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
+  std::vector<double> switch_theta_;           // their split fractions
+  double legacy_fbar_ = kNaN;        // [m/s^2]
+  mutable long unlocated_switches_ = 0;
+};
+
+/// Convenience: identifies the damping over a whole table (segments of options.segment_length,
+/// window options.window_length or the default) in one call. Returns false with `*error` naming
+/// the problem (missing column, non-uniform time, invalid option, record shorter than a window).
+bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
+              const IdentificationOptions& options, IdentificationResult* result,
+              std::string* error);
+
+}  // namespace gear_damping_id

@@ -1,0 +1,976 @@
+#include "gear_damping_id/integral_method.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "gear_damping_id/output_error.hpp"
+#include "gear_sim/models.hpp"
+
+namespace gear_damping_id {
+
+// ----------------------------------------------------------------------------------------------
+// Inputs
+
+std::string GearConstants::validate() const {
+  std::ostringstream e;
+  if (!(equivalent_mass > 0.0) || !std::isfinite(equivalent_mass)) {
+    e << "equivalent_mass = " << equivalent_mass << ": must be > 0 [kg]";
+  } else if (!(force_factor > 0.0) || !std::isfinite(force_factor)) {
+    e << "force_factor = " << force_factor << ": must be > 0 [1/(kg*m)]";
+  } else if (!(contact_ratio > 1.0 && contact_ratio <= 2.0)) {
+    e << "contact_ratio = " << contact_ratio << ": must be in (1, 2]";
+  } else if (!(mean_stiffness > 0.0) || !std::isfinite(mean_stiffness)) {
+    e << "mean_stiffness = " << mean_stiffness << ": must be > 0 [N/m]";
+  }
+  return e.str();
+}
+
+GearConstants gearConstants(const gear_sim::GearModel& model) {
+  GearConstants g;
+  g.equivalent_mass = model.gears.equivalentMass();
+  g.force_factor = model.gears.forceFactor();
+  g.contact_ratio = model.mesh.contact_ratio;
+  g.mean_stiffness = gear_sim::MeshStiffness(model.mesh).mean();
+  g.piecewise_constant_stiffness = model.mesh.model == gear_sim::StiffnessModel::Square ||
+                                   model.mesh.model == gear_sim::StiffnessModel::Constant;
+  return g;
+}
+
+SignalView SignalView::of(const gear_sim::SignalTable& t) {
+  SignalView v;
+  v.n = t.size();
+  if (v.n > 0) v.t0 = t.time[0];
+  if (v.n > 1) v.dt = (t.time[v.n - 1] - t.time[0]) / static_cast<double>(v.n - 1);
+  auto ptr = [](const Eigen::VectorXd& c) { return c.size() > 0 ? c.data() : nullptr; };
+  v.dte = ptr(t.dte);
+  v.stiffness = ptr(t.stiffness);
+  v.torque = ptr(t.torque);
+  v.mesh_state = ptr(t.mesh_state);
+  v.mesh_phase = ptr(t.mesh_phase);
+  return v;
+}
+
+namespace {
+
+bool needsStiffness(Formulation f) { return f == Formulation::Known; }
+bool needsTorque(Formulation f, DampingModel m) {
+  return f == Formulation::Known || f == Formulation::Greybox || m == DampingModel::LoadLaw;
+}
+bool needsState(Formulation f) { return f == Formulation::Greybox; }
+
+}  // namespace
+
+std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
+                             double rel_tolerance) {
+  std::ostringstream e;
+  const Eigen::Index n = t.size();
+  if (n < 2) return "the record has " + std::to_string(n) + " samples: need at least 2";
+  if (t.dte.size() != n) return "column 'dte' is missing or has the wrong length";
+  auto need = [&](const Eigen::VectorXd& c, const char* name, const char* why) {
+    if (c.size() == 0) {
+      e << "column '" << name << "' is required by " << why << " but missing";
+      return false;
+    }
+    if (c.size() != n) {
+      e << "column '" << name << "' has " << c.size() << " values for " << n << " time stamps";
+      return false;
+    }
+    return true;
+  };
+  const std::string fw = "formulation '" + toString(f) + "'";
+  if (needsStiffness(f) && !need(t.stiffness, "stiffness", fw.c_str())) return e.str();
+  if (needsState(f) && !need(t.mesh_state, "mesh_state", fw.c_str())) return e.str();
+  if (needsTorque(f, m)) {
+    const std::string why = f == Formulation::Known || f == Formulation::Greybox
+                                ? fw
+                                : std::string("model 'load_law'");
+    if (!need(t.torque, "torque", why.c_str())) return e.str();
+  }
+  const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
+  if (!(dt > 0.0) || !std::isfinite(dt)) return "time is not increasing";
+  for (Eigen::Index i = 1; i < n; ++i) {
+    const double d = t.time[i] - t.time[i - 1];
+    if (!(std::abs(d - dt) <= rel_tolerance * dt)) {
+      e << "time is not uniformly sampled at row " << i + 1 << " (t = " << t.time[i]
+        << " s): step " << d << " s differs from the mean step " << dt
+        << " s by more than the tolerance " << rel_tolerance << " (relative)";
+      return e.str();
+    }
+  }
+  return {};
+}
+
+std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalView& s,
+                                                                 const IdentificationOptions& o) {
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> out;
+  if (s.n < 1 || !(s.dt > 0.0)) return out;
+  // Samples with t in [t_start, t_end] (inclusive within a thousandth of a step).
+  const double eps = 1e-3;
+  const double ta = std::max(o.t_start, s.t0);
+  const double tb = std::min(o.t_end, s.time(s.n - 1));
+  const auto first = static_cast<Eigen::Index>(std::ceil((ta - s.t0) / s.dt - eps));
+  const auto last = static_cast<Eigen::Index>(std::floor((tb - s.t0) / s.dt + eps));  // incl.
+  const Eigen::Index lo = std::max<Eigen::Index>(0, first);
+  const Eigen::Index hi = std::min<Eigen::Index>(s.n, last + 1);
+  if (hi <= lo) return out;
+  const bool whole = !(o.segment_length > 0.0) || !std::isfinite(o.segment_length);
+  if (whole) {
+    out.emplace_back(lo, hi);
+    return out;
+  }
+  const double t_first = s.time(lo);
+  for (long i = 0;; ++i) {
+    const double seg_t = t_first + static_cast<double>(i) * o.segment_length;
+    const auto b = static_cast<Eigen::Index>(std::ceil((seg_t - s.t0) / s.dt - eps));
+    if (b >= hi) break;
+    const double next_t = seg_t + o.segment_length;
+    auto e = static_cast<Eigen::Index>(std::ceil((next_t - s.t0) / s.dt - eps));
+    e = std::min(e, hi);
+    if (e <= b) break;
+    out.emplace_back(b, e);
+  }
+  // A final partial segment shorter than half a segment joins the previous one.
+  if (out.size() >= 2) {
+    const double full = o.segment_length / s.dt;
+    const auto& tail = out.back();
+    if (static_cast<double>(tail.second - tail.first) < 0.5 * full) {
+      const Eigen::Index e = tail.second;
+      out.pop_back();
+      out.back().second = e;
+    }
+  }
+  return out;
+}
+
+double defaultWindowLength(const SignalView& s, const GearConstants& gear) {
+  double kbar = gear.mean_stiffness;
+  if (s.stiffness != nullptr && s.n > 0) {
+    double sum = 0.0;
+    long cnt = 0;
+    for (Eigen::Index i = 0; i < s.n; ++i) {
+      if (std::isfinite(s.stiffness[i])) sum += s.stiffness[i], ++cnt;
+    }
+    if (cnt > 0 && sum > 0.0) kbar = sum / static_cast<double>(cnt);
+  }
+  const double omega0 = std::sqrt(kbar / gear.equivalent_mass);
+  return 2.0 * 2.0 * M_PI / omega0;
+}
+
+// ----------------------------------------------------------------------------------------------
+// Small dense solves
+
+namespace {
+
+// Sum of x[lo, hi) with four accumulators (pipelines; a non-finite term makes it non-finite).
+double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
+  double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+  Eigen::Index i = lo;
+  for (; i + 4 <= hi; i += 4) a0 += x[i], a1 += x[i + 1], a2 += x[i + 2], a3 += x[i + 3];
+  for (; i < hi; ++i) a0 += x[i];
+  return (a0 + a1) + (a2 + a3);
+}
+
+// Relative rounding level of a residual sum of squares computed as b'b - b'X x.
+constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
+
+// Solves the symmetric positive semi-definite system G x = r after equilibration
+// (D G D, D = diag(G)^-1/2) by a symmetric eigendecomposition. Returns false when G is not
+// positive definite or its equilibrated 2-norm condition number (of the underlying design matrix,
+// i.e. sqrt of the Gram's) exceeds max_condition. `inverse` (may be null) receives G^-1.
+bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, double max_condition,
+                       Eigen::VectorXd* x, Eigen::MatrixXd* inverse, double* condition) {
+  const Eigen::Index q = G.rows();
+  if (q == 0) {
+    x->resize(0);
+    if (inverse) inverse->resize(0, 0);
+    *condition = 1.0;
+    return true;
+  }
+  Eigen::VectorXd d(q);
+  for (Eigen::Index i = 0; i < q; ++i) {
+    if (!(G(i, i) > 0.0) || !std::isfinite(G(i, i))) {
+      *condition = std::numeric_limits<double>::infinity();
+      return false;
+    }
+    d[i] = 1.0 / std::sqrt(G(i, i));
+  }
+  const Eigen::MatrixXd S = d.asDiagonal() * G * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+  if (es.info() != Eigen::Success) return false;
+  const Eigen::VectorXd& lam = es.eigenvalues();
+  const double lmax = lam[q - 1], lmin = lam[0];
+  *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
+  if (!(*condition <= max_condition)) return false;
+  const Eigen::MatrixXd& V = es.eigenvectors();
+  const Eigen::MatrixXd Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
+  *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
+  if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
+  return true;
+}
+
+}  // namespace
+
+// ----------------------------------------------------------------------------------------------
+// IntegralMethod
+
+IntegralMethod::IntegralMethod(const IdentificationOptions& options, const GearConstants& gear)
+    : options_(options), gear_(gear), window_length_(options.window_length) {
+  buildColumns();
+}
+
+void IntegralMethod::buildColumns() {
+  columns_.clear();
+  std::vector<Column> local, shared;
+  switch (options_.model) {
+    case DampingModel::Piecewise: local.push_back(Column::DampC); break;
+    case DampingModel::Constant: shared.push_back(Column::DampC); break;
+    case DampingModel::LoadLaw:
+      shared.push_back(Column::DampC);
+      shared.push_back(Column::DampLoad);
+      break;
+  }
+  switch (options_.formulation) {
+    case Formulation::Known: break;
+    case Formulation::Greybox:
+      local.push_back(Column::StiffK0);
+      local.push_back(Column::StiffDK);
+      break;
+    case Formulation::Paper:
+      local.push_back(Column::StiffK0);
+      local.push_back(Column::ForceConst);
+      break;
+    case Formulation::Legacy:
+      shared.push_back(Column::StiffK0);
+      if (std::isnan(legacy_fbar_)) shared.push_back(Column::ForceConst);
+      break;
+  }
+  n_local_ = static_cast<int>(local.size());
+  n_shared_ = static_cast<int>(shared.size());
+  columns_ = local;
+  columns_.insert(columns_.end(), shared.begin(), shared.end());
+}
+
+void IntegralMethod::setLegacyForcing(double fbar) {
+  legacy_fbar_ = fbar;
+  buildColumns();
+}
+
+void IntegralMethod::reset() {
+  segments_.clear();
+  unlocated_switches_ = 0;
+}
+
+int IntegralMethod::columnIndex(Column c) const {
+  for (size_t i = 0; i < columns_.size(); ++i) {
+    if (columns_[i] == c) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+double IntegralMethod::switchFraction(Eigen::Index j) const {
+  const auto it = std::lower_bound(switches_.begin(), switches_.end(), j);
+  return (it != switches_.end() && *it == j) ? switch_theta_[it - switches_.begin()] : 1.0;
+}
+
+double IntegralMethod::splitFraction(const SignalView& s, Eigen::Index j, bool rising) const {
+  // The held value changes between samples j and j+1: the switch lies in (t_j, t_{j+1}].
+  if (s.mesh_phase == nullptr || j + 1 >= s.n) return 1.0;
+  const double ua = s.mesh_phase[j], ub = s.mesh_phase[j + 1];
+  if (!(ub > ua)) return 1.0;
+  // Switch phases: integers (into the stiffer, double-contact phase: rising) and m + eps - 1.
+  const double off = rising ? 0.0 : gear_.contact_ratio - 1.0;
+  const double tol = 1e-9 * std::max(1.0, std::abs(ua));
+  const double c = std::ceil(ua - off - tol) + off;  // first switch phase >= ua (to rounding)
+  if (c > ub + (ub - ua)) {
+    ++unlocated_switches_;
+    return 1.0;  // the phase channel disagrees with the sampled values: sample-and-hold
+  }
+  return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
+}
+
+// Row values of one window [w0, w1): for each row r (sample w0 + r) the q column values and b,
+// stored column-major in rows_ (rows_(r, c)). Cumulative integrals restart at w0.
+//
+// Three passes, for speed: (1) per-interval increments of the integrals (independent across
+// intervals, so they vectorise), with a fix-up of the rare intervals that contain a switch;
+// (2) the prefix sums that make the cumulative single and double integrals, writing the rows.
+void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1,
+                                double fbar) {
+  const Eigen::Index L = w1 - w0;
+  const int q = static_cast<int>(columns_.size());
+  if (rows_.rows() < L || rows_.cols() != q + 1) rows_.resize(std::max<Eigen::Index>(L, 1), q + 1);
+  if (inc_.rows() < L || inc_.cols() < 7) inc_.resize(std::max<Eigen::Index>(L, 1), 7);
+  const double h = s.dt, h2 = h * h;
+  const double inv_me = 1.0 / gear_.equivalent_mass, ff = gear_.force_factor;
+  const Formulation f = options_.formulation;
+  const bool known = f == Formulation::Known, grey = f == Formulation::Greybox;
+  const bool use_force = known || grey;
+  const bool load = options_.model == DampingModel::LoadLaw;
+  const bool need_iiy = !known;
+  const bool split_k = known && gear_.piecewise_constant_stiffness;
+  const double* y = s.dte;
+  const double* k = s.stiffness;
+  const double* T = s.torque;
+  const double* st = s.mesh_state;
+  const double T_c = (load && T) ? T[w0] : 0.0;
+
+  // Increment arrays over the L - 1 intervals j = w0 + i: ay, my (y), ag, mg (K y - F or -F),
+  // as, ms (s y), dS (load law: (T1 - T_c) dy).
+  double* ay = &inc_(0, 0);
+  double* my = &inc_(0, 1);
+  double* ag = &inc_(0, 2);
+  double* mg = &inc_(0, 3);
+  double* as = &inc_(0, 4);
+  double* ms = &inc_(0, 5);
+  double* dS = &inc_(0, 6);
+  const Eigen::Index ni = L - 1;
+  // Pass 1: interior intervals with the interior rule; edges of the record use their own rule.
+  auto intervalRule = [&](Eigen::Index j) -> const CubicIntervalRule& {
+    return rules_.forInterval(j, 0, s.n);
+  };
+  Eigen::Index i_lo = 0, i_hi = ni;  // [i_lo, i_hi) use the interior rule
+  while (i_lo < ni && intervalRule(w0 + i_lo).offset() != -1) ++i_lo;
+  while (i_hi > i_lo && intervalRule(w0 + i_hi - 1).offset() != -1) --i_hi;
+  {
+    const auto& wa = rules_.interior.area();
+    const auto& wm = rules_.interior.moment();
+    const double a0 = h * wa[0], a1 = h * wa[1], a2 = h * wa[2], a3 = h * wa[3];
+    const double m0 = h2 * wm[0], m1 = h2 * wm[1], m2 = h2 * wm[2], m3 = h2 * wm[3];
+    const double* yb = y + w0 - 1;
+    for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+      ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
+      my[i] = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    }
+    if (known) {
+      const double* kb = k + w0;
+      const double* Tb = T + w0 - 1;
+      if (split_k) {
+        // K held on the interval (a switch inside is fixed up below).
+        for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+          const double K = kb[i] * inv_me;
+          const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2],
+                       F3 = ff * Tb[i + 3];
+          ag[i] = K * ay[i] - (a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
+          mg[i] = K * my[i] - (m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
+        }
+      } else {
+        const double* kk = k + w0 - 1;
+        const double* yy = y + w0 - 1;
+        for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+          double g[4];
+          for (int c = 0; c < 4; ++c) g[c] = kk[i + c] * inv_me * yy[i + c] - ff * Tb[i + c];
+          ag[i] = a0 * g[0] + a1 * g[1] + a2 * g[2] + a3 * g[3];
+          mg[i] = m0 * g[0] + m1 * g[1] + m2 * g[2] + m3 * g[3];
+        }
+      }
+    } else if (grey) {
+      const double* Tb = T + w0 - 1;
+      const double* sb = st + w0;
+      for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+        const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2],
+                     F3 = ff * Tb[i + 3];
+        ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
+        mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
+        as[i] = sb[i] * ay[i];
+        ms[i] = sb[i] * my[i];
+      }
+    }
+  }
+  // Edge intervals (first/last of the record), generic.
+  auto generic = [&](Eigen::Index i) {
+    const Eigen::Index j = w0 + i;
+    const CubicIntervalRule& rule = intervalRule(j);
+    const Eigen::Index b = j + rule.offset();
+    const auto& wa = rule.area();
+    const auto& wm = rule.moment();
+    double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0;
+    for (int c = 0; c < 4; ++c) {
+      sa += wa[c] * y[b + c], sm += wm[c] * y[b + c];
+      if (use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
+      if (known && !split_k) {
+        ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
+      }
+    }
+    ay[i] = h * sa, my[i] = h2 * sm;
+    if (known) {
+      if (split_k) ga = k[j] * inv_me * sa, gm = k[j] * inv_me * sm;
+      ag[i] = h * (ga - fa), mg[i] = h2 * (gm - fm);
+    } else if (grey) {
+      ag[i] = -h * fa, mg[i] = -h2 * fm;
+      as[i] = st[j] * ay[i], ms[i] = st[j] * my[i];
+    }
+  };
+  for (Eigen::Index i = 0; i < i_lo; ++i) generic(i);
+  for (Eigen::Index i = i_hi; i < ni; ++i) generic(i);
+  // Fix-up of intervals containing a switch: each part with its own held value.
+  auto splitParts = [&](Eigen::Index j, const double* ch, double* a_out, double* m_out,
+                        double scale) {
+    const double vl = ch[j] * scale, vr = ch[j + 1] * scale;
+    const double th = switchFraction(j);
+    const CubicIntervalRule& rule = intervalRule(j);
+    const Eigen::Index b = j + rule.offset();
+    const auto a0 = rule.area(0.0, th), a1 = rule.area(th, 1.0);
+    const auto m0 = rule.moment(0.0, th), m1 = rule.moment(th, 1.0);
+    double al = 0, ar = 0, ml = 0, mr = 0;
+    for (int c = 0; c < 4; ++c) {
+      al += a0[c] * y[b + c], ar += a1[c] * y[b + c];
+      ml += m0[c] * y[b + c], mr += m1[c] * y[b + c];
+    }
+    *a_out = h * (vl * al + vr * ar);
+    *m_out = h2 * (vl * ml + vr * mr);
+  };
+  if (split_k || grey) {
+    // The segment's switch list (see addSegment), restricted to this window's intervals.
+    auto it = std::lower_bound(switches_.begin(), switches_.end(), w0);
+    for (; it != switches_.end() && *it < w0 + ni; ++it) {
+      const Eigen::Index j = *it;
+      const Eigen::Index i = j - w0;
+      if (split_k) {
+        // Replace the K y part, keep the forcing part: ag = K y part - F part.
+        const double K = k[j] * inv_me;
+        const double fa = K * ay[i] - ag[i], fm = K * my[i] - mg[i];
+        double ka, km;
+        splitParts(j, k, &ka, &km, inv_me);
+        ag[i] = ka - fa, mg[i] = km - fm;
+      } else {
+        splitParts(j, st, &as[i], &ms[i], 1.0);
+      }
+    }
+  }
+  if (load) {
+    for (Eigen::Index i = 0; i < ni; ++i) {
+      const Eigen::Index j = w0 + i;
+      dS[i] = 0.5 * ((T[j] - T_c) + (T[j + 1] - T_c)) * (y[j + 1] - y[j]);
+    }
+  }
+
+  // Pass 2: prefix sums -> rows.
+  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
+  const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
+  const int cF = columnIndex(Column::ForceConst);
+  double* colb = &rows_(0, q);
+  if (known && options_.model != DampingModel::LoadLaw && q == 1) {
+    // Hot path (known, piecewise/constant): rows [-P, y + IIKy - IIF].
+    double* colC = &rows_(0, 0);
+    double P = 0.0, G = 0.0, Q = 0.0;
+    colC[0] = 0.0;
+    colb[0] = y[w0];
+    for (Eigen::Index r = 1; r < L; ++r) {
+      Q += h * G + mg[r - 1];
+      G += ag[r - 1];
+      P += ay[r - 1];
+      colC[r] = -P;
+      colb[r] = y[w0 + r] + Q;
+    }
+    return;
+  }
+  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0,
+         Dr = 0.0;
+  for (Eigen::Index r = 0; r < L; ++r) {
+    if (r > 0) {
+      const Eigen::Index i = r - 1;
+      if (need_iiy) Qy += h * Gy + my[i], Gy += ay[i];
+      if (use_force) Qkf += h * Gkf + mg[i], Gkf += ag[i];
+      if (grey) Qs += h * Gs + ms[i], Gs += as[i];
+      if (load) Dr += h * (Sr + 0.5 * dS[i]), Sr += dS[i];
+      P += ay[i];
+    }
+    const double tau = static_cast<double>(r) * h;
+    double bval = y[w0 + r];
+    if (use_force) bval += Qkf;  // known: + IIKy - IIF; greybox: - IIF
+    if (f == Formulation::Legacy && !std::isnan(fbar)) bval -= fbar * 0.5 * tau * tau;
+    colb[r] = bval;
+    if (cC >= 0) rows_(r, cC) = -P;
+    if (cL >= 0) rows_(r, cL) = -(T_c * P + Dr);
+    if (cK0 >= 0) rows_(r, cK0) = -Qy;
+    if (cDK >= 0) rows_(r, cDK) = -Qs;
+    if (cF >= 0) rows_(r, cF) = 0.5 * tau * tau;
+  }
+}
+
+namespace {
+
+// Means and p1-slopes of the nc = NC columns of rows (L rows), and the Gram matrix of the
+// columns projected onto the orthogonal complement of {1, p1}, p1 = r - (L-1)/2, added to
+// `gram`. One pass: each column is first detrended by the line through its first and last rows
+// (the projection is invariant to adding a linear function, so this is exact algebra); what
+// remains is small and oscillatory, so forming the projected Gram from its moments,
+//   G_ab = sum z_a z_b - (sum z_a)(sum z_b)/L - (sum p1 z_a)(sum p1 z_b)/sum p1^2,
+// does not cancel the leading digits the way raw moments of the trend-dominated integrals would.
+template <int NC>
+void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, double* mean,
+                   double* slope, double* raw_norm, Eigen::MatrixXd* gram) {
+  const double half = 0.5 * static_cast<double>(L - 1);
+  const double Ld = static_cast<double>(L);
+  const double sp2 = Ld * (Ld * Ld - 1.0) / 12.0;  // sum of p1^2
+  const double* col[NC];
+  double d0[NC], d1[NC];
+  for (int c = 0; c < NC; ++c) {
+    col[c] = &rows(0, c);
+    d0[c] = col[c][0];
+    d1[c] = L > 1 ? (col[c][L - 1] - col[c][0]) / static_cast<double>(L - 1) : 0.0;
+  }
+  double S[NC] = {0}, SP[NC] = {0}, M[NC][NC] = {{0}};
+  double raw = 0.0;
+  for (Eigen::Index r = 0; r < L; ++r) {
+    const double rd = static_cast<double>(r);
+    const double p = rd - half;
+    double z[NC];
+    for (int c = 0; c < NC; ++c) {
+      z[c] = col[c][r] - d0[c] - d1[c] * rd;
+      S[c] += z[c];
+      SP[c] += p * z[c];
+    }
+    for (int a = 0; a < NC; ++a) {
+      for (int b = a; b < NC; ++b) M[a][b] += z[a] * z[b];
+    }
+    raw += col[raw_col][r] * col[raw_col][r];
+  }
+  *raw_norm += raw;
+  for (int c = 0; c < NC; ++c) {
+    mean[c] = S[c] / Ld + d0[c] + d1[c] * half;
+    slope[c] = (sp2 > 0.0 ? SP[c] / sp2 : 0.0) + d1[c];
+  }
+  for (int a = 0; a < NC; ++a) {
+    for (int b = a; b < NC; ++b) {
+      const double g =
+          M[a][b] - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
+      (*gram)(a, b) += g;
+      if (a != b) (*gram)(b, a) += g;
+    }
+  }
+}
+
+}  // namespace
+
+SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index begin,
+                                           Eigen::Index end) {
+  SegmentRecord rec;
+  SegmentEstimate& est = rec.estimate;
+  est.t_start = s.time(begin);
+  est.t_end = s.time(end - 1) + s.dt;
+  const long rows = static_cast<long>(end - begin);
+  est.samples = rows;
+  const int q = static_cast<int>(columns_.size());
+  rec.gram = Eigen::MatrixXd::Zero(q + 1, q + 1);
+  auto fail = [&](const std::string& why) {
+    est.identifiable = false;
+    est.reason = why;
+    segments_.push_back(rec);
+    return est;
+  };
+  if (window_length_ <= 0.0) window_length_ = defaultWindowLength(s, gear_);
+  const Eigen::Index L0 = std::max<Eigen::Index>(
+      4, static_cast<Eigen::Index>(std::llround(window_length_ / s.dt)));
+  const int W = static_cast<int>(
+      std::max<Eigen::Index>(1, static_cast<Eigen::Index>(std::llround(double(rows) / L0))));
+  if (s.n < 4 || rows < 4L * W || rows - 2L * W - n_local_ < 2) {
+    return fail("too few samples (" + std::to_string(rows) + " in the segment)");
+  }
+  // Finite inputs on the segment and the stencil context (a sum is finite only if every term
+  // is; the element-wise search runs only when it is not).
+  const Eigen::Index c0 = std::max<Eigen::Index>(0, begin - 2);
+  const Eigen::Index c1 = std::min<Eigen::Index>(s.n, end + 2);
+  const Formulation f = options_.formulation;
+  const bool use_torque = needsTorque(f, options_.model);
+  struct Channel {
+    const double* data;
+    const char* name;
+  };
+  const Channel channels[] = {{s.dte, "dte"},
+                              {needsStiffness(f) ? s.stiffness : nullptr, "stiffness"},
+                              {use_torque ? s.torque : nullptr, "torque"},
+                              {needsState(f) ? s.mesh_state : nullptr, "mesh_state"}};
+  for (const Channel& ch : channels) {
+    if (ch.data == nullptr) continue;
+    if (std::isfinite(blockSum(ch.data, c0, c1))) continue;
+    for (Eigen::Index i = c0; i < c1; ++i) {
+      if (!std::isfinite(ch.data[i])) {
+        std::ostringstream m;
+        m << "NaN/Inf in input (" << ch.name << " at t = " << s.time(i) << " s)";
+        return fail(m.str());
+      }
+    }
+  }
+  // Segment means (time-weighted over the segment's intervals; switches split when located).
+  if (use_torque) {
+    rec.mean_torque = blockSum(s.torque, begin, end) / static_cast<double>(rows);
+    est.mean_torque = rec.mean_torque;
+  }
+  rec.duration = static_cast<double>(rows) * s.dt;
+  // Intervals j in [begin, end) (j + 1 < n) where the held stiffness / mesh state changes,
+  // with the switch's fraction of the interval: found once per segment by a branch-free scan.
+  const double* held = (f == Formulation::Known && gear_.piecewise_constant_stiffness)
+                           ? s.stiffness
+                           : (f == Formulation::Greybox ? s.mesh_state : nullptr);
+  switches_.clear();
+  switch_theta_.clear();
+  if (held != nullptr) {
+    const Eigen::Index last = std::min<Eigen::Index>(end, s.n - 1);
+    scan_.resize(static_cast<size_t>(std::max<Eigen::Index>(last - begin, 0)) + 1);
+    size_t cnt = 0;
+    for (Eigen::Index i = begin; i < last; ++i) {
+      scan_[cnt] = i;
+      cnt += held[i] != held[i + 1];
+    }
+    for (size_t c = 0; c < cnt; ++c) {
+      const Eigen::Index j = scan_[c];
+      switches_.push_back(j);
+      switch_theta_.push_back(splitFraction(s, j, held[j + 1] > held[j]));
+    }
+  }
+  if (s.stiffness) {
+    double sum = blockSum(s.stiffness, begin, end);
+    if (f == Formulation::Known && gear_.piecewise_constant_stiffness) {
+      for (size_t c = 0; c < switches_.size(); ++c) {
+        const Eigen::Index j = switches_[c];
+        sum += (1.0 - switch_theta_[c]) * (s.stiffness[j + 1] - s.stiffness[j]);
+      }
+    }
+    rec.k_integral = sum * s.dt / gear_.equivalent_mass;
+  }
+  if (s.mesh_state && f == Formulation::Greybox) {
+    double sum = blockSum(s.mesh_state, begin, end);
+    for (size_t c = 0; c < switches_.size(); ++c) {
+      const Eigen::Index j = switches_[c];
+      sum += (1.0 - switch_theta_[c]) * (s.mesh_state[j + 1] - s.mesh_state[j]);
+    }
+    rec.mean_state = sum / static_cast<double>(rows);
+    if (switches_.empty()) {
+      return fail("mesh state constant over the segment: the stiffness levels are not "
+                  "identifiable (segment shorter than a mesh period?)");
+    }
+  }
+  const double fbar = legacy_fbar_;
+  // Windows: W near-equal spans. The damping column comes first among the locals or, for
+  // shared damping, first among the shared columns; its raw norm serves the motion check.
+  double raw_c = 0.0;
+  const int cC = columnIndex(Column::DampC);
+  const int nc = q + 1;
+  rec.window_records.reserve(W);
+  for (int w = 0; w < W; ++w) {
+    const Eigen::Index w0 = begin + (rows * w) / W, w1 = begin + (rows * (w + 1)) / W;
+    const Eigen::Index L = w1 - w0;
+    windowRows(s, w0, w1, fbar);
+    WindowRecord wr;
+    wr.t_start = s.time(w0);
+    wr.t_end = s.time(w1 - 1);
+    wr.rows = L;
+    wr.dt = s.dt;
+    wr.torque_T = (use_torque && s.torque) ? s.torque[w0] : kNaN;
+    wr.mean.assign(nc, 0.0);
+    wr.slope.assign(nc, 0.0);
+    double raw = 0.0;
+    const int rc = std::max(cC, 0);
+    switch (nc) {
+      case 2: projectedGram<2>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      case 3: projectedGram<3>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      case 4: projectedGram<4>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      case 5: projectedGram<5>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      default: projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+    }
+    raw_c += raw;
+    rec.window_records.push_back(std::move(wr));
+  }
+  rec.rows = rows;
+  rec.windows = W;
+  est.windows = W;
+  if (cC >= 0 && !(rec.gram(cC, cC) > 1e-20 * raw_c)) {
+    return fail("no motion: the DTE has no dynamic content to identify damping from");
+  }
+  // Segment-local solve (final for models without shared unknowns).
+  if (n_local_ > 0) {
+    Eigen::VectorXd x;
+    double cond = 0.0;
+    const Eigen::MatrixXd Gll = rec.gram.topLeftCorner(n_local_, n_local_);
+    if (!solveEquilibrated(Gll, rec.gram.block(0, q, n_local_, 1), options_.max_condition, &x,
+                           nullptr, &cond)) {
+      est.condition = cond;
+      std::ostringstream m;
+      m << "rank deficient or ill-conditioned (condition " << cond << " > "
+        << options_.max_condition << ")";
+      return fail(m.str());
+    }
+    est.condition = cond;
+  }
+  est.identifiable = true;
+  segments_.push_back(std::move(rec));
+  if (n_shared_ == 0) {
+    // Fill the estimate from a finish() of this segment alone (cheap: small matrices).
+    const IdentificationResult r = finishRange(segments_.size() - 1, segments_.size());
+    return r.segments.back();
+  }
+  return segments_.back().estimate;
+}
+
+IdentificationResult IntegralMethod::finish() const { return finishRange(0, segments_.size()); }
+
+IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) const {
+  IdentificationResult res;
+  res.formulation = options_.formulation;
+  res.model = options_.model;
+  res.equivalent_mass = gear_.equivalent_mass;
+  res.window_length = window_length_;
+  const int q = static_cast<int>(columns_.size());
+  const int nl = n_local_, ns = n_shared_;
+  const double me = gear_.equivalent_mass;
+
+  // Shared unknowns: eliminate each segment's locals (Schur complement) and accumulate.
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
+  double rss_total = 0.0;
+  long dof_total = 0;
+  struct Local {
+    Eigen::MatrixXd Gll_inv;
+    bool ok = false;
+  };
+  std::vector<Local> locals(s_end - s_begin);
+  for (size_t i = s_begin; i < s_end; ++i) {
+    const SegmentRecord& rec = segments_[i];
+    if (!rec.estimate.identifiable) continue;
+    const Eigen::MatrixXd& G = rec.gram;
+    Local& L = locals[i - s_begin];
+    Eigen::VectorXd xl;
+    double cond = 0.0;
+    if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl, &L.Gll_inv,
+                           &cond)) {
+      continue;
+    }
+    L.ok = true;
+    const Eigen::MatrixXd Gsl = G.block(nl, 0, ns, nl);
+    A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv * Gsl.transpose();
+    rhs += G.block(nl, q, ns, 1) - Gsl * xl;
+    rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
+    dof_total += rec.rows - 2L * rec.windows - nl;
+  }
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(ns);
+  Eigen::MatrixXd Ainv = Eigen::MatrixXd::Zero(ns, ns);
+  bool shared_ok = true;
+  double shared_cond = 1.0;
+  std::string shared_reason;
+  if (ns > 0) {
+    dof_total -= ns;
+    if (dof_total < 1) {
+      shared_ok = false;
+      shared_reason = "too few samples over the identifiable segments";
+    } else if (!solveEquilibrated(A, rhs, options_.max_condition, &g, &Ainv, &shared_cond)) {
+      shared_ok = false;
+      std::ostringstream m;
+      m << "rank deficient or ill-conditioned (condition " << shared_cond << ")";
+      shared_reason = m.str();
+    } else {
+      rss_total -= rhs.dot(g);
+    }
+  }
+  const double sigma2_shared =
+      (ns > 0 && shared_ok) ? std::max(rss_total, 0.0) / static_cast<double>(dof_total) : kNaN;
+
+  // omega0 = sqrt(mean K): from the data (known) or the identified stiffness.
+  double k_int = 0.0, dur = 0.0;
+  std::vector<double> seg_kmean(s_end - s_begin, kNaN);
+
+  // Per-segment parameters and covariances.
+  struct Params {
+    Eigen::VectorXd theta;  // q
+    Eigen::MatrixXd cov;    // q x q
+  };
+  std::vector<Params> params(s_end - s_begin);
+  for (size_t i = s_begin; i < s_end; ++i) {
+    const SegmentRecord& rec = segments_[i];
+    const Local& L = locals[i - s_begin];
+    if (!rec.estimate.identifiable || !L.ok || (ns > 0 && !shared_ok)) continue;
+    const Eigen::MatrixXd& G = rec.gram;
+    Params& p = params[i - s_begin];
+    p.theta.resize(q);
+    p.cov = Eigen::MatrixXd::Zero(q, q);
+    const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
+    const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * g);
+    p.theta.head(nl) = xl;
+    p.theta.tail(ns) = g;
+    double sigma2 = sigma2_shared;
+    if (ns == 0) {
+      // The residual sum from the Gram matrix cancels to rounding when the fit is near exact:
+      // floor it at the rounding level instead of reporting a zero standard error.
+      const double rss = std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
+      sigma2 = rss / static_cast<double>(rec.rows - 2L * rec.windows - nl);
+    }
+    const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
+    p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * Ainv * B.transpose());
+    p.cov.block(0, nl, nl, ns) = -sigma2 * B * Ainv;
+    p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
+    p.cov.bottomRightCorner(ns, ns) = sigma2 * Ainv;
+    // Mean normalised stiffness over the segment.
+    double kmean = kNaN;
+    const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
+    if (options_.formulation == Formulation::Known && rec.duration > 0.0) {
+      kmean = rec.k_integral / rec.duration;
+    } else if (cK0 >= 0) {
+      kmean = p.theta[cK0] + (cDK >= 0 ? p.theta[cDK] * rec.mean_state : 0.0);
+    }
+    seg_kmean[i - s_begin] = kmean;
+    if (std::isfinite(kmean)) k_int += kmean * rec.duration, dur += rec.duration;
+  }
+  const double omega0 = dur > 0.0 && k_int > 0.0 ? std::sqrt(k_int / dur)
+                                                  : std::sqrt(gear_.mean_stiffness / me);
+  res.omega0 = omega0;
+
+  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
+  const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
+  auto fillC = [&](SegmentEstimate* e, double C, double var) {
+    e->C = C;
+    e->C_std = std::sqrt(std::max(var, 0.0));
+    e->c = C * me;
+    e->xi = C / (2.0 * omega0);
+  };
+  for (size_t i = s_begin; i < s_end; ++i) {
+    const SegmentRecord& rec = segments_[i];
+    SegmentEstimate e = rec.estimate;
+    const Params& p = params[i - s_begin];
+    if (e.identifiable && p.theta.size() == 0) {
+      e.identifiable = false;
+      e.reason = (ns > 0 && !shared_ok) ? shared_reason : "rank deficient";
+    }
+    if (e.identifiable) {
+      if (cL >= 0) {  // load law: C at the segment's mean torque
+        const double T = rec.mean_torque;
+        const double var = p.cov(cC, cC) + T * T * p.cov(cL, cL) + 2.0 * T * p.cov(cC, cL);
+        fillC(&e, p.theta[cC] + p.theta[cL] * T, var);
+      } else {
+        fillC(&e, p.theta[cC], p.cov(cC, cC));
+      }
+      if (cK0 >= 0) {
+        const double k0 = p.theta[cK0];
+        if (cDK >= 0) {
+          const double dk = p.theta[cDK];
+          e.k_min = me * k0;
+          e.k_max = me * (k0 + dk);
+          e.k_min_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
+          e.k_max_std = me * std::sqrt(std::max(
+                                 p.cov(cK0, cK0) + p.cov(cDK, cDK) + 2.0 * p.cov(cK0, cDK), 0.0));
+        } else {
+          e.k_min = e.k_max = me * k0;
+          e.k_min_std = e.k_max_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
+        }
+      }
+      const int cF = columnIndex(Column::ForceConst);
+      if (cF >= 0) {
+        e.forcing = p.theta[cF];
+      } else if (options_.formulation == Formulation::Legacy) {
+        e.forcing = legacy_fbar_;
+      }
+      // Windows: nuisance estimates for the modeled response.
+      for (const WindowRecord& w : rec.window_records) {
+        double m = w.mean[q], sl = w.slope[q];
+        for (int c = 0; c < q; ++c) m -= p.theta[c] * w.mean[c], sl -= p.theta[c] * w.slope[c];
+        const double half = 0.5 * static_cast<double>(w.rows - 1);
+        WindowEstimate we;
+        we.t_start = w.t_start;
+        we.t_end = w.t_end;
+        we.alpha = sl / w.dt;
+        we.y_T = m - sl * half;
+        double CT = p.theta[cC];
+        if (cL >= 0) CT += p.theta[cL] * w.torque_T;
+        we.velocity = we.alpha - CT * we.y_T;
+        res.windows.push_back(we);
+      }
+    } else {
+      e.C = e.C_std = e.c = e.xi = kNaN;
+      e.k_min = e.k_max = e.k_min_std = e.k_max_std = kNaN;
+    }
+    res.segments.push_back(e);
+  }
+  // Shared summaries.
+  if (options_.model == DampingModel::Constant) {
+    SegmentEstimate c;
+    if (!res.segments.empty()) {
+      c.t_start = res.segments.front().t_start;
+      c.t_end = res.segments.back().t_end;
+    }
+    c.identifiable = shared_ok && dof_total > 0;
+    c.reason = shared_reason;
+    c.condition = shared_cond;
+    for (const auto& r : segments_) c.samples += r.rows, c.windows += r.windows;
+    if (c.identifiable && cC >= nl) {
+      fillC(&c, g[cC - nl], sigma2_shared * Ainv(cC - nl, cC - nl));
+      if (cK0 >= nl) {
+        c.k_min = c.k_max = me * g[cK0 - nl];
+        c.k_min_std = c.k_max_std =
+            me * std::sqrt(std::max(sigma2_shared * Ainv(cK0 - nl, cK0 - nl), 0.0));
+      }
+    } else {
+      c.identifiable = false;
+      if (c.reason.empty()) c.reason = "no identifiable segment";
+    }
+    res.constant = c;
+  }
+  if (options_.model == DampingModel::LoadLaw) {
+    LoadLawEstimate l;
+    l.identifiable = shared_ok && dof_total > 0;
+    l.reason = shared_reason;
+    if (l.identifiable) {
+      const int a = cC - nl, b = cL - nl;
+      l.c0 = me * g[a];
+      l.c1 = me * g[b];
+      l.c0_std = me * std::sqrt(std::max(sigma2_shared * Ainv(a, a), 0.0));
+      l.c1_std = me * std::sqrt(std::max(sigma2_shared * Ainv(b, b), 0.0));
+    } else if (l.reason.empty()) {
+      l.reason = "no identifiable segment";
+    }
+    res.load_law = l;
+  }
+  if (unlocated_switches_ > 0) {
+    res.warnings.push_back(std::to_string(unlocated_switches_) +
+                           " stiffness switches could not be located from mesh_phase (values "
+                           "held from the sample instead): check contact_ratio and the phase "
+                           "origin");
+  }
+  return res;
+}
+
+// ----------------------------------------------------------------------------------------------
+
+bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
+              const IdentificationOptions& options, IdentificationResult* result,
+              std::string* error) {
+  std::string e = options.validate();
+  if (e.empty()) e = gear.validate();
+  if (e.empty()) e = checkSignalTable(table, options.formulation, options.model,
+                                      options.time_tolerance);
+  if (!e.empty()) {
+    *error = e;
+    return false;
+  }
+  const SignalView view = SignalView::of(table);
+  IdentificationOptions o = options;
+  if (o.window_length <= 0.0) o.window_length = defaultWindowLength(view, gear);
+  const auto ranges = segmentRanges(view, o);
+  if (ranges.empty()) {
+    *error = "no samples in the analysed time range [" + std::to_string(o.t_start) + ", " +
+             std::to_string(o.t_end) + "] s";
+    return false;
+  }
+  IntegralMethod m(o, gear);
+  if (o.formulation == Formulation::Legacy && view.torque != nullptr) {
+    double sum = 0.0;
+    const Eigen::Index b = ranges.front().first, en = ranges.back().second;
+    for (Eigen::Index i = b; i < en; ++i) sum += view.torque[i];
+    m.setLegacyForcing(gear.force_factor * sum / static_cast<double>(en - b));
+  }
+  for (const auto& r : ranges) m.addSegment(view, r.first, r.second);
+  *result = m.finish();
+  if (wantsRefinement(o, *result)) {
+    IdentificationResult refined = *result;
+    std::string why;
+    if (refineOutputError(view, ranges, gear, o, &refined, &why)) {
+      *result = std::move(refined);
+    } else {
+      result->warnings.push_back("output-error refinement failed (" + why +
+                                 "): integral-method estimates reported");
+    }
+  }
+  return true;
+}
+
+}  // namespace gear_damping_id
