@@ -6,3 +6,20 @@ add_library(gear_damping_id_core ${GEAR_ID_CORE_SOURCES})
 target_include_directories(gear_damping_id_core PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/include)
 target_link_libraries(gear_damping_id_core PUBLIC gear_sim_core Eigen3::Eigen PkgConfig::FFTW3)
 target_compile_options(gear_damping_id_core PRIVATE ${GEAR_WARNINGS})
+
+# Analysis outputs (JSON, tables, CSV): no ROS either, shared by the tools and the tests.
+file(GLOB GEAR_ID_IO_SOURCES CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/src/io/*.cpp)
+add_library(gear_damping_id_io ${GEAR_ID_IO_SOURCES})
+target_link_libraries(gear_damping_id_io PUBLIC gear_damping_id_core nlohmann_json::nlohmann_json)
+target_compile_options(gear_damping_id_io PRIVATE ${GEAR_WARNINGS})
+
+# `rosrun gear_damping analyze`: identification (and wavelet validation) of a recorded signal.
+add_executable(analyze gear_damping_id/tools/analyze.cpp)
+target_link_libraries(analyze gear_damping_id_io gear_sim_io CLI11::CLI11)
+target_compile_options(analyze PRIVATE ${GEAR_WARNINGS})
+
+install(TARGETS gear_damping_id_core gear_damping_id_io analyze
+        ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(DIRECTORY gear_damping_id/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_DESTINATION})

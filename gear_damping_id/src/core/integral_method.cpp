@@ -63,7 +63,7 @@ bool needsState(Formulation f) { return f == Formulation::Greybox; }
 }  // namespace
 
 std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
-                             double rel_tolerance) {
+                             double rel_tolerance, Eigen::Index first_line) {
   std::ostringstream e;
   const Eigen::Index n = t.size();
   if (n < 2) return "the record has " + std::to_string(n) + " samples: need at least 2";
@@ -90,12 +90,23 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
   }
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
   if (!(dt > 0.0) || !std::isfinite(dt)) return "time is not increasing";
+  // Reference step: the median of the first three steps (a record whose very first step is the
+  // odd one is then reported there, not at every later step).
+  double ref = t.time[1] - t.time[0];
+  if (n >= 4) {
+    double d[3] = {t.time[1] - t.time[0], t.time[2] - t.time[1], t.time[3] - t.time[2]};
+    std::sort(d, d + 3);
+    ref = d[1];
+  }
   for (Eigen::Index i = 1; i < n; ++i) {
     const double d = t.time[i] - t.time[i - 1];
-    if (!(std::abs(d - dt) <= rel_tolerance * dt)) {
-      e << "time is not uniformly sampled at row " << i + 1 << " (t = " << t.time[i]
-        << " s): step " << d << " s differs from the mean step " << dt
-        << " s by more than the tolerance " << rel_tolerance << " (relative)";
+    if (!(std::abs(d - ref) <= rel_tolerance * ref)) {
+      e << "time is not uniformly sampled at ";
+      if (first_line >= 0) e << "line " << first_line + i << " (sample " << i << ", ";
+      else e << "sample " << i << " (";
+      e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step "
+        << ref << " s by more than the tolerance " << rel_tolerance
+        << " (relative)" << (d > ref ? ": a gap or a dropped sample" : "");
       return e.str();
     }
   }
