@@ -13,12 +13,21 @@ add_library(gear_damping_id_io ${GEAR_ID_IO_SOURCES})
 target_link_libraries(gear_damping_id_io PUBLIC gear_damping_id_core nlohmann_json::nlohmann_json)
 target_compile_options(gear_damping_id_io PRIVATE ${GEAR_WARNINGS})
 
+# ROS side: identification results <-> messages, shared by the tools and the nodes.
+add_library(gear_id_ros_conversions gear_damping_id/ros/id_conversions.cpp)
+target_include_directories(gear_id_ros_conversions PUBLIC
+                           ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include)
+target_link_libraries(gear_id_ros_conversions PUBLIC gear_damping_id_core gear_ros_conversions)
+target_compile_options(gear_id_ros_conversions PRIVATE ${GEAR_WARNINGS})
+add_dependencies(gear_id_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
+
 # `rosrun gear_damping analyze`: identification (and wavelet validation) of a recorded signal.
 add_executable(analyze gear_damping_id/tools/analyze.cpp)
-target_link_libraries(analyze gear_damping_id_io gear_sim_io CLI11::CLI11)
+target_link_libraries(analyze gear_damping_id_io gear_id_ros_conversions gear_sim_io CLI11::CLI11
+                      ${catkin_LIBRARIES})
 target_compile_options(analyze PRIVATE ${GEAR_WARNINGS})
 
-install(TARGETS gear_damping_id_core gear_damping_id_io analyze
+install(TARGETS gear_damping_id_core gear_damping_id_io gear_id_ros_conversions analyze
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

@@ -5,8 +5,6 @@
 // the DESIGN §6 CSV, or a bag with gear_damping/SignalChunk messages on /gear/signal and the
 // gear parameters (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid
 // input (message on stderr naming the key/option), 2 output could not be written.
-#include <rosbag/bag.h>
-
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
@@ -16,39 +14,13 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
-#include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/bag_io.hpp"
 
 namespace {
 
 bool endsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-// Writes the bag to `path`; stamps are 1 s + the sample time (a bag cannot hold time 0).
-bool writeBag(const std::string& path, const gear_sim::SimConfig& c, const gear_sim::SignalTable& t,
-              Eigen::Index chunk_size, std::string* error) {
-  try {
-    rosbag::Bag bag(path, rosbag::bagmode::Write);
-    const ros::Time base(1.0);
-    auto params = gear_sim_ros::toMsg(c.gearModel());
-    params.header.stamp = base;
-    bag.write("/gear/params", base, params);
-    gear_damping::SignalChunk chunk;
-    for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
-      const Eigen::Index n = std::min(chunk_size, t.size() - b);
-      gear_sim_ros::toChunk(t, b, n, c.simulation.sample_rate, static_cast<std::uint64_t>(b),
-                            &chunk);
-      chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
-      chunk.header.stamp = base + ros::Duration(t.time[b]);
-      bag.write("/gear/signal", chunk.header.stamp, chunk);
-    }
-    bag.close();
-  } catch (const std::exception& e) {
-    *error = path + ": " + e.what();
-    return false;
-  }
-  return true;
 }
 
 }  // namespace
@@ -92,8 +64,11 @@ int main(int argc, char** argv) {
   }
   // Write next to the target and rename on success: no partial file that looks complete.
   const std::string tmp = output + ".partial";
-  const bool ok = endsWith(output, ".csv") ? gear_sim::writeSignalCsv(tmp, t, &error)
-                                           : writeBag(tmp, c, t, chunk_size, &error);
+  const gear_sim::GearModel model = c.gearModel();
+  const bool ok = endsWith(output, ".csv")
+                      ? gear_sim::writeSignalCsv(tmp, t, &error)
+                      : gear_sim_ros::writeSignalBag(tmp, t, c.simulation.sample_rate, &model,
+                                                     chunk_size, &error);
   if (!ok || std::rename(tmp.c_str(), output.c_str()) != 0) {
     std::remove(tmp.c_str());
     std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";
