@@ -201,12 +201,18 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     bool per_segment = false;
   };
   std::vector<State> states(runs->size());
+  // The default window from the record's mean stiffness, as for a record read whole.
   double window = runs->front().options.window_length;
+  if (!(window > 0.0)) {
+    gd::SignalView mean_k = whole;
+    mean_k.n = info.stiffness_mean > 0.0 ? 1 : 0;
+    mean_k.stiffness = &info.stiffness_mean;
+    window = gd::defaultWindowLength(mean_k, gear);
+  }
   Progress progress(static_cast<std::int64_t>(ranges.back().second - ranges.front().first));
   const bool ok = gear_sim_ros::streamSignalBag(
       info, ranges, [&](const gear_sim::SignalTable& block, size_t r) {
         const gd::SignalView view = gd::SignalView::of(block);
-        if (!(window > 0.0)) window = gd::defaultWindowLength(view, gear);
         for (size_t k = 0; k < runs->size(); ++k) {
           gd::AnalysisRun& run = (*runs)[k];
           State& st = states[k];

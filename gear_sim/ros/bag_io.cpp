@@ -103,6 +103,8 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     std::uint64_t next = 0;  // global index after the previous chunk
     unsigned channels = 0;
+    double k_sum = 0.0;
+    long long k_count = 0;
     for (const rosbag::MessageInstance& m : view) {
       const auto c = m.instantiate<gear_damping::SignalChunk>();
       const std::string where = path + ": " + out.topic + " message " +
@@ -158,6 +160,8 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
         }
       }
       next = c->first_index + c->dte.size();
+      for (double k : c->stiffness)
+        if (std::isfinite(k)) k_sum += k, ++k_count;
       ++out.chunks;
     }
     if (out.chunks == 0) {
@@ -168,6 +172,7 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
       out.warnings.push_back(std::to_string(out.gaps) + " gaps in all, " +
                              std::to_string(out.gap_samples) + " samples missing");
     out.samples = static_cast<std::int64_t>(next - out.first_index);
+    if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
     out.dte_velocity = channels & 1u;
     out.stiffness = channels & 2u;
     out.torque = channels & 4u;

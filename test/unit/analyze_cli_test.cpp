@@ -16,6 +16,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
 
@@ -23,38 +24,13 @@ namespace {
 
 const std::string kParams = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
 
-struct ToolRun {
-  int code = -1;
-  std::string out, err;
-};
+using gear_test::readText;
+using gear_test::ToolRun;
+using gear_test::writeText;
 
-// Runs the analyze executable with `args`, capturing stdout and stderr.
 ToolRun analyze(const std::string& args, const fs::path& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string cmd = std::string(GEAR_TOOL_DIR) + "/analyze " + args + " >" + out.string() +
-                          " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  ToolRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  auto slurp = [](const fs::path& p) {
-    std::ifstream f(p);
-    std::stringstream s;
-    s << f.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return gear_test::runTool("analyze", args, dir);
 }
-
-std::string readText(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-void writeText(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 
 // Replaces line `line` (1-based) of `text` with `with` (or deletes it when `with` is empty and
 // `erase` is set).

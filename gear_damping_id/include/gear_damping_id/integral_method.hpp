@@ -195,6 +195,7 @@ class IntegralMethod {
   std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
   std::vector<double> switch_theta_;           // their split fractions
   double legacy_fbar_ = kNaN;        // [m/s^2]
+  Eigen::Index seg_lo_ = 0, seg_hi_ = 0;  // current segment's samples (quadrature stencils)
   mutable long unlocated_switches_ = 0;
 };
 

@@ -337,9 +337,11 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   double* ms = &inc_(0, 5);
   double* dS = &inc_(0, 6);
   const Eigen::Index ni = L - 1;
-  // Pass 1: interior intervals with the interior rule; edges of the record use their own rule.
+  // Pass 1: interior intervals with the interior rule; the segment's edges use one-sided rules,
+  // so a segment reads no sample outside itself (streamed segments give the whole-record
+  // estimates, and a NaN next door does not leak in).
   auto intervalRule = [&](Eigen::Index j) -> const CubicIntervalRule& {
-    return rules_.forInterval(j, 0, s.n);
+    return rules_.forInterval(j, seg_lo_, seg_hi_);
   };
   Eigen::Index i_lo = 0, i_hi = ni;  // [i_lo, i_hi) use the interior rule
   while (i_lo < ni && intervalRule(w0 + i_lo).offset() != -1) ++i_lo;
@@ -580,10 +582,11 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   if (s.n < 4 || rows < 4L * W || rows - 2L * W - n_local_ < 2) {
     return fail("too few samples (" + std::to_string(rows) + " in the segment)");
   }
-  // Finite inputs on the segment and the stencil context (a sum is finite only if every term
-  // is; the element-wise search runs only when it is not).
-  const Eigen::Index c0 = std::max<Eigen::Index>(0, begin - 2);
-  const Eigen::Index c1 = std::min<Eigen::Index>(s.n, end + 2);
+  // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
+  // search runs only when it is not). The quadrature stencils stay inside [begin, end).
+  const Eigen::Index c0 = begin, c1 = end;
+  seg_lo_ = begin;
+  seg_hi_ = end;
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   struct Channel {

@@ -30,6 +30,7 @@ struct BagSignalInfo {
   std::int64_t gap_samples = 0; ///< samples missing in gaps (read as NaN)
   long gaps = 0;
   std::vector<std::string> warnings;  ///< one line per gap (the first few) and similar remarks
+  double stiffness_mean = 0.0;  ///< [N/m] mean of the finite stiffness samples (0: none)
   /// Optional channels present (every chunk must carry the same set).
   bool dte_velocity = false, stiffness = false, torque = false, mesh_state = false,
        mesh_phase = false, damping = false;
