@@ -12,10 +12,6 @@
 
 namespace {
 
-using gear_damping_id::DampingModel;
-using gear_damping_id::Formulation;
-using gear_damping_id::IdentificationOptions;
-using gear_damping_id::IdentificationResult;
 using namespace gear_id_test;
 
 // Issue 4 bars (DESIGN §7), noise-free.

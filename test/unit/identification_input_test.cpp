@@ -12,11 +12,7 @@
 
 namespace {
 
-using gear_damping_id::DampingModel;
-using gear_damping_id::Formulation;
 using gear_damping_id::GearConstants;
-using gear_damping_id::IdentificationOptions;
-using gear_damping_id::IdentificationResult;
 using gear_damping_id::IntegralMethod;
 using gear_damping_id::SegmentEstimate;
 using gear_damping_id::SignalView;
@@ -27,17 +23,8 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Bar for the segments untouched by the bad data (noise-free: the 0.05 %).
 constexpr double kCleanCTol = 5e-4;
 
-class IdentificationInput : public ::testing::Test {
+class IdentificationInput : public PiecewiseDefaultCase {
  protected:
-  static void SetUpTestSuite() {
-    config_ = new SimConfig(table1Config());
-    setPiecewiseTruth(config_, 1e-3);
-    clean_ = new SignalTable(simulateOrFail(*config_));
-  }
-  static void TearDownTestSuite() {
-    delete config_;
-    delete clean_;
-  }
   static GearConstants gear() { return gear_damping_id::gearConstants(config_->gearModel()); }
   static IdentificationOptions opts(Formulation f = Formulation::Known,
                                     DampingModel m = DampingModel::Piecewise) {
@@ -46,11 +33,7 @@ class IdentificationInput : public ::testing::Test {
     o.model = m;
     return o;
   }
-  static SimConfig* config_;
-  static SignalTable* clean_;
 };
-SimConfig* IdentificationInput::config_ = nullptr;
-SignalTable* IdentificationInput::clean_ = nullptr;
 
 // Every number of an identifiable estimate is finite; a non-identifiable one says why and
 // carries no number.

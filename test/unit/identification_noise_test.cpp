@@ -11,38 +11,34 @@
 
 namespace {
 
-using gear_damping_id::DampingModel;
-using gear_damping_id::Formulation;
-using gear_damping_id::IdentificationOptions;
-using gear_damping_id::IdentificationResult;
 using namespace gear_id_test;
 
-// The noise-free default case with the piecewise truth aligned to the 1 ms segments, simulated
-// once per test binary; every noisy record is a copy with fresh noise.
-class NoisyIdentification : public ::testing::Test {
+// Issue 4 / DESIGN §7 bars on the median segment error.
+constexpr double kMedianTol40dB = 5e-3;  // 0.5 %
+constexpr double kMedianTol20dB = 3e-2;  // 3 %
+constexpr int kSeeds = 10;
+
+void report(const std::string& label, const std::vector<double>& medians, double overall) {
+  std::cout << "[ measured ] " << label << ": median segment error over " << medians.size()
+            << " seeds x 10 segments " << overall * 100 << " %, worst seed's median "
+            << maxOf(medians) * 100 << " %\n";
+}
+
+// Every noisy record is a copy of the fixture's noise-free record with fresh noise.
+class NoisyIdentification : public PiecewiseDefaultCase {
  protected:
-  static void SetUpTestSuite() {
-    config_ = new SimConfig(table1Config());
-    setPiecewiseTruth(config_, 1e-3);
-    clean_ = new SignalTable(simulateOrFail(*config_));
-  }
-  static void TearDownTestSuite() {
-    delete config_;
-    delete clean_;
-  }
   static SignalTable noisy(double snr_db, unsigned long seed) {
     SignalTable t = *clean_;
     addWhiteNoise(&t.dte, snr_db, seed);
     return t;
   }
   // Median relative segment error of each seed's identification, and the median over all.
-  static std::vector<double> perSeedMedians(double snr_db, int seeds,
-                                            IdentificationOptions::Refine refine,
+  static std::vector<double> perSeedMedians(double snr_db, IdentificationOptions::Refine refine,
                                             double* overall) {
     IdentificationOptions o;
     o.refine = refine;
     std::vector<double> medians, all;
-    for (int s = 1; s <= seeds; ++s) {
+    for (int s = 1; s <= kSeeds; ++s) {
       const SignalTable t = noisy(snr_db, 1000 + s);
       const IdentificationResult r = identifyOrFail(t, *config_, o);
       const std::vector<double> err = segmentErrors(r, t, *config_);
@@ -52,43 +48,27 @@ class NoisyIdentification : public ::testing::Test {
     *overall = median(all);
     return medians;
   }
-  static SimConfig* config_;
-  static SignalTable* clean_;
+  // Each seed's median segment error is within the bar (refined: the default for noisy data);
+  // the integral method alone is reported for comparison.
+  static void expectMedians(double snr_db, double tol) {
+    const std::string db = std::to_string(static_cast<int>(snr_db)) + " dB known piecewise";
+    double overall = 0.0;
+    const auto medians = perSeedMedians(snr_db, IdentificationOptions::Refine::Auto, &overall);
+    report(db + " (default: refined)", medians, overall);
+    for (size_t i = 0; i < medians.size(); ++i) EXPECT_LT(medians[i], tol) << "seed " << i;
+    double integral = 0.0;
+    const auto integral_medians =
+        perSeedMedians(snr_db, IdentificationOptions::Refine::Never, &integral);
+    report(db + " integral-only (for comparison)", integral_medians, integral);
+  }
 };
-SimConfig* NoisyIdentification::config_ = nullptr;
-SignalTable* NoisyIdentification::clean_ = nullptr;
-
-// Issue 4 / DESIGN §7 bars on the median segment error.
-constexpr double kMedianTol40dB = 5e-3;  // 0.5 %
-constexpr double kMedianTol20dB = 3e-2;  // 3 %
-constexpr int kSeeds = 6;
-
-void report(const char* label, const std::vector<double>& medians, double overall) {
-  std::cout << "[ measured ] " << label << ": median segment error over " << medians.size()
-            << " seeds x 10 segments " << overall * 100 << " %, worst seed's median "
-            << maxOf(medians) * 100 << " %\n";
-}
 
 TEST_F(NoisyIdentification, MedianSegmentErrorAt40dBIsWithinHalfAPercent) {
-  double overall = 0.0;
-  const auto medians = perSeedMedians(40.0, kSeeds, IdentificationOptions::Refine::Auto, &overall);
-  report("40 dB known piecewise (default: refined)", medians, overall);
-  for (size_t i = 0; i < medians.size(); ++i) EXPECT_LT(medians[i], kMedianTol40dB) << "seed " << i;
-  double integral = 0.0;
-  const auto integral_medians =
-      perSeedMedians(40.0, kSeeds, IdentificationOptions::Refine::Never, &integral);
-  report("40 dB known piecewise integral-only (for comparison)", integral_medians, integral);
+  expectMedians(40.0, kMedianTol40dB);
 }
 
 TEST_F(NoisyIdentification, MedianSegmentErrorAt20dBIsWithinThreePercent) {
-  double overall = 0.0;
-  const auto medians = perSeedMedians(20.0, kSeeds, IdentificationOptions::Refine::Auto, &overall);
-  report("20 dB known piecewise (default: refined)", medians, overall);
-  for (size_t i = 0; i < medians.size(); ++i) EXPECT_LT(medians[i], kMedianTol20dB) << "seed " << i;
-  double integral = 0.0;
-  const auto integral_medians =
-      perSeedMedians(20.0, kSeeds, IdentificationOptions::Refine::Never, &integral);
-  report("20 dB known piecewise integral-only (for comparison)", integral_medians, integral);
+  expectMedians(20.0, kMedianTol20dB);
 }
 
 // Over 50 seeds x 10 segments the truth lies within +-2 reported standard errors in 90-99 % of

@@ -27,11 +27,7 @@ namespace {
 
 using gear_damping_id::CubicIntervalRule;
 using gear_damping_id::CubicRules;
-using gear_damping_id::DampingModel;
-using gear_damping_id::Formulation;
 using gear_damping_id::GearConstants;
-using gear_damping_id::IdentificationOptions;
-using gear_damping_id::IdentificationResult;
 using gear_damping_id::SignalView;
 using Eigen::Index;
 using namespace gear_id_test;
@@ -166,17 +162,18 @@ Reference solveDense(const SignalView& s, const GearConstants& g, Formulation f,
   return ref;
 }
 
-class QrReference : public ::testing::Test {
+// The fixture's record with white noise at 40 dB.
+class QrReference : public PiecewiseDefaultCase {
  protected:
   static void SetUpTestSuite() {
-    config_ = new SimConfig(table1Config());
-    setPiecewiseTruth(config_, 1e-3);
-    table_ = new SignalTable(simulateOrFail(*config_));
+    PiecewiseDefaultCase::SetUpTestSuite();
+    table_ = new SignalTable(*clean_);
     addWhiteNoise(&table_->dte, 40.0, 11);
   }
   static void TearDownTestSuite() {
-    delete config_;
     delete table_;
+    table_ = nullptr;
+    PiecewiseDefaultCase::TearDownTestSuite();
   }
   // The sample ranges of the result's windows, checked to tile [first, last) contiguously.
   static std::vector<std::pair<Index, Index>> windowRanges(const SignalView& s,
@@ -217,11 +214,8 @@ class QrReference : public ::testing::Test {
           << label << " window " << w;
     }
   }
-  static SimConfig* config_;
-  static SignalTable* table_;
+  inline static SignalTable* table_ = nullptr;
 };
-SimConfig* QrReference::config_ = nullptr;
-SignalTable* QrReference::table_ = nullptr;
 
 double rel(double a, double b) { return std::abs(a - b) / std::abs(b); }
 

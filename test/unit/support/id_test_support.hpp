@@ -20,6 +20,8 @@
 
 namespace gear_id_test {
 
+using gear_damping_id::DampingModel;
+using gear_damping_id::Formulation;
 using gear_damping_id::IdentificationOptions;
 using gear_damping_id::IdentificationResult;
 using gear_sim::SignalTable;
@@ -119,6 +121,25 @@ inline std::vector<double> segmentErrors(const IdentificationResult& r, const Si
   }
   return e;
 }
+
+/// Fixture: the noise-free default case with the piecewise truth aligned to the 1 ms segments,
+/// simulated once per test suite (config_, clean_); tests copy clean_ to add noise or defects.
+class PiecewiseDefaultCase : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    config_ = new SimConfig(table1Config());
+    setPiecewiseTruth(config_, 1e-3);
+    clean_ = new SignalTable(simulateOrFail(*config_));
+  }
+  static void TearDownTestSuite() {
+    delete config_;
+    delete clean_;
+    config_ = nullptr;
+    clean_ = nullptr;
+  }
+  inline static SimConfig* config_ = nullptr;
+  inline static SignalTable* clean_ = nullptr;
+};
 
 inline double maxOf(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::max_element(v.begin(), v.end());
