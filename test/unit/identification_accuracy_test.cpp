@@ -36,30 +36,6 @@ SimConfig piecewiseDefault() {
   return c;
 }
 
-// A held-out case: other gears (teeth, inertias, radii, stiffness levels, contact ratio), a
-// speed whose switch instants fall between samples, a mesh phase offset, another sample rate
-// (dt not a divisor of the segment's start times' grid of the default case) and a longer record.
-SimConfig heldOutCase() {
-  SimConfig c = table1Config();
-  c.gears.pinion.teeth = 23;
-  c.gears.pinion.inertia = 0.0004;
-  c.gears.pinion.base_radius = 0.055;
-  c.gears.gear.teeth = 37;
-  c.gears.gear.inertia = 0.003;
-  c.gears.gear.base_radius = 0.09;
-  c.mesh.k_max = 3.3e8;
-  c.mesh.k_min = 1.9e8;
-  c.mesh.contact_ratio = 1.43;
-  c.mesh.initial_phase = 0.37;
-  c.speed.pinion_rpm = 2717.0;  // mesh 1041.5 Hz: switches fall between samples
-  c.load.mean = 80.0;
-  c.load.amplitude = 30.0;
-  c.load.frequency = 70.0;
-  c.simulation.sample_rate = 750e3;  // dt = 1.333 us
-  c.simulation.duration = 0.012;
-  return c;
-}
-
 // Least-squares line through the simulator's true c(t) against T1(t): the true c0, c1 of a
 // damping law linear in the load (exact for the load-dependent model).
 std::pair<double, double> trueLoadLaw(const SignalTable& t) {

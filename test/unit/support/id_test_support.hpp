@@ -56,6 +56,31 @@ inline void setPiecewiseTruth(SimConfig* c, double segment_length) {
   c->damping.ratios = piecewiseRatios(n);
 }
 
+/// A held-out case none of the defaults were chosen for: other gears (teeth, inertias, radii,
+/// stiffness levels, contact ratio), a speed whose switch instants fall between samples, a mesh
+/// phase offset, another load, another sample rate (750 kHz: dt = 1.33 us, w0 dt = 0.068) and a
+/// longer record. Load-dependent true damping, as in the default case.
+inline SimConfig heldOutCase() {
+  SimConfig c = table1Config();
+  c.gears.pinion.teeth = 23;
+  c.gears.pinion.inertia = 0.0004;
+  c.gears.pinion.base_radius = 0.055;
+  c.gears.gear.teeth = 37;
+  c.gears.gear.inertia = 0.003;
+  c.gears.gear.base_radius = 0.09;
+  c.mesh.k_max = 3.3e8;
+  c.mesh.k_min = 1.9e8;
+  c.mesh.contact_ratio = 1.43;
+  c.mesh.initial_phase = 0.37;
+  c.speed.pinion_rpm = 2717.0;  // mesh 1041.5 Hz: switches fall between samples
+  c.load.mean = 80.0;
+  c.load.amplitude = 30.0;
+  c.load.frequency = 70.0;
+  c.simulation.sample_rate = 750e3;  // dt = 1.333 us
+  c.simulation.duration = 0.012;
+  return c;
+}
+
 inline SignalTable simulateOrFail(const SimConfig& c) {
   SignalTable t;
   std::string e;
