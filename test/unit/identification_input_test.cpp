@@ -250,6 +250,53 @@ TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
   }
 }
 
+// An analysed time range [t_start, t_end] picks the segments starting at t_start; with the same
+// segment starts as the whole-record analysis, each segment's estimate is the same (the record
+// outside the range still serves the interpolation stencils). t_end is inclusive: half a sample
+// before 8 ms ends the range at sample 7999.
+TEST_F(IdentificationInput, AnalysedTimeRangeSelectsTheSameSegments) {
+  constexpr double kRel = 1e-12;
+  IdentificationOptions o = opts();
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult whole = identifyOrFail(*clean_, *config_, o);
+  o.t_start = 2e-3;
+  o.t_end = 8e-3 - 0.5e-6;
+  const IdentificationResult part = identifyOrFail(*clean_, *config_, o);
+  ASSERT_EQ(part.segments.size(), 6u);
+  for (size_t i = 0; i < part.segments.size(); ++i) {
+    const auto& a = part.segments[i];
+    const auto& b = whole.segments[i + 2];
+    EXPECT_NEAR(a.t_start, b.t_start, 1e-12);
+    EXPECT_NEAR(a.t_end, b.t_end, 1e-12);
+    EXPECT_NEAR(a.C, b.C, kRel * b.C) << "segment " << i;
+  }
+  // A range outside the record is an error, not an empty result.
+  o.t_start = 1.0;
+  o.t_end = 2.0;
+  IdentificationResult r;
+  std::string err;
+  EXPECT_FALSE(gear_damping_id::identify(*clean_, gear(), o, &r, &err));
+  EXPECT_NE(err.find("no samples in the analysed time range"), std::string::npos) << err;
+}
+
+// A rig's clock does not start at zero: the same record stamped from t = 12.345 s gives the same
+// estimates (the time step is recovered from stamps whose rounding is ~1e-15 s, so ~1e-9 of C).
+TEST_F(IdentificationInput, TimeOriginDoesNotChangeTheEstimates) {
+  constexpr double kRel = 1e-9;
+  SignalTable shifted = *clean_;
+  for (Eigen::Index i = 0; i < shifted.size(); ++i) {
+    shifted.time[i] = 12.345 + static_cast<double>(i) * 1e-6;
+  }
+  const IdentificationResult a = identifyOrFail(*clean_, *config_, opts());
+  const IdentificationResult b = identifyOrFail(shifted, *config_, opts());
+  ASSERT_EQ(a.segments.size(), b.segments.size());
+  for (size_t i = 0; i < a.segments.size(); ++i) {
+    ASSERT_TRUE(b.segments[i].identifiable) << b.segments[i].reason;
+    EXPECT_NEAR(b.segments[i].C, a.segments[i].C, kRel * a.segments[i].C) << "segment " << i;
+    EXPECT_NEAR(b.segments[i].t_start, 12.345 + a.segments[i].t_start, 1e-9);
+  }
+}
+
 // A node feeds the IntegralMethod segment by segment as data arrives, each time with a view of
 // just that segment and the two samples of interpolation context on either side; the result is
 // the one identify() computes over the whole table. Per-segment estimates of the piecewise model
