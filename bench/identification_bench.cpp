@@ -124,7 +124,10 @@ void BM_StreamKnownPiecewiseReused(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_IdentifyKnownPiecewiseIntegral)->Arg(10000)->Arg(1000000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_IdentifyKnownPiecewiseIntegral)
+    ->Arg(10000)
+    ->Arg(1000000)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_StreamKnownPiecewiseReused)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_IdentifyGreyboxPiecewiseIntegral)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_IdentifyKnownLoadLawIntegral)->Arg(1000000)->Unit(benchmark::kMillisecond);

@@ -15,13 +15,14 @@ namespace {
 using namespace gear_id_test;
 
 // Issue 4 bars (DESIGN §7), noise-free.
-constexpr double kKnownCTol = 5e-4;       // known piecewise C within 0.05 %
-constexpr double kGreyboxCTol = 1e-3;     // greybox C within 0.1 %
-constexpr double kGreyboxKTol = 1e-4;     // greybox stiffness levels within 0.01 %
-constexpr double kLoadLawTol = 5e-3;      // load law c0, c1 within 0.5 %
+constexpr double kKnownCTol = 5e-4;    // known piecewise C within 0.05 %
+constexpr double kGreyboxCTol = 1e-3;  // greybox C within 0.1 %
+constexpr double kGreyboxKTol = 1e-4;  // greybox stiffness levels within 0.01 %
+constexpr double kLoadLawTol = 5e-3;   // load law c0, c1 within 0.5 %
 
-IdentificationOptions options(Formulation f, DampingModel m,
-                              IdentificationOptions::Refine refine = IdentificationOptions::Refine::Auto) {
+IdentificationOptions options(
+    Formulation f, DampingModel m,
+    IdentificationOptions::Refine refine = IdentificationOptions::Refine::Auto) {
   IdentificationOptions o;
   o.formulation = f;
   o.model = m;
@@ -45,16 +46,16 @@ std::pair<double, double> trueLoadLaw(const SignalTable& t) {
   return {cm - c1 * Tm, c1};
 }
 
-void expectPiecewiseAccuracy(const SimConfig& c, Formulation f, IdentificationOptions::Refine refine,
-                             double tol, const char* label) {
+void expectPiecewiseAccuracy(const SimConfig& c, Formulation f,
+                             IdentificationOptions::Refine refine, double tol, const char* label) {
   const SignalTable t = simulateOrFail(c);
   const IdentificationResult r = identifyOrFail(t, c, options(f, DampingModel::Piecewise, refine));
   const double seg_len = 1e-3;
   ASSERT_EQ(r.segments.size(), static_cast<size_t>(std::lround(c.simulation.duration / seg_len)));
   const std::vector<double> err = segmentErrors(r, t, c);
   for (size_t i = 0; i < err.size(); ++i) EXPECT_LT(err[i], tol) << label << " segment " << i;
-  std::cout << "[ measured ] " << label << ": max relative C error " << maxOf(err)
-            << " over " << err.size() << " segments (estimator " << r.estimator << ")\n";
+  std::cout << "[ measured ] " << label << ": max relative C error " << maxOf(err) << " over "
+            << err.size() << " segments (estimator " << r.estimator << ")\n";
 }
 
 TEST(IdentificationAccuracy, KnownPiecewiseRecoversAlignedPiecewiseDampingWithin005Percent) {
@@ -164,9 +165,8 @@ TEST(IdentificationAccuracy, LoadLawRecoversALoadLinearTruthUnderATrapezoidalLoa
 double fitPercent(const SignalTable& t, const SimConfig& c, const IdentificationResult& r) {
   gear_damping_id::ModeledResponse m;
   std::string e;
-  EXPECT_TRUE(gear_damping_id::modeledResponse(gear_damping_id::SignalView::of(t),
-                                               gear_damping_id::gearConstants(c.gearModel()), r,
-                                               &m, &e))
+  EXPECT_TRUE(gear_damping_id::modeledResponse(
+      gear_damping_id::SignalView::of(t), gear_damping_id::gearConstants(c.gearModel()), r, &m, &e))
       << e;
   return m.fit_percent;
 }
@@ -182,8 +182,8 @@ TEST(PaperResults, LegacyFormulationFailsOnATimeVaryingLoad) {
       fitPercent(t, c, identifyOrFail(t, c, options(Formulation::Legacy, DampingModel::Piecewise)));
   const double paper =
       fitPercent(t, c, identifyOrFail(t, c, options(Formulation::Paper, DampingModel::Piecewise)));
-  std::cout << "[ measured ] fit %: known " << known << ", paper " << paper << ", legacy "
-            << legacy << "\n";
+  std::cout << "[ measured ] fit %: known " << known << ", paper " << paper << ", legacy " << legacy
+            << "\n";
   // Known reproduces the noise-free response to well within a thousandth of its variation; the
   // legacy fit is at least 20 points worse (the load swings by +-50 %, which the mean forcing
   // misses).
@@ -221,7 +221,7 @@ TEST(IdentificationUnits, Omega0XiAndCoefficientAreConsistent) {
   const double omega0 = std::sqrt(t.stiffness.mean() / me);
   constexpr double kRel = 1e-12;  // same formulas, rounding only
   EXPECT_NEAR(r.equivalent_mass, me, kRel * me);
-  EXPECT_NEAR(r.omega0, omega0, 1e-9 * omega0);  // time-weighted vs sample mean
+  EXPECT_NEAR(r.omega0, omega0, 1e-9 * omega0);                   // time-weighted vs sample mean
   const double k_mean = 0.6 * c.mesh.k_max + 0.4 * c.mesh.k_min;  // eps = 1.6
   const std::vector<double> ratios = piecewiseRatios(10);
   ASSERT_EQ(r.segments.size(), ratios.size());

@@ -68,7 +68,8 @@ TEST_F(IdentificationInput, NonFiniteSamplesMakeOnlyTheirSegmentUnidentifiable) 
   SignalTable t = *clean_;
   t.dte[3456] = kNaN;
   t.torque[7890] = kInf;
-  for (auto refine : {IdentificationOptions::Refine::Never, IdentificationOptions::Refine::Always}) {
+  for (auto refine :
+       {IdentificationOptions::Refine::Never, IdentificationOptions::Refine::Always}) {
     IdentificationOptions o = opts();
     o.refine = refine;
     const IdentificationResult r = identifyOrFail(t, *config_, o);
@@ -200,8 +201,8 @@ TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
   SignalTable t = *clean_;
   const double dt = 1e-6;
   t.time[4321] += 0.01 * dt;  // 1 % of a step: far above the 1e-6 tolerance
-  const std::string e = gear_damping_id::checkSignalTable(t, Formulation::Known,
-                                                          DampingModel::Piecewise);
+  const std::string e =
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
   EXPECT_NE(e.find("not uniformly sampled"), std::string::npos) << e;
   EXPECT_NE(e.find("row 4322"), std::string::npos) << e;  // 1-based row of sample 4321
   IdentificationResult r;
@@ -241,7 +242,8 @@ TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
     IdentificationOptions o;
     k.set(&o);
     const std::string e = o.validate();
-    EXPECT_EQ(e.rfind(k.field, 0), 0u) << "expected a message starting with " << k.field << ": " << e;
+    EXPECT_EQ(e.rfind(k.field, 0), 0u)
+        << "expected a message starting with " << k.field << ": " << e;
     IdentificationResult r;
     std::string err;
     EXPECT_FALSE(
@@ -308,9 +310,11 @@ TEST_F(IdentificationInput, StreamingSegmentBySegmentEqualsIdentifyOnTheWholeTab
   SignalTable t = *clean_;
   addWhiteNoise(&t.dte, 40.0, 7);
   const SignalView whole = SignalView::of(t);
-  for (DampingModel model : {DampingModel::Piecewise, DampingModel::Constant, DampingModel::LoadLaw}) {
+  for (DampingModel model :
+       {DampingModel::Piecewise, DampingModel::Constant, DampingModel::LoadLaw}) {
     for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
-      const std::string label = gear_damping_id::toString(f) + "/" + gear_damping_id::toString(model);
+      const std::string label =
+          gear_damping_id::toString(f) + "/" + gear_damping_id::toString(model);
       IdentificationOptions o = opts(f, model);
       o.refine = IdentificationOptions::Refine::Never;
       const IdentificationResult batch = identifyOrFail(t, *config_, o);

@@ -21,8 +21,8 @@ constexpr int kSeeds = 10;
 void report(const std::string& label, const std::vector<double>& medians, double overall,
             size_t segments) {
   std::cout << "[ measured ] " << label << ": median segment error over " << medians.size()
-            << " seeds x " << segments << " segments " << overall * 100 << " %, worst seed's median "
-            << maxOf(medians) * 100 << " %\n";
+            << " seeds x " << segments << " segments " << overall * 100
+            << " %, worst seed's median " << maxOf(medians) * 100 << " %\n";
 }
 
 // A noisy copy of a noise-free record.
@@ -131,7 +131,8 @@ void expectHonestStandardErrors(const SimConfig& c, const SignalTable& clean, Fo
   double emp2 = 0.0, se2 = 0.0, rel2 = 0.0;
   for (size_t i = 0; i < nseg; ++i) {
     const Eigen::Map<const Eigen::VectorXd> v(C[i].data(), static_cast<Eigen::Index>(C[i].size()));
-    const Eigen::Map<const Eigen::VectorXd> e(se[i].data(), static_cast<Eigen::Index>(se[i].size()));
+    const Eigen::Map<const Eigen::VectorXd> e(se[i].data(),
+                                              static_cast<Eigen::Index>(se[i].size()));
     emp2 += (v.array() - v.mean()).square().sum() / static_cast<double>(v.size() - 1);
     se2 += e.mean() * e.mean();
     rel2 += (e.mean() / v.mean()) * (e.mean() / v.mean());

@@ -25,11 +25,11 @@
 
 namespace {
 
+using Eigen::Index;
 using gear_damping_id::CubicIntervalRule;
 using gear_damping_id::CubicRules;
 using gear_damping_id::GearConstants;
 using gear_damping_id::SignalView;
-using Eigen::Index;
 using namespace gear_id_test;
 
 // The solve is checked to agree to 1e-9 relative (issue 4); the standard errors come from the
@@ -98,13 +98,13 @@ Eigen::MatrixXd windowColumns(const SignalView& s, const GearConstants& g, Formu
         Qk += h * Gk + mk, Gk += ak;
       }
       // Stieltjes trapezoid of int (T1 - T_c) dy, then trapezoid in time.
-      const double dS = 0.5 * ((s.torque[j] - Tc) + (s.torque[j + 1] - Tc)) *
-                        (s.dte[j + 1] - s.dte[j]);
+      const double dS =
+          0.5 * ((s.torque[j] - Tc) + (s.torque[j + 1] - Tc)) * (s.dte[j + 1] - s.dte[j]);
       D += h * (S + 0.5 * dS), S += dS;
     }
     const double y = s.dte[w0 + r];
     int c = 0;
-    out(r, c++) = -Gy;                      // C (theta0)
+    out(r, c++) = -Gy;                       // C (theta0)
     if (load) out(r, c++) = -(Tc * Gy + D);  // theta1
     if (grey) out(r, c++) = -Qy, out(r, c++) = -Qs;
     out(r, nq) = grey ? y - Qf : y + Qk - Qf;
@@ -113,7 +113,7 @@ Eigen::MatrixXd windowColumns(const SignalView& s, const GearConstants& g, Formu
 }
 
 struct Reference {
-  Eigen::VectorXd theta;   // unknowns (damping, stiffness) then per window (y_T, alpha)
+  Eigen::VectorXd theta;    // unknowns (damping, stiffness) then per window (y_T, alpha)
   Eigen::VectorXd std_err;  // standard errors
   int nq = 0;
 };
@@ -152,8 +152,7 @@ Reference solveDense(const SignalView& s, const GearConstants& g, Formulation f,
   const double rss = (b - X * ref.theta).squaredNorm();
   const double sigma2 = rss / static_cast<double>(rows - cols);
   // (X'X)^-1 = S (Xs'Xs)^-1 S with (Xs'Xs)^-1 = P R^-1 R^-T P'.
-  const Eigen::MatrixXd R =
-      qr.matrixQR().topRows(cols).triangularView<Eigen::Upper>();
+  const Eigen::MatrixXd R = qr.matrixQR().topRows(cols).triangularView<Eigen::Upper>();
   const Eigen::MatrixXd Rinv =
       R.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(cols, cols));
   const Eigen::MatrixXd cov_perm = Rinv * Rinv.transpose();

@@ -2,13 +2,13 @@
 // cubics (area, first moment and value, over a whole interval or a part of it cut at an
 // arbitrary switch fraction), and fourth order on smooth signals, also for a held stiffness that
 // jumps between two samples when the interval is split at the switch.
+#include "gear_damping_id/quadrature.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <iostream>
 #include <vector>
-
-#include "gear_damping_id/quadrature.hpp"
 
 namespace {
 

@@ -32,8 +32,8 @@ using gear_sim::SimConfig;
 inline SimConfig table1Config() {
   SimConfig c;
   std::string e;
-  EXPECT_TRUE(gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml",
-                                          &c, &e))
+  EXPECT_TRUE(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
       << e;
   return c;
 }
@@ -93,8 +93,8 @@ inline IdentificationResult identifyOrFail(const SignalTable& t, const SimConfig
                                            const IdentificationOptions& o) {
   IdentificationResult r;
   std::string e;
-  EXPECT_TRUE(gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r,
-                                        &e))
+  EXPECT_TRUE(
+      gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r, &e))
       << e;
   return r;
 }
@@ -142,7 +142,7 @@ inline std::vector<double> segmentErrors(const IdentificationResult& r, const Si
     EXPECT_TRUE(std::isfinite(s.C)) << "segment [" << s.t_start << ", " << s.t_end << ")";
     const double truth = trueC(t, c, s.t_start, s.t_end);
     e.push_back(s.identifiable && std::isfinite(s.C) ? std::abs(s.C - truth) / truth
-                                                      : std::numeric_limits<double>::infinity());
+                                                     : std::numeric_limits<double>::infinity());
   }
   return e;
 }
