@@ -204,7 +204,10 @@ TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
   const std::string e =
       gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
   EXPECT_NE(e.find("not uniformly sampled"), std::string::npos) << e;
-  EXPECT_NE(e.find("row 4322"), std::string::npos) << e;  // 1-based row of sample 4321
+  EXPECT_NE(e.find("sample 4321"), std::string::npos) << e;  // 0-based index of the sample
+  const std::string with_line =
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise, 1e-6, 2);
+  EXPECT_NE(with_line.find("line 4323"), std::string::npos) << with_line;  // CSV: header + 1
   IdentificationResult r;
   std::string err;
   EXPECT_FALSE(gear_damping_id::identify(t, gear(), opts(), &r, &err));

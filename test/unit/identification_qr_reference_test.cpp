@@ -49,8 +49,9 @@ double switchFraction(const SignalView& s, Index j, bool rising, double eps) {
 }
 
 // Data columns of one window [w0, w1): returns L x (unknown columns + 1) with b last.
+// The quadrature stencils stay inside the damping segment [lo, hi) holding the window.
 Eigen::MatrixXd windowColumns(const SignalView& s, const GearConstants& g, Formulation f,
-                              DampingModel m, Index w0, Index w1) {
+                              DampingModel m, Index w0, Index w1, Index lo, Index hi) {
   const CubicRules rules;
   const Index L = w1 - w0;
   const double h = s.dt, ff = g.force_factor, me = g.equivalent_mass;
@@ -63,7 +64,7 @@ Eigen::MatrixXd windowColumns(const SignalView& s, const GearConstants& g, Formu
   for (Index r = 0; r < L; ++r) {
     if (r > 0) {
       const Index j = w0 + r - 1;
-      const CubicIntervalRule& rule = rules.forInterval(j, 0, s.n);
+      const CubicIntervalRule& rule = rules.forInterval(j, lo, hi);
       const Index b = j + rule.offset();
       // Integrals over [u0, u1] of the cubic through samples of channel x (times weight v).
       auto part = [&](const double* x, double u0, double u1, double* a, double* mo) {
@@ -124,6 +125,7 @@ Reference solveDense(const SignalView& s, const GearConstants& g, Formulation f,
                      const std::vector<std::pair<Index, Index>>& windows) {
   Index rows = 0;
   for (const auto& w : windows) rows += w.second - w.first;
+  const auto segments = gear_damping_id::segmentRanges(s, gear_damping_id::IdentificationOptions{});
   const int nq = 1 + (m == DampingModel::LoadLaw ? 1 : 0) + (f == Formulation::Greybox ? 2 : 0);
   const Index nw = static_cast<Index>(windows.size());
   const Index cols = nq + 2 * nw;
@@ -132,7 +134,11 @@ Reference solveDense(const SignalView& s, const GearConstants& g, Formulation f,
   Index r0 = 0;
   for (Index w = 0; w < nw; ++w) {
     const auto [w0, w1] = windows[w];
-    const Eigen::MatrixXd c = windowColumns(s, g, f, m, w0, w1);
+    // The damping segment (default options: 1 ms) holding this window.
+    Index lo = 0, hi = s.n;
+    for (const auto& seg : segments)
+      if (seg.first <= w0 && w1 <= seg.second) lo = seg.first, hi = seg.second;
+    const Eigen::MatrixXd c = windowColumns(s, g, f, m, w0, w1, lo, hi);
     const Index L = w1 - w0;
     X.block(r0, 0, L, nq) = c.leftCols(nq);
     for (Index r = 0; r < L; ++r) {
