@@ -692,5 +692,89 @@ TEST(WaveletCsv, WritesADecimatedScalogramAndTheSpectraOrReportsTheIoError) {
   EXPECT_NE(writeScalogramCsv(WaveletResult{}, scal).find("no scalogram"), std::string::npos);
 }
 
+TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
+  const std::vector<double> y = freeDecay(kPaperModes, kPaperFs, kPaperN);
+  WaveletResult r = validateWavelet(y, kPaperFs);
+  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_EQ(r.modes.size(), kPaperModes.size());
+  // C = 2*xi*omega0 for xi = 0.02 at omega0 = 2*pi*1731 Hz gives back 0.02.
+  const double w0 = 2.0 * kPi * 1731.0;
+  EXPECT_DOUBLE_EQ(integralDampingRatio(2.0 * 0.02 * w0, w0), 0.02);
+  EXPECT_TRUE(std::isnan(integralDampingRatio(1.0, 0.0)));
+  EXPECT_TRUE(std::isnan(integralDampingRatio(NAN, w0)));
+  attachIntegralDampingRatio(&r, 0.02);
+  attachIntegralDampingRatio(nullptr, 0.02);  // no-op, no crash
+  r.modes[1].warning = "a \"quoted\" remark";
+  std::ostringstream out;
+  ASSERT_EQ(writeModesCsv(r, out), "");
+  std::istringstream in(out.str());
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line.rfind("frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,", 0),
+            0u);
+  std::vector<std::string> rows;
+  while (std::getline(in, line)) rows.push_back(line);
+  ASSERT_EQ(rows.size(), kPaperModes.size());
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const double f = std::stod(rows[i]);
+    EXPECT_NEAR(f, r.modes[i].frequency_hz, 1e-6 * f);
+    EXPECT_NE(rows[i].find(",0.02,"), std::string::npos) << rows[i];
+  }
+  EXPECT_NE(rows[1].find("\"a \"\"quoted\"\" remark\""), std::string::npos) << rows[1];
+  EXPECT_NE(writeModesCsv(r, "/nonexistent_dir/m.csv").find("/nonexistent_dir/m.csv"),
+            std::string::npos);
+  std::ostringstream scal, spec;
+  EXPECT_EQ(writeScalogramCsv(r, scal, 100), "");
+  EXPECT_EQ(writeSpectrumCsv(r, spec), "");
+  EXPECT_GT(scal.str().size(), 1000u);
+  EXPECT_EQ(spec.str().rfind("kind,frequency_hz,power\n", 0), 0u);
+}
+
+// --- High-level entry point -------------------------------------------------------------------
+
+TEST(ValidateWavelet, ReturnsTheModesOfACleanFreeDecay) {
+  const std::vector<double> y = freeDecay(kPaperModes, kPaperFs, kPaperN);
+  const WaveletResult r = validateWavelet(y.data(), y.size(), kPaperFs);
+  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_EQ(r.modes.size(), kPaperModes.size());
+  for (size_t i = 0; i < r.modes.size(); ++i) {
+    EXPECT_NEAR(r.modes[i].damping_ratio, kPaperModes[i].xi, kMultiModeXiTol * kPaperModes[i].xi);
+    EXPECT_TRUE(r.modes[i].warning.empty()) << r.modes[i].warning;
+  }
+  EXPECT_EQ(r.modulus.rows(), 200);
+}
+
+TEST(ValidateWavelet, InvalidInputGivesAnErrorStringAndAnEmptyResultNeverNaNs) {
+  const std::vector<double> y = freeDecay({{1000.0, 0.01, 1.0, 0.0}}, 20000.0, 4000);
+  auto errorOf = [](const WaveletResult& r) {
+    EXPECT_FALSE(r.ok());
+    EXPECT_TRUE(r.modes.empty());
+    EXPECT_TRUE(r.frequencies.empty());
+    return r.error;
+  };
+  EXPECT_NE(errorOf(validateWavelet(y, 0.0)).find("sample_rate"), std::string::npos);
+  EXPECT_NE(errorOf(validateWavelet(y, -5.0)).find("sample_rate"), std::string::npos);
+  EXPECT_NE(errorOf(validateWavelet(y.data(), 10, 20000.0)).find("n = 10"), std::string::npos);
+  EXPECT_NE(errorOf(validateWavelet(nullptr, 1000, 20000.0)).find("null"), std::string::npos);
+  std::vector<double> bad = y;
+  bad[77] = NAN;
+  EXPECT_NE(errorOf(validateWavelet(bad, 20000.0)).find("sample 77"), std::string::npos);
+  WaveletOptions o;
+  o.f_max = 15000.0;
+  EXPECT_NE(errorOf(validateWavelet(y, 20000.0, o)).find("Nyquist"), std::string::npos);
+  o = WaveletOptions{};
+  o.mode_frequencies = {10000.0};
+  EXPECT_NE(errorOf(validateWavelet(y, 20000.0, o)).find("Nyquist"), std::string::npos);
+  o = WaveletOptions{};
+  o.peak_omega0 = NAN;
+  EXPECT_NE(errorOf(validateWavelet(y, 20000.0, o)).find("peak_omega0"), std::string::npos);
+  // A constant record is valid input with nothing to fit: ok, no modes, a global warning.
+  const WaveletResult flat = validateWavelet(std::vector<double>(4000, 1.5), 20000.0);
+  EXPECT_TRUE(flat.ok()) << flat.error;
+  for (const WaveletMode& m : flat.modes) {
+    EXPECT_TRUE(std::isfinite(m.damping_ratio) || !m.warning.empty());
+  }
+}
+
 }  // namespace
 }  // namespace gear_damping_id

@@ -38,6 +38,7 @@
 #pragma once
 
 #include <complex>
+#include <iosfwd>
 #include <limits>
 #include <memory>
 #include <string>
@@ -226,6 +227,11 @@ struct WaveletOptions {
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
   long max_scalogram_columns = 2000;
+  /// FFTW planning of the scalogram's transforms. kEstimate (default) plans instantly; kMeasure
+  /// costs ~0.1-3 s of planning once per FFT size and process and pays off for repeated
+  /// full scalograms of long records (the benchmark uses it). The damping fits' few rows
+  /// always use kEstimate.
+  FftPlanning fft_planning = FftPlanning::kEstimate;
 
   /// Empty when valid; otherwise names the field, its value and the rule broken.
   std::string validate() const;
@@ -272,6 +278,11 @@ struct WaveletResult {
   double noise_std = 0.0;  ///< [unit of y] white-noise estimate per sample (see analyzeWavelet)
   std::vector<WaveletMode> modes;     ///< ascending frequency
   std::vector<std::string> warnings;  ///< global remarks (modes also carry their own)
+  /// Empty on success; otherwise why the analysis could not run (validateWavelet only: the
+  /// bool-returning analyzeWavelet reports through its error argument). When set, everything
+  /// else is empty.
+  std::string error;
+  bool ok() const { return error.empty(); }
 };
 
 /// Morlet-wavelet damping analysis of a record y[0..n) sampled at sample_rate [Hz]
@@ -314,6 +325,36 @@ bool analyzeWavelet(const std::vector<double>& y, double sample_rate,
 bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletOptions& options,
                     WaveletResult* result, std::string* error);
 
+/// High-level entry point (the `analyze --wavelet` tool and the nodes): analyzeWavelet on
+/// y[0..n) sampled at sample_rate [Hz], returning the result by value. Never throws for bad
+/// input and never returns silent NaNs: on invalid input (options.validate() failing, a null
+/// or too short signal (n < 64), a NaN/Inf sample (its index is named), a sample rate that is
+/// not finite and > 0, a frequency grid or mode frequency at or above the Nyquist frequency)
+/// the result has ok() == false, `error` says which field or sample is wrong and everything
+/// else is empty. A mode whose fit fails has NaN numbers *and* a non-empty `warning`.
+WaveletResult validateWavelet(const double* y, size_t n, double sample_rate,
+                              const WaveletOptions& options = WaveletOptions());
+WaveletResult validateWavelet(const std::vector<double>& y, double sample_rate,
+                              const WaveletOptions& options = WaveletOptions());
+
+/// Integral-method damping ratio xi = C / (2 * omega0) [-] for C = c / Me [1/s] and
+/// omega0 = sqrt(mean(K)) = sqrt(k_mean / Me) [rad/s] (DESIGN.md §4 convention), shown beside
+/// the wavelet's xi. NaN unless C is finite and omega0 finite and > 0.
+double integralDampingRatio(double C_per_s, double omega0_rad_s);
+
+/// Sets WaveletMode::integral_xi of every mode of `result` to xi_integral (the integral
+/// method identifies one damping for the mesh mode; the wavelet may see several modes, and
+/// the table shows the integral value beside each). No-op for a null result.
+void attachIntegralDampingRatio(WaveletResult* result, double xi_integral);
+
+/// Writes the table of modes (paper Table 2) as CSV with the header
+///   frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,sigma_per_s,r2,
+///   t_start_s,t_end_s,omega0,peak_amplitude,noise_floor,warning
+/// one row per mode (ascending frequency); NaN is written `nan`, the warning is quoted (any
+/// '"' doubled). Returns "" on success, else a message.
+std::string writeModesCsv(const WaveletResult& result, std::ostream& out);
+std::string writeModesCsv(const WaveletResult& result, const std::string& path);
+
 /// Writes the scalogram as CSV: a '#' comment line, then a numeric matrix M (comma-separated,
 /// loadable with numpy.loadtxt(path, delimiter=',')): M[0][0] = M[0][1] = NaN, M[0][2:] = the
 /// column times [s]; then one row per frequency: M[r][0] = frequency [Hz], M[r][1] = COI
@@ -321,10 +362,13 @@ bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletO
 /// remain. Returns "" on success, else a message (empty scalogram, I/O failure with the path).
 std::string writeScalogramCsv(const WaveletResult& result, const std::string& path,
                               long max_columns = 2000);
+std::string writeScalogramCsv(const WaveletResult& result, std::ostream& out,
+                              long max_columns = 2000);
 
 /// Writes the spectra as CSV with header `kind,frequency_hz,power`: rows of kind `psd`
 /// (WaveletResult::spectrum_power [unit^2/Hz], up to the grid's highest frequency) then
 /// `scalogram` (time-averaged scalogram [unit^2]). "" on success, else a message.
 std::string writeSpectrumCsv(const WaveletResult& result, const std::string& path);
+std::string writeSpectrumCsv(const WaveletResult& result, std::ostream& out);
 
 }  // namespace gear_damping_id

@@ -791,7 +791,7 @@ bool analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOp
   // (1) Spectrum and time-averaged scalogram from one FFT.
   MorletCwt scal;
   if (!scal.configure(n, fs, grid, w0,
-                      options.full_scalogram ? FftPlanning::kMeasure : FftPlanning::kEstimate,
+                      options.full_scalogram ? options.fft_planning : FftPlanning::kEstimate,
                       error) ||
       !scal.setSignal(y, error)) {
     return false;
@@ -1043,10 +1043,67 @@ bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletO
 }
 
 // ------------------------------------------------------------------------------------------
-// CSV export
+// High-level entry point and the integral-method comparison
 
-std::string writeScalogramCsv(const WaveletResult& result, const std::string& path,
-                              long max_columns) {
+WaveletResult validateWavelet(const double* y, size_t n, double sample_rate,
+                              const WaveletOptions& options) {
+  WaveletResult result;
+  std::string error;
+  if (n > static_cast<size_t>(std::numeric_limits<long>::max())) {
+    result.error = "validateWavelet: n = " + std::to_string(n) + " samples is too large";
+    return result;
+  }
+  if (!analyzeWavelet(y, static_cast<long>(n), sample_rate, options, &result, &error)) {
+    result = WaveletResult{};
+    result.error = error.empty() ? std::string("validateWavelet: analysis failed") : error;
+  }
+  return result;
+}
+
+WaveletResult validateWavelet(const std::vector<double>& y, double sample_rate,
+                              const WaveletOptions& options) {
+  return validateWavelet(y.data(), y.size(), sample_rate, options);
+}
+
+double integralDampingRatio(double C_per_s, double omega0_rad_s) {
+  if (!std::isfinite(C_per_s) || !std::isfinite(omega0_rad_s) || !(omega0_rad_s > 0.0)) {
+    return kNaN;
+  }
+  return C_per_s / (2.0 * omega0_rad_s);
+}
+
+void attachIntegralDampingRatio(WaveletResult* result, double xi_integral) {
+  if (!result) return;
+  for (WaveletMode& m : result->modes) m.integral_xi = xi_integral;
+}
+
+// ------------------------------------------------------------------------------------------
+// CSV export: each writer formats into a std::ostream; the path overloads open the file,
+// delegate, and name the path in I/O errors.
+
+namespace {
+
+template <typename Writer>
+std::string writeToFile(const std::string& path, const char* what, Writer write) {
+  std::ofstream out(path);
+  if (!out) return std::string(what) + ": cannot open '" + path + "' for writing";
+  const std::string e = write(out);
+  if (!e.empty()) return e;
+  out.flush();
+  if (!out) return std::string(what) + ": write to '" + path + "' failed";
+  return "";
+}
+
+std::string csvNumber(double v, const char* format) {
+  if (std::isnan(v)) return "nan";
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), format, v);
+  return buf;
+}
+
+}  // namespace
+
+std::string writeScalogramCsv(const WaveletResult& result, std::ostream& out, long max_columns) {
   const long rows = result.modulus.rows(), cols = result.modulus.cols();
   if (rows == 0 || cols == 0) return "writeScalogramCsv: the result holds no scalogram";
   if (static_cast<size_t>(rows) != result.frequencies.size() ||
@@ -1057,11 +1114,8 @@ std::string writeScalogramCsv(const WaveletResult& result, const std::string& pa
   if (max_columns < 1) {
     return "writeScalogramCsv: max_columns = " + std::to_string(max_columns) + " must be >= 1";
   }
-  std::ofstream out(path);
-  if (!out) return "writeScalogramCsv: cannot open '" + path + "' for writing";
   const long d = cols > max_columns ? (cols + max_columns - 1) / max_columns : 1;
   const long oc = (cols + d - 1) / d;
-  char buf[32];
   out << "# gear_damping Morlet scalogram |W| (omega0 = " << num(result.omega0)
       << "). Row 1: NaN, NaN, times [s]; then per frequency: frequency [Hz], cone-of-influence "
          "half-width [s], |W| per time\n";
@@ -1070,30 +1124,33 @@ std::string writeScalogramCsv(const WaveletResult& result, const std::string& pa
     const long b = c * d, e = std::min(cols, b + d);
     double t = 0.0;
     for (long j = b; j < e; ++j) t += result.scalogram_times[static_cast<size_t>(j)];
-    std::snprintf(buf, sizeof(buf), ",%.9g", t / static_cast<double>(e - b));
-    out << buf;
+    out << ',' << csvNumber(t / static_cast<double>(e - b), "%.9g");
   }
   out << '\n';
   for (long r = 0; r < rows; ++r) {
-    std::snprintf(buf, sizeof(buf), "%.9g,%.9g", result.frequencies[static_cast<size_t>(r)],
-                  r < static_cast<long>(result.coi.size()) ? result.coi[static_cast<size_t>(r)]
-                                                           : kNaN);
-    out << buf;
+    out << csvNumber(result.frequencies[static_cast<size_t>(r)], "%.9g") << ','
+        << csvNumber(r < static_cast<long>(result.coi.size()) ? result.coi[static_cast<size_t>(r)]
+                                                             : kNaN,
+                     "%.9g");
     for (long c = 0; c < oc; ++c) {
       const long b = c * d, e = std::min(cols, b + d);
       double v = 0.0;
       for (long j = b; j < e; ++j) v += result.modulus(r, j);
-      std::snprintf(buf, sizeof(buf), ",%.7g", v / static_cast<double>(e - b));
-      out << buf;
+      out << ',' << csvNumber(v / static_cast<double>(e - b), "%.7g");
     }
     out << '\n';
   }
-  out.flush();
-  if (!out) return "writeScalogramCsv: write to '" + path + "' failed";
-  return "";
+  return out ? "" : "writeScalogramCsv: write failed";
 }
 
-std::string writeSpectrumCsv(const WaveletResult& result, const std::string& path) {
+std::string writeScalogramCsv(const WaveletResult& result, const std::string& path,
+                              long max_columns) {
+  return writeToFile(path, "writeScalogramCsv", [&](std::ostream& out) {
+    return writeScalogramCsv(result, out, max_columns);
+  });
+}
+
+std::string writeSpectrumCsv(const WaveletResult& result, std::ostream& out) {
   if (result.spectrum_freq.size() != result.spectrum_power.size() ||
       result.frequencies.size() != result.scalogram_power.size()) {
     return "writeSpectrumCsv: inconsistent result (spectrum and frequency sizes differ)";
@@ -1101,26 +1158,45 @@ std::string writeSpectrumCsv(const WaveletResult& result, const std::string& pat
   if (result.spectrum_freq.empty() && result.frequencies.empty()) {
     return "writeSpectrumCsv: the result holds no spectrum";
   }
-  std::ofstream out(path);
-  if (!out) return "writeSpectrumCsv: cannot open '" + path + "' for writing";
   const double f_top = result.frequencies.empty() ? std::numeric_limits<double>::infinity()
                                                   : result.frequencies.back();
-  char buf[64];
   out << "kind,frequency_hz,power\n";
   for (size_t k = 0; k < result.spectrum_freq.size(); ++k) {
     if (result.spectrum_freq[k] > f_top) break;
-    std::snprintf(buf, sizeof(buf), "psd,%.9g,%.9g\n", result.spectrum_freq[k],
-                  result.spectrum_power[k]);
-    out << buf;
+    out << "psd," << csvNumber(result.spectrum_freq[k], "%.9g") << ','
+        << csvNumber(result.spectrum_power[k], "%.9g") << '\n';
   }
   for (size_t i = 0; i < result.frequencies.size(); ++i) {
-    std::snprintf(buf, sizeof(buf), "scalogram,%.9g,%.9g\n", result.frequencies[i],
-                  result.scalogram_power[i]);
-    out << buf;
+    out << "scalogram," << csvNumber(result.frequencies[i], "%.9g") << ','
+        << csvNumber(result.scalogram_power[i], "%.9g") << '\n';
   }
-  out.flush();
-  if (!out) return "writeSpectrumCsv: write to '" + path + "' failed";
-  return "";
+  return out ? "" : "writeSpectrumCsv: write failed";
+}
+
+std::string writeSpectrumCsv(const WaveletResult& result, const std::string& path) {
+  return writeToFile(path, "writeSpectrumCsv",
+                     [&](std::ostream& out) { return writeSpectrumCsv(result, out); });
+}
+
+std::string writeModesCsv(const WaveletResult& result, std::ostream& out) {
+  out << "frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,sigma_per_s,"
+         "r2,t_start_s,t_end_s,omega0,peak_amplitude,noise_floor,warning\n";
+  for (const WaveletMode& m : result.modes) {
+    for (double v : {m.frequency_hz, m.spectrum_frequency_hz, m.damping_ratio, m.integral_xi,
+                     m.sigma, m.r2, m.t_start, m.t_end, m.omega0, m.peak_amplitude,
+                     m.noise_floor}) {
+      out << csvNumber(v, "%.9g") << ',';
+    }
+    out << '"';
+    for (char ch : m.warning) out << (ch == '"' ? "\"\"" : std::string(1, ch));
+    out << "\"\n";
+  }
+  return out ? "" : "writeModesCsv: write failed";
+}
+
+std::string writeModesCsv(const WaveletResult& result, const std::string& path) {
+  return writeToFile(path, "writeModesCsv",
+                     [&](std::ostream& out) { return writeModesCsv(result, out); });
 }
 
 }  // namespace gear_damping_id
