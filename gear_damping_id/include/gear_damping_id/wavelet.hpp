@@ -50,9 +50,10 @@
 namespace gear_damping_id {
 
 /// How much time FFTW spends choosing its algorithm (see the FFTW manual).
-/// kMeasure: times candidate algorithms at plan creation (~0.1-3 s for 1e5-1e6 points, once per
-///   size and process; later plans of the same size reuse FFTW's wisdom). Worth it when many
-///   rows are transformed (a full scalogram): the inverse FFT runs once per row.
+/// kMeasure: times candidate algorithms at plan creation, capped at 5 s per plan
+///   (fftw_set_timelimit; an uncapped search takes minutes for N ~ 1.8e6), once per size and
+///   process (later plans of the same size reuse FFTW's wisdom). Worth it when many rows are
+///   transformed (a full scalogram of a long record): the inverse FFT runs once per row.
 /// kEstimate: heuristic plan, no measurement; use for a handful of rows.
 enum class FftPlanning { kEstimate, kMeasure };
 
