@@ -9,9 +9,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace gear_damping_id {
@@ -592,41 +594,27 @@ TEST(AnalyzeWavelet, RejectsInvalidInputWithAnErrorNamingTheProblem) {
   EXPECT_NE(analyzeError(bad, 20000.0, ok).find("sample 1234"), std::string::npos);
   EXPECT_NE(analyzeError(y, 0.0, ok).find("sample_rate"), std::string::npos);
   EXPECT_NE(analyzeError(y, NAN, ok).find("sample_rate"), std::string::npos);
-  WaveletOptions o;
-  o.f_max = 10000.0;  // = Nyquist
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_max"), std::string::npos);
-  o = ok;
-  o.f_min = 3000.0;
-  o.f_max = 2000.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_min"), std::string::npos);
-  o = ok;
-  o.f_min = 9000.0;  // >= auto f_max = 8 kHz
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_min"), std::string::npos);
-  o = ok;
-  o.n_scales = 0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("n_scales"), std::string::npos);
-  o = ok;
-  o.omega0 = 0.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("omega0"), std::string::npos);
-  o = ok;
-  o.frequencies = {100.0, 300.0, 200.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("frequencies[2]"), std::string::npos);
-  o = ok;
-  o.frequencies = {100.0, 200.0, 12000.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("Nyquist"), std::string::npos);
-  o = ok;
-  o.mode_frequencies = {1000.0, 11000.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("mode_frequencies[1]"), std::string::npos);
-  o = ok;
-  o.mode_frequencies = {1000.0};
-  o.decay_regions = {{0.02, 0.01}};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("decay_regions[0]"), std::string::npos);
-  o = ok;
-  o.peak_prominence = 1.5;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("peak_prominence"), std::string::npos);
-  o = ok;
-  o.fit_omega0 = 2.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("fit_omega0"), std::string::npos);
+  // Each row: one option broken (the rest default) and what the error must name.
+  const std::vector<std::pair<std::function<void(WaveletOptions*)>, std::string>> cases = {
+      {[](WaveletOptions* o) { o->f_max = 10000.0; }, "f_max"},  // = Nyquist
+      {[](WaveletOptions* o) { o->f_min = 3000.0, o->f_max = 2000.0; }, "f_min"},
+      {[](WaveletOptions* o) { o->f_min = 9000.0; }, "f_min"},  // >= auto f_max = 8 kHz
+      {[](WaveletOptions* o) { o->n_scales = 0; }, "n_scales"},
+      {[](WaveletOptions* o) { o->omega0 = 0.0; }, "omega0"},
+      {[](WaveletOptions* o) { o->frequencies = {100.0, 300.0, 200.0}; }, "frequencies[2]"},
+      {[](WaveletOptions* o) { o->frequencies = {100.0, 200.0, 12000.0}; }, "Nyquist"},
+      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0, 11000.0}; }, "mode_frequencies[1]"},
+      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0}, o->decay_regions = {{0.02, 0.01}}; },
+       "decay_regions[0]"},
+      {[](WaveletOptions* o) { o->peak_prominence = 1.5; }, "peak_prominence"},
+      {[](WaveletOptions* o) { o->fit_omega0 = 2.0; }, "fit_omega0"},
+  };
+  for (const auto& c : cases) {
+    WaveletOptions o = ok;
+    c.first(&o);
+    const std::string e = analyzeError(y, 20000.0, o);
+    EXPECT_NE(e.find(c.second), std::string::npos) << "expected '" << c.second << "' in: " << e;
+  }
   WaveletResult r;
   EXPECT_FALSE(analyzeWavelet(nullptr, 100, 1000.0, ok, &r, nullptr));  // null error pointer is ok
   EXPECT_FALSE(analyzeWavelet(y.data(), long(y.size()), 20000.0, ok, nullptr, nullptr));

@@ -403,26 +403,27 @@ bool MorletCwt::transform(const double* y, std::complex<double>* out, std::strin
   return true;
 }
 
-bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
+namespace {
+// Both transformModulus overloads: setSignal, then |W| of every row into out (row-major).
+template <typename T>
+bool transformModulusInto(MorletCwt* cwt, const double* y, T* out, std::string* error) {
   if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!setSignal(y, error)) return false;
-  for (int i = 0; i < rows(); ++i) {
-    if (!rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(n_))) {
+  if (!cwt->setSignal(y, error)) return false;
+  for (int i = 0; i < cwt->rows(); ++i) {
+    if (!cwt->rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(cwt->size()))) {
       return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
     }
   }
   return true;
 }
+}  // namespace
+
+bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
+  return transformModulusInto(this, y, out, error);
+}
 
 bool MorletCwt::transformModulus(const double* y, float* out, std::string* error) {
-  if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!setSignal(y, error)) return false;
-  for (int i = 0; i < rows(); ++i) {
-    if (!rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(n_))) {
-      return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
-    }
-  }
-  return true;
+  return transformModulusInto(this, y, out, error);
 }
 
 namespace {
