@@ -1,0 +1,177 @@
+// The wavelet validation on the simulator's default gear case (config/table1.yaml, DESIGN §3):
+// the Morlet-envelope damping ratio at the natural frequency against the simulator's true
+// ratio C/(2*omega0), and the table of modes. See docs/wavelet.md ("The default gear case").
+//
+// What the wavelet can see. The DTE of the default case is a forced, parametrically excited
+// response: y'' + C(t) y' + K(t) y = F(t) with K = k(t)/Me a 1 kHz square wave (k_min..k_max)
+// and F the load. Its spectrum is a line spectrum at the mesh harmonics (the 10th sits on the
+// ~10 kHz natural frequency), and every stiffness switch (2 per mesh period) kicks a new
+// transient: there is no long free decay in the raw DTE, and a line fit of ln|W| over it
+// measures the forced lines, not the damping (checked below). The free decay is the part of
+// the response that is not forced: because the equation is linear in y, the difference of two
+// runs of the same case from two initial states is exactly the homogeneous (free) response
+// y'' + C(t) y' + K(t) y = 0 of the default case, i.e. its start-up transient with the
+// steady, forced part removed. That is the signal analysed here.
+//
+// The truth. C(t) = c(t)/Me from the simulator's `damping` column, omega0 = sqrt(k_mean/Me)
+// (gear_sim::naturalFrequencyHz). The default damping is load-dependent (xi 0.035..0.065 over
+// the 100 Hz load cycle), so the reference is C over the decay region the wavelet used,
+// weighted like the fit (by |W|^2 ~ exp(-2*sigma*t)), divided by 2*omega0.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "gear_damping_id/wavelet.hpp"
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/models.hpp"
+#include "gear_sim/simulator.hpp"
+
+namespace {
+
+using gear_damping_id::WaveletMode;
+using gear_damping_id::WaveletOptions;
+using gear_damping_id::WaveletResult;
+
+constexpr double kPi = 3.14159265358979323846;
+// The brief's bar for the forced, parametrically excited gear case (measured: 1.5 % for the
+// automatically picked mode, 7 % for the mode fitted at exactly the natural frequency). Why it
+// is wider than the 2 % of analytic free decays: the square-wave stiffness makes the free
+// oscillation hop between sqrt(k_max/Me) (11.2 kHz) and sqrt(k_min/Me) (7.9 kHz) every mesh
+// switch, so the envelope is modulated at 1 kHz (by the amplitude change at each switch) and
+// the rotation frequency (~10.1 kHz) differs from omega0; and the Floquet exponent of the
+// undamped Hill equation is not exactly zero near the 20th parametric resonance (2 f0 / f_mesh
+// = 19.97): with constant damping (xi = 0.05) the same analysis gives 0.047..0.053.
+constexpr double kGearCaseXiTol = 0.10;
+// The mode picked automatically lies within one wavelet bandwidth (1/omega0 ~ 25 % at the
+// fit's omega0 ~ 4) of the natural frequency.
+constexpr double kGearCaseFrequencyTol = 0.15;
+
+struct GearCase {
+  gear_sim::SimConfig config;
+  gear_sim::SignalTable forced, shifted;
+  Eigen::VectorXd free_decay;
+  double me = 0.0, omega0 = 0.0, f0 = 0.0;
+};
+
+const GearCase& defaultGearCase() {
+  static const GearCase g = [] {
+    GearCase c;
+    std::string error;
+    const std::string path = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
+    EXPECT_TRUE(gear_sim::loadSimConfigFile(path, &c.config, &error)) << error;
+    c.me = c.config.gears.equivalentMass();
+    c.f0 = gear_sim::naturalFrequencyHz(c.config.gears, c.config.mesh);
+    c.omega0 = 2.0 * kPi * c.f0;
+    EXPECT_TRUE(gear_sim::simulate(c.config, &c.forced, &error)) << error;
+    // Second run from the static deflection under the mean load instead of rest.
+    gear_sim::SimConfig shifted = c.config;
+    shifted.simulation.initial_dte =
+        c.config.gears.forceFactor() * c.config.load.mean / (c.omega0 * c.omega0);
+    EXPECT_TRUE(gear_sim::simulate(shifted, &c.shifted, &error)) << error;
+    c.free_decay = c.shifted.dte - c.forced.dte;
+    return c;
+  }();
+  return g;
+}
+
+// True xi = mean C / (2 omega0) over the mode's decay region, weighted by exp(-2 sigma t) as
+// the fit's |W|^2 weights are.
+double trueXiOver(const GearCase& g, const WaveletMode& m) {
+  const double fs = g.config.simulation.sample_rate;
+  const long j0 = std::lround(m.t_start * fs), j1 = std::lround(m.t_end * fs);
+  double sum = 0.0, weight = 0.0;
+  for (long j = std::max(0L, j0); j <= j1 && j < g.forced.size(); ++j) {
+    const double w = std::exp(-2.0 * m.sigma * static_cast<double>(j - j0) / fs);
+    sum += w * g.forced.damping[j] / g.me;  // C = c / Me [1/s]
+    weight += w;
+  }
+  return gear_damping_id::integralDampingRatio(sum / weight, g.omega0);
+}
+
+// validateWavelet on a record of the case with the grid 2 kHz .. 0.4 fs (the automatic grid
+// would start at 10 cycles per 10 ms record) and optional explicit mode frequencies.
+WaveletResult analyzeCase(const GearCase& g, const Eigen::VectorXd& y, bool full_scalogram,
+                          const std::vector<double>& mode_frequencies = {}) {
+  const double fs = g.config.simulation.sample_rate;
+  WaveletOptions o;
+  o.f_min = 2000.0;
+  o.f_max = 0.4 * fs;
+  o.full_scalogram = full_scalogram;
+  o.mode_frequencies = mode_frequencies;
+  return gear_damping_id::validateWavelet(y.data(), static_cast<size_t>(y.size()), fs, o);
+}
+
+const WaveletMode* nearest(const WaveletResult& r, double f) {
+  const WaveletMode* best = nullptr;
+  for (const WaveletMode& m : r.modes) {
+    if (!best || std::abs(m.spectrum_frequency_hz - f) < std::abs(best->spectrum_frequency_hz - f)) {
+      best = &m;
+    }
+  }
+  return best;
+}
+
+TEST(WaveletGearCase, FreeDecayOfTheDefaultCaseGivesTheTrueDampingRatioWithinTenPercent) {
+  const GearCase& g = defaultGearCase();
+  ASSERT_EQ(g.free_decay.size(), g.forced.size());
+  WaveletResult r = analyzeCase(g, g.free_decay, true);
+  ASSERT_TRUE(r.ok()) << r.error;
+  const WaveletMode* m = nearest(r, g.f0);
+  ASSERT_NE(m, nullptr);
+  ASSERT_TRUE(std::isfinite(m->damping_ratio)) << m->warning;
+  const double truth = trueXiOver(g, *m);
+  gear_damping_id::attachIntegralDampingRatio(&r, truth);
+  std::ostringstream table;
+  ASSERT_EQ(gear_damping_id::writeModesCsv(r, table), "");
+  std::printf("[ measured ] default gear case, free decay, automatic peak: f_d %.1f Hz "
+              "(f0 %.1f Hz), xi %.5f vs true %.5f (error %+.2f %%), R^2 %.5f, region "
+              "[%.4f, %.4f] s, omega0 %.2f\n[ table    ]\n%s",
+              m->frequency_hz, g.f0, m->damping_ratio, truth,
+              100.0 * (m->damping_ratio / truth - 1.0), m->r2, m->t_start, m->t_end, m->omega0,
+              table.str().c_str());
+  EXPECT_NEAR(m->spectrum_frequency_hz, g.f0, kGearCaseFrequencyTol * g.f0);
+  EXPECT_NEAR(m->damping_ratio, truth, kGearCaseXiTol * truth);
+  EXPECT_GT(m->r2, 0.95);
+  // The nominal ratio of the YAML (damping.ratio, the load-weighted mean) is within the bar too.
+  EXPECT_NEAR(m->damping_ratio, g.config.damping.ratio, kGearCaseXiTol * g.config.damping.ratio);
+}
+
+TEST(WaveletGearCase, ExplicitNaturalFrequencyGivesTheTrueDampingRatioWithinTenPercent) {
+  const GearCase& g = defaultGearCase();
+  const WaveletResult r = analyzeCase(g, g.free_decay, false, {g.f0});
+  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_EQ(r.modes.size(), 1u);
+  const WaveletMode& m = r.modes[0];
+  ASSERT_TRUE(std::isfinite(m.damping_ratio)) << m.warning;
+  const double truth = trueXiOver(g, m);
+  std::printf("[ measured ] default gear case, free decay, row at f0 = %.1f Hz: xi %.5f vs true "
+              "%.5f (error %+.2f %%), f_d %.1f Hz, R^2 %.5f, region [%.4f, %.4f] s\n",
+              g.f0, m.damping_ratio, truth, 100.0 * (m.damping_ratio / truth - 1.0),
+              m.frequency_hz, m.r2, m.t_start, m.t_end);
+  EXPECT_NEAR(m.damping_ratio, truth, kGearCaseXiTol * truth);
+}
+
+// The limitation documented in docs/wavelet.md: on the raw, forced DTE the peaks are mesh
+// harmonics (multiples of 1 kHz) whose envelopes do not decay like the mode, so their fitted
+// "damping ratios" are far below the truth. The test pins this down so that nobody mistakes
+// the raw-DTE table for a damping measurement.
+TEST(WaveletGearCase, RawForcedResponseShowsMeshHarmonicsNotTheFreeDecay) {
+  const GearCase& g = defaultGearCase();
+  const WaveletResult r = analyzeCase(g, g.forced.dte, false);
+  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_FALSE(r.modes.empty());
+  const double mesh_hz = g.config.speed.pinion_rpm / 60.0 * g.config.gears.pinion.teeth;
+  for (const WaveletMode& m : r.modes) {
+    const double harmonic = m.spectrum_frequency_hz / mesh_hz;
+    EXPECT_NEAR(harmonic, std::round(harmonic), 0.02) << m.spectrum_frequency_hz;
+    if (std::isfinite(m.damping_ratio)) {
+      EXPECT_LT(m.damping_ratio, 0.5 * g.config.damping.ratio) << m.spectrum_frequency_hz;
+    }
+  }
+}
+
+}  // namespace
