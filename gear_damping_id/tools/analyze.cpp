@@ -2,17 +2,23 @@
 //     [--formulation known|greybox|paper|legacy]... [--model piecewise|constant|load_law]...
 //     [--segment S] [--window S] [--t-start S] [--t-end S] [--refine auto|always|never]
 //     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
+//     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
+//                [--decay-region T0,T1]...]
 //
 // Identifies the mesh damping of a DTE record (CSV with the DESIGN §6 columns, or a bag of
 // gear_damping/SignalChunk messages) with the integral method (DESIGN §4) for every requested
 // formulation x damping model, re-simulates the modeled response of each, prints a table per
 // run on stdout and writes the DESIGN §6 JSON, CSV tables and a bag of results on request.
+// --wavelet adds the Morlet wavelet validation (DESIGN §5: modes, their damping ratios beside
+// the integral method's); without gear parameters (a `time,dte` record and no --params) the
+// wavelet validation runs alone.
 // Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
 // Exit codes (README "analyze"): 0 success, 1 invalid command line or option value, 2 invalid
 // input (file, columns, numbers, time axis, chunks, gear parameters, sample rate, length),
 // 3 an output could not be written, 4 nothing identifiable in the record. Messages on stderr.
 #include <gear_damping/DampingArray.h>
 #include <gear_damping/ModeledResponse.h>
+#include <gear_damping/WaveletModes.h>
 #include <rosbag/bag.h>
 #include <unistd.h>
 
@@ -30,6 +36,7 @@
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -168,7 +175,8 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
 // their output-error refinement and modeled response need the whole record and are skipped
 // with a warning.
 bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
-                      std::vector<gd::AnalysisRun>* runs, ResultBag* bag, std::string* error) {
+                      std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
+                      std::vector<double>* wavelet_dte, size_t wavelet_max, std::string* error) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
@@ -213,6 +221,11 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   const bool ok = gear_sim_ros::streamSignalBag(
       info, ranges, [&](const gear_sim::SignalTable& block, size_t r) {
         const gd::SignalView view = gd::SignalView::of(block);
+        if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
+          const size_t take = std::min(wavelet_max - wavelet_dte->size(),
+                                       static_cast<size_t>(block.dte.size()));
+          wavelet_dte->insert(wavelet_dte->end(), block.dte.data(), block.dte.data() + take);
+        }
         for (size_t k = 0; k < runs->size(); ++k) {
           gd::AnalysisRun& run = (*runs)[k];
           State& st = states[k];
@@ -275,25 +288,67 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   return true;
 }
 
+// The integral method's xi set beside a wavelet mode: the shared estimate of a constant model,
+// else the segments' xi averaged over the mode's decay region [t_start, t_end] with the fit's
+// weight exp(-2 sigma t) (the wavelet measures the decay there; with load-dependent damping a
+// record-wide mean would compare different things). NaN when nothing overlaps.
+double integralXiOver(const gd::IdentificationResult& r, const gd::WaveletMode& m) {
+  if (r.constant) return r.constant->identifiable ? r.constant->xi : gd::kNaN;
+  const double sigma = std::isfinite(m.sigma) ? m.sigma : 0.0;
+  auto weight = [&](double a, double b) {  // integral of exp(-2 sigma (t - t_start)) over [a, b]
+    if (std::abs(sigma) < 1e-12) return b - a;
+    return (std::exp(-2.0 * sigma * (a - m.t_start)) - std::exp(-2.0 * sigma * (b - m.t_start))) /
+           (2.0 * sigma);
+  };
+  double sum = 0.0, wsum = 0.0;
+  for (const auto& s : r.segments) {
+    const double a = std::max(s.t_start, m.t_start), b = std::min(s.t_end, m.t_end);
+    if (!s.identifiable || !(b > a)) continue;
+    const double w = weight(a, b);
+    sum += w * s.xi;
+    wsum += w;
+  }
+  return wsum > 0.0 ? sum / wsum : gd::kNaN;
+}
+
+// Splits "T0,T1" into a decay region [s].
+bool parseRegion(const std::string& text, std::pair<double, double>* out) {
+  const auto comma = text.find(',');
+  if (comma == std::string::npos) return false;
+  try {
+    size_t a = 0, b = 0;
+    out->first = std::stod(text.substr(0, comma), &a);
+    out->second = std::stod(text.substr(comma + 1), &b);
+    return a == comma && b == text.size() - comma - 1;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
       "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
-      "(integral method, Yousfi et al. 2022) and re-simulate the modeled response."};
+      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
+      "the damping with Morlet wavelets."};
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
   std::string refine = "auto";
   gd::IdentificationOptions base;
   std::optional<double> t_start, t_end;
   long max_in_memory = 1000000;
+  bool wavelet = false;
+  gd::WaveletOptions wopt;
+  std::vector<std::string> regions;
+  long wavelet_max = 1L << 20;
   app.add_option("--input", input,
                  "signal record: CSV with the DESIGN §6 columns, or a bag of SignalChunk messages")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--params", params,
                  "gear parameters: the simulator's YAML (pinion, gear, mesh, speed sections); "
-                 "default for a bag: its GearParams message")
+                 "default for a bag: its GearParams message; none: wavelet validation only")
       ->check(CLI::ExistingFile);
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
   app.add_option("--output", output, "write the result JSON (DESIGN §6) to this file");
@@ -323,10 +378,37 @@ int main(int argc, char** argv) {
                  "(default 1e6)")
       ->check(CLI::PositiveNumber);
   app.add_option("--csv-out", csv_out,
-                 "write segments.csv, summary.csv and response_<run>.csv into this directory");
+                 "write segments.csv, summary.csv, response_<run>.csv and the wavelet tables "
+                 "into this directory");
   app.add_option("--bag-out", bag_out,
-                 "write the results as gear_damping messages (DampingArray, ModeledResponse) "
-                 "to this bag");
+                 "write the results as gear_damping messages (DampingArray, ModeledResponse, "
+                 "WaveletModes) to this bag");
+  app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (DESIGN §5)");
+  app.add_option("--f-min", wopt.f_min, "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
+  app.add_option("--f-max", wopt.f_max, "wavelet: highest frequency [Hz] (default 0.4 fs)");
+  app.add_option("--scales", wopt.n_scales, "wavelet: number of log-spaced frequencies (default 200)");
+  app.add_option("--omega0", wopt.omega0,
+                 "wavelet: Morlet centre frequency of the scalogram (default 6; 3..100)");
+  app.add_option("--fit-omega0", wopt.fit_omega0,
+                 "wavelet: Morlet centre frequency of the damping fits (default 0 = automatic)");
+  app.add_option("--mode-freq", wopt.mode_frequencies,
+                 "wavelet: explicit mode frequency [Hz] (repeat; default: picked peaks)")
+      ->take_all();
+  app.add_option("--decay-region", regions,
+                 "wavelet: decay region T0,T1 [s from the analysed record's start] (once for all "
+                 "modes, or once per --mode-freq)")
+      ->take_all();
+  app.add_option("--prominence", wopt.peak_prominence,
+                 "wavelet: minimum peak prominence, fraction of the highest peak (default 0.05)");
+  std::string wavelet_input;
+  app.add_option("--wavelet-input", wavelet_input,
+                 "wavelet: analyse the dte of this record (CSV or bag, e.g. a free decay from "
+                 "`simulate --free-response`) instead of the identification record")
+      ->check(CLI::ExistingFile);
+  app.add_option("--wavelet-max-samples", wavelet_max,
+                 "wavelet: analyse at most this many samples from the start of the analysed "
+                 "record (default 2^20)")
+      ->check(CLI::PositiveNumber);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -340,6 +422,7 @@ int main(int argc, char** argv) {
     return fail(kExitUsage, "--input " + input + ": must end in .csv or .bag");
   if (!bag_out.empty() && !endsWith(bag_out, ".bag"))
     return fail(kExitUsage, "--bag-out " + bag_out + ": must end in .bag");
+  if (!is_bag && !topic.empty()) return fail(kExitUsage, "--topic applies to bag input only");
   if (t_start) base.t_start = *t_start;
   if (t_end) base.t_end = *t_end;
   base.refine = refine == "always"  ? gd::IdentificationOptions::Refine::Always
@@ -355,6 +438,13 @@ int main(int argc, char** argv) {
       runs_options.push_back(o);
     }
   }
+  for (const auto& r : regions) {
+    std::pair<double, double> region;
+    if (!parseRegion(r, &region))
+      return fail(kExitUsage, "--decay-region " + r + ": expected T0,T1 in seconds");
+    wopt.decay_regions.push_back(region);
+  }
+  if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
 
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
   std::string error;
@@ -368,45 +458,55 @@ int main(int argc, char** argv) {
     streaming = bag_info.samples > max_in_memory;
     if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
       return fail(kExitInput, error);
-  } else {
-    if (!topic.empty()) return fail(kExitUsage, "--topic applies to bag input only");
+  } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
+                                      /*allow_non_finite=*/true)) {
     // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
-    if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
-                                 /*allow_non_finite=*/true))
-      return fail(kExitInput, error);
+    return fail(kExitInput, error);
   }
 
+  // Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
   gear_sim::GearModel model;
   std::string params_source = params;
+  bool identification = true;
   if (!params.empty()) {
     if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
   } else if (is_bag && bag_info.has_params) {
     model = bag_info.params;
     params_source = input + ":" + bag_info.params_topic;
   } else {
-    return fail(kExitUsage,
-                "--params GEAR.yaml is required" +
-                    std::string(is_bag ? (bag_info.params_error.empty()
-                                              ? " (the bag has no GearParams message)"
-                                              : " (" + bag_info.params_error + ")")
-                                       : ""));
+    identification = false;
+    wavelet = true;
+    warn("no gear parameters (--params" +
+         std::string(is_bag ? (bag_info.params_error.empty() ? ", or a GearParams message in the bag"
+                                                             : "; " + bag_info.params_error)
+                            : "") +
+         "): running the wavelet validation only");
   }
-  const gd::GearConstants gear = gd::gearConstants(model);
-  if (const std::string e = gear.validate(); !e.empty())
-    return fail(kExitInput, params_source + ": " + e);
+  const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  if (identification) {
+    if (const std::string e = gear.validate(); !e.empty())
+      return fail(kExitInput, params_source + ": " + e);
+  }
 
-  // Record-level checks: columns and time axis (tables), sample rate, length.
-  double sample_rate, duration;
-  if (streaming) {
-    sample_rate = bag_info.sample_rate;
-    gd::SignalView whole;
-    whole.dt = 1.0 / sample_rate;
-    whole.t0 = static_cast<double>(bag_info.first_index) * whole.dt;
-    whole.n = static_cast<Eigen::Index>(bag_info.samples);
-    const Ranges r = gd::segmentRanges(whole, runs_options.front());
-    duration = r.empty() ? 0.0 : static_cast<double>(r.back().second - r.front().first) * whole.dt;
+  // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
+  const double sample_rate =
+      streaming ? bag_info.sample_rate
+                : static_cast<double>(table.size() - 1) / (table.time[table.size() - 1] - table.time[0]);
+  gd::SignalView whole;
+  whole.dt = 1.0 / sample_rate;
+  whole.t0 = streaming ? static_cast<double>(bag_info.first_index) * whole.dt : table.time[0];
+  whole.n = streaming ? static_cast<Eigen::Index>(bag_info.samples) : table.size();
+  if (!streaming) {
     for (const auto& o : runs_options) {
-      gear_sim::SignalTable shape;  // columns present, for the formulation check
+      const std::string e = gd::checkSignalTable(
+          table, identification ? o.formulation : gd::Formulation::Paper,  // Paper: dte only
+          identification ? o.model : gd::DampingModel::Piecewise, o.time_tolerance,
+          /*first_line=*/is_bag ? -1 : 2);
+      if (!e.empty()) return fail(kExitInput, input + ": " + e);
+    }
+  } else if (identification) {
+    for (const auto& o : runs_options) {
+      gear_sim::SignalTable shape;  // the columns present, for the formulation check
       shape.time = Eigen::VectorXd::LinSpaced(2, 0.0, whole.dt);
       shape.dte.resize(2);
       if (bag_info.stiffness) shape.stiffness.resize(2);
@@ -415,79 +515,172 @@ int main(int argc, char** argv) {
       if (const std::string e = gd::checkSignalTable(shape, o.formulation, o.model); !e.empty())
         return fail(kExitInput, input + ": " + e);
     }
-  } else {
-    for (const auto& o : runs_options) {
-      const std::string e = gd::checkSignalTable(table, o.formulation, o.model, o.time_tolerance,
-                                                 /*first_line=*/is_bag ? -1 : 2);
-      if (!e.empty()) return fail(kExitInput, input + ": " + e);
-    }
-    const gd::SignalView view = gd::SignalView::of(table);
-    sample_rate = 1.0 / view.dt;
-    const Ranges r = gd::segmentRanges(view, runs_options.front());
-    duration = r.empty() ? 0.0 : static_cast<double>(r.back().second - r.front().first) * view.dt;
   }
-  std::string rate_warning;
-  if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
-    return fail(kExitInput, input + ": " + e);
-  if (!rate_warning.empty()) warn(input + ": " + rate_warning);
-  if (duration <= 0.0) return fail(kExitInput, input + ": no samples in the analysed time range");
-  for (const auto& o : runs_options)
-    if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
+  const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
+  if (analysed.empty()) return fail(kExitInput, input + ": no samples in the analysed time range");
+  const double duration =
+      static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
+  if (identification) {
+    std::string rate_warning;
+    if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
       return fail(kExitInput, input + ": " + e);
+    if (!rate_warning.empty()) warn(input + ": " + rate_warning);
+    for (const auto& o : runs_options)
+      if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
+        return fail(kExitInput, input + ": " + e);
+  }
 
   ResultBag bag;
   if (!bag_out.empty() && !bag.open(bag_out, &error)) return fail(kExitOutput, error);
 
+  // Identification (table or streaming); the wavelet's samples are collected on the way.
   std::vector<gd::AnalysisRun> runs;
-  for (const auto& o : runs_options) {
-    gd::AnalysisRun run;
-    run.options = o;
-    run.dt = 1.0 / sample_rate;
-    run.t0 = streaming ? static_cast<double>(bag_info.first_index) * run.dt : table.time[0];
-    runs.push_back(std::move(run));
+  std::vector<double> wavelet_dte;
+  const Eigen::Index first = analysed.front().first;
+  const size_t wavelet_n_record = static_cast<size_t>(
+      std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
+  const bool wavelet_on_record = wavelet && wavelet_input.empty();
+  if (identification) {
+    for (const auto& o : runs_options) {
+      gd::AnalysisRun run;
+      run.options = o;
+      run.dt = whole.dt;
+      run.t0 = whole.t0;
+      runs.push_back(std::move(run));
+    }
   }
-  if (streaming) {
-    if (!analyzeStreaming(bag_info, gear, &runs, &bag, &error))
+  if (streaming && identification) {
+    if (!analyzeStreaming(bag_info, gear, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
+                          wavelet_n_record, &error))
       return fail(kExitInput, input + ": " + error);
+  } else if (streaming && wavelet_on_record) {
+    if (!gear_sim_ros::streamSignalBag(
+            bag_info, {{first, first + static_cast<Eigen::Index>(wavelet_n_record)}},
+            [&](const gear_sim::SignalTable& t, size_t) {
+              wavelet_dte.assign(t.dte.data(), t.dte.data() + t.dte.size());
+              return true;
+            },
+            &error))
+      return fail(kExitInput, error);
   } else {
     const gd::SignalView view = gd::SignalView::of(table);
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
       if (!gd::identify(table, gear, run.options, &run.result, &error))
         return fail(kExitInput, input + ": " + error);
-      if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error))
+      if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
         run.response = gd::ModeledResponse{};
-      else
-        bag.write(topicOf(run, k == 0, "modeled_response"), table.time[run.response.begin],
+      } else {
+        const double tr = table.time[run.response.begin];
+        bag.write(topicOf(run, k == 0, "modeled_response"), tr,
                   gear_damping_ros::toMsg(run.response, sample_rate,
-                                          static_cast<std::uint64_t>(std::llround(
-                                              table.time[run.response.begin] * sample_rate))));
+                                          static_cast<std::uint64_t>(std::llround(tr * sample_rate))));
+      }
     }
+    if (wavelet_on_record)
+      wavelet_dte.assign(table.dte.data() + first, table.dte.data() + first + wavelet_n_record);
   }
   bool identifiable = false;
   for (size_t k = 0; k < runs.size(); ++k) {
     identifiable = identifiable || anyIdentifiable(runs[k].result);
-    bag.write(topicOf(runs[k], k == 0, "damping"), duration + runs[k].t0,
+    bag.write(topicOf(runs[k], k == 0, "damping"), whole.t0 + duration,
               gear_damping_ros::toMsg(runs[k].result));
   }
-  gd::printRunTables(std::cout, runs);
+  if (!runs.empty()) gd::printRunTables(std::cout, runs);
 
-  const nlohmann::json in = {
+  // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
+  gd::WaveletResult wres;
+  double t_first = whole.t0 + static_cast<double>(first) * whole.dt;
+  double wavelet_rate = sample_rate;
+  size_t wavelet_n = wavelet_n_record;
+  if (!wavelet_input.empty()) {
+    wavelet = true;
+    gear_sim::SignalTable w;
+    if (endsWith(wavelet_input, ".bag")) {
+      gear_sim_ros::BagSignalInfo wi;
+      if (!gear_sim_ros::scanSignalBag(wavelet_input, "", &wi, &error) ||
+          !gear_sim_ros::streamSignalBag(
+              wi, {{0, std::min<Eigen::Index>(wavelet_max, wi.samples)}},
+              [&](const gear_sim::SignalTable& t, size_t) {
+                w = t;
+                return true;
+              },
+              &error))
+        return fail(kExitInput, "--wavelet-input: " + error);
+    } else if (!gear_sim::readSignalCsv(wavelet_input, &w, &error, {"time", "dte"}, true)) {
+      return fail(kExitInput, "--wavelet-input: " + error);
+    }
+    if (const std::string e = gd::checkSignalTable(w, gd::Formulation::Paper,
+                                                   gd::DampingModel::Piecewise, 1e-6,
+                                                   endsWith(wavelet_input, ".bag") ? -1 : 2);
+        !e.empty())
+      return fail(kExitInput, wavelet_input + ": " + e);
+    wavelet_n = static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, w.size()));
+    wavelet_dte.assign(w.dte.data(), w.dte.data() + wavelet_n);
+    wavelet_rate = static_cast<double>(w.size() - 1) / (w.time[w.size() - 1] - w.time[0]);
+    t_first = w.time[0];
+  }
+  if (wavelet) {
+    if (wavelet_on_record && wavelet_n < static_cast<size_t>(analysed.back().second - first))
+      warn("wavelet validation on the first " + std::to_string(wavelet_n) +
+           " samples of the analysed record (--wavelet-max-samples)");
+    wres = gd::validateWavelet(wavelet_dte.data(), wavelet_dte.size(), wavelet_rate, wopt);
+    if (!wres.ok()) {
+      if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.error);
+      warn("wavelet validation not possible: " + wres.error);
+    } else {
+      gd::shiftWaveletTimes(&wres, t_first);  // onto the record's time axis
+      if (identification && !runs.empty())
+        for (auto& m : wres.modes) m.integral_xi = integralXiOver(runs.front().result, m);
+      gd::printWaveletTable(std::cout, wres);
+      gear_damping::WaveletModes msg;
+      msg.t_start = t_first;
+      msg.t_end = t_first + static_cast<double>(wavelet_n) / wavelet_rate;
+      msg.wavelet_parameter = wres.omega0;
+      for (const auto& m : wres.modes) {
+        gear_damping::WaveletMode wm;
+        wm.frequency_hz = m.frequency_hz;
+        wm.damping_ratio = m.damping_ratio;
+        wm.r2 = m.r2;
+        wm.decay_t_start = m.t_start;
+        wm.decay_t_end = m.t_end;
+        wm.xi_integral = m.integral_xi;
+        wm.warning = m.warning;
+        msg.modes.push_back(wm);
+      }
+      bag.write("/gear/wavelet_modes", msg.t_end, msg);
+    }
+  }
+
+  nlohmann::json in = {
       {"file", input},
-      {"params", params_source},
-      {"samples", streaming ? static_cast<std::int64_t>(bag_info.samples)
-                            : static_cast<std::int64_t>(table.size())},
+      {"params", identification ? nlohmann::json(params_source) : nlohmann::json(nullptr)},
+      {"samples", static_cast<std::int64_t>(whole.n)},
       {"sample_rate", sample_rate},
+      {"t_start", t_first},
+      {"duration", duration},
       {"streaming", streaming},
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
-  if (!output.empty() &&
-      !gd::writeFileAtomically(output, gd::analysisJson(runs, in).dump(2) + "\n", &error))
+  nlohmann::json doc = gd::analysisJson(runs, in);
+  if (wavelet) {
+    doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
+    if (wres.ok()) {
+      doc["wavelet"]["samples"] = wavelet_n;
+      doc["wavelet"]["input"] = wavelet_input.empty() ? input : wavelet_input;
+    }
+  }
+  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error))
     return fail(kExitOutput, error);
-  if (!csv_out.empty() && !gd::writeRunCsv(csv_out, runs, &error))
-    return fail(kExitOutput, error);
+  if (!csv_out.empty()) {
+    if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error)) return fail(kExitOutput, error);
+    if (wavelet && wres.ok() &&
+        !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
+                             wavelet_rate, t_first, 4000, &error))
+      return fail(kExitOutput, error);
+  }
   if (!bag.close(&error)) return fail(kExitOutput, error);
-  if (!identifiable)
+  if (identification && !identifiable)
     return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
   return 0;
 }

@@ -2,13 +2,14 @@
 //     [--noise-snr DB] [--seed N] [--chunk-size N] --output OUT.csv|OUT.bag
 //
 // Simulates the gear pair described by FILE.yaml (README "Simulator configuration") and writes
-// the DESIGN §6 CSV, or a bag with gear_damping/SignalChunk messages on /gear/signal and the
+// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag with gear_damping/SignalChunk messages on /gear/signal and the
 // gear parameters (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid
 // input (message on stderr naming the key/option), 2 output could not be written.
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
@@ -41,6 +42,12 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "override simulation.seed");
   app.add_option("--chunk-size", chunk_size, "samples per SignalChunk in a bag (default 1000)")
       ->check(CLI::PositiveNumber);
+  bool free_response = false;
+  app.add_flag("--free-response", free_response,
+               "write the free (homogeneous) response y'' + C y' + K y = 0 of the case instead: "
+               "the difference of two runs, from the static deflection under the mean load and "
+               "from the configured initial state (the start-up transient without the forced "
+               "part; what the wavelet validation needs, docs/wavelet.md)");
   CLI11_PARSE(app, argc, argv);
 
   if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
@@ -61,6 +68,25 @@ int main(int argc, char** argv) {
   if (!gear_sim::simulate(c, &t, &error)) {  // validates the overridden values too
     std::cerr << "simulate: " << error << "\n";
     return 1;
+  }
+  if (free_response) {
+    // Eq. (4) is linear in y: two runs differing only in the initial state differ by exactly
+    // the free response. Noise, if configured, is left out of the difference and added once.
+    gear_sim::SimConfig quiet = c, shifted;
+    quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
+    shifted = quiet;
+    const double w0 = 2.0 * M_PI * gear_sim::naturalFrequencyHz(c.gears, c.mesh);
+    shifted.simulation.initial_dte =
+        c.simulation.initial_dte + c.gears.forceFactor() * t.torque.mean() / (w0 * w0);
+    gear_sim::SignalTable a, b;
+    if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
+      std::cerr << "simulate: " << error << "\n";
+      return 1;
+    }
+    const Eigen::VectorXd noise = t.dte - a.dte;  // the configured measurement noise (or 0)
+    t.dte = b.dte - a.dte + noise;
+    t.dte_velocity = b.dte_velocity - a.dte_velocity;
+    t.torque.setZero();  // no forcing in the free response
   }
   // Write next to the target and rename on success: no partial file that looks complete.
   const std::string tmp = output + ".partial";

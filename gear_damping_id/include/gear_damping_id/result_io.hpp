@@ -9,6 +9,7 @@
 
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/wavelet.hpp"
 
 namespace gear_damping_id {
 
@@ -42,6 +43,28 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs);
 /// Writes `dir`/segments.csv (all runs, long format), `dir`/summary.csv (one row per run) and
 /// `dir`/response_<run>.csv (time, observed, modeled). Creates `dir`. False with `*error`.
 bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error);
+
+/// JSON of a wavelet validation (DESIGN §6 `wavelet`): modes[] with frequency_hz,
+/// damping_ratio, r2, t_start, t_end, sigma, spectrum_frequency_hz, omega0,
+/// integral_damping_ratio, warning; plus warnings, noise_std and the scalogram's omega0.
+nlohmann::json waveletJson(const WaveletResult& w);
+
+/// Adds t0 [s] to every time of `w` (decay regions, scalogram columns): analyzeWavelet counts
+/// time from the first sample it was given, the outputs use the record's time axis.
+void shiftWaveletTimes(WaveletResult* w, double t0);
+
+/// The modes as a table like the paper's Table 2 (frequency, xi wavelet, xi integral, R^2,
+/// decay region, warning).
+void printWaveletTable(std::ostream& os, const WaveletResult& w);
+
+/// Writes `dir`/wavelet_modes.csv, wavelet_spectrum.csv, wavelet_scalogram.csv (when the
+/// result holds a scalogram) and wavelet_envelopes.csv: `mode,time,envelope` with the envelope
+/// |W(f_mode, t)| of each fitted mode at the omega0 of its fit, recomputed from the record
+/// y[0, n) sampled at `sample_rate` with its first sample at time t0 (times in the file are
+/// t0 + j/fs, so `w`'s times should be shifted by t0 too: see shiftWaveletTimes), every d-th
+/// sample so that at most `max_points` rows per mode remain. False with `*error`.
+bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
+                     double sample_rate, double t0, long max_points, std::string* error);
 
 /// Writes `text` to `path` atomically (a temporary file renamed on success), so a failed run
 /// never leaves a partial file that looks complete. False with `*error`.

@@ -170,6 +170,104 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
   }
 }
 
+json waveletJson(const WaveletResult& w) {
+  json j;
+  j["omega0"] = num(w.omega0);
+  j["noise_std"] = num(w.noise_std);
+  j["warnings"] = w.warnings;
+  j["modes"] = json::array();
+  for (const auto& m : w.modes) {
+    j["modes"].push_back({{"frequency_hz", num(m.frequency_hz)},
+                          {"spectrum_frequency_hz", num(m.spectrum_frequency_hz)},
+                          {"damping_ratio", num(m.damping_ratio)},
+                          {"r2", num(m.r2)},
+                          {"sigma", num(m.sigma)},
+                          {"t_start", num(m.t_start)},
+                          {"t_end", num(m.t_end)},
+                          {"omega0", num(m.omega0)},
+                          {"peak_amplitude", num(m.peak_amplitude)},
+                          {"noise_floor", num(m.noise_floor)},
+                          {"integral_damping_ratio", num(m.integral_xi)},
+                          {"warning", m.warning}});
+  }
+  return j;
+}
+
+void shiftWaveletTimes(WaveletResult* w, double t0) {
+  for (auto& m : w->modes) m.t_start += t0, m.t_end += t0;
+  for (auto& t : w->scalogram_times) t += t0;
+}
+
+void printWaveletTable(std::ostream& os, const WaveletResult& w) {
+  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): "
+     << w.modes.size() << " mode(s)\n"
+     << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]\n";
+  int i = 0;
+  for (const auto& m : w.modes) {
+    os << "  " << std::setw(4) << i++ << "  " << std::setw(11) << fmt(m.frequency_hz, 6) << "  "
+       << std::setw(10) << fmt(m.damping_ratio, 4) << "  " << std::setw(11) << fmt(m.integral_xi, 4)
+       << "  " << std::setw(8) << fmt(m.r2, 4) << "  " << fmt(m.t_start * 1e3, 4) << " - "
+       << fmt(m.t_end * 1e3, 4) << "\n";
+    if (!m.warning.empty()) os << "        warning: " << m.warning << "\n";
+  }
+  for (const auto& s : w.warnings) os << "  warning: " << s << "\n";
+}
+
+bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
+                     double sample_rate, double t0, long max_points, std::string* error) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    *error = dir + ": cannot create directory (" + ec.message() + ")";
+    return false;
+  }
+  auto check = [&](const std::string& e) {
+    if (!e.empty()) *error = e;
+    return e.empty();
+  };
+  std::ostringstream modes, spectrum, scalogram;
+  if (!check(writeModesCsv(w, modes)) || !check(writeSpectrumCsv(w, spectrum))) return false;
+  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error) ||
+      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error))
+    return false;
+  if (w.modulus.size() > 0) {
+    if (!check(writeScalogramCsv(w, scalogram)) ||
+        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error))
+      return false;
+  }
+  // Envelopes of the fitted modes, each at the omega0 of its fit.
+  std::vector<double> freqs, omegas;
+  std::vector<int> index;
+  for (size_t k = 0; k < w.modes.size(); ++k) {
+    const WaveletMode& m = w.modes[k];
+    if (std::isfinite(m.frequency_hz) && std::isfinite(m.omega0)) {
+      freqs.push_back(m.frequency_hz);
+      omegas.push_back(m.omega0);
+      index.push_back(static_cast<int>(k));
+    }
+  }
+  std::ostringstream env;
+  env << "mode,time,envelope\n";
+  if (!freqs.empty()) {
+    MorletCwt cwt;
+    std::string e;
+    if (!cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::kEstimate, &e) ||
+        !cwt.setSignal(y, &e)) {
+      *error = "wavelet envelopes: " + e;
+      return false;
+    }
+    std::vector<double> row(static_cast<size_t>(n));
+    const long step = std::max<long>(1, (n + max_points - 1) / std::max<long>(1, max_points));
+    for (size_t r = 0; r < freqs.size(); ++r) {
+      if (!cwt.rowModulus(static_cast<int>(r), row.data())) continue;
+      for (long j = 0; j < n; j += step)
+        env << index[r] << "," << csvNum(t0 + static_cast<double>(j) / sample_rate) << ","
+            << csvNum(row[static_cast<size_t>(j)]) << "\n";
+    }
+  }
+  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error);
+}
+
 bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error) {
   const std::string tmp = path + ".partial";
   {
