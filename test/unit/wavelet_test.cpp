@@ -290,6 +290,44 @@ TEST(MorletCwt, ReusesItsPlansAndBuffersAcrossRowsAndSignals) {
   EXPECT_EQ(reused.paddedSize(), fastFftLength(reused.paddedSize()));
 }
 
+// The pruned |W| of narrow-band rows (N/M batched size-M FFTs) against |row()| from the full
+// inverse FFT: rounding only. Grid from 10 cycles per record to 0.4 fs, as in the benchmark,
+// so most rows take the pruned path and the top ones the full one.
+TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
+  constexpr double kPrunedTol = 1e-12;  // relative to the row's peak; measured ~1e-15
+  const double fs = 1000.0;
+  const long n = 6000;
+  const std::vector<double> grid = logSpacedFrequencies(10.0 * fs / n, 0.4 * fs, 40);
+  const std::vector<double> y = toneBursts(n, fs, true);
+  MorletCwt cwt;
+  std::string error;
+  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(cwt.setSignal(y.data(), &error)) << error;
+  std::vector<double> fast(static_cast<size_t>(n));
+  std::vector<float> fast_f(static_cast<size_t>(n));
+  double worst = 0.0;
+  for (int i = 0; i < cwt.rows(); ++i) {
+    ASSERT_TRUE(cwt.rowModulus(i, fast.data()));
+    ASSERT_TRUE(cwt.rowModulus(i, fast_f.data()));
+    const std::complex<double>* w = cwt.row(i);
+    ASSERT_NE(w, nullptr);
+    double peak = 0.0, err = 0.0;
+    for (long j = 0; j < n; ++j) peak = std::max(peak, std::abs(w[j]));
+    for (long j = 0; j < n; ++j) {
+      err = std::max(err, std::abs(fast[size_t(j)] - std::abs(w[j])));
+      EXPECT_NEAR(fast_f[size_t(j)], std::abs(w[j]), 1e-6 * peak);
+    }
+    ASSERT_GT(peak, 0.0);
+    worst = std::max(worst, err / peak);
+  }
+  std::printf("[ measured ] pruned vs full |W|: max error %.2e of the row's peak\n", worst);
+  EXPECT_LT(worst, kPrunedTol);
+  cwt.setPrunedModulus(false);
+  ASSERT_TRUE(cwt.rowModulus(0, fast.data()));
+  const std::complex<double>* w = cwt.row(0);
+  for (long j = 0; j < n; ++j) EXPECT_DOUBLE_EQ(fast[size_t(j)], std::abs(w[j]));
+}
+
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
   MorletCwt cwt;
   std::string error;
