@@ -474,6 +474,20 @@ int main(int argc, char** argv) {
     model = bag_info.params;
     params_source = input + ":" + bag_info.params_topic;
   } else {
+    // Without gear parameters the wavelet validation runs alone, if asked for (--wavelet) or
+    // if the record has nothing but time and dte; a record made for the identification is
+    // not silently analysed otherwise.
+    const bool id_columns = is_bag ? (bag_info.stiffness || bag_info.torque || bag_info.mesh_state)
+                                   : (table.stiffness.size() > 0 || table.torque.size() > 0 ||
+                                      table.mesh_state.size() > 0);
+    if (id_columns && !wavelet && wavelet_input.empty())
+      return fail(kExitUsage,
+                  "--params GEAR.yaml is required for the identification" +
+                      std::string(is_bag ? (bag_info.params_error.empty()
+                                                ? " (the bag has no GearParams message)"
+                                                : " (" + bag_info.params_error + ")")
+                                         : "") +
+                      "; --wavelet runs the wavelet validation alone");
     identification = false;
     wavelet = true;
     warn("no gear parameters (--params" +
