@@ -11,6 +11,7 @@
 #include <limits>
 #include <memory>
 
+#include "gear_sim/signal_csv.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
 namespace gear_sim_ros {
@@ -299,12 +300,7 @@ bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, dou
     *error = path + ": cannot write (" + e.what() + ")";
     return false;
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    *error = path + ": cannot write";
-    return false;
-  }
-  return true;
+  return gear_sim::commitFile(tmp, path, error);
 }
 
 }  // namespace gear_sim_ros

@@ -1,5 +1,7 @@
 #include "gear_damping_id/result_io.hpp"
 
+#include "gear_sim/signal_csv.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -278,12 +280,7 @@ bool writeFileAtomically(const std::string& path, const std::string& text, std::
       return false;
     }
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    *error = path + ": cannot write";
-    return false;
-  }
-  return true;
+  return gear_sim::commitFile(tmp, path, error);
 }
 
 bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error) {

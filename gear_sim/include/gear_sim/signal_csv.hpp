@@ -28,6 +28,11 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
                    const std::vector<std::string>& required = {"time", "dte"},
                    bool allow_non_finite = false);
 
+/// Finishes an atomic write: renames the complete temporary file `tmp` over `path`. On failure
+/// removes `tmp` and sets `*error` ("<path>: cannot write"): no partial file is left looking
+/// complete.
+bool commitFile(const std::string& tmp, const std::string& path, std::string* error);
+
 /// A load-torque file for the simulator's `load.profile: csv`: columns time and torque.
 inline bool readTorqueCsv(const std::string& path, SignalTable* out, std::string* error) {
   return readSignalCsv(path, out, error, {"time", "torque"});

@@ -75,6 +75,13 @@ bool writeSignalCsv(const std::string& path, const SignalTable& table, std::stri
   return true;
 }
 
+bool commitFile(const std::string& tmp, const std::string& path, std::string* error) {
+  if (std::rename(tmp.c_str(), path.c_str()) == 0) return true;
+  std::remove(tmp.c_str());
+  if (error) *error = path + ": cannot write";
+  return false;
+}
+
 bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
                    const std::vector<std::string>& required, bool allow_non_finite) {
   auto fail = [&](const std::string& what) {
