@@ -6,3 +6,25 @@ add_library(gear_damping_id_core ${GEAR_ID_CORE_SOURCES})
 target_include_directories(gear_damping_id_core PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/include)
 target_link_libraries(gear_damping_id_core PUBLIC gear_sim_core Eigen3::Eigen PkgConfig::FFTW3)
 target_compile_options(gear_damping_id_core PRIVATE ${GEAR_WARNINGS})
+
+# ---------------------------------------------------------------------------------------------
+# Live nodes (issue 6): damping_id_node, wavelet_node, and their message conversions. The
+# sequencing logic they share (StreamAssembler) is in the core library above.
+add_library(gear_id_ros_conversions gear_damping_id/ros/conversions.cpp)
+target_include_directories(gear_id_ros_conversions PUBLIC
+  ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include
+  ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
+target_link_libraries(gear_id_ros_conversions PUBLIC gear_damping_id_core ${catkin_LIBRARIES})
+target_compile_options(gear_id_ros_conversions PRIVATE ${GEAR_WARNINGS})
+add_dependencies(gear_id_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
+foreach(node damping_id_node wavelet_node)
+  add_executable(${node} gear_damping_id/nodes/${node}.cpp)
+  target_link_libraries(${node} gear_id_ros_conversions gear_ros_conversions gear_sim_io
+                        ${catkin_LIBRARIES})
+  target_compile_options(${node} PRIVATE ${GEAR_WARNINGS})
+  add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp)
+endforeach()
+install(TARGETS gear_id_ros_conversions damping_id_node wavelet_node
+        ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
