@@ -7,6 +7,7 @@
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <ros/ros.h>
 
+#include <cctype>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -192,7 +193,15 @@ class ChunkIntake {
   unsigned long last_samples_ = 0, last_chunks_ = 0, last_events_ = 0;
 };
 
-/// Parses a StreamOptions-style error into the node's "~name = value: rule" form.
-inline std::string paramError(const std::string& e) { return "~" + e; }
+/// A core options error ("field = value: rule", possibly "Struct.field = ...") in the node's
+/// "~field = value: rule" form.
+inline std::string paramError(const std::string& e) {
+  const size_t eq = e.find(" = "), dot = e.find('.');
+  if (dot != std::string::npos && eq != std::string::npos && dot < eq &&
+      std::isupper(static_cast<unsigned char>(e[0]))) {
+    return "~" + e.substr(dot + 1);
+  }
+  return "~" + e;
+}
 
 }  // namespace gear_damping_nodes
