@@ -25,7 +25,8 @@
 // - endOfStream() (end of a bag, an idle publisher, or a trigger).
 // Rejected (never enter a run, counted): chunks with a non-finite value in any channel present,
 // a sample rate different from the run's (relative tolerance 1e-9), malformed chunks (no
-// samples, sample rate not finite and > 0). Ignored (counted): exact duplicates, chunks that
+// samples, sample rate not finite and > 0, an index beyond 2^52, fewer than 4 samples per
+// segment at the chunk's rate). Ignored (counted): exact duplicates, chunks that
 // arrive after their indices were declared a gap ("late"); a chunk overlapping accepted samples
 // contributes only its new samples.
 #pragma once
@@ -79,7 +80,7 @@ enum class ChunkStatus {
   kLate,              ///< its samples were already declared missing (a gap): ignored
   kRejectedNonFinite, ///< NaN/Inf in a channel: rejected
   kRejectedRate,      ///< sample rate differs from the stream's: rejected
-  kRejectedMalformed  ///< no samples, no dte or a sample rate not finite and > 0: rejected
+  kRejectedMalformed  ///< no samples, no dte, bad sample rate or index: rejected
 };
 const char* toString(ChunkStatus s);
 

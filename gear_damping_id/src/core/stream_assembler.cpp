@@ -13,6 +13,10 @@ constexpr double kIndexEps = 1e-3;       // as segmentRanges: boundaries within 
 constexpr double kRateTolerance = 1e-9;  // relative sample-rate change that rejects a chunk
 constexpr size_t kRecentGaps = 64;       // gaps remembered to tell late chunks from duplicates
 constexpr std::uint64_t kNoEnd = std::numeric_limits<std::uint64_t>::max();
+// Largest accepted global index: 2^52, so index/time arithmetic in doubles stays exact (142
+// years at 1 MHz). Segments must hold at least kMinSegmentSamples samples at the stream's rate.
+constexpr std::uint64_t kMaxIndex = std::uint64_t{1} << 52;
+constexpr double kMinSegmentSamples = 4.0;
 
 enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
 
@@ -148,12 +152,16 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   std::string& why = detail ? *detail : scratch;
   why.clear();
   ++counters_.chunks_received;
+  const bool short_segments = !wholeRun() && !(options_.segment_length * c.sample_rate >=
+                                                 kMinSegmentSamples);
   if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
-      c.first_index > kNoEnd - c.n) {
+      c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
     ++counters_.rejected_malformed;
     std::ostringstream m;
     m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
-      << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "");
+      << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
+      << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
+      << (short_segments ? ", fewer than 4 samples per segment" : "");
     why = m.str();
     return ChunkStatus::kRejectedMalformed;
   }
