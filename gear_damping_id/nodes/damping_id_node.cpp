@@ -49,8 +49,7 @@ namespace {
 struct NodeOptions {
   gd::IdentificationOptions id;
   gd::StreamOptions stream;
-  int queue_size = 10000;                 // [chunks]
-  double end_of_stream_timeout = 0.5;     // [s] wall
+  nodes::IntakeOptions intake;
   bool publish_modeled_response = true;
   double cumulative_period = 0.1;         // [s] wall: most frequent /gear/damping update
   std::string gear_config;                // YAML path; empty: /gear/params
@@ -68,9 +67,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.getDouble("max_condition", &o->id.max_condition) || !p.get("refine", &refine) ||
       !p.getDouble("refine_threshold", &o->id.refine_threshold) ||
       !p.get("max_iterations", &max_iterations) ||
-      !p.get("reorder_chunks", &o->stream.reorder_chunks, "chunks") ||
-      !p.get("queue_size", &o->queue_size, "chunks") ||
-      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s") ||
+      !nodes::readIntakeParams(p, &o->intake) ||
       !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
       !p.get("publish_modeled_response", &o->publish_modeled_response) ||
       !p.get("gear_config", &o->gear_config)) {
@@ -100,18 +97,11 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     o->stream.segment_length = o->id.segment_length;
     o->stream.t_start = o->id.t_start;
     o->stream.t_end = o->id.t_end;
+    o->stream.reorder_chunks = o->intake.reorder_chunks;
     e = o->stream.validate();
   }
   if (!e.empty()) {
     ROS_FATAL("%s", nodes::paramError(e).c_str());
-    return false;
-  }
-  if (o->queue_size < 1) {
-    ROS_FATAL("~queue_size = %d: must be >= 1 [chunks]", o->queue_size);
-    return false;
-  }
-  if (!(o->end_of_stream_timeout > 0.0)) {
-    ROS_FATAL("~end_of_stream_timeout = %g: must be > 0 [s]", o->end_of_stream_timeout);
     return false;
   }
   if (!(o->cumulative_period >= 0.0)) {
@@ -137,7 +127,7 @@ class DampingIdNode {
     updater_.add("stream", this, &DampingIdNode::diagnoseStream);
     updater_.add("identification", this, &DampingIdNode::diagnoseIdentification);
     // Absolute names, remappable (e.g. /gear/signal:=/rig/chunks).
-    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.queue_size),
+    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
                                &DampingIdNode::onChunk, this,
                                ros::TransportHints().tcpNoDelay());
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &DampingIdNode::onTimer, this);
@@ -197,7 +187,7 @@ class DampingIdNode {
 
   void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
     if (!gear_) {  // keep until the gear parameters arrive
-      if (early_.size() >= static_cast<size_t>(o_.queue_size)) {
+      if (early_.size() >= static_cast<size_t>(o_.intake.queue_size)) {
         early_.pop_front();
         ++dropped_early_;
       }
@@ -211,7 +201,7 @@ class DampingIdNode {
   }
 
   void onTimer(const ros::WallTimerEvent&) {
-    if (gear_ && intake_.idle(o_.end_of_stream_timeout)) {
+    if (gear_ && intake_.idle(o_.intake.end_of_stream_timeout)) {
       intake_.assembler().endOfStream();  // the publisher paused or stopped: flush
       processReady();
       publishCumulative(true);

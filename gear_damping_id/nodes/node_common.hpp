@@ -98,6 +98,32 @@ class ParamReader {
   std::ostringstream summary_;
 };
 
+/// Parameters of the chunk intake shared by both nodes.
+struct IntakeOptions {
+  int reorder_chunks = 8;             // [chunks] held while waiting for a missing chunk
+  int queue_size = 10000;             // [chunks] subscriber queue (10 s of the default stream)
+  double end_of_stream_timeout = 0.5;  // [s] wall time without chunks that ends the stream
+};
+
+/// Reads and validates ~reorder_chunks, ~queue_size, ~end_of_stream_timeout (ROS_FATAL + false
+/// when invalid).
+inline bool readIntakeParams(ParamReader& p, IntakeOptions* o) {
+  if (!p.get("reorder_chunks", &o->reorder_chunks, "chunks") ||
+      !p.get("queue_size", &o->queue_size, "chunks") ||
+      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s")) {
+    return false;
+  }
+  if (o->queue_size < 1) {
+    ROS_FATAL("~queue_size = %d: must be >= 1 [chunks]", o->queue_size);
+    return false;
+  }
+  if (!(o->end_of_stream_timeout > 0.0)) {
+    ROS_FATAL("~end_of_stream_timeout = %g: must be > 0 [s]", o->end_of_stream_timeout);
+    return false;
+  }
+  return true;  // reorder_chunks is checked by StreamOptions::validate
+}
+
 /// Chunk intake: converts messages, feeds the assembler, warns (throttled) about rejections,
 /// gaps and restarts, measures the input rate, and reports everything to diagnostics.
 /// Times are wall-clock (ros::WallTime): input rate and idle detection concern the transport,

@@ -31,8 +31,7 @@ struct NodeOptions {
   gd::StreamOptions stream;
   double window = 0.0;               // [s] 0 = whole run
   int min_window_samples = 256;      // [samples]
-  int queue_size = 10000;            // [chunks]
-  double end_of_stream_timeout = 0.5;  // [s] wall
+  nodes::IntakeOptions intake;
 };
 
 bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
@@ -50,9 +49,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.get("max_modes", &max_modes) || !p.getDouble("coi_factor", &w.coi_factor) ||
       !p.getDouble("floor_factor", &w.floor_factor) ||
       !p.get("mode_frequencies", &w.mode_frequencies, "Hz") ||
-      !p.get("reorder_chunks", &o->stream.reorder_chunks, "chunks") ||
-      !p.get("queue_size", &o->queue_size, "chunks") ||
-      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s")) {
+      !nodes::readIntakeParams(p, &o->intake)) {
     return false;
   }
   p.allow("diagnostic_period");
@@ -68,15 +65,8 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     ROS_FATAL("~min_window_samples = %d: must be >= 64 [samples]", o->min_window_samples);
     return false;
   }
-  if (o->queue_size < 1) {
-    ROS_FATAL("~queue_size = %d: must be >= 1 [chunks]", o->queue_size);
-    return false;
-  }
-  if (!(o->end_of_stream_timeout > 0.0)) {
-    ROS_FATAL("~end_of_stream_timeout = %g: must be > 0 [s]", o->end_of_stream_timeout);
-    return false;
-  }
   o->stream.segment_length = o->window;
+  o->stream.reorder_chunks = o->intake.reorder_chunks;
   o->stream.context = 0;
   std::string e = w.validate();
   if (e.empty()) e = o->stream.validate();
@@ -98,7 +88,7 @@ class WaveletNode {
     updater_.setHardwareID("wavelet");
     updater_.add("stream", this, &WaveletNode::diagnoseStream);
     updater_.add("wavelet", this, &WaveletNode::diagnoseWavelet);
-    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.queue_size),
+    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
                                &WaveletNode::onChunk, this, ros::TransportHints().tcpNoDelay());
     damping_sub_ = nh.subscribe("/gear/damping", 1, &WaveletNode::onDamping, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
@@ -120,7 +110,7 @@ class WaveletNode {
   }
 
   void onTimer(const ros::WallTimerEvent&) {
-    if (intake_.idle(o_.end_of_stream_timeout)) {
+    if (intake_.idle(o_.intake.end_of_stream_timeout)) {
       intake_.assembler().endOfStream();
       processReady();
       updater_.force_update();

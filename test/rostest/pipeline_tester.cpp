@@ -33,6 +33,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "run_command.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -356,22 +357,13 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
 }
 
 // ------------------------------------------------------------------------------------------
-// Runs a command, returns (exit status, combined output).
-std::pair<int, std::string> run(const std::string& cmd) {
-  std::array<char, 512> buf;
-  std::string out;
-  std::unique_ptr<FILE, int (*)(FILE*)> p(popen((cmd + " 2>&1").c_str(), "r"), &pclose);
-  if (!p) return {-1, ""};
-  while (fgets(buf.data(), buf.size(), p.get())) out += buf.data();
-  const int status = pclose(p.release());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using gear_test::runCommand;
 
 void expectFatal(const std::string& node, const std::string& args, const std::string& needle) {
   static int n = 0;
   const std::string cmd = "timeout 30 rosrun gear_damping " + node + " __name:=bad_" +
                           std::to_string(++n) + " " + args;
-  const auto r = run(cmd);
+  const auto r = runCommand(cmd);
   EXPECT_NE(r.first, 0) << cmd << "\n" << r.second;
   EXPECT_NE(r.first, 124) << cmd << ": timed out instead of exiting";
   EXPECT_NE(r.second.find(needle), std::string::npos) << cmd << "\n" << r.second;
