@@ -51,8 +51,8 @@ struct NodeOptions {
   gd::StreamOptions stream;
   nodes::IntakeOptions intake;
   bool publish_modeled_response = true;
-  double cumulative_period = 0.1;         // [s] wall: most frequent /gear/damping update
-  std::string gear_config;                // YAML path; empty: /gear/params
+  double cumulative_period = 0.1;  // [s] wall: most frequent /gear/damping update
+  std::string gear_config;         // YAML path; empty: /gear/params
 };
 
 // Reads and validates every private parameter; false after ROS_FATAL naming the parameter.
@@ -66,8 +66,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.getDouble("t_start", &o->id.t_start, "s") || !p.getDouble("t_end", &o->id.t_end, "s") ||
       !p.getDouble("max_condition", &o->id.max_condition) || !p.get("refine", &refine) ||
       !p.getDouble("refine_threshold", &o->id.refine_threshold) ||
-      !p.get("max_iterations", &max_iterations) ||
-      !nodes::readIntakeParams(p, &o->intake) ||
+      !p.get("max_iterations", &max_iterations) || !nodes::readIntakeParams(p, &o->intake) ||
       !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
       !p.get("publish_modeled_response", &o->publish_modeled_response) ||
       !p.get("gear_config", &o->gear_config)) {
@@ -84,9 +83,12 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     return false;
   }
   using R = gd::IdentificationOptions::Refine;
-  if (refine == "auto") o->id.refine = R::Auto;
-  else if (refine == "always") o->id.refine = R::Always;
-  else if (refine == "never") o->id.refine = R::Never;
+  if (refine == "auto")
+    o->id.refine = R::Auto;
+  else if (refine == "always")
+    o->id.refine = R::Always;
+  else if (refine == "never")
+    o->id.refine = R::Never;
   else {
     ROS_FATAL("~refine = '%s': must be auto, always or never", refine.c_str());
     return false;
@@ -128,8 +130,7 @@ class DampingIdNode {
     updater_.add("identification", this, &DampingIdNode::diagnoseIdentification);
     // Absolute names, remappable (e.g. /gear/signal:=/rig/chunks).
     signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
-                               &DampingIdNode::onChunk, this,
-                               ros::TransportHints().tcpNoDelay());
+                               &DampingIdNode::onChunk, this, ros::TransportHints().tcpNoDelay());
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &DampingIdNode::onTimer, this);
     if (o_.gear_config.empty()) {
       params_sub_ = nh.subscribe("/gear/params", 1, &DampingIdNode::onParams, this);
@@ -240,8 +241,8 @@ class DampingIdNode {
       est.t_start = v.time(s.begin);
       est.t_end = v.time(s.end - 1) + v.dt;
       est.samples = static_cast<long>(s.end - s.begin);
-      est.reason = "missing channel " + missing + " (needed by " +
-                   gd::toString(o_.id.formulation) + "/" + gd::toString(o_.id.model) + ")";
+      est.reason = "missing channel " + missing + " (needed by " + gd::toString(o_.id.formulation) +
+                   "/" + gd::toString(o_.id.model) + ")";
       seg.formulation = o_.id.formulation;
       seg.model = o_.id.model;
       seg.segments.push_back(est);
@@ -279,8 +280,8 @@ class DampingIdNode {
     } else {
       ++not_identifiable_;
       last_reason_ = est.reason;
-      ROS_WARN_THROTTLE(2.0, "segment [%.6f, %.6f] s not identifiable: %s", est.t_start,
-                        est.t_end, est.reason.c_str());
+      ROS_WARN_THROTTLE(2.0, "segment [%.6f, %.6f] s not identifiable: %s", est.t_start, est.t_end,
+                        est.reason.c_str());
     }
     if (s.partial) ++partial_;
     segments_.push_back(est);
@@ -320,9 +321,8 @@ class DampingIdNode {
     if (o_.id.model == gd::DampingModel::Piecewise) {
       // Per-segment estimates (refined where applied); xi with the omega0 of every segment so
       // far (at the end of a record: the record's, as offline).
-      gd::IdentificationResult r = method_ && method_->segmentCount() > 0
-                                       ? method_->finish()
-                                       : gd::IdentificationResult();
+      gd::IdentificationResult r =
+          method_ && method_->segmentCount() > 0 ? method_->finish() : gd::IdentificationResult();
       r.formulation = o_.id.formulation;
       r.model = o_.id.model;
       r.segments = segments_;
@@ -373,7 +373,8 @@ class DampingIdNode {
   }
 
   void diagnoseStream(diagnostic_updater::DiagnosticStatusWrapper& s) {
-    s.summary(diagnostic_msgs::DiagnosticStatus::OK, gear_ ? "receiving" : "waiting for gear parameters");
+    s.summary(diagnostic_msgs::DiagnosticStatus::OK,
+              gear_ ? "receiving" : "waiting for gear parameters");
     intake_.report(s);
     s.add("chunks dropped waiting for gear parameters", dropped_early_);
   }
@@ -382,7 +383,8 @@ class DampingIdNode {
     const unsigned long n = identified_ + not_identifiable_;
     s.summary(diagnostic_msgs::DiagnosticStatus::OK, "identifying");
     if (not_identifiable_ != reported_not_identifiable_) {
-      s.summary(diagnostic_msgs::DiagnosticStatus::WARN, "segments not identifiable: " + last_reason_);
+      s.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                "segments not identifiable: " + last_reason_);
     }
     reported_not_identifiable_ = not_identifiable_;
     s.add("formulation", gd::toString(o_.id.formulation));

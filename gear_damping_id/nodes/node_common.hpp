@@ -43,8 +43,10 @@ class ParamReader {
     known_.insert(name);
     std::string s;
     if (pnh_.getParam(name, s)) {
-      if (s == ".inf" || s == "inf") *value = std::numeric_limits<double>::infinity();
-      else if (s == "-.inf" || s == "-inf") *value = -std::numeric_limits<double>::infinity();
+      if (s == ".inf" || s == "inf")
+        *value = std::numeric_limits<double>::infinity();
+      else if (s == "-.inf" || s == "-inf")
+        *value = -std::numeric_limits<double>::infinity();
       else {
         ROS_FATAL("~%s = '%s': wrong type (expected a number [%s])", name.c_str(), s.c_str(), unit);
         return false;
@@ -100,8 +102,8 @@ class ParamReader {
 
 /// Parameters of the chunk intake shared by both nodes.
 struct IntakeOptions {
-  int reorder_chunks = 8;             // [chunks] held while waiting for a missing chunk
-  int queue_size = 10000;             // [chunks] subscriber queue (10 s of the default stream)
+  int reorder_chunks = 8;              // [chunks] held while waiting for a missing chunk
+  int queue_size = 10000;              // [chunks] subscriber queue (10 s of the default stream)
   double end_of_stream_timeout = 0.5;  // [s] wall time without chunks that ends the stream
 };
 
@@ -176,8 +178,8 @@ class ChunkIntake {
     const auto& k = assembler_.counters();
     const ros::WallTime now = ros::WallTime::now();
     const double span = last_report_.isZero() ? 0.0 : (now - last_report_).toSec();
-    const double rate = span > 0.0 ? static_cast<double>(k.samples_accepted - last_samples_) / span
-                                   : 0.0;
+    const double rate =
+        span > 0.0 ? static_cast<double>(k.samples_accepted - last_samples_) / span : 0.0;
     const double chunk_rate =
         span > 0.0 ? static_cast<double>(k.chunks_received - last_chunks_) / span : 0.0;
     last_report_ = now;

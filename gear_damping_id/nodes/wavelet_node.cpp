@@ -1,7 +1,8 @@
 // wavelet_node: Morlet-wavelet damping validation (DESIGN.md §5) on a stream of
 // gear_damping/SignalChunk messages.
 //
-// Subscribes:  /gear/signal (SignalChunk; remappable, e.g. /gear/signal:=/rig/signal), /gear/damping
+// Subscribes:  /gear/signal (SignalChunk; remappable, e.g. /gear/signal:=/rig/signal),
+// /gear/damping
 //              (DampingArray, for the integral-method xi shown beside each mode)
 // Publishes:   /gear/wavelet_modes (WaveletModes): one per analysed window; /diagnostics
 // Services:    ~analyze (std_srvs/Trigger): analyse what is buffered now (closes the window)
@@ -29,8 +30,8 @@ namespace {
 struct NodeOptions {
   gd::WaveletOptions wavelet;
   gd::StreamOptions stream;
-  double window = 0.0;               // [s] 0 = whole run
-  int min_window_samples = 256;      // [samples]
+  double window = 0.0;           // [s] 0 = whole run
+  int min_window_samples = 256;  // [samples]
   nodes::IntakeOptions intake;
 };
 
@@ -123,12 +124,12 @@ class WaveletNode {
     intake_.assembler().endOfStream();
     processReady();
     res.success = windows_analysed_ > before;
-    res.message = res.success ? "analysed " + std::to_string(windows_analysed_ - before) +
-                                    " window(s), last with " + std::to_string(last_modes_) +
-                                    " mode(s)"
-                              : "nothing analysed: " + (last_problem_.empty()
-                                                            ? std::string("no samples buffered")
-                                                            : last_problem_);
+    res.message =
+        res.success
+            ? "analysed " + std::to_string(windows_analysed_ - before) + " window(s), last with " +
+                  std::to_string(last_modes_) + " mode(s)"
+            : "nothing analysed: " +
+                  (last_problem_.empty() ? std::string("no samples buffered") : last_problem_);
     return true;
   }
 
@@ -165,7 +166,8 @@ class WaveletNode {
       return;
     }
     gd::attachIntegralDampingRatio(&r, xi_integral_);
-    auto msg = gear_damping_id_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
+    auto msg =
+        gear_damping_id_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
     msg.header.stamp = ros::Time::now();
     modes_pub_.publish(msg);
     ++windows_analysed_;

@@ -9,8 +9,8 @@ bool toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh
   const size_t n = msg.dte.size();
   auto check = [&](size_t len, const char* name) {
     if (len == 0 || len == n) return true;
-    *error = std::string(name) + " has " + std::to_string(len) + " samples, dte " +
-             std::to_string(n);
+    *error =
+        std::string(name) + " has " + std::to_string(len) + " samples, dte " + std::to_string(n);
     return false;
   };
   if (!check(msg.stiffness.size(), "stiffness") || !check(msg.torque.size(), "torque") ||

@@ -13,6 +13,7 @@
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <std_srvs/Empty.h>
+#include <std_srvs/Trigger.h>
 
 #include <array>
 #include <cmath>
@@ -177,11 +178,12 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
     EXPECT_NEAR(live.t_end, off.t_end, 1e-12);
     const double rel = std::abs(live.C - off.C) / std::abs(off.C);
     max_rel = std::max(max_rel, rel);
-    EXPECT_LE(rel, kLiveVsOfflineRelTol) << "segment " << i << ": live " << live.C
-                                         << " offline " << off.C;
+    EXPECT_LE(rel, kLiveVsOfflineRelTol)
+        << "segment " << i << ": live " << live.C << " offline " << off.C;
     max_xi_rel = std::max(max_xi_rel, std::abs(live.xi - off.xi) / off.xi);
     // Truth: the simulator's true damping column, time-averaged over the segment, / Me.
-    const auto b = static_cast<Eigen::Index>(std::llround(off.t_start * cfg.simulation.sample_rate));
+    const auto b =
+        static_cast<Eigen::Index>(std::llround(off.t_start * cfg.simulation.sample_rate));
     const auto en = static_cast<Eigen::Index>(std::llround(off.t_end * cfg.simulation.sample_rate));
     const double C_true = meanOver(t.damping, b, en) / gear.equivalent_mass;
     const double terr = std::abs(live.C - C_true) / C_true;
@@ -191,9 +193,10 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
   EXPECT_LE(max_xi_rel, kLiveVsOfflineRelTol);
   RecordProperty("max_rel_diff_vs_offline", std::to_string(max_rel));
   RecordProperty("max_rel_error_vs_truth", std::to_string(max_truth));
-  std::printf("[pipeline] %zu segments: max |C_live - C_offline|/C_offline = %.3g, max truth "
-              "error %.3g, max xi diff %.3g\n",
-              offline.segments.size(), max_rel, max_truth, max_xi_rel);
+  std::printf(
+      "[pipeline] %zu segments: max |C_live - C_offline|/C_offline = %.3g, max truth "
+      "error %.3g, max xi diff %.3g\n",
+      offline.segments.size(), max_rel, max_truth, max_xi_rel);
   // Per-segment arrays and modeled responses (not latched: the tester may have connected after
   // the first segments were published, so check those it received, at least one).
   EXPECT_GE(col.per_segment.size(), 1u);
@@ -220,10 +223,11 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
     EXPECT_GT(r.fit_percent, 90.0);
     min_fit = std::min(min_fit, r.fit_percent);
   }
-  std::printf("[pipeline] received %zu per-segment arrays, %zu modeled responses (min fit %.4g %%),"
-              " %zu wavelet windows (%zu modes)\n",
-              col.per_segment.size(), col.responses.size(), min_fit, col.modes.size(),
-              col.modes.empty() ? size_t{0} : col.modes.back().modes.size());
+  std::printf(
+      "[pipeline] received %zu per-segment arrays, %zu modeled responses (min fit %.4g %%),"
+      " %zu wavelet windows (%zu modes)\n",
+      col.per_segment.size(), col.responses.size(), min_fit, col.modes.size(),
+      col.modes.empty() ? size_t{0} : col.modes.back().modes.size());
   // Diagnostics: everything received, nothing lost.
   EXPECT_EQ(col.value("damping_id: stream", "samples received"), static_cast<double>(t.size()));
   EXPECT_EQ(col.value("damping_id: stream", "gaps"), 0.0);
@@ -325,11 +329,15 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
     ASSERT_TRUE(live.identifiable) << intact[j] << ": " << live.reason;
     EXPECT_NEAR(live.t_start, off.t_start, 1e-12);
     const double rel = std::abs(live.C - off.C) / off.C;
-    (full_context[j] ? max_full : max_border) = std::max(full_context[j] ? max_full : max_border, rel);
-    EXPECT_LE(rel, full_context[j] ? kLiveVsOfflineRelTol : kGapBorderRelTol) << "segment " << intact[j];
+    (full_context[j] ? max_full : max_border) =
+        std::max(full_context[j] ? max_full : max_border, rel);
+    EXPECT_LE(rel, full_context[j] ? kLiveVsOfflineRelTol : kGapBorderRelTol)
+        << "segment " << intact[j];
   }
-  std::printf("[robustness] intact segments vs offline: max rel diff %.3g (full context), %.3g "
-              "(bordering a gap)\n", max_full, max_border);
+  std::printf(
+      "[robustness] intact segments vs offline: max rel diff %.3g (full context), %.3g "
+      "(bordering a gap)\n",
+      max_full, max_border);
 
   // Pass B: the simulator restarts from index 0 and sends a clean record.
   ros::WallDuration(1.0).sleep();
@@ -352,6 +360,14 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
   ASSERT_TRUE(ros::service::waitForService("/damping_id/get_damping", 10000));
   ASSERT_TRUE(ros::service::call("/damping_id/get_damping", get));
   EXPECT_EQ(get.response.damping.segments.size(), 10u);
+  // wavelet_node analysed the runs of pass A (cut by the gaps) and pass B; nothing is buffered.
+  EXPECT_TRUE(
+      waitFor([&] { return col.value("wavelet: wavelet", "windows analysed") >= 4.0; }, 30.0))
+      << col.value("wavelet: wavelet", "windows analysed");
+  std_srvs::Trigger analyze;
+  ASSERT_TRUE(ros::service::waitForService("/wavelet/analyze", 10000));
+  ASSERT_TRUE(ros::service::call("/wavelet/analyze", analyze));
+  EXPECT_FALSE(analyze.response.success) << analyze.response.message;
   std_srvs::Empty reset;
   ASSERT_TRUE(ros::service::call("/damping_id/reset", reset));
   ASSERT_TRUE(ros::service::call("/damping_id/get_damping", get));
@@ -363,8 +379,8 @@ using gear_test::runCommand;
 
 void expectFatal(const std::string& node, const std::string& args, const std::string& needle) {
   static int n = 0;
-  const std::string cmd = "timeout 30 rosrun gear_damping " + node + " __name:=bad_" +
-                          std::to_string(++n) + " " + args;
+  const std::string cmd =
+      "timeout 30 rosrun gear_damping " + node + " __name:=bad_" + std::to_string(++n) + " " + args;
   const auto r = runCommand(cmd);
   EXPECT_NE(r.first, 0) << cmd << "\n" << r.second;
   EXPECT_NE(r.first, 124) << cmd << ": timed out instead of exiting";
@@ -392,8 +408,7 @@ TEST(Throughput, FullSpeedSimulatorLosesNoChunkWithDefaultSettings) {
   pnh.param("expected_samples", expected_samples, expected_samples);
   Collector col(false);
   const std::string st = "damping_id: stream";
-  ASSERT_TRUE(waitFor([&] { return col.value(st, "samples received") >= expected_samples; },
-                      120.0))
+  ASSERT_TRUE(waitFor([&] { return col.value(st, "samples received") >= expected_samples; }, 120.0))
       << "samples received " << col.value(st, "samples received");
   const size_t segments = static_cast<size_t>(expected_samples / 1000);
   EXPECT_TRUE(waitFor(
@@ -407,11 +422,12 @@ TEST(Throughput, FullSpeedSimulatorLosesNoChunkWithDefaultSettings) {
   size_t identifiable = 0;
   for (const auto& s : col.cumulative.segments) identifiable += s.identifiable ? 1 : 0;
   EXPECT_EQ(identifiable, segments);
-  std::printf("[throughput] %g samples received, %g gaps, %g dropped chunks, %zu segments, "
-              "mean processing %.3g ms/segment\n",
-              col.value(st, "samples received"), col.value(st, "gaps"),
-              col.value(st, "dropped chunks"), col.cumulative.segments.size(),
-              col.value("damping_id: identification", "processing time mean [ms]"));
+  std::printf(
+      "[throughput] %g samples received, %g gaps, %g dropped chunks, %zu segments, "
+      "mean processing %.3g ms/segment\n",
+      col.value(st, "samples received"), col.value(st, "gaps"), col.value(st, "dropped chunks"),
+      col.cumulative.segments.size(),
+      col.value("damping_id: identification", "processing time mean [ms]"));
 }
 
 }  // namespace

@@ -1,5 +1,7 @@
 // StreamAssembler: chunk sequencing (gaps, duplicates, reordering, restarts, rejections) and
 // segment assembly that reproduces the offline segmentation and the offline identification.
+#include "gear_damping_id/stream_assembler.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 #include <vector>
 
 #include "gear_damping_id/integral_method.hpp"
-#include "gear_damping_id/stream_assembler.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 
@@ -94,8 +95,7 @@ TEST(StreamAssembler, ContiguousChunksGiveTheOfflineSegmentsWithStencilContext) 
     EXPECT_EQ(segs[i].segment_number, static_cast<long>(i));
     // Two samples of context on each side where the record has them.
     EXPECT_EQ(segs[i].begin, i == 0 ? 0 : 2);
-    EXPECT_EQ(static_cast<size_t>(segs[i].end) + (i + 1 < segs.size() ? 2 : 0),
-              segs[i].dte.size());
+    EXPECT_EQ(static_cast<size_t>(segs[i].end) + (i + 1 < segs.size() ? 2 : 0), segs[i].dte.size());
     for (size_t j = 0; j < segs[i].dte.size(); ++j) {
       ASSERT_EQ(segs[i].dte[j], rec.dte[segs[i].first_index + j]);
       ASSERT_EQ(segs[i].stiffness[j], rec.stiffness[segs[i].first_index + j]);
@@ -245,9 +245,12 @@ TEST(StreamAssembler, RandomAbuseNeverMixesSamplesAcrossGapsOrSegments) {
       const size_t n = 1 + rng() % 700;
       const unsigned r = rng() % 100;
       std::uint64_t first = next;
-      if (r < 5) first = 0;                                   // restart
-      else if (r < 15) first = next > n ? next - n : 0;       // duplicate / overlap
-      else if (r < 25) first = next + rng() % 2000;           // drop
+      if (r < 5)
+        first = 0;  // restart
+      else if (r < 15)
+        first = next > n ? next - n : 0;  // duplicate / overlap
+      else if (r < 25)
+        first = next + rng() % 2000;  // drop
       if (first + n > rec.dte.size()) first = 0;
       // A rate change is rejected, except on a restart (index 0), which would start a new grid.
       const double fs = first > 0 && r >= 25 && r < 28 ? 2e6 : kFs;
@@ -296,8 +299,8 @@ TEST(StreamAssembler, InvalidOptionsNameTheField) {
 TEST(StreamAssembler, LiveIdentificationEqualsOfflineOnTheDefaultCase) {
   gear_sim::SimConfig cfg;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml",
-                                          &cfg, &e))
+  ASSERT_TRUE(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &cfg, &e))
       << e;
   gear_sim::SignalTable t;
   ASSERT_TRUE(gear_sim::simulate(cfg, &t, &e)) << e;

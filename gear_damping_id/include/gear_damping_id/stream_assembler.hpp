@@ -46,10 +46,10 @@ namespace gear_damping_id {
 /// One chunk of consecutive samples (pointers valid during push only). Optional channels are
 /// null when absent; every present channel holds n values.
 struct ChunkData {
-  std::uint64_t first_index = 0;  ///< global index of the first sample
-  double sample_rate = 0.0;       ///< [Hz]
-  size_t n = 0;                   ///< samples
-  const double* dte = nullptr;    ///< [m] required
+  std::uint64_t first_index = 0;       ///< global index of the first sample
+  double sample_rate = 0.0;            ///< [Hz]
+  size_t n = 0;                        ///< samples
+  const double* dte = nullptr;         ///< [m] required
   const double* stiffness = nullptr;   ///< [N/m]
   const double* torque = nullptr;      ///< [N*m]
   const double* mesh_state = nullptr;  ///< [0/1]
@@ -74,27 +74,27 @@ struct StreamOptions {
 
 /// What happened to a chunk given to push().
 enum class ChunkStatus {
-  kAccepted,          ///< appended to the current run (possibly after trimming an overlap)
-  kHeld,              ///< ahead of the expected index: held for reordering
-  kDuplicate,         ///< every sample already accepted: ignored
-  kLate,              ///< its samples were already declared missing (a gap): ignored
-  kRejectedNonFinite, ///< NaN/Inf in a channel: rejected
-  kRejectedRate,      ///< sample rate differs from the stream's: rejected
-  kRejectedMalformed  ///< no samples, no dte, bad sample rate or index: rejected
+  kAccepted,           ///< appended to the current run (possibly after trimming an overlap)
+  kHeld,               ///< ahead of the expected index: held for reordering
+  kDuplicate,          ///< every sample already accepted: ignored
+  kLate,               ///< its samples were already declared missing (a gap): ignored
+  kRejectedNonFinite,  ///< NaN/Inf in a channel: rejected
+  kRejectedRate,       ///< sample rate differs from the stream's: rejected
+  kRejectedMalformed   ///< no samples, no dte, bad sample rate or index: rejected
 };
 const char* toString(ChunkStatus s);
 
 /// Event counters since construction or reset().
 struct StreamCounters {
   unsigned long chunks_received = 0;
-  unsigned long chunks_accepted = 0;   ///< appended (incl. trimmed overlaps and released holds)
+  unsigned long chunks_accepted = 0;  ///< appended (incl. trimmed overlaps and released holds)
   unsigned long samples_accepted = 0;
-  unsigned long gaps = 0;              ///< runs closed by missing indices
-  unsigned long samples_missing = 0;   ///< samples in those gaps
+  unsigned long gaps = 0;             ///< runs closed by missing indices
+  unsigned long samples_missing = 0;  ///< samples in those gaps
   unsigned long duplicates = 0;
-  unsigned long overlaps = 0;          ///< chunks partly overlapping accepted samples (trimmed)
-  unsigned long late = 0;              ///< chunks arriving after their gap was declared
-  unsigned long out_of_order = 0;      ///< chunks held and released in order
+  unsigned long overlaps = 0;      ///< chunks partly overlapping accepted samples (trimmed)
+  unsigned long late = 0;          ///< chunks arriving after their gap was declared
+  unsigned long out_of_order = 0;  ///< chunks held and released in order
   unsigned long rejected_nonfinite = 0;
   unsigned long rejected_rate = 0;
   unsigned long rejected_malformed = 0;
@@ -181,12 +181,12 @@ class StreamAssembler {
 
   StreamOptions options_;
   StreamCounters counters_;
-  double rate_ = 0.0;  // 0: not yet known
-  unsigned mask_ = 0;  // channels present in the current run
-  bool have_run_ = false;     // a run is open
-  bool seen_any_ = false;     // a chunk was accepted since construction/reset/restart
-  std::uint64_t next_index_ = 0;   // expected next global index
-  std::uint64_t seg_begin_ = 0;    // first index not yet emitted in the current run
+  double rate_ = 0.0;             // 0: not yet known
+  unsigned mask_ = 0;             // channels present in the current run
+  bool have_run_ = false;         // a run is open
+  bool seen_any_ = false;         // a chunk was accepted since construction/reset/restart
+  std::uint64_t next_index_ = 0;  // expected next global index
+  std::uint64_t seg_begin_ = 0;   // first index not yet emitted in the current run
   unsigned long epoch_ = 0;
   Buffer run_;
   std::map<std::uint64_t, Held> held_;

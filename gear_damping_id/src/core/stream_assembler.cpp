@@ -24,13 +24,20 @@ enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
 
 const char* toString(ChunkStatus s) {
   switch (s) {
-    case ChunkStatus::kAccepted: return "accepted";
-    case ChunkStatus::kHeld: return "held for reordering";
-    case ChunkStatus::kDuplicate: return "duplicate";
-    case ChunkStatus::kLate: return "late (after its gap)";
-    case ChunkStatus::kRejectedNonFinite: return "rejected: NaN/Inf";
-    case ChunkStatus::kRejectedRate: return "rejected: sample rate changed";
-    case ChunkStatus::kRejectedMalformed: return "rejected: malformed";
+    case ChunkStatus::kAccepted:
+      return "accepted";
+    case ChunkStatus::kHeld:
+      return "held for reordering";
+    case ChunkStatus::kDuplicate:
+      return "duplicate";
+    case ChunkStatus::kLate:
+      return "late (after its gap)";
+    case ChunkStatus::kRejectedNonFinite:
+      return "rejected: NaN/Inf";
+    case ChunkStatus::kRejectedRate:
+      return "rejected: sample rate changed";
+    case ChunkStatus::kRejectedMalformed:
+      return "rejected: malformed";
   }
   return "?";
 }
@@ -53,8 +60,8 @@ std::string missingChannel(const SignalView& v, Formulation f, DampingModel m) {
   if (v.dte == nullptr) return "dte";
   if (f == Formulation::Known && v.stiffness == nullptr) return "stiffness";
   if (f == Formulation::Greybox && v.mesh_state == nullptr) return "mesh_state";
-  const bool torque = f == Formulation::Known || f == Formulation::Greybox ||
-                      m == DampingModel::LoadLaw;
+  const bool torque =
+      f == Formulation::Known || f == Formulation::Greybox || m == DampingModel::LoadLaw;
   if (torque && v.torque == nullptr) return "torque";
   return "";
 }
@@ -152,8 +159,8 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   std::string& why = detail ? *detail : scratch;
   why.clear();
   ++counters_.chunks_received;
-  const bool short_segments = !wholeRun() && !(options_.segment_length * c.sample_rate >=
-                                                 kMinSegmentSamples);
+  const bool short_segments =
+      !wholeRun() && !(options_.segment_length * c.sample_rate >= kMinSegmentSamples);
   if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
       c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
     ++counters_.rejected_malformed;
@@ -353,8 +360,9 @@ void StreamAssembler::emitReady(bool closing) {
     const size_t a = static_cast<size_t>(copy_lo - run_.first);
     const size_t b = static_cast<size_t>(copy_hi - run_.first);
     auto slice = [&](const std::vector<double>& v, std::vector<double>* out) {
-      if (!v.empty()) out->assign(v.begin() + static_cast<std::ptrdiff_t>(a),
-                                  v.begin() + static_cast<std::ptrdiff_t>(b));
+      if (!v.empty())
+        out->assign(v.begin() + static_cast<std::ptrdiff_t>(a),
+                    v.begin() + static_cast<std::ptrdiff_t>(b));
     };
     slice(run_.dte, &s.dte);
     slice(run_.stiffness, &s.stiffness);
@@ -372,8 +380,8 @@ void StreamAssembler::emitReady(bool closing) {
   const std::uint64_t next = std::max(seg_begin_, first_analysed);
   const std::uint64_t keep =
       next >= end_analysed ? run_end : std::max(run_.first, next >= ctx ? next - ctx : 0);
-  const size_t drop = static_cast<size_t>(std::min<std::uint64_t>(keep - run_.first,
-                                                                   run_.dte.size()));
+  const size_t drop =
+      static_cast<size_t>(std::min<std::uint64_t>(keep - run_.first, run_.dte.size()));
   if (drop > 0) {
     auto erase = [&](std::vector<double>* v) {
       if (!v->empty()) v->erase(v->begin(), v->begin() + static_cast<std::ptrdiff_t>(drop));

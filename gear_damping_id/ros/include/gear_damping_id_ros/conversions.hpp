@@ -29,8 +29,8 @@ gear_damping::DampingSegment toMsg(const gear_damping_id::SegmentEstimate& e);
 gear_damping::DampingArray toMsg(const gear_damping_id::IdentificationResult& r);
 
 /// Modeled response over samples starting at global index `first_index`.
-gear_damping::ModeledResponse toMsg(const gear_damping_id::ModeledResponse& m,
-                                    double sample_rate, std::uint64_t first_index);
+gear_damping::ModeledResponse toMsg(const gear_damping_id::ModeledResponse& m, double sample_rate,
+                                    std::uint64_t first_index);
 
 /// Wavelet modes of a window [t_start, t_end] [s].
 gear_damping::WaveletModes toMsg(const gear_damping_id::WaveletResult& r, double t_start,
