@@ -11,18 +11,18 @@
 // Services:    ~reset (std_srvs/Empty), ~get_damping (gear_damping/GetDamping)
 // Parameters:  see loadParameters() and docs/live.md.
 //
-// Live semantics: segments are those of the offline analysis (boundaries at multiples of
-// ~segment_length from sample 0 or ~t_start, see StreamAssembler); each is identified by the
-// streaming IntegralMethod as soon as its samples (plus two of stencil context) have arrived, so
-// with ~refine never the numbers equal `analyze`/identify() on the same record. With the
-// piecewise model a segment is refined by output error on its own (auto: when noisy, as offline;
-// segment problems are independent, so this equals the offline refinement up to the solver's
-// convergence tolerance). The shared-damping models (constant, load_law) publish the cumulative
-// integral-method estimate, updated per segment; they are not refined live.
-// Differences from offline: the default window comes from the first segment's mean stiffness
-// (offline: the record's), legacy's mean forcing is an unknown (offline: the record mean), and a
-// final partial segment is identified on its own (offline merges a tail shorter than half a
-// segment into the previous one, unless ~t_end is finite, where live does the same).
+// Live semantics (gear_damping_id/live_identification.hpp): segments are those of the offline
+// analysis (boundaries at multiples of ~segment_length from sample 0 or ~t_start, see
+// StreamAssembler); each is identified by the streaming IntegralMethod as soon as its samples (plus
+// two of stencil context) have arrived, so with ~refine never the numbers equal
+// `analyze`/identify() on the same record. With the piecewise model a segment is refined by output
+// error on its own (auto: when noisy, as offline; segment problems are independent, so this equals
+// the offline refinement up to the solver's convergence tolerance). The shared-damping models
+// (constant, load_law) publish the cumulative integral-method estimate, updated per segment; they
+// are not refined live. Differences from offline: the default window comes from the first segment's
+// mean stiffness (offline: the record's), legacy's mean forcing is an unknown (offline: the record
+// mean), and a final partial segment is identified on its own (offline merges a tail shorter than
+// half a segment into the previous one, unless ~t_end is finite, where live does the same).
 //
 // Threading: one thread (ros::spin). Callbacks convert and buffer; identification of a segment
 // (~0.1 ms for 1000 samples) runs in the chunk callback, and the subscriber queue (~queue_size
@@ -35,8 +35,7 @@
 #include <deque>
 #include <memory>
 
-#include "gear_damping_id/integral_method.hpp"
-#include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/live_identification.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "node_common.hpp"
@@ -163,8 +162,7 @@ class DampingIdNode {
     }
     if (gear_) ROS_WARN("gear parameters changed: estimates reset");
     gear_ = std::make_unique<gd::GearConstants>(g);
-    method_ = std::make_unique<gd::IntegralMethod>(o_.id, *gear_);
-    single_ = std::make_unique<gd::IntegralMethod>(o_.id, *gear_);
+    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_);
     clearEstimates();
     ROS_INFO("gear constants: Me = %.6g kg, mean stiffness %.6g N/m", g.equivalent_mass,
              g.mean_stiffness);
@@ -234,47 +232,10 @@ class DampingIdNode {
   void identify(const gd::StreamSegment& s) {
     const ros::WallTime t0 = ros::WallTime::now();
     const gd::SignalView v = s.view();
-    gd::SegmentEstimate est;
-    gd::IdentificationResult seg;  // this segment alone (with its windows)
-    const std::string missing = gd::missingChannel(v, o_.id.formulation, o_.id.model);
-    if (!missing.empty()) {
-      est.t_start = v.time(s.begin);
-      est.t_end = v.time(s.end - 1) + v.dt;
-      est.samples = static_cast<long>(s.end - s.begin);
-      est.reason = "missing channel " + missing + " (needed by " + gd::toString(o_.id.formulation) +
-                   "/" + gd::toString(o_.id.model) + ")";
-      seg.formulation = o_.id.formulation;
-      seg.model = o_.id.model;
-      seg.segments.push_back(est);
-    } else if (o_.id.model == gd::DampingModel::Piecewise) {
-      single_->reset();
-      single_->addSegment(v, s.begin, s.end);
-      seg = single_->finish();
-      if (seg.segments.size() == 1 && seg.segments[0].identifiable &&
-          gd::wantsRefinement(o_.id, seg)) {
-        gd::IdentificationResult refined = seg;
-        std::string why;
-        if (gd::refineOutputError(v, {{s.begin, s.end}}, *gear_, o_.id, &refined, &why)) {
-          seg = std::move(refined);
-        } else {
-          ROS_WARN_THROTTLE(5.0, "output-error refinement failed (%s): integral estimate kept",
-                            why.c_str());
-        }
-      }
-      est = seg.segments.empty() ? est : seg.segments.front();
-      method_->addSegment(v, s.begin, s.end);  // for the cumulative omega0 (xi), as offline
-    } else {
-      method_->addSegment(v, s.begin, s.end);
-      shared_ = method_->finish();
-      est = shared_.segments.back();
-      seg = shared_;
-      seg.segments = {est};
-      std::vector<gd::WindowEstimate> w;
-      for (const auto& x : shared_.windows) {
-        if (x.t_start >= est.t_start - 0.5 * v.dt && x.t_start < est.t_end) w.push_back(x);
-      }
-      seg.windows = w;
-    }
+    const gd::LiveIdentification::SegmentOutput out = live_->add(v, s.begin, s.end);
+    const gd::SegmentEstimate& est = out.estimate;
+    const gd::IdentificationResult& seg = out.result;
+    if (!out.warning.empty()) ROS_WARN_THROTTLE(5.0, "%s", out.warning.c_str());
     if (est.identifiable) {
       ++identified_;
     } else {
@@ -284,7 +245,7 @@ class DampingIdNode {
                         est.reason.c_str());
     }
     if (s.partial) ++partial_;
-    segments_.push_back(est);
+    latest_ = est;
     dirty_ = true;
 
     gear_damping::DampingArray one = gear_damping_id_ros::toMsg(seg);
@@ -317,26 +278,8 @@ class DampingIdNode {
   }
 
   gear_damping::DampingArray cumulative() const {
-    gear_damping::DampingArray a;
-    if (o_.id.model == gd::DampingModel::Piecewise) {
-      // Per-segment estimates (refined where applied); xi with the omega0 of every segment so
-      // far (at the end of a record: the record's, as offline).
-      gd::IdentificationResult r =
-          method_ && method_->segmentCount() > 0 ? method_->finish() : gd::IdentificationResult();
-      r.formulation = o_.id.formulation;
-      r.model = o_.id.model;
-      r.segments = segments_;
-      if (std::isfinite(r.omega0) && r.omega0 > 0.0) {
-        for (auto& e : r.segments) {
-          if (e.identifiable) e.xi = e.C / (2.0 * r.omega0);
-        }
-      }
-      a = gear_damping_id_ros::toMsg(r);
-    } else {
-      a = gear_damping_id_ros::toMsg(shared_);
-      a.formulation = gd::toString(o_.id.formulation);
-      a.model = gd::toString(o_.id.model);
-    }
+    gear_damping::DampingArray a =
+        live_ ? gear_damping_id_ros::toMsg(live_->cumulative()) : gear_damping::DampingArray();
     a.header.stamp = ros::Time::now();
     return a;
   }
@@ -350,9 +293,7 @@ class DampingIdNode {
   }
 
   void clearEstimates() {
-    if (method_) method_->reset();
-    segments_.clear();
-    shared_ = gd::IdentificationResult();
+    if (live_) live_->reset();
     dirty_ = true;
   }
 
@@ -393,14 +334,14 @@ class DampingIdNode {
     s.add("segments not identifiable", not_identifiable_);
     s.add("last not identifiable reason", last_reason_);
     s.add("partial segments (cut by gap/restart/end)", partial_);
-    s.add("segments in current estimate", segments_.size());
+    s.add("segments in current estimate", live_ ? live_->segmentCount() : 0);
     s.add("processing time last segment [ms]", last_ms_);
     s.add("processing time mean [ms]", n ? sum_ms_ / static_cast<double>(n) : 0.0);
     s.add("processing time max [ms]", max_ms_);
     s.add("last fit [%]", last_fit_);
-    if (!segments_.empty() && segments_.back().identifiable) {
-      s.add("latest C [1/s]", segments_.back().C);
-      s.add("latest xi", segments_.back().xi);
+    if (latest_.identifiable) {
+      s.add("latest C [1/s]", latest_.C);
+      s.add("latest xi", latest_.xi);
     }
   }
 
@@ -412,10 +353,9 @@ class DampingIdNode {
   ros::ServiceServer reset_srv_, get_srv_;
   ros::WallTimer timer_;
   std::unique_ptr<gd::GearConstants> gear_;
-  std::unique_ptr<gd::IntegralMethod> method_, single_;
+  std::unique_ptr<gd::LiveIdentification> live_;
   std::deque<gear_damping::SignalChunk::ConstPtr> early_;
-  std::vector<gd::SegmentEstimate> segments_;  // piecewise: per segment, possibly refined
-  gd::IdentificationResult shared_;            // constant/load_law: latest cumulative
+  gd::SegmentEstimate latest_;
   unsigned long epoch_ = 0, identified_ = 0, not_identifiable_ = 0, partial_ = 0;
   unsigned long reported_not_identifiable_ = 0, dropped_early_ = 0;
   std::string last_reason_;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "gear_damping_id/integral_method.hpp"
+#include "gear_damping_id/live_identification.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 
@@ -294,7 +295,7 @@ TEST(StreamAssembler, InvalidOptionsNameTheField) {
   EXPECT_EQ(gd::StreamOptions().validate(), "");
 }
 
-// The live path (chunks -> assembler -> IntegralMethod per segment) equals identify() on the
+// The live path (chunks -> assembler -> LiveIdentification) equals identify() on the
 // same record with the same options (integral method only) on the default simulated case.
 TEST(StreamAssembler, LiveIdentificationEqualsOfflineOnTheDefaultCase) {
   gear_sim::SimConfig cfg;
@@ -311,13 +312,13 @@ TEST(StreamAssembler, LiveIdentificationEqualsOfflineOnTheDefaultCase) {
   ASSERT_TRUE(gd::identify(t, gear, io, &offline, &e)) << e;
 
   gd::StreamAssembler a{gd::StreamOptions()};
-  gd::IntegralMethod live(io, gear);
+  gd::LiveIdentification live(io, gear);  // window resolved from the first segment, as the node
   std::vector<gd::SegmentEstimate> est;
   std::vector<double> state(static_cast<size_t>(t.size()));
   for (Eigen::Index i = 0; i < t.size(); ++i) state[static_cast<size_t>(i)] = t.mesh_state[i];
   auto run = [&] {
     gd::StreamSegment s;
-    while (a.nextSegment(&s)) est.push_back(live.addSegment(s.view(), s.begin, s.end));
+    while (a.nextSegment(&s)) est.push_back(live.add(s.view(), s.begin, s.end).estimate);
   };
   for (Eigen::Index b = 0; b < t.size(); b += 1000) {
     gd::ChunkData c;
