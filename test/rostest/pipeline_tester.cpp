@@ -339,17 +339,21 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
       "(bordering a gap)\n",
       max_full, max_border);
 
-  // Pass B: the simulator restarts from index 0 and sends a clean record.
+  // Pass B: the simulator restarts from index 0 and sends the whole record, two chunks swapped.
   ros::WallDuration(1.0).sleep();
-  for (int k = 0; k < 10; ++k) s.publish(s.chunk(k));
+  // Chunks 2 and 3 swapped on the way: put back in order, not a gap.
+  for (int k : {0, 1, 3, 2, 4, 5, 6, 7, 8, 9}) s.publish(s.chunk(k));
   ASSERT_TRUE(waitFor(
       [&] {
-        return col.value(st, "restarts") == 1.0 && col.cumulative.segments.size() == 10 &&
+        return col.value(st, "restarts") == 1.0 && col.value(st, "out-of-order chunks") == 1.0 &&
+               col.cumulative.segments.size() == 10 &&
                col.cumulative.segments.back().t_end > 0.0099;
       },
       60.0))
       << "restarts " << col.value(st, "restarts") << ", segments "
       << col.cumulative.segments.size();
+  EXPECT_EQ(col.value(st, "out-of-order chunks"), 1.0);
+  EXPECT_EQ(col.value(st, "gaps"), 2.0) << "no new gap in pass B";
   for (size_t i = 0; i < 10; ++i) {
     EXPECT_NEAR(col.cumulative.segments[i].C, offline.segments[i].C,
                 kLiveVsOfflineRelTol * offline.segments[i].C)
