@@ -37,21 +37,27 @@ WAVELET = "cmor1.8-1.0"  # bandwidth B = 1.8, centre frequency 1.0 cycle per uni
 
 
 def find_bench(explicit):
+    """--bench, else bench_wavelet of a catkin workspace built from this checkout: $GEAR_DAMPING_WS,
+    ../gear_damping_ws (scripts/common.sh's default) or /work/ws*; a workspace whose
+    src/gear_damping links to this checkout is preferred over one built from another tree."""
     if explicit:
         return explicit
-    here = os.path.dirname(os.path.abspath(__file__))
-    repo = os.path.dirname(here)
-    candidates = []
-    ws = os.environ.get("GEAR_DAMPING_WS")
-    if ws:
-        candidates.append(os.path.join(ws, "devel/lib/gear_damping/bench_wavelet"))
-    candidates.append(os.path.join(os.path.dirname(repo), "gear_damping_ws/devel/lib/gear_damping/bench_wavelet"))
-    candidates += sorted(glob.glob("/work/ws*/devel/lib/gear_damping/bench_wavelet"))
-    candidates += sorted(glob.glob(os.path.join(os.path.dirname(repo), "*/devel/lib/gear_damping/bench_wavelet")))
-    for c in candidates:
-        if os.path.isfile(c) and os.access(c, os.X_OK):
-            return c
-    sys.exit("compare_cwt.py: bench_wavelet not found; build the package (gear_build) or pass --bench PATH")
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    workspaces = []
+    if os.environ.get("GEAR_DAMPING_WS"):
+        workspaces.append(os.environ["GEAR_DAMPING_WS"])
+    workspaces.append(os.path.join(os.path.dirname(repo), "gear_damping_ws"))
+    workspaces += sorted(glob.glob("/work/ws*"))
+    found = [w for w in workspaces
+             if os.access(os.path.join(w, "devel/lib/gear_damping/bench_wavelet"), os.X_OK)]
+    if not found:
+        sys.exit("compare_cwt.py: bench_wavelet not found; build the package (gear_build) or pass --bench PATH")
+    ours = [w for w in found
+            if os.path.realpath(os.path.join(w, "src/gear_damping")) == os.path.realpath(repo)]
+    ws = (ours or found)[0]
+    if not ours:
+        print(f"warning: {ws} was not built from {repo}", file=sys.stderr)
+    return os.path.join(ws, "devel/lib/gear_damping/bench_wavelet")
 
 
 def run_bench(path, estimate, repeats):

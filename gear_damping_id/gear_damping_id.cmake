@@ -7,24 +7,53 @@ target_include_directories(gear_damping_id_core PUBLIC ${CMAKE_CURRENT_SOURCE_DI
 target_link_libraries(gear_damping_id_core PUBLIC gear_sim_core Eigen3::Eigen PkgConfig::FFTW3)
 target_compile_options(gear_damping_id_core PRIVATE ${GEAR_WARNINGS})
 
-# ---------------------------------------------------------------------------------------------
-# Live nodes (issue 6): damping_id_node, wavelet_node, and their message conversions. The
-# sequencing logic they share (StreamAssembler) is in the core library above.
-add_library(gear_id_ros_conversions gear_damping_id/ros/conversions.cpp)
+# Analysis outputs (JSON, tables, CSV): no ROS either, shared by the tools and the tests.
+file(GLOB GEAR_ID_IO_SOURCES CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/src/io/*.cpp)
+add_library(gear_damping_id_io ${GEAR_ID_IO_SOURCES})
+target_link_libraries(gear_damping_id_io PUBLIC gear_damping_id_core nlohmann_json::nlohmann_json)
+target_compile_options(gear_damping_id_io PRIVATE ${GEAR_WARNINGS})
+
+# ROS side: identification results <-> messages, shared by the tools and the nodes.
+add_library(gear_id_ros_conversions gear_damping_id/ros/id_conversions.cpp)
 target_include_directories(gear_id_ros_conversions PUBLIC
-  ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include
-  ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
-target_link_libraries(gear_id_ros_conversions PUBLIC gear_damping_id_core ${catkin_LIBRARIES})
+                           ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include)
+target_link_libraries(gear_id_ros_conversions PUBLIC gear_damping_id_core gear_ros_conversions)
 target_compile_options(gear_id_ros_conversions PRIVATE ${GEAR_WARNINGS})
 add_dependencies(gear_id_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
+
+# `rosrun gear_damping analyze`: identification (and wavelet validation) of a recorded signal.
+add_executable(analyze gear_damping_id/tools/analyze.cpp)
+target_link_libraries(analyze gear_damping_id_io gear_id_ros_conversions gear_sim_io CLI11::CLI11
+                      ${catkin_LIBRARIES})
+target_compile_options(analyze PRIVATE ${GEAR_WARNINGS})
+
+install(TARGETS gear_damping_id_core gear_damping_id_io gear_id_ros_conversions analyze
+        ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(DIRECTORY gear_damping_id/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_DESTINATION})
+
+# ---------------------------------------------------------------------------------------------
+# Live nodes (issue 6): damping_id_node, wavelet_node, and the conversions only they need
+# (chunk -> StreamAssembler input, wavelet result -> WaveletModes). The sequencing and
+# segment-by-segment identification they share (StreamAssembler, LiveIdentification) are in the
+# core library above.
+add_library(gear_live_ros_conversions gear_damping_id/ros/live_conversions.cpp)
+target_include_directories(gear_live_ros_conversions PUBLIC
+  ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include
+  ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
+target_link_libraries(gear_live_ros_conversions PUBLIC gear_id_ros_conversions gear_damping_id_core
+                      ${catkin_LIBRARIES})
+target_compile_options(gear_live_ros_conversions PRIVATE ${GEAR_WARNINGS})
+add_dependencies(gear_live_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
 foreach(node damping_id_node wavelet_node)
   add_executable(${node} gear_damping_id/nodes/${node}.cpp)
-  target_link_libraries(${node} gear_id_ros_conversions gear_ros_conversions gear_sim_io
-                        ${catkin_LIBRARIES})
+  target_link_libraries(${node} gear_live_ros_conversions gear_id_ros_conversions
+                        gear_ros_conversions gear_sim_io ${catkin_LIBRARIES})
   target_compile_options(${node} PRIVATE ${GEAR_WARNINGS})
   add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp)
 endforeach()
-install(TARGETS gear_id_ros_conversions damping_id_node wavelet_node
+install(TARGETS gear_live_ros_conversions damping_id_node wavelet_node
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

@@ -22,7 +22,7 @@ else()
 endif()
 
 # ROS side: message <-> core conversions shared by the tools and nodes.
-add_library(gear_ros_conversions gear_sim/ros/conversions.cpp)
+add_library(gear_ros_conversions gear_sim/ros/conversions.cpp gear_sim/ros/bag_io.cpp)
 target_include_directories(gear_ros_conversions PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/gear_sim/ros/include
                            ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
 target_link_libraries(gear_ros_conversions PUBLIC gear_sim_io ${catkin_LIBRARIES})
@@ -34,12 +34,17 @@ add_executable(simulate gear_sim/tools/simulate.cpp)
 target_link_libraries(simulate gear_sim_io gear_ros_conversions CLI11::CLI11 ${catkin_LIBRARIES})
 target_compile_options(simulate PRIVATE ${GEAR_WARNINGS})
 
+# `rosrun gear_damping convert`: signal records CSV <-> bag.
+add_executable(convert gear_sim/tools/convert.cpp)
+target_link_libraries(convert gear_sim_io gear_ros_conversions CLI11::CLI11 ${catkin_LIBRARIES})
+target_compile_options(convert PRIVATE ${GEAR_WARNINGS})
+
 # gear_sim_node: publishes the simulated signal as chunks, the gear parameters latched.
 add_executable(gear_sim_node gear_sim/nodes/gear_sim_node.cpp)
 target_link_libraries(gear_sim_node gear_sim_io gear_ros_conversions ${catkin_LIBRARIES})
 target_compile_options(gear_sim_node PRIVATE ${GEAR_WARNINGS})
 
-install(TARGETS gear_sim_core gear_sim_io gear_ros_conversions simulate gear_sim_node
+install(TARGETS gear_sim_core gear_sim_io gear_ros_conversions simulate convert gear_sim_node
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

@@ -1,24 +1,33 @@
 #!/usr/bin/env bash
-# The main job: installs what is missing, builds, and runs the demo on default parameters,
-# writing its results into OUT_DIR (default: results/ in this checkout).
-# Currently: simulates the Table 1 default case (DESIGN §3) to CSV and bag and prints its key
-# numbers; the identification, wavelet validation and report are added by later issues.
+# The main job: installs what is missing, builds, and runs the demo pipeline on default
+# parameters (the paper's §4 storyline), writing everything into OUT_DIR (default: results/ in
+# this checkout):
+#   signal.csv, signal.bag   the Table 1 case simulated under a sine load with load-dependent
+#                            damping (config/table1.yaml), 1 MHz, 10 ms
+#   free_response.csv        the free decay of the same case (for the wavelet validation)
+#   result.json, tables/     analyze: legacy vs known formulation; piecewise, constant and
+#                            load-law damping models; wavelet validation (DESIGN §6 keys)
+#   results.bag              the results as gear_damping messages (rqt_bag, rqt_plot)
+#   analysis.txt             the analysis tables as printed
+#   report/index.html        figures and tables (rosrun gear_damping report)
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-out=${1:-$GEAR_REPO/results}
+out=$(mkdir -p "${1:-$GEAR_REPO/results}" && cd "${1:-$GEAR_REPO/results}" && pwd)
 gear_install_deps
 gear_build
 gear_source_ws
-mkdir -p "$out"
-echo "gear_damping $(sed -n 's:.*<version>\(.*\)</version>.*:\1:p' "$GEAR_REPO/package.xml")"
-rosrun gear_damping simulate --config "$GEAR_REPO/config/table1.yaml" --output "$out/simulation.csv"
-rosrun gear_damping simulate --config "$GEAR_REPO/config/table1.yaml" --output "$out/simulation.bag"
-/usr/bin/python3 - "$out/simulation.csv" <<'PY'
-import sys, numpy as np
-d = np.genfromtxt(sys.argv[1], delimiter=",", names=True)
-me = 0.00026 * 0.0045 / (0.00026 * 0.11**2 + 0.0045 * 0.05**2)
-print(f"Table 1 default case: {len(d)} samples over {d['time'][-1]*1e3:.3f} ms")
-print(f"  Me = {me:.5f} kg, natural frequency = {np.sqrt(np.mean(d['stiffness'])/me)/2/np.pi:.0f} Hz")
-print(f"  DTE mean {np.mean(d['dte'])*1e6:.3f} um, std {np.std(d['dte'])*1e6:.3f} um")
-print(f"  true damping c(t) from {d['damping'].min():.1f} to {d['damping'].max():.1f} N*s/m")
-PY
-echo "results: $out/simulation.csv, $out/simulation.bag"
+config="$GEAR_REPO/config/table1.yaml"
+echo "gear_damping $(sed -n 's:.*<version>\(.*\)</version>.*:\1:p' "$GEAR_REPO/package.xml"): demo into $out"
+rosrun gear_damping simulate --config "$config" --output "$out/signal.csv"
+rosrun gear_damping simulate --config "$config" --output "$out/signal.bag"
+rosrun gear_damping simulate --config "$config" --free-response --output "$out/free_response.csv"
+# The bag carries the gear parameters (GearParams), so no --params is needed.
+rosrun gear_damping analyze --input "$out/signal.bag" \
+    --formulation known --formulation legacy \
+    --model piecewise --model constant --model load_law \
+    --wavelet-input "$out/free_response.csv" \
+    --output "$out/result.json" --csv-out "$out/tables" --bag-out "$out/results.bag" \
+    > "$out/analysis.txt"
+if rospack find gear_damping >/dev/null 2>&1 && [ -x "$GEAR_REPO/gear_damping_id/scripts/report" ]; then
+  rosrun gear_damping report "$out" >/dev/null
+fi
+/usr/bin/python3 "$GEAR_REPO/scripts/storyline.py" "$out"

@@ -36,6 +36,7 @@
 #include <memory>
 
 #include "gear_damping_id/live_identification.hpp"
+#include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "node_common.hpp"
@@ -248,7 +249,7 @@ class DampingIdNode {
     latest_ = est;
     dirty_ = true;
 
-    gear_damping::DampingArray one = gear_damping_id_ros::toMsg(seg);
+    gear_damping::DampingArray one = gear_damping_ros::toMsg(seg);
     one.header.stamp = ros::Time::now();
     segment_pub_.publish(one);
     if (est.identifiable && std::isfinite(est.C)) {
@@ -262,8 +263,8 @@ class DampingIdNode {
       gd::ModeledResponse mr;
       std::string why;
       if (gd::modeledResponse(v, *gear_, seg, &mr, &why)) {
-        auto msg = gear_damping_id_ros::toMsg(mr, s.sample_rate,
-                                              s.first_index + static_cast<std::uint64_t>(mr.begin));
+        auto msg = gear_damping_ros::toMsg(mr, s.sample_rate,
+                                           s.first_index + static_cast<std::uint64_t>(mr.begin));
         msg.header.stamp = ros::Time::now();
         response_pub_.publish(msg);
         last_fit_ = mr.fit_percent;
@@ -279,7 +280,7 @@ class DampingIdNode {
 
   gear_damping::DampingArray cumulative() const {
     gear_damping::DampingArray a =
-        live_ ? gear_damping_id_ros::toMsg(live_->cumulative()) : gear_damping::DampingArray();
+        live_ ? gear_damping_ros::toMsg(live_->cumulative()) : gear_damping::DampingArray();
     a.header.stamp = ros::Time::now();
     return a;
   }

@@ -17,7 +17,7 @@
 
 #include "gear_damping/SignalChunk.h"
 #include "gear_damping_id/stream_assembler.hpp"
-#include "gear_damping_id_ros/conversions.hpp"
+#include "gear_damping_ros/live_conversions.hpp"
 
 namespace gear_damping_nodes {
 
@@ -141,7 +141,7 @@ class ChunkIntake {
     ++messages_;
     std::string why;
     gear_damping_id::ChunkData c;
-    if (!gear_damping_id_ros::toChunkData(msg, &state_, &c, &why)) {
+    if (!gear_damping_ros::toChunkData(msg, &state_, &c, &why)) {
       c = gear_damping_id::ChunkData();  // empty: the assembler counts it as malformed
       c.first_index = msg.first_index;
       c.sample_rate = msg.sample_rate;

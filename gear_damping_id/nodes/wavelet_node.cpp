@@ -167,7 +167,7 @@ class WaveletNode {
     }
     gd::attachIntegralDampingRatio(&r, xi_integral_);
     auto msg =
-        gear_damping_id_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
+        gear_damping_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
     msg.header.stamp = ros::Time::now();
     modes_pub_.publish(msg);
     ++windows_analysed_;

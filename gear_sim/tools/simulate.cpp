@@ -2,53 +2,26 @@
 //     [--noise-snr DB] [--seed N] [--chunk-size N] --output OUT.csv|OUT.bag
 //
 // Simulates the gear pair described by FILE.yaml (README "Simulator configuration") and writes
-// the DESIGN §6 CSV, or a bag with gear_damping/SignalChunk messages on /gear/signal and the
+// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag with gear_damping/SignalChunk messages on /gear/signal and the
 // gear parameters (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid
 // input (message on stderr naming the key/option), 2 output could not be written.
-#include <rosbag/bag.h>
-
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
-#include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/bag_io.hpp"
 
 namespace {
 
 bool endsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-// Writes the bag to `path`; stamps are 1 s + the sample time (a bag cannot hold time 0).
-bool writeBag(const std::string& path, const gear_sim::SimConfig& c, const gear_sim::SignalTable& t,
-              Eigen::Index chunk_size, std::string* error) {
-  try {
-    rosbag::Bag bag(path, rosbag::bagmode::Write);
-    const ros::Time base(1.0);
-    auto params = gear_sim_ros::toMsg(c.gearModel());
-    params.header.stamp = base;
-    bag.write("/gear/params", base, params);
-    gear_damping::SignalChunk chunk;
-    for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
-      const Eigen::Index n = std::min(chunk_size, t.size() - b);
-      gear_sim_ros::toChunk(t, b, n, c.simulation.sample_rate, static_cast<std::uint64_t>(b),
-                            &chunk);
-      chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
-      chunk.header.stamp = base + ros::Duration(t.time[b]);
-      bag.write("/gear/signal", chunk.header.stamp, chunk);
-    }
-    bag.close();
-  } catch (const std::exception& e) {
-    *error = path + ": " + e.what();
-    return false;
-  }
-  return true;
 }
 
 }  // namespace
@@ -69,6 +42,12 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "override simulation.seed");
   app.add_option("--chunk-size", chunk_size, "samples per SignalChunk in a bag (default 1000)")
       ->check(CLI::PositiveNumber);
+  bool free_response = false;
+  app.add_flag("--free-response", free_response,
+               "write the free (homogeneous) response y'' + C y' + K y = 0 of the case instead: "
+               "the difference of two runs, from the static deflection under the mean load and "
+               "from the configured initial state (the start-up transient without the forced "
+               "part; what the wavelet validation needs, docs/wavelet.md)");
   CLI11_PARSE(app, argc, argv);
 
   if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
@@ -90,10 +69,32 @@ int main(int argc, char** argv) {
     std::cerr << "simulate: " << error << "\n";
     return 1;
   }
+  if (free_response) {
+    // Eq. (4) is linear in y: two runs differing only in the initial state differ by exactly
+    // the free response. Noise, if configured, is left out of the difference and added once.
+    gear_sim::SimConfig quiet = c, shifted;
+    quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
+    shifted = quiet;
+    const double w0 = 2.0 * M_PI * gear_sim::naturalFrequencyHz(c.gears, c.mesh);
+    shifted.simulation.initial_dte =
+        c.simulation.initial_dte + c.gears.forceFactor() * t.torque.mean() / (w0 * w0);
+    gear_sim::SignalTable a, b;
+    if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
+      std::cerr << "simulate: " << error << "\n";
+      return 1;
+    }
+    const Eigen::VectorXd noise = t.dte - a.dte;  // the configured measurement noise (or 0)
+    t.dte = b.dte - a.dte + noise;
+    t.dte_velocity = b.dte_velocity - a.dte_velocity;
+    t.torque.setZero();  // no forcing in the free response
+  }
   // Write next to the target and rename on success: no partial file that looks complete.
   const std::string tmp = output + ".partial";
-  const bool ok = endsWith(output, ".csv") ? gear_sim::writeSignalCsv(tmp, t, &error)
-                                           : writeBag(tmp, c, t, chunk_size, &error);
+  const gear_sim::GearModel model = c.gearModel();
+  const bool ok = endsWith(output, ".csv")
+                      ? gear_sim::writeSignalCsv(tmp, t, &error)
+                      : gear_sim_ros::writeSignalBag(tmp, t, c.simulation.sample_rate, &model,
+                                                     chunk_size, &error);
   if (!ok || std::rename(tmp.c_str(), output.c_str()) != 0) {
     std::remove(tmp.c_str());
     std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";

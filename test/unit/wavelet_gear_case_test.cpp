@@ -23,6 +23,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -91,6 +92,19 @@ double trueXiOver(const GearCase& g, const WaveletMode& m) {
   return gear_damping_id::integralDampingRatio(sum / weight, g.omega0);
 }
 
+// validateWavelet on a record of the case with the grid 2 kHz .. 0.4 fs (the automatic grid
+// would start at 10 cycles per 10 ms record) and optional explicit mode frequencies.
+WaveletResult analyzeCase(const GearCase& g, const Eigen::VectorXd& y, bool full_scalogram,
+                          const std::vector<double>& mode_frequencies = {}) {
+  const double fs = g.config.simulation.sample_rate;
+  WaveletOptions o;
+  o.f_min = 2000.0;
+  o.f_max = 0.4 * fs;
+  o.full_scalogram = full_scalogram;
+  o.mode_frequencies = mode_frequencies;
+  return gear_damping_id::validateWavelet(y.data(), static_cast<size_t>(y.size()), fs, o);
+}
+
 const WaveletMode* nearest(const WaveletResult& r, double f) {
   const WaveletMode* best = nullptr;
   for (const WaveletMode& m : r.modes) {
@@ -104,12 +118,7 @@ const WaveletMode* nearest(const WaveletResult& r, double f) {
 TEST(WaveletGearCase, FreeDecayOfTheDefaultCaseGivesTheTrueDampingRatioWithinTenPercent) {
   const GearCase& g = defaultGearCase();
   ASSERT_EQ(g.free_decay.size(), g.forced.size());
-  const double fs = g.config.simulation.sample_rate;
-  WaveletOptions o;
-  o.f_min = 2000.0;  // the automatic grid would start at 10 cycles per 10 ms record
-  o.f_max = 0.4 * fs;
-  WaveletResult r = gear_damping_id::validateWavelet(g.free_decay.data(),
-                                                     static_cast<size_t>(g.free_decay.size()), fs, o);
+  WaveletResult r = analyzeCase(g, g.free_decay, true);
   ASSERT_TRUE(r.ok()) << r.error;
   const WaveletMode* m = nearest(r, g.f0);
   ASSERT_NE(m, nullptr);
@@ -133,14 +142,7 @@ TEST(WaveletGearCase, FreeDecayOfTheDefaultCaseGivesTheTrueDampingRatioWithinTen
 
 TEST(WaveletGearCase, ExplicitNaturalFrequencyGivesTheTrueDampingRatioWithinTenPercent) {
   const GearCase& g = defaultGearCase();
-  const double fs = g.config.simulation.sample_rate;
-  WaveletOptions o;
-  o.f_min = 2000.0;
-  o.f_max = 0.4 * fs;
-  o.mode_frequencies = {g.f0};
-  o.full_scalogram = false;
-  const WaveletResult r = gear_damping_id::validateWavelet(
-      g.free_decay.data(), static_cast<size_t>(g.free_decay.size()), fs, o);
+  const WaveletResult r = analyzeCase(g, g.free_decay, false, {g.f0});
   ASSERT_TRUE(r.ok()) << r.error;
   ASSERT_EQ(r.modes.size(), 1u);
   const WaveletMode& m = r.modes[0];
@@ -159,13 +161,7 @@ TEST(WaveletGearCase, ExplicitNaturalFrequencyGivesTheTrueDampingRatioWithinTenP
 // the raw-DTE table for a damping measurement.
 TEST(WaveletGearCase, RawForcedResponseShowsMeshHarmonicsNotTheFreeDecay) {
   const GearCase& g = defaultGearCase();
-  const double fs = g.config.simulation.sample_rate;
-  WaveletOptions o;
-  o.f_min = 2000.0;
-  o.f_max = 0.4 * fs;
-  o.full_scalogram = false;
-  const WaveletResult r = gear_damping_id::validateWavelet(
-      g.forced.dte.data(), static_cast<size_t>(g.forced.dte.size()), fs, o);
+  const WaveletResult r = analyzeCase(g, g.forced.dte, false);
   ASSERT_TRUE(r.ok()) << r.error;
   ASSERT_FALSE(r.modes.empty());
   const double mesh_hz = g.config.speed.pinion_rpm / 60.0 * g.config.gears.pinion.teeth;

@@ -9,9 +9,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace gear_damping_id {
@@ -286,6 +288,44 @@ TEST(MorletCwt, ReusesItsPlansAndBuffersAcrossRowsAndSignals) {
   EXPECT_EQ(p0, p1) << "rows must reuse one output buffer";
   EXPECT_GE(reused.paddedSize(), n);
   EXPECT_EQ(reused.paddedSize(), fastFftLength(reused.paddedSize()));
+}
+
+// The pruned |W| of narrow-band rows (N/M batched size-M FFTs) against |row()| from the full
+// inverse FFT: rounding only. Grid from 10 cycles per record to 0.4 fs, as in the benchmark,
+// so most rows take the pruned path and the top ones the full one.
+TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
+  constexpr double kPrunedTol = 1e-12;  // relative to the row's peak; measured ~1e-15
+  const double fs = 1000.0;
+  const long n = 6000;
+  const std::vector<double> grid = logSpacedFrequencies(10.0 * fs / n, 0.4 * fs, 40);
+  const std::vector<double> y = toneBursts(n, fs, true);
+  MorletCwt cwt;
+  std::string error;
+  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(cwt.setSignal(y.data(), &error)) << error;
+  std::vector<double> fast(static_cast<size_t>(n));
+  std::vector<float> fast_f(static_cast<size_t>(n));
+  double worst = 0.0;
+  for (int i = 0; i < cwt.rows(); ++i) {
+    ASSERT_TRUE(cwt.rowModulus(i, fast.data()));
+    ASSERT_TRUE(cwt.rowModulus(i, fast_f.data()));
+    const std::complex<double>* w = cwt.row(i);
+    ASSERT_NE(w, nullptr);
+    double peak = 0.0, err = 0.0;
+    for (long j = 0; j < n; ++j) peak = std::max(peak, std::abs(w[j]));
+    for (long j = 0; j < n; ++j) {
+      err = std::max(err, std::abs(fast[size_t(j)] - std::abs(w[j])));
+      EXPECT_NEAR(fast_f[size_t(j)], std::abs(w[j]), 1e-6 * peak);
+    }
+    ASSERT_GT(peak, 0.0);
+    worst = std::max(worst, err / peak);
+  }
+  std::printf("[ measured ] pruned vs full |W|: max error %.2e of the row's peak\n", worst);
+  EXPECT_LT(worst, kPrunedTol);
+  cwt.setPrunedModulus(false);
+  ASSERT_TRUE(cwt.rowModulus(0, fast.data()));
+  const std::complex<double>* w = cwt.row(0);
+  for (long j = 0; j < n; ++j) EXPECT_DOUBLE_EQ(fast[size_t(j)], std::abs(w[j]));
 }
 
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
@@ -592,41 +632,27 @@ TEST(AnalyzeWavelet, RejectsInvalidInputWithAnErrorNamingTheProblem) {
   EXPECT_NE(analyzeError(bad, 20000.0, ok).find("sample 1234"), std::string::npos);
   EXPECT_NE(analyzeError(y, 0.0, ok).find("sample_rate"), std::string::npos);
   EXPECT_NE(analyzeError(y, NAN, ok).find("sample_rate"), std::string::npos);
-  WaveletOptions o;
-  o.f_max = 10000.0;  // = Nyquist
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_max"), std::string::npos);
-  o = ok;
-  o.f_min = 3000.0;
-  o.f_max = 2000.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_min"), std::string::npos);
-  o = ok;
-  o.f_min = 9000.0;  // >= auto f_max = 8 kHz
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("f_min"), std::string::npos);
-  o = ok;
-  o.n_scales = 0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("n_scales"), std::string::npos);
-  o = ok;
-  o.omega0 = 0.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("omega0"), std::string::npos);
-  o = ok;
-  o.frequencies = {100.0, 300.0, 200.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("frequencies[2]"), std::string::npos);
-  o = ok;
-  o.frequencies = {100.0, 200.0, 12000.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("Nyquist"), std::string::npos);
-  o = ok;
-  o.mode_frequencies = {1000.0, 11000.0};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("mode_frequencies[1]"), std::string::npos);
-  o = ok;
-  o.mode_frequencies = {1000.0};
-  o.decay_regions = {{0.02, 0.01}};
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("decay_regions[0]"), std::string::npos);
-  o = ok;
-  o.peak_prominence = 1.5;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("peak_prominence"), std::string::npos);
-  o = ok;
-  o.fit_omega0 = 2.0;
-  EXPECT_NE(analyzeError(y, 20000.0, o).find("fit_omega0"), std::string::npos);
+  // Each row: one option broken (the rest default) and what the error must name.
+  const std::vector<std::pair<std::function<void(WaveletOptions*)>, std::string>> cases = {
+      {[](WaveletOptions* o) { o->f_max = 10000.0; }, "f_max"},  // = Nyquist
+      {[](WaveletOptions* o) { o->f_min = 3000.0, o->f_max = 2000.0; }, "f_min"},
+      {[](WaveletOptions* o) { o->f_min = 9000.0; }, "f_min"},  // >= auto f_max = 8 kHz
+      {[](WaveletOptions* o) { o->n_scales = 0; }, "n_scales"},
+      {[](WaveletOptions* o) { o->omega0 = 0.0; }, "omega0"},
+      {[](WaveletOptions* o) { o->frequencies = {100.0, 300.0, 200.0}; }, "frequencies[2]"},
+      {[](WaveletOptions* o) { o->frequencies = {100.0, 200.0, 12000.0}; }, "Nyquist"},
+      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0, 11000.0}; }, "mode_frequencies[1]"},
+      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0}, o->decay_regions = {{0.02, 0.01}}; },
+       "decay_regions[0]"},
+      {[](WaveletOptions* o) { o->peak_prominence = 1.5; }, "peak_prominence"},
+      {[](WaveletOptions* o) { o->fit_omega0 = 2.0; }, "fit_omega0"},
+  };
+  for (const auto& c : cases) {
+    WaveletOptions o = ok;
+    c.first(&o);
+    const std::string e = analyzeError(y, 20000.0, o);
+    EXPECT_NE(e.find(c.second), std::string::npos) << "expected '" << c.second << "' in: " << e;
+  }
   WaveletResult r;
   EXPECT_FALSE(analyzeWavelet(nullptr, 100, 1000.0, ok, &r, nullptr));  // null error pointer is ok
   EXPECT_FALSE(analyzeWavelet(y.data(), long(y.size()), 20000.0, ok, nullptr, nullptr));

@@ -104,11 +104,14 @@ struct SignalView {
   static SignalView of(const gear_sim::SignalTable& table);
 };
 
-/// Checks that `table` can be analysed: uniform time step within `rel_tolerance` of the mean step
-/// (names the first offending row), the channels `formulation`/`model` need present (names the
-/// missing column), finite values. Returns an empty string when fine.
+/// Checks that `table` can be analysed: the channels `formulation`/`model` need present (names the
+/// missing column) and a uniform time step within `rel_tolerance` of the sampling step (names the
+/// first offending sample, and its file line `first_line + sample` when `first_line` >= 0, e.g.
+/// 2 for a CSV with one header line). Non-finite values are not an error here: the segments that
+/// hold them are reported as not identifiable. Returns an empty string when fine.
 std::string checkSignalTable(const gear_sim::SignalTable& table, Formulation formulation,
-                             DampingModel model, double rel_tolerance = 1e-6);
+                             DampingModel model, double rel_tolerance = 1e-6,
+                             Eigen::Index first_line = -1);
 
 /// The sample ranges of the damping segments of [t_start, t_end] within a record: segment i starts
 /// at the first sample at or after t_start + i*dT. A final partial segment shorter than half dT
@@ -192,6 +195,7 @@ class IntegralMethod {
   std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
   std::vector<double> switch_theta_;           // their split fractions
   double legacy_fbar_ = kNaN;        // [m/s^2]
+  Eigen::Index seg_lo_ = 0, seg_hi_ = 0;  // current segment's samples (quadrature stencils)
   mutable long unlocated_switches_ = 0;
 };
 

@@ -12,8 +12,9 @@
 // - constant / load_law: the shared unknowns are re-solved over all segments so far after each
 //   segment (the cumulative result equals identify() over the same segments with Refine::Never);
 //   they are not refined live.
-// - A segment lacking a channel the formulation needs is reported as not identifiable (the
-//   reason names the channel) and takes no part in any estimate.
+// - A segment lacking a channel the formulation needs, or sampled too coarsely for the gear's
+//   natural frequency (input_checks.hpp), is reported as not identifiable (the reason says
+//   which) and takes no part in any estimate.
 #pragma once
 
 #include <memory>

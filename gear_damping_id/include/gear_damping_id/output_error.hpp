@@ -61,7 +61,8 @@ struct ModeledResponse {
 bool modeledResponse(const SignalView& signal, const GearConstants& gear,
                      const IdentificationResult& result, ModeledResponse* out, std::string* error);
 
-/// NRMSE and fit % of `modeled` against `observed` (equal lengths, >= 2).
+/// NRMSE and fit % of `modeled` against `observed` (equal lengths) over the samples where both
+/// are finite; NaN when none are or observed is constant there.
 void fitMetrics(const Eigen::VectorXd& observed, const Eigen::VectorXd& modeled, double* nrmse,
                 double* fit_percent);
 

@@ -128,8 +128,16 @@ class MorletCwt {
   const std::complex<double>* rowAt(double frequency_hz, double omega0);
 
   /// |W| of row i into out[0, size()) (double or float). False if row(i) would be null.
+  /// Rows whose band of nonzero bins fits in M <= N/16 bins (M a divisor of N) skip the full
+  /// inverse FFT: with j = q*(N/M) + p, |W_j| is the modulus of N/M inverse FFTs of size M of
+  /// twiddled copies of the band (exact up to rounding, ~1e-14 relative to the row's peak;
+  /// N log M work instead of N log N, in cache; FFTW_ESTIMATE plans, one per size M). With
+  /// the default log grid (10 cycles per record to 0.4 fs, omega0 = 6) 2/3 to 3/4 of the rows
+  /// take this path. setPrunedModulus(false) always uses the full inverse FFT. The pruned
+  /// path leaves row()'s buffer untouched.
   bool rowModulus(int i, double* out);
   bool rowModulus(int i, float* out);
+  void setPrunedModulus(bool enabled) { pruned_ = enabled; }
 
   /// Whole transform of y: setSignal(y) then every row; output row-major [row][time] with
   /// rows()*size() elements (caller-allocated; allocate once and reuse). False + *error on
@@ -165,12 +173,18 @@ class MorletCwt {
  private:
   struct Fftw;
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
+  bool fillRow(double frequency_hz, double omega0);
+  template <typename T>
+  bool prunedModulus(T* out);
+  template <typename T>
+  bool rowModulusImpl(int i, T* out);
   bool fitsPadding(double frequency_hz, double omega0) const;
   void release();
 
   long n_ = 0, n_fft_ = 0;
   double fs_ = 0.0, mean_ = 0.0;
   bool has_signal_ = false;
+  bool pruned_ = true;
   FftPlanning planning_ = FftPlanning::kMeasure;
   std::vector<double> frequencies_, omega0s_;
   std::unique_ptr<Fftw> fftw_;

@@ -63,7 +63,7 @@ bool needsState(Formulation f) { return f == Formulation::Greybox; }
 }  // namespace
 
 std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
-                             double rel_tolerance) {
+                             double rel_tolerance, Eigen::Index first_line) {
   std::ostringstream e;
   const Eigen::Index n = t.size();
   if (n < 2) return "the record has " + std::to_string(n) + " samples: need at least 2";
@@ -90,12 +90,23 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
   }
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
   if (!(dt > 0.0) || !std::isfinite(dt)) return "time is not increasing";
+  // Reference step: the median of the first three steps (a record whose very first step is the
+  // odd one is then reported there, not at every later step).
+  double ref = t.time[1] - t.time[0];
+  if (n >= 4) {
+    double d[3] = {t.time[1] - t.time[0], t.time[2] - t.time[1], t.time[3] - t.time[2]};
+    std::sort(d, d + 3);
+    ref = d[1];
+  }
   for (Eigen::Index i = 1; i < n; ++i) {
     const double d = t.time[i] - t.time[i - 1];
-    if (!(std::abs(d - dt) <= rel_tolerance * dt)) {
-      e << "time is not uniformly sampled at row " << i + 1 << " (t = " << t.time[i]
-        << " s): step " << d << " s differs from the mean step " << dt
-        << " s by more than the tolerance " << rel_tolerance << " (relative)";
+    if (!(std::abs(d - ref) <= rel_tolerance * ref)) {
+      e << "time is not uniformly sampled at ";
+      if (first_line >= 0) e << "line " << first_line + i << " (sample " << i << ", ";
+      else e << "sample " << i << " (";
+      e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step "
+        << ref << " s by more than the tolerance " << rel_tolerance
+        << " (relative)" << (d > ref ? ": a gap or a dropped sample" : "");
       return e.str();
     }
   }
@@ -326,9 +337,11 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   double* ms = &inc_(0, 5);
   double* dS = &inc_(0, 6);
   const Eigen::Index ni = L - 1;
-  // Pass 1: interior intervals with the interior rule; edges of the record use their own rule.
+  // Pass 1: interior intervals with the interior rule; the segment's edges use one-sided rules,
+  // so a segment reads no sample outside itself (streamed segments give the whole-record
+  // estimates, and a NaN next door does not leak in).
   auto intervalRule = [&](Eigen::Index j) -> const CubicIntervalRule& {
-    return rules_.forInterval(j, 0, s.n);
+    return rules_.forInterval(j, seg_lo_, seg_hi_);
   };
   Eigen::Index i_lo = 0, i_hi = ni;  // [i_lo, i_hi) use the interior rule
   while (i_lo < ni && intervalRule(w0 + i_lo).offset() != -1) ++i_lo;
@@ -569,10 +582,11 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   if (s.n < 4 || rows < 4L * W || rows - 2L * W - n_local_ < 2) {
     return fail("too few samples (" + std::to_string(rows) + " in the segment)");
   }
-  // Finite inputs on the segment and the stencil context (a sum is finite only if every term
-  // is; the element-wise search runs only when it is not).
-  const Eigen::Index c0 = std::max<Eigen::Index>(0, begin - 2);
-  const Eigen::Index c1 = std::min<Eigen::Index>(s.n, end + 2);
+  // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
+  // search runs only when it is not). The quadrature stencils stay inside [begin, end).
+  const Eigen::Index c0 = begin, c1 = end;
+  seg_lo_ = begin;
+  seg_hi_ = end;
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   struct Channel {

@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include "gear_damping_id/input_checks.hpp"
 #include "gear_damping_id/stream_assembler.hpp"
 
 namespace gear_damping_id {
@@ -57,6 +58,7 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     est = shared_.segments.back();
     seg = shared_;
     seg.segments = {est};
+    seg.constant.reset();  // this segment, with the current shared value
     seg.windows.clear();
     for (const auto& w : shared_.windows) {
       if (w.t_start >= est.t_start - 0.5 * v.dt && w.t_start < est.t_end) seg.windows.push_back(w);

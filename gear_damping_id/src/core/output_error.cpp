@@ -474,10 +474,19 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
 // Modeled response
 
 void fitMetrics(const Eigen::VectorXd& y, const Eigen::VectorXd& yh, double* nrmse, double* fit) {
-  const double mean = y.mean();
-  const double den = (y.array() - mean).matrix().norm();
-  const double num = (y - yh).norm();
-  *nrmse = den > 0.0 ? num / den : kNaN;
+  // Over the samples where both series are finite (a NaN sample of the record must not turn
+  // the whole record's fit into NaN); NaN when there are none or y is constant there.
+  double n = 0.0, sum = 0.0;
+  for (Eigen::Index i = 0; i < y.size(); ++i)
+    if (std::isfinite(y[i]) && std::isfinite(yh[i])) sum += y[i], n += 1.0;
+  const double mean = n > 0.0 ? sum / n : 0.0;
+  double den = 0.0, num = 0.0;
+  for (Eigen::Index i = 0; i < y.size(); ++i) {
+    if (!std::isfinite(y[i]) || !std::isfinite(yh[i])) continue;
+    den += (y[i] - mean) * (y[i] - mean);
+    num += (y[i] - yh[i]) * (y[i] - yh[i]);
+  }
+  *nrmse = den > 0.0 ? std::sqrt(num / den) : kNaN;
   *fit = 100.0 * (1.0 - *nrmse);
 }
 

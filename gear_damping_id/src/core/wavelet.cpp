@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <sstream>
 #if defined(__SSE2__)
@@ -40,6 +41,11 @@ constexpr double kLeakWarn = 1e-2;
 constexpr double kMaxXiOmega0 = 0.25;
 constexpr double kMinFitOmega0 = 3.0;
 constexpr long kMinSamples = 64;
+// The pruned |W| of a row (MorletCwt::prunedModulus) is used when its band fits in M <= N/16
+// bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
+// inverse FFT, whose size-M transforms then no longer fit in cache); they take the full path.
+constexpr long kMinPrunedBatches = 16;
+constexpr long kPrunedChunk = 8192;  // complex values per chunk of batches (128 KiB, in L2)
 constexpr double kMeasureTimeLimitS = 5.0;  // FFTW_MEASURE planning cap per plan [s]
 constexpr long kMinRegionSamples = 16;
 
@@ -87,6 +93,21 @@ void modulusOf(const double* w, long n, T* out) {
   }
 #endif
   for (; i < n; ++i) out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
+}
+
+// out[i] = sqrt(sq[i]) for n non-negative values, two per SSE2 instruction (see modulusOf).
+template <typename T>
+void sqrtOf(const double* sq, long n, T* out) {
+  long i = 0;
+#if defined(__SSE2__)
+  for (; i + 1 < n; i += 2) {
+    alignas(16) double tmp[2];
+    _mm_store_pd(tmp, _mm_sqrt_pd(_mm_loadu_pd(sq + i)));
+    out[i] = static_cast<T>(tmp[0]);
+    out[i + 1] = static_cast<T>(tmp[1]);
+  }
+#endif
+  for (; i < n; ++i) out[i] = static_cast<T>(std::sqrt(sq[i]));
 }
 
 // Bins [lo, hi] of the band where Psi(s*w_k) > 1e-16 of its peak, with a = s * 2*pi*fs/N
@@ -187,13 +208,21 @@ struct MorletCwt::Fftw {
   fftw_plan r2c = nullptr;
   fftw_plan c2c = nullptr;
   long band_lo = 1, band_hi = 0;
+  // Pruned |W| of narrow-band rows (see prunedModulus): divisors of N (ascending), the batch
+  // buffer of N values (allocated on first use) and one batched size-M plan per M used.
+  std::vector<long> divisors;
+  fftw_complex* batch = nullptr;  // one chunk of batches
+  std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
+  std::map<long, fftw_plan> batch_plans;
   ~Fftw() {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (r2c) fftw_destroy_plan(r2c);
     if (c2c) fftw_destroy_plan(c2c);
+    for (auto& p : batch_plans) fftw_destroy_plan(p.second);
     fftw_free(spec);
     fftw_free(in);
     fftw_free(out);
+    fftw_free(batch);
   }
 };
 
@@ -271,6 +300,13 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
   std::memset(f->spec, 0, sizeof(fftw_complex) * (nc / 2 + 1));
   std::memset(f->in, 0, sizeof(fftw_complex) * nc);
   std::memset(f->out, 0, sizeof(fftw_complex) * nc);
+  for (long d = 1; d * d <= n_fft; ++d) {
+    if (n_fft % d == 0) {
+      f->divisors.push_back(d);
+      if (d * d != n_fft) f->divisors.push_back(n_fft / d);
+    }
+  }
+  std::sort(f->divisors.begin(), f->divisors.end());
   fftw_ = std::move(f);
   n_ = n;
   n_fft_ = n_fft;
@@ -310,6 +346,12 @@ bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
 }
 
 const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double omega0) {
+  if (!fillRow(frequency_hz, omega0)) return nullptr;
+  fftw_execute(fftw_->c2c);
+  return reinterpret_cast<const std::complex<double>*>(fftw_->out);
+}
+
+bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   Fftw& f = *fftw_;
   if (!f.c2c) {
     std::lock_guard<std::mutex> lock(plannerMutex());
@@ -318,7 +360,7 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
     // FFTW_MEASURE overwrites both arrays while planning: zero `in` again afterwards; `out`
     // (which holds the r2c input) is not needed once the spectrum is computed.
     f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD, flags);
-    if (!f.c2c) return nullptr;
+    if (!f.c2c) return false;
     std::memset(f.in, 0, sizeof(fftw_complex) * static_cast<size_t>(n_fft_));
     f.band_lo = 1;
     f.band_hi = 0;
@@ -360,8 +402,103 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
       r *= q;
     }
   }
-  fftw_execute(f.c2c);
-  return reinterpret_cast<const std::complex<double>*>(f.out);
+  return true;
+}
+
+// |W| of the row whose band fillRow left in in[lo..hi], without the full inverse FFT.
+// With B = hi - lo + 1 nonzero bins, M a divisor of N with M >= B and P = N/M, sample
+// j = q*P + p (0 <= p < P, 0 <= q < M) of the inverse DFT is
+//   W_j = e^{2 pi i lo j/N} * sum_{k<M} (in_{lo+k} e^{2 pi i k p/N}) e^{2 pi i k q/M},
+// i.e. P inverse FFTs of size M of twiddled copies of the band, and |W_j| drops the leading
+// phase. Cost ~ N log M + N twiddles instead of N log N. The P batches are processed in
+// chunks of C (C*M <= kPrunedChunk values) so twiddling, the FFTs and the transposition into
+// time order all stay in cache. Returns false when no divisor makes it worthwhile
+// (M > N/kMinPrunedBatches): the caller then uses the full inverse FFT.
+template <typename T>
+bool MorletCwt::prunedModulus(T* out) {
+  Fftw& f = *fftw_;
+  const long lo = f.band_lo, hi = f.band_hi;
+  if (lo > hi) {
+    std::fill(out, out + n_, T(0));
+    return true;
+  }
+  const long B = hi - lo + 1;
+  const auto it = std::lower_bound(f.divisors.begin(), f.divisors.end(), B);
+  if (it == f.divisors.end() || *it * kMinPrunedBatches > n_fft_) return false;
+  const long M = *it, P = n_fft_ / M;
+  long C = std::max(1L, std::min(P, kPrunedChunk / M));
+  while (P % C != 0) --C;  // chunks of equal size: one plan
+  fftw_plan plan = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    if (!f.batch) {
+      // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches.
+      f.batch = fftw_alloc_complex(
+          static_cast<size_t>(std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches)));
+      if (!f.batch) return false;
+      f.tw.resize(static_cast<size_t>(4 * (n_fft_ / kMinPrunedBatches + 1) + n_fft_));
+    }
+    auto found = f.batch_plans.find(M);
+    if (found == f.batch_plans.end()) {
+      // FFTW_ESTIMATE always: up to one plan per row size, each planned in ~1 ms.
+      fftw_set_timelimit(FFTW_NO_TIMELIMIT);
+      const int m = static_cast<int>(M);
+      fftw_plan pl = fftw_plan_many_dft(1, &m, static_cast<int>(C), f.batch, nullptr, 1, m,
+                                        f.batch, nullptr, 1, m, FFTW_BACKWARD, FFTW_ESTIMATE);
+      if (!pl) return false;
+      found = f.batch_plans.emplace(M, pl).first;
+    }
+    plan = found->second;
+  }
+  // Twiddles e^{2 pi i k p/N} for k < B, kept per k (structure of arrays: tr, ti) and advanced
+  // along p by the per-k step e^{2 pi i k/N} (sr, si): independent per k, so the loop
+  // vectorises; re-seeded exactly (integer phase k*p mod N) every kRecurrenceBlock batches.
+  double* tr = f.tw.data();
+  double* ti = tr + B;
+  double* sr = ti + B;
+  double* si = sr + B;
+  double* sq = si + B;  // C squared moduli
+  const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
+  for (long k = 0; k < B; ++k) {
+    sr[k] = std::cos(two_pi_over_n * static_cast<double>(k));
+    si[k] = std::sin(two_pi_over_n * static_cast<double>(k));
+  }
+  const double* x = reinterpret_cast<const double*>(f.in + lo);
+  double* b = reinterpret_cast<double*>(f.batch);
+  const long q_end = (n_ + P - 1) / P;  // q with some q*P + p < n
+  for (long p0 = 0; p0 < P; p0 += C) {
+    for (long c = 0; c < C; ++c) {
+      const long p = p0 + c;
+      if (p % kRecurrenceBlock == 0) {
+        for (long k = 0; k < B; ++k) {
+          const double ph = two_pi_over_n * static_cast<double>((k * p) % n_fft_);
+          tr[k] = std::cos(ph);
+          ti[k] = std::sin(ph);
+        }
+      }
+      double* bc = b + 2 * c * M;
+      for (long k = 0; k < B; ++k) {
+        const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
+        bc[2 * k] = xr * ar - xi * ai;
+        bc[2 * k + 1] = xr * ai + xi * ar;
+        tr[k] = ar * sr[k] - ai * si[k];
+        ti[k] = ar * si[k] + ai * sr[k];
+      }
+      std::memset(bc + 2 * B, 0, sizeof(fftw_complex) * static_cast<size_t>(M - B));
+    }
+    fftw_execute(plan);
+    // out[q*P + p] = |chunk[(p - p0)*M + q]| (squares gathered, then vector square roots).
+    for (long q = 0; q < q_end; ++q) {
+      const long j0 = q * P + p0;
+      const long ce = std::min(C, n_ - j0);
+      for (long c = 0; c < ce; ++c) {
+        const double re = b[2 * (c * M + q)], im = b[2 * (c * M + q) + 1];
+        sq[c] = re * re + im * im;
+      }
+      if (ce > 0) sqrtOf(sq, ce, out + j0);
+    }
+  }
+  return true;
 }
 
 const std::complex<double>* MorletCwt::row(int i) {
@@ -377,19 +514,20 @@ const std::complex<double>* MorletCwt::rowAt(double frequency_hz, double omega0)
   return computeRow(frequency_hz, omega0);
 }
 
-bool MorletCwt::rowModulus(int i, double* out) {
-  const std::complex<double>* w = row(i);
-  if (!w || !out) return false;
-  modulusOf(reinterpret_cast<const double*>(w), n_, out);
+template <typename T>
+bool MorletCwt::rowModulusImpl(int i, T* out) {
+  if (!has_signal_ || i < 0 || i >= rows() || !out) return false;
+  if (!fillRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)])) {
+    return false;
+  }
+  if (pruned_ && prunedModulus(out)) return true;
+  fftw_execute(fftw_->c2c);
+  modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
   return true;
 }
 
-bool MorletCwt::rowModulus(int i, float* out) {
-  const std::complex<double>* w = row(i);
-  if (!w || !out) return false;
-  modulusOf(reinterpret_cast<const double*>(w), n_, out);
-  return true;
-}
+bool MorletCwt::rowModulus(int i, double* out) { return rowModulusImpl(i, out); }
+bool MorletCwt::rowModulus(int i, float* out) { return rowModulusImpl(i, out); }
 
 bool MorletCwt::transform(const double* y, std::complex<double>* out, std::string* error) {
   if (!out) return setError(error, "MorletCwt: null output"), false;
@@ -403,26 +541,27 @@ bool MorletCwt::transform(const double* y, std::complex<double>* out, std::strin
   return true;
 }
 
-bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
+namespace {
+// Both transformModulus overloads: setSignal, then |W| of every row into out (row-major).
+template <typename T>
+bool transformModulusInto(MorletCwt* cwt, const double* y, T* out, std::string* error) {
   if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!setSignal(y, error)) return false;
-  for (int i = 0; i < rows(); ++i) {
-    if (!rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(n_))) {
+  if (!cwt->setSignal(y, error)) return false;
+  for (int i = 0; i < cwt->rows(); ++i) {
+    if (!cwt->rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(cwt->size()))) {
       return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
     }
   }
   return true;
 }
+}  // namespace
+
+bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
+  return transformModulusInto(this, y, out, error);
+}
 
 bool MorletCwt::transformModulus(const double* y, float* out, std::string* error) {
-  if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!setSignal(y, error)) return false;
-  for (int i = 0; i < rows(); ++i) {
-    if (!rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(n_))) {
-      return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
-    }
-  }
-  return true;
+  return transformModulusInto(this, y, out, error);
 }
 
 namespace {

@@ -21,10 +21,12 @@ bool writeSignalCsv(const std::string& path, const SignalTable& table, std::stri
 /// Reads a CSV into `out`. Accepts any order/subset of the known columns; `required` columns
 /// must be present (default time and dte). Errors name the line and column: cannot open, empty
 /// file, missing header, unknown or duplicate column, wrong field count, malformed number,
-/// NaN/Inf, time not strictly increasing, fewer than two rows. (Uniformity of the time step is
-/// the analysers' check.)
+/// NaN/Inf (unless `allow_non_finite`: then NaN/Inf are kept in every column but time, for
+/// analysers that report the affected segments as not identifiable), time not strictly
+/// increasing, fewer than two rows. (Uniformity of the time step is the analysers' check.)
 bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
-                   const std::vector<std::string>& required = {"time", "dte"});
+                   const std::vector<std::string>& required = {"time", "dte"},
+                   bool allow_non_finite = false);
 
 /// A load-torque file for the simulator's `load.profile: csv`: columns time and torque.
 inline bool readTorqueCsv(const std::string& path, SignalTable* out, std::string* error) {

@@ -76,7 +76,7 @@ bool writeSignalCsv(const std::string& path, const SignalTable& table, std::stri
 }
 
 bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
-                   const std::vector<std::string>& required) {
+                   const std::vector<std::string>& required, bool allow_non_finite) {
   auto fail = [&](const std::string& what) {
     if (error) *error = path + ": " + what;
     return false;
@@ -140,7 +140,7 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
         while (q < end && *q != ',') ++q;
         return fail(where + ": malformed number '" + std::string(p, q) + "'");
       }
-      if (!std::isfinite(v))
+      if (!std::isfinite(v) && (!allow_non_finite || map[field] == 0))
         return fail(where + ": value is not finite (" + std::string(p, r.ptr) + ")");
       data[map[field]].push_back(v);
       p = r.ptr;

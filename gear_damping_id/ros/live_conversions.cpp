@@ -1,6 +1,6 @@
-#include "gear_damping_id_ros/conversions.hpp"
+#include "gear_damping_ros/live_conversions.hpp"
 
-namespace gear_damping_id_ros {
+namespace gear_damping_ros {
 
 namespace gd = gear_damping_id;
 
@@ -32,50 +32,6 @@ bool toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh
   return true;
 }
 
-gear_damping::DampingSegment toMsg(const gd::SegmentEstimate& e) {
-  gear_damping::DampingSegment s;
-  s.t_start = e.t_start;
-  s.t_end = e.t_end;
-  s.C = e.C;
-  s.C_std = e.C_std;
-  s.c = e.c;
-  s.xi = e.xi;
-  s.k_min = e.k_min;
-  s.k_max = e.k_max;
-  s.identifiable = e.identifiable;
-  s.reason = e.reason;
-  return s;
-}
-
-gear_damping::DampingArray toMsg(const gd::IdentificationResult& r) {
-  gear_damping::DampingArray a;
-  a.formulation = gd::toString(r.formulation);
-  a.model = gd::toString(r.model);
-  a.equivalent_mass = r.equivalent_mass;
-  a.omega0 = r.omega0;
-  for (const auto& e : r.segments) a.segments.push_back(toMsg(e));
-  a.c0 = a.c0_std = a.c1 = a.c1_std = gd::kNaN;
-  if (r.load_law) {
-    a.c0 = r.load_law->c0;
-    a.c0_std = r.load_law->c0_std;
-    a.c1 = r.load_law->c1;
-    a.c1_std = r.load_law->c1_std;
-  }
-  return a;
-}
-
-gear_damping::ModeledResponse toMsg(const gd::ModeledResponse& m, double sample_rate,
-                                    std::uint64_t first_index) {
-  gear_damping::ModeledResponse msg;
-  msg.sample_rate = sample_rate;
-  msg.first_index = first_index;
-  msg.observed.assign(m.observed.data(), m.observed.data() + m.observed.size());
-  msg.modeled.assign(m.modeled.data(), m.modeled.data() + m.modeled.size());
-  msg.nrmse = m.nrmse;
-  msg.fit_percent = m.fit_percent;
-  return msg;
-}
-
 gear_damping::WaveletModes toMsg(const gd::WaveletResult& r, double t_start, double t_end) {
   gear_damping::WaveletModes msg;
   msg.t_start = t_start;
@@ -96,4 +52,4 @@ gear_damping::WaveletModes toMsg(const gd::WaveletResult& r, double t_start, dou
   return msg;
 }
 
-}  // namespace gear_damping_id_ros
+}  // namespace gear_damping_ros

@@ -1,0 +1,73 @@
+// Analysis outputs of the `analyze` tool (DESIGN.md §6): the result JSON, the readable segment
+// table and the CSV tables. No ROS (nlohmann::json only), so the tests and the tools share it.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "gear_damping_id/identification_types.hpp"
+#include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/wavelet.hpp"
+
+namespace gear_damping_id {
+
+/// One identification run (one formulation x damping model) and its modeled response.
+struct AnalysisRun {
+  IdentificationOptions options;
+  IdentificationResult result;
+  ModeledResponse response;    ///< empty when `response_error` is set
+  std::string response_error;  ///< why no modeled response could be computed
+  double t0 = 0.0, dt = 0.0;   ///< [s] time of sample 0 and sample step (for response times)
+  std::string name() const;    ///< "<formulation>_<model>", e.g. "known_piecewise"
+};
+
+/// JSON of one segment estimate (DESIGN §6 keys: t_start, t_end, C, C_std, c, xi, k_min, k_max,
+/// plus identifiable/reason/samples/windows/condition/refined). Non-finite numbers become null.
+nlohmann::json segmentJson(const SegmentEstimate& s, Formulation f);
+
+/// JSON of one run: formulation, model, options, segments[], constant, load_law, warnings and
+/// response {nrmse, fit_percent}.
+nlohmann::json runJson(const AnalysisRun& run);
+
+/// The DESIGN §6 document: `identification` and `response` from the primary (first) run,
+/// with the `constant` and `load_law` blocks taken from whichever run computed them, and
+/// `runs[]` with every run in full. `input` describes the analysed record.
+nlohmann::json analysisJson(const std::vector<AnalysisRun>& runs, const nlohmann::json& input);
+
+/// Readable tables on `os`: one per run (segments with C, its standard error, c, xi, k levels)
+/// and a summary line per run (constant / load-law estimates, fit %).
+void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs);
+
+/// Writes `dir`/segments.csv (all runs, long format), `dir`/summary.csv (one row per run) and
+/// `dir`/response_<run>.csv (time, observed, modeled). Creates `dir`. False with `*error`.
+bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error);
+
+/// JSON of a wavelet validation (DESIGN §6 `wavelet`): modes[] with frequency_hz,
+/// damping_ratio, r2, t_start, t_end, sigma, spectrum_frequency_hz, omega0,
+/// integral_damping_ratio, warning; plus warnings, noise_std and the scalogram's omega0.
+nlohmann::json waveletJson(const WaveletResult& w);
+
+/// Adds t0 [s] to every time of `w` (decay regions, scalogram columns): analyzeWavelet counts
+/// time from the first sample it was given, the outputs use the record's time axis.
+void shiftWaveletTimes(WaveletResult* w, double t0);
+
+/// The modes as a table like the paper's Table 2 (frequency, xi wavelet, xi integral, R^2,
+/// decay region, warning).
+void printWaveletTable(std::ostream& os, const WaveletResult& w);
+
+/// Writes `dir`/wavelet_modes.csv, wavelet_spectrum.csv, wavelet_scalogram.csv (when the
+/// result holds a scalogram) and wavelet_envelopes.csv: `mode,time,envelope` with the envelope
+/// |W(f_mode, t)| of each fitted mode at the omega0 of its fit, recomputed from the record
+/// y[0, n) sampled at `sample_rate` with its first sample at time t0 (times in the file are
+/// t0 + j/fs, so `w`'s times should be shifted by t0 too: see shiftWaveletTimes), every d-th
+/// sample so that at most `max_points` rows per mode remain. False with `*error`.
+bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
+                     double sample_rate, double t0, long max_points, std::string* error);
+
+/// Writes `text` to `path` atomically (a temporary file renamed on success), so a failed run
+/// never leaves a partial file that looks complete. False with `*error`.
+bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error);
+
+}  // namespace gear_damping_id

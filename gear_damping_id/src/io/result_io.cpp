@@ -1,0 +1,333 @@
+#include "gear_damping_id/result_io.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <sstream>
+
+namespace gear_damping_id {
+namespace {
+
+using nlohmann::json;
+
+json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+bool hasStiffnessLevels(Formulation f) { return f != Formulation::Known; }
+
+// Full precision for the CSV tables; empty field for a non-finite value.
+std::string csvNum(double v) {
+  if (!std::isfinite(v)) return "";
+  std::ostringstream o;
+  o << std::setprecision(std::numeric_limits<double>::max_digits10) << v;
+  return o.str();
+}
+
+// Field quoting for free text (reasons): quotes doubled, field quoted.
+std::string csvText(const std::string& s) {
+  std::string q = "\"";
+  for (char ch : s) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+  return q + "\"";
+}
+
+const SegmentEstimate* sharedEstimate(const IdentificationResult& r) {
+  return r.constant ? &*r.constant : nullptr;
+}
+
+std::string fmt(double v, int precision, bool fixed = false) {
+  if (!std::isfinite(v)) return "-";
+  std::ostringstream o;
+  if (fixed) o << std::fixed;
+  o << std::setprecision(precision) << v;
+  return o.str();
+}
+
+}  // namespace
+
+std::string AnalysisRun::name() const {
+  return toString(options.formulation) + "_" + toString(options.model);
+}
+
+json segmentJson(const SegmentEstimate& s, Formulation f) {
+  json j = {{"t_start", num(s.t_start)}, {"t_end", num(s.t_end)},    {"C", num(s.C)},
+            {"C_std", num(s.C_std)},     {"c", num(s.c)},            {"xi", num(s.xi)},
+            {"identifiable", s.identifiable}, {"samples", s.samples}, {"windows", s.windows},
+            {"condition", num(s.condition)},  {"refined", s.refined}};
+  if (!s.identifiable) j["reason"] = s.reason;
+  if (hasStiffnessLevels(f)) {
+    j["k_min"] = num(s.k_min);
+    j["k_max"] = num(s.k_max);
+    j["k_min_std"] = num(s.k_min_std);
+    j["k_max_std"] = num(s.k_max_std);
+  }
+  if (std::isfinite(s.mean_torque)) j["mean_torque"] = s.mean_torque;
+  if (std::isfinite(s.forcing)) j["forcing"] = s.forcing;
+  return j;
+}
+
+json runJson(const AnalysisRun& run) {
+  const IdentificationResult& r = run.result;
+  json j;
+  j["formulation"] = toString(r.formulation);
+  j["model"] = toString(r.model);
+  j["estimator"] = r.estimator;
+  j["iterations"] = r.iterations;
+  j["noise_std"] = num(r.noise_std);
+  j["equivalent_mass"] = num(r.equivalent_mass);
+  j["omega0"] = num(r.omega0);
+  j["window_length"] = num(r.window_length);
+  j["segment_length"] = num(run.options.segment_length);
+  j["segments"] = json::array();
+  for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
+  if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
+  if (r.load_law) {
+    const LoadLawEstimate& l = *r.load_law;
+    j["load_law"] = {{"c0", num(l.c0)},         {"c0_std", num(l.c0_std)},
+                     {"c1", num(l.c1)},         {"c1_std", num(l.c1_std)},
+                     {"identifiable", l.identifiable}};
+    if (!l.identifiable) j["load_law"]["reason"] = l.reason;
+  }
+  j["warnings"] = r.warnings;
+  if (run.response_error.empty()) {
+    j["response"] = {{"nrmse", num(run.response.nrmse)},
+                     {"fit_percent", num(run.response.fit_percent)}};
+  } else {
+    j["response"] = {{"nrmse", nullptr}, {"fit_percent", nullptr}, {"error", run.response_error}};
+  }
+  return j;
+}
+
+json analysisJson(const std::vector<AnalysisRun>& runs, const json& input) {
+  json doc;
+  doc["input"] = input;
+  if (runs.empty()) return doc;
+  json primary = runJson(runs.front());
+  json id = primary;
+  id.erase("response");
+  // The constant / load-law blocks of DESIGN §6 come from the run that computed them.
+  for (const auto& run : runs) {
+    if (run.options.formulation != runs.front().options.formulation) continue;
+    json rj = runJson(run);
+    if (!id.contains("constant") && rj.contains("constant")) id["constant"] = rj["constant"];
+    if (!id.contains("load_law") && rj.contains("load_law")) id["load_law"] = rj["load_law"];
+  }
+  doc["identification"] = id;
+  doc["response"] = primary["response"];
+  doc["runs"] = json::array();
+  for (const auto& run : runs) doc["runs"].push_back(runJson(run));
+  return doc;
+}
+
+void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
+  for (const auto& run : runs) {
+    const IdentificationResult& r = run.result;
+    const bool levels = hasStiffnessLevels(r.formulation);
+    os << "== " << toString(r.formulation) << " formulation, " << toString(r.model)
+       << " model (" << r.estimator << ", window " << fmt(r.window_length * 1e3, 4)
+       << " ms, omega0 " << fmt(r.omega0, 6) << " rad/s, Me " << fmt(r.equivalent_mass, 6)
+       << " kg)\n";
+    if (r.model == DampingModel::Piecewise) {
+      os << "  seg   t_start[ms]  t_end[ms]      C[1/s]   C_std[1/s]     c[N*s/m]       xi[-]";
+      if (levels) os << "   k_min[N/m]   k_max[N/m]";
+      os << "\n";
+      int i = 0;
+      for (const auto& s : r.segments) {
+        os << "  " << std::setw(3) << i++ << "  " << std::setw(11) << fmt(s.t_start * 1e3, 4, true)
+           << "  " << std::setw(9) << fmt(s.t_end * 1e3, 4, true);
+        if (!s.identifiable) {
+          os << "   not identifiable: " << s.reason << "\n";
+          continue;
+        }
+        os << "  " << std::setw(10) << fmt(s.C, 6) << "  " << std::setw(11) << fmt(s.C_std, 3)
+           << "  " << std::setw(11) << fmt(s.c, 6) << "  " << std::setw(10) << fmt(s.xi, 5);
+        if (levels) os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
+                       << fmt(s.k_max, 6);
+        os << "\n";
+      }
+    }
+    if (const SegmentEstimate* c = sharedEstimate(r)) {
+      os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3) << " 1/s, c = "
+         << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
+      if (!c->identifiable) os << " (not identifiable: " << c->reason << ")";
+      os << "\n";
+    }
+    if (r.load_law) {
+      const LoadLawEstimate& l = *r.load_law;
+      os << "  load law: c(t) = c0 + c1*T1(t), c0 = " << fmt(l.c0, 6) << " +- " << fmt(l.c0_std, 3)
+         << " N*s/m, c1 = " << fmt(l.c1, 6) << " +- " << fmt(l.c1_std, 3) << " N*s/m/(N*m)";
+      if (!l.identifiable) os << " (not identifiable: " << l.reason << ")";
+      os << "\n";
+    }
+    if (run.response_error.empty()) {
+      os << "  modeled response: fit " << fmt(run.response.fit_percent, 4, true) << " %, NRMSE "
+         << fmt(run.response.nrmse, 4) << "\n";
+    } else {
+      os << "  modeled response: not available (" << run.response_error << ")\n";
+    }
+    for (const auto& w : r.warnings) os << "  warning: " << w << "\n";
+  }
+}
+
+json waveletJson(const WaveletResult& w) {
+  json j;
+  j["omega0"] = num(w.omega0);
+  j["noise_std"] = num(w.noise_std);
+  j["warnings"] = w.warnings;
+  j["modes"] = json::array();
+  for (const auto& m : w.modes) {
+    j["modes"].push_back({{"frequency_hz", num(m.frequency_hz)},
+                          {"spectrum_frequency_hz", num(m.spectrum_frequency_hz)},
+                          {"damping_ratio", num(m.damping_ratio)},
+                          {"r2", num(m.r2)},
+                          {"sigma", num(m.sigma)},
+                          {"t_start", num(m.t_start)},
+                          {"t_end", num(m.t_end)},
+                          {"omega0", num(m.omega0)},
+                          {"peak_amplitude", num(m.peak_amplitude)},
+                          {"noise_floor", num(m.noise_floor)},
+                          {"integral_damping_ratio", num(m.integral_xi)},
+                          {"warning", m.warning}});
+  }
+  return j;
+}
+
+void shiftWaveletTimes(WaveletResult* w, double t0) {
+  for (auto& m : w->modes) m.t_start += t0, m.t_end += t0;
+  for (auto& t : w->scalogram_times) t += t0;
+}
+
+void printWaveletTable(std::ostream& os, const WaveletResult& w) {
+  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): "
+     << w.modes.size() << " mode(s)\n"
+     << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]\n";
+  int i = 0;
+  for (const auto& m : w.modes) {
+    os << "  " << std::setw(4) << i++ << "  " << std::setw(11) << fmt(m.frequency_hz, 6) << "  "
+       << std::setw(10) << fmt(m.damping_ratio, 4) << "  " << std::setw(11) << fmt(m.integral_xi, 4)
+       << "  " << std::setw(8) << fmt(m.r2, 4) << "  " << fmt(m.t_start * 1e3, 4) << " - "
+       << fmt(m.t_end * 1e3, 4) << "\n";
+    if (!m.warning.empty()) os << "        warning: " << m.warning << "\n";
+  }
+  for (const auto& s : w.warnings) os << "  warning: " << s << "\n";
+}
+
+bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
+                     double sample_rate, double t0, long max_points, std::string* error) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    *error = dir + ": cannot create directory (" + ec.message() + ")";
+    return false;
+  }
+  auto check = [&](const std::string& e) {
+    if (!e.empty()) *error = e;
+    return e.empty();
+  };
+  std::ostringstream modes, spectrum, scalogram;
+  if (!check(writeModesCsv(w, modes)) || !check(writeSpectrumCsv(w, spectrum))) return false;
+  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error) ||
+      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error))
+    return false;
+  if (w.modulus.size() > 0) {
+    if (!check(writeScalogramCsv(w, scalogram)) ||
+        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error))
+      return false;
+  }
+  // Envelopes of the fitted modes, each at the omega0 of its fit.
+  std::vector<double> freqs, omegas;
+  std::vector<int> index;
+  for (size_t k = 0; k < w.modes.size(); ++k) {
+    const WaveletMode& m = w.modes[k];
+    if (std::isfinite(m.frequency_hz) && std::isfinite(m.omega0)) {
+      freqs.push_back(m.frequency_hz);
+      omegas.push_back(m.omega0);
+      index.push_back(static_cast<int>(k));
+    }
+  }
+  std::ostringstream env;
+  env << "mode,time,envelope\n";
+  if (!freqs.empty()) {
+    MorletCwt cwt;
+    std::string e;
+    if (!cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::kEstimate, &e) ||
+        !cwt.setSignal(y, &e)) {
+      *error = "wavelet envelopes: " + e;
+      return false;
+    }
+    std::vector<double> row(static_cast<size_t>(n));
+    const long step = std::max<long>(1, (n + max_points - 1) / std::max<long>(1, max_points));
+    for (size_t r = 0; r < freqs.size(); ++r) {
+      if (!cwt.rowModulus(static_cast<int>(r), row.data())) continue;
+      for (long j = 0; j < n; j += step)
+        env << index[r] << "," << csvNum(t0 + static_cast<double>(j) / sample_rate) << ","
+            << csvNum(row[static_cast<size_t>(j)]) << "\n";
+    }
+  }
+  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error);
+}
+
+bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error) {
+  const std::string tmp = path + ".partial";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f || !(f << text) || !f.flush()) {
+      std::remove(tmp.c_str());
+      *error = path + ": cannot write";
+      return false;
+    }
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    *error = path + ": cannot write";
+    return false;
+  }
+  return true;
+}
+
+bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    *error = dir + ": cannot create directory (" + ec.message() + ")";
+    return false;
+  }
+  std::ostringstream seg, sum;
+  seg << "formulation,model,segment,t_start,t_end,C,C_std,c,xi,k_min,k_max,identifiable,reason\n";
+  sum << "formulation,model,estimator,C,C_std,c,xi,c0,c0_std,c1,c1_std,nrmse,fit_percent\n";
+  for (const auto& run : runs) {
+    const IdentificationResult& r = run.result;
+    const std::string head = toString(r.formulation) + "," + toString(r.model) + ",";
+    int i = 0;
+    for (const auto& s : r.segments) {
+      seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << ","
+          << csvNum(s.C) << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi)
+          << "," << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0)
+          << "," << (s.identifiable ? std::string() : csvText(s.reason)) << "\n";
+    }
+    const SegmentEstimate* c = sharedEstimate(r);
+    const LoadLawEstimate* l = r.load_law ? &*r.load_law : nullptr;
+    sum << head << r.estimator << "," << csvNum(c ? c->C : kNaN) << ","
+        << csvNum(c ? c->C_std : kNaN) << "," << csvNum(c ? c->c : kNaN) << ","
+        << csvNum(c ? c->xi : kNaN) << "," << csvNum(l ? l->c0 : kNaN) << ","
+        << csvNum(l ? l->c0_std : kNaN) << "," << csvNum(l ? l->c1 : kNaN) << ","
+        << csvNum(l ? l->c1_std : kNaN) << "," << csvNum(run.response.nrmse) << ","
+        << csvNum(run.response.fit_percent) << "\n";
+    if (run.response_error.empty() && run.response.observed.size() > 0) {
+      std::ostringstream resp;
+      resp << "time,observed,modeled\n";
+      for (Eigen::Index k = 0; k < run.response.observed.size(); ++k) {
+        const double t = run.t0 + static_cast<double>(run.response.begin + k) * run.dt;
+        resp << csvNum(t) << "," << csvNum(run.response.observed[k]) << ","
+             << csvNum(run.response.modeled[k]) << "\n";
+      }
+      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error))
+        return false;
+    }
+  }
+  return writeFileAtomically(dir + "/segments.csv", seg.str(), error) &&
+         writeFileAtomically(dir + "/summary.csv", sum.str(), error);
+}
+
+}  // namespace gear_damping_id

@@ -1,0 +1,700 @@
+// rosrun gear_damping analyze --input FILE.csv|FILE.bag [--params GEAR.yaml] [--output result.json]
+//     [--formulation known|greybox|paper|legacy]... [--model piecewise|constant|load_law]...
+//     [--segment S] [--window S] [--t-start S] [--t-end S] [--refine auto|always|never]
+//     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
+//     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
+//                [--decay-region T0,T1]...]
+//
+// Identifies the mesh damping of a DTE record (CSV with the DESIGN §6 columns, or a bag of
+// gear_damping/SignalChunk messages) with the integral method (DESIGN §4) for every requested
+// formulation x damping model, re-simulates the modeled response of each, prints a table per
+// run on stdout and writes the DESIGN §6 JSON, CSV tables and a bag of results on request.
+// --wavelet adds the Morlet wavelet validation (DESIGN §5: modes, their damping ratios beside
+// the integral method's); without gear parameters (a `time,dte` record and no --params) the
+// wavelet validation runs alone.
+// Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
+// Exit codes (README "analyze"): 0 success, 1 invalid command line or option value, 2 invalid
+// input (file, columns, numbers, time axis, chunks, gear parameters, sample rate, length),
+// 3 an output could not be written, 4 nothing identifiable in the record. Messages on stderr.
+#include <gear_damping/DampingArray.h>
+#include <gear_damping/ModeledResponse.h>
+#include <gear_damping/WaveletModes.h>
+#include <rosbag/bag.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "gear_damping_id/input_checks.hpp"
+#include "gear_damping_id/integral_method.hpp"
+#include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_ros/id_conversions.hpp"
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/signal_csv.hpp"
+#include "gear_sim_ros/bag_io.hpp"
+
+namespace gd = gear_damping_id;
+using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
+
+namespace {
+
+constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitNothing = 4;
+
+int fail(int code, const std::string& message) {
+  std::cerr << "analyze: " << message << "\n";
+  return code;
+}
+
+void warn(const std::string& message) { std::cerr << "analyze: warning: " << message << "\n"; }
+
+bool endsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+bool anyIdentifiable(const gd::IdentificationResult& r) {
+  if (r.constant && r.constant->identifiable) return true;
+  if (r.load_law && r.load_law->identifiable) return true;
+  for (const auto& s : r.segments)
+    if (s.identifiable) return true;
+  return false;
+}
+
+// Progress on stderr for long records, only when stderr is a terminal.
+class Progress {
+ public:
+  explicit Progress(std::int64_t total) : total_(total), on_(isatty(2) && total >= 1000000) {}
+  void update(std::int64_t done) {
+    if (!on_) return;
+    const int pct = static_cast<int>(100.0 * static_cast<double>(done) / static_cast<double>(total_));
+    if (pct == last_) return;
+    last_ = pct;
+    std::fprintf(stderr, "\ranalyze: %3d %% (%lld of %lld samples)", pct,
+                 static_cast<long long>(done), static_cast<long long>(total_));
+    std::fflush(stderr);
+  }
+  ~Progress() {
+    if (on_ && last_ >= 0) std::fprintf(stderr, "\n");
+  }
+
+ private:
+  std::int64_t total_;
+  bool on_;
+  int last_ = -1;
+};
+
+// Streaming sums for the NRMSE of a response assembled from blocks (Chan's parallel update).
+struct FitAccumulator {
+  double n = 0, mean = 0, m2 = 0, sse = 0;
+  void add(const gd::ModeledResponse& r) {
+    const Eigen::Index m = r.observed.size();
+    if (m == 0) return;
+    const double bm = r.observed.mean();
+    const double bm2 = (r.observed.array() - bm).square().sum();
+    const double nb = static_cast<double>(m), nt = n + nb, d = bm - mean;
+    mean += d * nb / nt;
+    m2 += bm2 + d * d * n * nb / nt;
+    n = nt;
+    sse += (r.observed - r.modeled).squaredNorm();
+  }
+  void finish(gd::ModeledResponse* out) const {
+    out->nrmse = n > 0 && m2 > 0 ? std::sqrt(sse / m2) : gd::kNaN;
+    out->fit_percent = 100.0 * (1.0 - out->nrmse);
+  }
+};
+
+// The optional bag of results (written to a temporary file, renamed when complete).
+class ResultBag {
+ public:
+  bool open(const std::string& path, std::string* error) {
+    path_ = path;
+    try {
+      bag_ = std::make_unique<rosbag::Bag>(path + ".partial", rosbag::bagmode::Write);
+    } catch (const std::exception& e) {
+      *error = path + ": cannot write (" + e.what() + ")";
+      return false;
+    }
+    return true;
+  }
+  bool active() const { return bag_ != nullptr; }
+  template <class M>
+  void write(const std::string& topic, double t, M msg) {
+    if (!bag_) return;
+    const ros::Time stamp = ros::Time(1.0) + ros::Duration(std::max(0.0, t));
+    msg.header.stamp = stamp;
+    bag_->write(topic, stamp, msg);
+  }
+  bool close(std::string* error) {
+    if (!bag_) return true;
+    try {
+      bag_->close();
+    } catch (const std::exception& e) {
+      *error = path_ + ": cannot write (" + e.what() + ")";
+      return false;
+    }
+    bag_.reset();
+    if (std::rename((path_ + ".partial").c_str(), path_.c_str()) != 0) {
+      *error = path_ + ": cannot write";
+      return false;
+    }
+    return true;
+  }
+  ~ResultBag() {
+    if (bag_) {  // not closed: an error path; leave nothing that looks complete
+      try {
+        bag_->close();
+      } catch (...) {
+      }
+      std::remove((path_ + ".partial").c_str());
+    }
+  }
+
+ private:
+  std::string path_;
+  std::unique_ptr<rosbag::Bag> bag_;
+};
+
+std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) {
+  return primary ? std::string("/gear/") + leaf : "/gear/" + run.name() + "/" + leaf;
+}
+
+// Streaming analysis of a long bag: segment by segment, memory bounded by a segment.
+// Piecewise known/greybox/paper runs treat each segment as its own record (the unknowns are
+// segment-local, so this is the whole-record estimate; refinement and modeled response are per
+// segment, each response starting from its segment's identified state). Runs with shared
+// unknowns (constant, load_law, legacy) accumulate their normal equations with IntegralMethod;
+// their output-error refinement and modeled response need the whole record and are skipped
+// with a warning.
+bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
+                      std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
+                      std::vector<double>* wavelet_dte, size_t wavelet_max, std::string* error) {
+  gd::SignalView whole;
+  whole.dt = 1.0 / info.sample_rate;
+  whole.t0 = static_cast<double>(info.first_index) * whole.dt;
+  whole.n = static_cast<Eigen::Index>(info.samples);
+  const Ranges ranges = gd::segmentRanges(whole, runs->front().options);
+  if (ranges.empty()) {
+    *error = "no samples in the analysed time range";
+    return false;
+  }
+  // Legacy forcing: the mean load over the analysed range (one extra pass).
+  double fbar = gd::kNaN;
+  bool legacy = false;
+  for (const auto& r : *runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
+  if (legacy && info.torque) {
+    double sum = 0.0;
+    long long cnt = 0;
+    if (!gear_sim_ros::streamSignalBag(info, ranges,
+                                       [&](const gear_sim::SignalTable& t, size_t) {
+                                         sum += t.torque.sum();
+                                         cnt += t.torque.size();
+                                         return true;
+                                       },
+                                       error))
+      return false;
+    fbar = gear.force_factor * sum / static_cast<double>(cnt);
+  }
+  struct State {
+    std::unique_ptr<gd::IntegralMethod> method;  // shared-unknown runs
+    FitAccumulator fit;
+    bool per_segment = false;
+  };
+  std::vector<State> states(runs->size());
+  // The default window from the record's mean stiffness, as for a record read whole.
+  double window = runs->front().options.window_length;
+  if (!(window > 0.0)) {
+    gd::SignalView mean_k = whole;
+    mean_k.n = info.stiffness_mean > 0.0 ? 1 : 0;
+    mean_k.stiffness = &info.stiffness_mean;
+    window = gd::defaultWindowLength(mean_k, gear);
+  }
+  Progress progress(static_cast<std::int64_t>(ranges.back().second - ranges.front().first));
+  const bool ok = gear_sim_ros::streamSignalBag(
+      info, ranges, [&](const gear_sim::SignalTable& block, size_t r) {
+        const gd::SignalView view = gd::SignalView::of(block);
+        if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
+          const size_t take = std::min(wavelet_max - wavelet_dte->size(),
+                                       static_cast<size_t>(block.dte.size()));
+          wavelet_dte->insert(wavelet_dte->end(), block.dte.data(), block.dte.data() + take);
+        }
+        for (size_t k = 0; k < runs->size(); ++k) {
+          gd::AnalysisRun& run = (*runs)[k];
+          State& st = states[k];
+          gd::IdentificationOptions o = run.options;
+          o.window_length = window;
+          const gd::Formulation f = o.formulation;
+          st.per_segment = o.model == gd::DampingModel::Piecewise && f != gd::Formulation::Legacy;
+          if (!st.per_segment) {
+            if (!st.method) {
+              st.method = std::make_unique<gd::IntegralMethod>(o, gear);
+              if (f == gd::Formulation::Legacy) st.method->setLegacyForcing(fbar);
+            }
+            st.method->addSegment(view, 0, view.n);
+            continue;
+          }
+          o.segment_length = std::numeric_limits<double>::infinity();
+          o.t_start = -std::numeric_limits<double>::infinity();
+          o.t_end = std::numeric_limits<double>::infinity();
+          gd::IdentificationResult seg;
+          std::string e;
+          if (!gd::identify(block, gear, o, &seg, &e)) {
+            *error = e;
+            return false;
+          }
+          if (run.result.segments.empty()) run.result = seg;  // formulation, Me, omega0, ...
+          else run.result.segments.push_back(seg.segments.front());
+          for (const auto& w : seg.warnings) run.result.warnings.push_back(w);
+          gd::ModeledResponse resp;
+          std::string why;
+          if (seg.segments.front().identifiable &&
+              gd::modeledResponse(view, gear, seg, &resp, &why)) {
+            st.fit.add(resp);
+            bag->write(topicOf(run, k == 0, "modeled_response"), block.time[0],
+                       gear_damping_ros::toMsg(resp, info.sample_rate,
+                                               info.first_index +
+                                                   static_cast<std::uint64_t>(ranges[r].first)));
+          }
+        }
+        progress.update(ranges[r].second - ranges.front().first);
+        return true;
+      },
+      error);
+  if (!ok) return false;
+  for (size_t k = 0; k < runs->size(); ++k) {
+    gd::AnalysisRun& run = (*runs)[k];
+    if (states[k].per_segment) {
+      states[k].fit.finish(&run.response);
+      run.response.observed.resize(0);
+      run.result.window_length = window;
+    } else {
+      run.result = states[k].method->finish();
+      run.response_error = "not computed for a record analysed streaming (" +
+                           std::to_string(info.samples) +
+                           " samples): the shared model's response needs the whole record";
+      run.result.warnings.push_back(
+          "output-error refinement skipped: a record analysed streaming is refined per segment "
+          "only for the piecewise model");
+    }
+  }
+  return true;
+}
+
+// The integral method's xi set beside a wavelet mode: the shared estimate of a constant model,
+// else the segments' xi averaged over the mode's decay region [t_start, t_end] with the fit's
+// weight exp(-2 sigma t) (the wavelet measures the decay there; with load-dependent damping a
+// record-wide mean would compare different things). NaN when nothing overlaps.
+double integralXiOver(const gd::IdentificationResult& r, const gd::WaveletMode& m) {
+  if (r.constant) return r.constant->identifiable ? r.constant->xi : gd::kNaN;
+  const double sigma = std::isfinite(m.sigma) ? m.sigma : 0.0;
+  auto weight = [&](double a, double b) {  // integral of exp(-2 sigma (t - t_start)) over [a, b]
+    if (std::abs(sigma) < 1e-12) return b - a;
+    return (std::exp(-2.0 * sigma * (a - m.t_start)) - std::exp(-2.0 * sigma * (b - m.t_start))) /
+           (2.0 * sigma);
+  };
+  double sum = 0.0, wsum = 0.0;
+  for (const auto& s : r.segments) {
+    const double a = std::max(s.t_start, m.t_start), b = std::min(s.t_end, m.t_end);
+    if (!s.identifiable || !(b > a)) continue;
+    const double w = weight(a, b);
+    sum += w * s.xi;
+    wsum += w;
+  }
+  return wsum > 0.0 ? sum / wsum : gd::kNaN;
+}
+
+// Splits "T0,T1" into a decay region [s].
+bool parseRegion(const std::string& text, std::pair<double, double>* out) {
+  const auto comma = text.find(',');
+  if (comma == std::string::npos) return false;
+  try {
+    size_t a = 0, b = 0;
+    out->first = std::stod(text.substr(0, comma), &a);
+    out->second = std::stod(text.substr(comma + 1), &b);
+    return a == comma && b == text.size() - comma - 1;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
+      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
+      "the damping with Morlet wavelets."};
+  std::string input, params, output, csv_out, bag_out, topic;
+  std::vector<std::string> formulations{"known"}, models{"piecewise"};
+  std::string refine = "auto";
+  gd::IdentificationOptions base;
+  std::optional<double> t_start, t_end;
+  long max_in_memory = 1000000;
+  bool wavelet = false;
+  gd::WaveletOptions wopt;
+  std::vector<std::string> regions;
+  long wavelet_max = 1L << 18;
+  app.add_option("--input", input,
+                 "signal record: CSV with the DESIGN §6 columns, or a bag of SignalChunk messages")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--params", params,
+                 "gear parameters: the simulator's YAML (pinion, gear, mesh, speed sections); "
+                 "default for a bag: its GearParams message; none: wavelet validation only")
+      ->check(CLI::ExistingFile);
+  app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
+  app.add_option("--output", output, "write the result JSON (DESIGN §6) to this file");
+  app.add_option("--formulation", formulations,
+                 "known | greybox | paper | legacy (repeat for several; default known)")
+      ->check(CLI::IsMember({"known", "greybox", "paper", "legacy"}))
+      ->take_all();
+  app.add_option("--model", models,
+                 "piecewise | constant | load_law (repeat for several; default piecewise)")
+      ->check(CLI::IsMember({"piecewise", "constant", "load_law"}))
+      ->take_all();
+  app.add_option("--segment", base.segment_length,
+                 "damping segment length [s] (0 or inf: the whole record; default 1e-3)");
+  app.add_option("--window", base.window_length,
+                 "integration window [s] (default: two natural periods from the data)");
+  app.add_option("--t-start", t_start, "analyse from this time [s]");
+  app.add_option("--t-end", t_end, "analyse up to this time [s]");
+  app.add_option("--refine", refine,
+                 "output-error refinement: auto (when the data are noisy) | always | never")
+      ->check(CLI::IsMember({"auto", "always", "never"}));
+  app.add_option("--max-condition", base.max_condition,
+                 "largest condition number of an identifiable segment (default 1e6)");
+  app.add_option("--time-tolerance", base.time_tolerance,
+                 "relative tolerance on the uniformity of the time column (default 1e-6)");
+  app.add_option("--max-in-memory", max_in_memory,
+                 "bags with more samples are analysed streaming, one segment at a time "
+                 "(default 1e6)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--csv-out", csv_out,
+                 "write segments.csv, summary.csv, response_<run>.csv and the wavelet tables "
+                 "into this directory");
+  app.add_option("--bag-out", bag_out,
+                 "write the results as gear_damping messages (DampingArray, ModeledResponse, "
+                 "WaveletModes) to this bag");
+  app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (DESIGN §5)");
+  app.add_option("--f-min", wopt.f_min, "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
+  app.add_option("--f-max", wopt.f_max, "wavelet: highest frequency [Hz] (default 0.4 fs)");
+  app.add_option("--scales", wopt.n_scales, "wavelet: number of log-spaced frequencies (default 200)");
+  app.add_option("--omega0", wopt.omega0,
+                 "wavelet: Morlet centre frequency of the scalogram (default 6; 3..100)");
+  app.add_option("--fit-omega0", wopt.fit_omega0,
+                 "wavelet: Morlet centre frequency of the damping fits (default 0 = automatic)");
+  app.add_option("--mode-freq", wopt.mode_frequencies,
+                 "wavelet: explicit mode frequency [Hz] (repeat; default: picked peaks)")
+      ->take_all();
+  app.add_option("--decay-region", regions,
+                 "wavelet: decay region T0,T1 [s from the analysed record's start] (once for all "
+                 "modes, or once per --mode-freq)")
+      ->take_all();
+  app.add_option("--prominence", wopt.peak_prominence,
+                 "wavelet: minimum peak prominence, fraction of the highest peak (default 0.05)");
+  std::string wavelet_input;
+  app.add_option("--wavelet-input", wavelet_input,
+                 "wavelet: analyse the dte of this record (CSV or bag, e.g. a free decay from "
+                 "`simulate --free-response`) instead of the identification record")
+      ->check(CLI::ExistingFile);
+  app.add_option("--wavelet-max-samples", wavelet_max,
+                 "wavelet: analyse at most this many samples from the start of the analysed "
+                 "record (default 2^18 = 262144: a free decay of a 10 kHz mode lasts milliseconds)")
+      ->check(CLI::PositiveNumber);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);  // prints the help or the message naming the option
+    return rc == 0 ? 0 : kExitUsage;
+  }
+
+  // Options: validated before any file is read, each message naming the option.
+  const bool is_bag = endsWith(input, ".bag");
+  if (!is_bag && !endsWith(input, ".csv"))
+    return fail(kExitUsage, "--input " + input + ": must end in .csv or .bag");
+  if (!bag_out.empty() && !endsWith(bag_out, ".bag"))
+    return fail(kExitUsage, "--bag-out " + bag_out + ": must end in .bag");
+  if (!is_bag && !topic.empty()) return fail(kExitUsage, "--topic applies to bag input only");
+  if (t_start) base.t_start = *t_start;
+  if (t_end) base.t_end = *t_end;
+  base.refine = refine == "always"  ? gd::IdentificationOptions::Refine::Always
+                : refine == "never" ? gd::IdentificationOptions::Refine::Never
+                                    : gd::IdentificationOptions::Refine::Auto;
+  std::vector<gd::IdentificationOptions> runs_options;
+  for (const auto& f : formulations) {
+    for (const auto& m : models) {
+      gd::IdentificationOptions o = base;
+      gd::parseFormulation(f, &o.formulation);
+      gd::parseDampingModel(m, &o.model);
+      if (const std::string e = o.validate(); !e.empty()) return fail(kExitUsage, e);
+      runs_options.push_back(o);
+    }
+  }
+  for (const auto& r : regions) {
+    std::pair<double, double> region;
+    if (!parseRegion(r, &region))
+      return fail(kExitUsage, "--decay-region " + r + ": expected T0,T1 in seconds");
+    wopt.decay_regions.push_back(region);
+  }
+  if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
+
+  // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
+  std::string error;
+  gear_sim::SignalTable table;
+  gear_sim_ros::BagSignalInfo bag_info;
+  bool streaming = false;
+  if (is_bag) {
+    if (!gear_sim_ros::scanSignalBag(input, topic, &bag_info, &error))
+      return fail(kExitInput, error);
+    for (const auto& w : bag_info.warnings) warn(input + ": " + w);
+    streaming = bag_info.samples > max_in_memory;
+    if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
+      return fail(kExitInput, error);
+  } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
+                                      /*allow_non_finite=*/true)) {
+    // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
+    return fail(kExitInput, error);
+  }
+
+  // Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
+  gear_sim::GearModel model;
+  std::string params_source = params;
+  bool identification = true;
+  if (!params.empty()) {
+    if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
+  } else if (is_bag && bag_info.has_params) {
+    model = bag_info.params;
+    params_source = input + ":" + bag_info.params_topic;
+  } else {
+    // Without gear parameters the wavelet validation runs alone, if asked for (--wavelet) or
+    // if the record has nothing but time and dte; a record made for the identification is
+    // not silently analysed otherwise.
+    const bool id_columns = is_bag ? (bag_info.stiffness || bag_info.torque || bag_info.mesh_state)
+                                   : (table.stiffness.size() > 0 || table.torque.size() > 0 ||
+                                      table.mesh_state.size() > 0);
+    if (id_columns && !wavelet && wavelet_input.empty())
+      return fail(kExitUsage,
+                  "--params GEAR.yaml is required for the identification" +
+                      std::string(is_bag ? (bag_info.params_error.empty()
+                                                ? " (the bag has no GearParams message)"
+                                                : " (" + bag_info.params_error + ")")
+                                         : "") +
+                      "; --wavelet runs the wavelet validation alone");
+    identification = false;
+    wavelet = true;
+    warn("no gear parameters (--params" +
+         std::string(is_bag ? (bag_info.params_error.empty() ? ", or a GearParams message in the bag"
+                                                             : "; " + bag_info.params_error)
+                            : "") +
+         "): running the wavelet validation only");
+  }
+  const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  if (identification) {
+    if (const std::string e = gear.validate(); !e.empty())
+      return fail(kExitInput, params_source + ": " + e);
+  }
+
+  // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
+  const double sample_rate =
+      streaming ? bag_info.sample_rate
+                : static_cast<double>(table.size() - 1) / (table.time[table.size() - 1] - table.time[0]);
+  gd::SignalView whole;
+  whole.dt = 1.0 / sample_rate;
+  whole.t0 = streaming ? static_cast<double>(bag_info.first_index) * whole.dt : table.time[0];
+  whole.n = streaming ? static_cast<Eigen::Index>(bag_info.samples) : table.size();
+  if (!streaming) {
+    for (const auto& o : runs_options) {
+      const std::string e = gd::checkSignalTable(
+          table, identification ? o.formulation : gd::Formulation::Paper,  // Paper: dte only
+          identification ? o.model : gd::DampingModel::Piecewise, o.time_tolerance,
+          /*first_line=*/is_bag ? -1 : 2);
+      if (!e.empty()) return fail(kExitInput, input + ": " + e);
+    }
+  } else if (identification) {
+    for (const auto& o : runs_options) {
+      gear_sim::SignalTable shape;  // the columns present, for the formulation check
+      shape.time = Eigen::VectorXd::LinSpaced(2, 0.0, whole.dt);
+      shape.dte.resize(2);
+      if (bag_info.stiffness) shape.stiffness.resize(2);
+      if (bag_info.torque) shape.torque.resize(2);
+      if (bag_info.mesh_state) shape.mesh_state.resize(2);
+      if (const std::string e = gd::checkSignalTable(shape, o.formulation, o.model); !e.empty())
+        return fail(kExitInput, input + ": " + e);
+    }
+  }
+  const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
+  if (analysed.empty()) return fail(kExitInput, input + ": no samples in the analysed time range");
+  const double duration =
+      static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
+  if (identification) {
+    std::string rate_warning;
+    if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
+      return fail(kExitInput, input + ": " + e);
+    if (!rate_warning.empty()) warn(input + ": " + rate_warning);
+    for (const auto& o : runs_options)
+      if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
+        return fail(kExitInput, input + ": " + e);
+  }
+
+  ResultBag bag;
+  if (!bag_out.empty() && !bag.open(bag_out, &error)) return fail(kExitOutput, error);
+
+  // Identification (table or streaming); the wavelet's samples are collected on the way.
+  std::vector<gd::AnalysisRun> runs;
+  std::vector<double> wavelet_dte;
+  const Eigen::Index first = analysed.front().first;
+  const size_t wavelet_n_record = static_cast<size_t>(
+      std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
+  const bool wavelet_on_record = wavelet && wavelet_input.empty();
+  if (identification) {
+    for (const auto& o : runs_options) {
+      gd::AnalysisRun run;
+      run.options = o;
+      run.dt = whole.dt;
+      run.t0 = whole.t0;
+      runs.push_back(std::move(run));
+    }
+  }
+  if (streaming && identification) {
+    if (!analyzeStreaming(bag_info, gear, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
+                          wavelet_n_record, &error))
+      return fail(kExitInput, input + ": " + error);
+  } else if (streaming && wavelet_on_record) {
+    if (!gear_sim_ros::streamSignalBag(
+            bag_info, {{first, first + static_cast<Eigen::Index>(wavelet_n_record)}},
+            [&](const gear_sim::SignalTable& t, size_t) {
+              wavelet_dte.assign(t.dte.data(), t.dte.data() + t.dte.size());
+              return true;
+            },
+            &error))
+      return fail(kExitInput, error);
+  } else {
+    const gd::SignalView view = gd::SignalView::of(table);
+    for (size_t k = 0; k < runs.size(); ++k) {
+      gd::AnalysisRun& run = runs[k];
+      if (!gd::identify(table, gear, run.options, &run.result, &error))
+        return fail(kExitInput, input + ": " + error);
+      if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
+        run.response = gd::ModeledResponse{};
+      } else {
+        const double tr = table.time[run.response.begin];
+        bag.write(topicOf(run, k == 0, "modeled_response"), tr,
+                  gear_damping_ros::toMsg(run.response, sample_rate,
+                                          static_cast<std::uint64_t>(std::llround(tr * sample_rate))));
+      }
+    }
+    if (wavelet_on_record)
+      wavelet_dte.assign(table.dte.data() + first, table.dte.data() + first + wavelet_n_record);
+  }
+  bool identifiable = false;
+  for (size_t k = 0; k < runs.size(); ++k) {
+    identifiable = identifiable || anyIdentifiable(runs[k].result);
+    bag.write(topicOf(runs[k], k == 0, "damping"), whole.t0 + duration,
+              gear_damping_ros::toMsg(runs[k].result));
+  }
+  if (!runs.empty()) gd::printRunTables(std::cout, runs);
+
+  // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
+  gd::WaveletResult wres;
+  double t_first = whole.t0 + static_cast<double>(first) * whole.dt;
+  double wavelet_rate = sample_rate;
+  size_t wavelet_n = wavelet_n_record;
+  if (!wavelet_input.empty()) {
+    wavelet = true;
+    gear_sim::SignalTable w;
+    if (endsWith(wavelet_input, ".bag")) {
+      gear_sim_ros::BagSignalInfo wi;
+      if (!gear_sim_ros::scanSignalBag(wavelet_input, "", &wi, &error) ||
+          !gear_sim_ros::streamSignalBag(
+              wi, {{0, std::min<Eigen::Index>(wavelet_max, wi.samples)}},
+              [&](const gear_sim::SignalTable& t, size_t) {
+                w = t;
+                return true;
+              },
+              &error))
+        return fail(kExitInput, "--wavelet-input: " + error);
+    } else if (!gear_sim::readSignalCsv(wavelet_input, &w, &error, {"time", "dte"}, true)) {
+      return fail(kExitInput, "--wavelet-input: " + error);
+    }
+    if (const std::string e = gd::checkSignalTable(w, gd::Formulation::Paper,
+                                                   gd::DampingModel::Piecewise, 1e-6,
+                                                   endsWith(wavelet_input, ".bag") ? -1 : 2);
+        !e.empty())
+      return fail(kExitInput, wavelet_input + ": " + e);
+    wavelet_n = static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, w.size()));
+    wavelet_dte.assign(w.dte.data(), w.dte.data() + wavelet_n);
+    wavelet_rate = static_cast<double>(w.size() - 1) / (w.time[w.size() - 1] - w.time[0]);
+    t_first = w.time[0];
+  }
+  if (wavelet) {
+    if (wavelet_on_record && wavelet_n < static_cast<size_t>(analysed.back().second - first))
+      warn("wavelet validation on the first " + std::to_string(wavelet_n) +
+           " samples of the analysed record (--wavelet-max-samples)");
+    wres = gd::validateWavelet(wavelet_dte.data(), wavelet_dte.size(), wavelet_rate, wopt);
+    if (!wres.ok()) {
+      if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.error);
+      warn("wavelet validation not possible: " + wres.error);
+    } else {
+      gd::shiftWaveletTimes(&wres, t_first);  // onto the record's time axis
+      if (identification && !runs.empty())
+        for (auto& m : wres.modes) m.integral_xi = integralXiOver(runs.front().result, m);
+      gd::printWaveletTable(std::cout, wres);
+      gear_damping::WaveletModes msg;
+      msg.t_start = t_first;
+      msg.t_end = t_first + static_cast<double>(wavelet_n) / wavelet_rate;
+      msg.wavelet_parameter = wres.omega0;
+      for (const auto& m : wres.modes) {
+        gear_damping::WaveletMode wm;
+        wm.frequency_hz = m.frequency_hz;
+        wm.damping_ratio = m.damping_ratio;
+        wm.r2 = m.r2;
+        wm.decay_t_start = m.t_start;
+        wm.decay_t_end = m.t_end;
+        wm.xi_integral = m.integral_xi;
+        wm.warning = m.warning;
+        msg.modes.push_back(wm);
+      }
+      bag.write("/gear/wavelet_modes", msg.t_end, msg);
+    }
+  }
+
+  nlohmann::json in = {
+      {"file", input},
+      {"params", identification ? nlohmann::json(params_source) : nlohmann::json(nullptr)},
+      {"samples", static_cast<std::int64_t>(whole.n)},
+      {"sample_rate", sample_rate},
+      {"t_start", t_first},
+      {"duration", duration},
+      {"streaming", streaming},
+      {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
+      {"gaps", is_bag ? bag_info.gaps : 0}};
+  nlohmann::json doc = gd::analysisJson(runs, in);
+  if (wavelet) {
+    doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
+    if (wres.ok()) {
+      doc["wavelet"]["samples"] = wavelet_n;
+      doc["wavelet"]["input"] = wavelet_input.empty() ? input : wavelet_input;
+    }
+  }
+  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error))
+    return fail(kExitOutput, error);
+  if (!csv_out.empty()) {
+    if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error)) return fail(kExitOutput, error);
+    if (wavelet && wres.ok() &&
+        !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
+                             wavelet_rate, t_first, 4000, &error))
+      return fail(kExitOutput, error);
+  }
+  if (!bag.close(&error)) return fail(kExitOutput, error);
+  if (identification && !identifiable)
+    return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
+  return 0;
+}

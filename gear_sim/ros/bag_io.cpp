@@ -1,0 +1,310 @@
+#include "gear_sim_ros/bag_io.hpp"
+
+#include <gear_damping/GearParams.h>
+#include <gear_damping/SignalChunk.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+
+#include "gear_sim_ros/conversions.hpp"
+
+namespace gear_sim_ros {
+namespace {
+
+constexpr const char* kChunkType = "gear_damping/SignalChunk";
+constexpr const char* kParamsType = "gear_damping/GearParams";
+constexpr int kMaxGapWarnings = 5;
+
+std::string openError(const std::string& path, const std::exception& e) {
+  return path + ": cannot read as a bag (" + e.what() +
+         "); if it is truncated, `rosbag reindex` may recover it";
+}
+
+// The channels a chunk carries, as a bit set (dte_velocity, stiffness, torque, mesh_state,
+// mesh_phase, damping).
+unsigned channelSet(const gear_damping::SignalChunk& c) {
+  return (!c.dte_velocity.empty() ? 1u : 0u) | (!c.stiffness.empty() ? 2u : 0u) |
+         (!c.torque.empty() ? 4u : 0u) | (!c.mesh_state.empty() ? 8u : 0u) |
+         (!c.mesh_phase.empty() ? 16u : 0u) | (!c.damping.empty() ? 32u : 0u);
+}
+
+std::string channelLengthError(const gear_damping::SignalChunk& c) {
+  const size_t m = c.dte.size();
+  auto bad = [m](size_t s) { return s != 0 && s != m; };
+  if (bad(c.dte_velocity.size())) return "dte_velocity";
+  if (bad(c.stiffness.size())) return "stiffness";
+  if (bad(c.torque.size())) return "torque";
+  if (bad(c.mesh_state.size())) return "mesh_state";
+  if (bad(c.mesh_phase.size())) return "mesh_phase";
+  if (bad(c.damping.size())) return "damping";
+  return {};
+}
+
+}  // namespace
+
+bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
+                   std::string* error) {
+  BagSignalInfo out;
+  out.path = path;
+  try {
+    rosbag::Bag bag;
+    bag.open(path, rosbag::bagmode::Read);
+    rosbag::View all(bag);
+    std::vector<std::string> chunk_topics, params_topics;
+    std::string topic_type;
+    for (const rosbag::ConnectionInfo* c : all.getConnections()) {
+      if (c->datatype == kChunkType &&
+          std::find(chunk_topics.begin(), chunk_topics.end(), c->topic) == chunk_topics.end())
+        chunk_topics.push_back(c->topic);
+      if (c->datatype == kParamsType &&
+          std::find(params_topics.begin(), params_topics.end(), c->topic) == params_topics.end())
+        params_topics.push_back(c->topic);
+      if (c->topic == topic) topic_type = c->datatype;
+    }
+    if (!topic.empty()) {
+      if (topic_type.empty()) {
+        *error = path + ": no topic '" + topic + "' in the bag";
+        return false;
+      }
+      if (topic_type != kChunkType) {
+        *error = path + ": topic '" + topic + "' has type " + topic_type + ", not " + kChunkType;
+        return false;
+      }
+      out.topic = topic;
+    } else if (chunk_topics.size() == 1) {
+      out.topic = chunk_topics.front();
+    } else if (chunk_topics.empty()) {
+      *error = path + ": no topic of type " + std::string(kChunkType) + " in the bag";
+      return false;
+    } else {
+      std::string list;
+      for (const auto& t : chunk_topics) list += (list.empty() ? "" : ", ") + t;
+      *error = path + ": several topics of type " + std::string(kChunkType) + " (" + list +
+               "): choose one with --topic";
+      return false;
+    }
+    if (!params_topics.empty()) {
+      out.params_topic = params_topics.front();
+      rosbag::View pv(bag, rosbag::TopicQuery(out.params_topic));
+      gear_damping::GearParams::ConstPtr last;
+      for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
+      std::string e;
+      if (last && fromMsg(*last, &out.params, &e)) {
+        out.has_params = true;
+      } else {
+        out.params_error = out.params_topic + ": " + (last ? e : "no readable message");
+      }
+    }
+    rosbag::View view(bag, rosbag::TopicQuery(out.topic));
+    std::uint64_t next = 0;  // global index after the previous chunk
+    unsigned channels = 0;
+    double k_sum = 0.0;
+    long long k_count = 0;
+    for (const rosbag::MessageInstance& m : view) {
+      const auto c = m.instantiate<gear_damping::SignalChunk>();
+      const std::string where = path + ": " + out.topic + " message " +
+                                std::to_string(out.chunks + 1) + " (first_index " +
+                                (c ? std::to_string(c->first_index) : std::string("?")) + ")";
+      if (!c) {
+        *error = where + ": not a " + std::string(kChunkType);
+        return false;
+      }
+      if (!(c->sample_rate > 0.0) || !std::isfinite(c->sample_rate)) {
+        *error = where + ": sample_rate " + std::to_string(c->sample_rate) +
+                 " is not a positive number";
+        return false;
+      }
+      if (c->dte.empty()) {
+        *error = where + ": no dte samples";
+        return false;
+      }
+      if (const std::string bad = channelLengthError(*c); !bad.empty()) {
+        *error = where + ": channel " + bad + " has " + "a length other than dte's (" +
+                 std::to_string(c->dte.size()) + ")";
+        return false;
+      }
+      if (out.chunks == 0) {
+        out.sample_rate = c->sample_rate;
+        out.first_index = c->first_index;
+        channels = channelSet(*c);
+      } else {
+        if (c->sample_rate != out.sample_rate) {
+          *error = where + ": sample_rate changed from " + std::to_string(out.sample_rate) +
+                   " to " + std::to_string(c->sample_rate) + " Hz";
+          return false;
+        }
+        if (channelSet(*c) != channels) {
+          *error = where + ": carries a different set of channels than the first chunk";
+          return false;
+        }
+        if (c->first_index < next) {
+          *error = where + ": sample indices not increasing (the previous chunk ended at " +
+                   std::to_string(next - 1) + "): a duplicated or out-of-order chunk";
+          return false;
+        }
+        if (c->first_index > next) {
+          const std::uint64_t missing = c->first_index - next;
+          ++out.gaps;
+          out.gap_samples += static_cast<std::int64_t>(missing);
+          if (out.gaps <= kMaxGapWarnings)
+            out.warnings.push_back("gap of " + std::to_string(missing) + " samples before " +
+                                   out.topic + " message " + std::to_string(out.chunks + 1) +
+                                   " (indices " + std::to_string(next) + " to " +
+                                   std::to_string(c->first_index - 1) +
+                                   "): the segments there are not identifiable");
+        }
+      }
+      next = c->first_index + c->dte.size();
+      for (double k : c->stiffness)
+        if (std::isfinite(k)) k_sum += k, ++k_count;
+      ++out.chunks;
+    }
+    if (out.chunks == 0) {
+      *error = path + ": topic '" + out.topic + "' has no messages";
+      return false;
+    }
+    if (out.gaps > kMaxGapWarnings)
+      out.warnings.push_back(std::to_string(out.gaps) + " gaps in all, " +
+                             std::to_string(out.gap_samples) + " samples missing");
+    out.samples = static_cast<std::int64_t>(next - out.first_index);
+    if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
+    out.dte_velocity = channels & 1u;
+    out.stiffness = channels & 2u;
+    out.torque = channels & 4u;
+    out.mesh_state = channels & 8u;
+    out.mesh_phase = channels & 16u;
+    out.damping = channels & 32u;
+  } catch (const std::exception& e) {
+    *error = openError(path, e);
+    return false;
+  }
+  *info = std::move(out);
+  return true;
+}
+
+bool streamSignalBag(const BagSignalInfo& info,
+                     const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                     const std::function<bool(const gear_sim::SignalTable&, size_t)>& sink,
+                     std::string* error) {
+  if (ranges.empty()) return true;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  gear_sim::SignalTable block;
+  size_t r = 0;             // current range
+  auto startRange = [&]() {
+    const Eigen::Index n = ranges[r].second - ranges[r].first;
+    auto make = [&](bool present, Eigen::VectorXd& v) {
+      if (present) v.setConstant(n, nan); else v.resize(0);
+    };
+    block.time.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i)
+      block.time[i] = static_cast<double>(info.first_index + static_cast<std::uint64_t>(
+                                                                 ranges[r].first + i)) /
+                      info.sample_rate;
+    make(true, block.dte);
+    make(info.dte_velocity, block.dte_velocity);
+    make(info.stiffness, block.stiffness);
+    make(info.torque, block.torque);
+    make(info.mesh_state, block.mesh_state);
+    make(info.mesh_phase, block.mesh_phase);
+    make(info.damping, block.damping);
+  };
+  // Emits every range that ends at or before sample `upto` (gap samples stay NaN).
+  auto flushUpTo = [&](Eigen::Index upto) {
+    while (r < ranges.size() && ranges[r].second <= upto) {
+      if (!sink(block, r)) return false;
+      if (++r < ranges.size()) startRange();
+    }
+    return true;
+  };
+  startRange();
+  try {
+    rosbag::Bag bag;
+    bag.open(info.path, rosbag::bagmode::Read);
+    rosbag::View view(bag, rosbag::TopicQuery(info.topic));
+    for (const rosbag::MessageInstance& m : view) {
+      const auto c = m.instantiate<gear_damping::SignalChunk>();
+      if (!c) continue;  // validated by scanSignalBag
+      const Eigen::Index b = static_cast<Eigen::Index>(c->first_index - info.first_index);
+      const Eigen::Index e = b + static_cast<Eigen::Index>(c->dte.size());
+      if (!flushUpTo(b)) return false;
+      while (r < ranges.size() && ranges[r].first < e) {
+        const Eigen::Index lo = std::max(b, ranges[r].first), hi = std::min(e, ranges[r].second);
+        for (Eigen::Index g = lo; g < hi; ++g) {
+          const size_t j = static_cast<size_t>(g - b);
+          const Eigen::Index i = g - ranges[r].first;
+          block.dte[i] = c->dte[j];
+          if (info.dte_velocity) block.dte_velocity[i] = c->dte_velocity[j];
+          if (info.stiffness) block.stiffness[i] = c->stiffness[j];
+          if (info.torque) block.torque[i] = c->torque[j];
+          if (info.mesh_state) block.mesh_state[i] = c->mesh_state[j];
+          if (info.mesh_phase) block.mesh_phase[i] = c->mesh_phase[j];
+          if (info.damping) block.damping[i] = c->damping[j];
+        }
+        if (hi < ranges[r].second) break;  // the range continues in the next chunk
+        if (!sink(block, r)) return false;
+        if (++r < ranges.size()) startRange();
+      }
+    }
+    if (!flushUpTo(std::numeric_limits<Eigen::Index>::max())) return false;
+  } catch (const std::exception& e) {
+    *error = openError(info.path, e);
+    return false;
+  }
+  return true;
+}
+
+bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error) {
+  return streamSignalBag(info, {{0, static_cast<Eigen::Index>(info.samples)}},
+                         [&](const gear_sim::SignalTable& t, size_t) {
+                           *out = t;
+                           return true;
+                         },
+                         error);
+}
+
+bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, double sample_rate,
+                    const gear_sim::GearModel* params, long chunk_size, std::string* error,
+                    const std::string& topic, const std::string& params_topic) {
+  if (!(chunk_size > 0) || t.size() == 0 || !(sample_rate > 0.0)) {
+    *error = path + ": nothing to write (empty record, chunk size or sample rate not positive)";
+    return false;
+  }
+  const std::string tmp = path + ".partial";
+  try {
+    rosbag::Bag bag(tmp, rosbag::bagmode::Write);
+    const ros::Time base(1.0);
+    if (params) {
+      auto p = toMsg(*params);
+      p.header.stamp = base;
+      bag.write(params_topic, base, p);
+    }
+    const std::uint64_t first =
+        static_cast<std::uint64_t>(std::llround(std::max(0.0, t.time[0] * sample_rate)));
+    gear_damping::SignalChunk chunk;
+    for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
+      const Eigen::Index n = std::min<Eigen::Index>(chunk_size, t.size() - b);
+      toChunk(t, b, n, sample_rate, first + static_cast<std::uint64_t>(b), &chunk);
+      chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
+      chunk.header.stamp = base + ros::Duration(t.time[b]);
+      bag.write(topic, chunk.header.stamp, chunk);
+    }
+    bag.close();
+  } catch (const std::exception& e) {
+    std::remove(tmp.c_str());
+    *error = path + ": cannot write (" + e.what() + ")";
+    return false;
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    *error = path + ": cannot write";
+    return false;
+  }
+  return true;
+}
+
+}  // namespace gear_sim_ros

@@ -1,0 +1,73 @@
+// Signal records in rosbag files: gear_damping/SignalChunk messages on one topic, the gear
+// parameters (gear_damping/GearParams) optionally on another. Reading is streaming (memory
+// bounded by the block the caller asks for), so records of 1e7 samples and more are fine.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "gear_sim/signal_table.hpp"
+#include "gear_sim/sim_config.hpp"
+
+namespace gear_sim_ros {
+
+/// What scanSignalBag found out about a bag's signal record.
+struct BagSignalInfo {
+  std::string path;
+  std::string topic;            ///< the SignalChunk topic read
+  std::string params_topic;     ///< the GearParams topic, empty when none
+  bool has_params = false;      ///< `params` is valid (from the latest GearParams message)
+  std::string params_error;     ///< why a present GearParams message could not be used
+  gear_sim::GearModel params;
+  double sample_rate = 0.0;     ///< [Hz] of every chunk
+  std::uint64_t first_index = 0;  ///< global index of the first sample
+  long chunks = 0;
+  std::int64_t samples = 0;     ///< samples from the first to the last, gaps included
+  std::int64_t gap_samples = 0; ///< samples missing in gaps (read as NaN)
+  long gaps = 0;
+  std::vector<std::string> warnings;  ///< one line per gap (the first few) and similar remarks
+  double stiffness_mean = 0.0;  ///< [N/m] mean of the finite stiffness samples (0: none)
+  /// Optional channels present (every chunk must carry the same set).
+  bool dte_velocity = false, stiffness = false, torque = false, mesh_state = false,
+       mesh_phase = false, damping = false;
+};
+
+/// Opens `path` and validates its signal record in one pass: the topic is `topic` or, when
+/// empty, the only topic of type gear_damping/SignalChunk (an error lists the candidates when
+/// there are several); every chunk has the same finite, positive sample rate, the same set of
+/// channels with the length of dte, and a first_index beyond the previous chunk's last sample
+/// (a duplicated, overlapping or out-of-order chunk is an error naming it; a gap is a warning:
+/// its samples read as NaN, so the analysers report the segments there as not identifiable).
+/// The gear parameters come from the latest GearParams message on any topic.
+/// False with a one-line `*error`: cannot open / not a bag / corrupt or truncated, no such
+/// topic, wrong message type, no chunks, inconsistent chunks.
+bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
+                   std::string* error);
+
+/// Streams the record scanned into `info` as SignalTable blocks, one per range [begin, end) of
+/// sample numbers counted from info.first_index (ascending, non-overlapping, within
+/// [0, info.samples)): sink(table, range_index) gets the samples of each range (gaps as NaN,
+/// time = global index / sample_rate). Samples outside the ranges are skipped. The sink returns
+/// false to stop (then this returns false with its message in *error, if it set one).
+bool streamSignalBag(const BagSignalInfo& info,
+                     const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                     const std::function<bool(const gear_sim::SignalTable&, size_t)>& sink,
+                     std::string* error);
+
+/// The whole record as one table (gaps as NaN).
+bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error);
+
+/// Writes `table` (uniform time) as SignalChunk messages of `chunk_size` samples on
+/// `topic` (first_index = round(time[0] * sample_rate) + i) and, when `params` is not null, the
+/// gear parameters on `params_topic` first. Bag time stamps are 1 s + the sample time. Writes a
+/// temporary file renamed on success. False with `*error`.
+bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& table,
+                    double sample_rate, const gear_sim::GearModel* params, long chunk_size,
+                    std::string* error, const std::string& topic = "/gear/signal",
+                    const std::string& params_topic = "/gear/params");
+
+}  // namespace gear_sim_ros

@@ -1,0 +1,218 @@
+// Bag input of `analyze` and the CSV <-> bag converter: identical results from both inputs,
+// and every bad-bag case of issue 7 with its one-line message and documented exit code
+// (0 with a warning where the analysis proceeds on the intact part, 1 usage, 2 invalid input).
+#include <gear_damping/GearParams.h>
+#include <gear_damping/SignalChunk.h>
+#include <gtest/gtest.h>
+#include <rosbag/bag.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/signal_csv.hpp"
+#include "gear_sim/simulator.hpp"
+#include "gear_sim_ros/bag_io.hpp"
+#include "gear_sim_ros/conversions.hpp"
+#include "tool_runner.hpp"
+
+namespace fs = std::filesystem;
+using gear_test::readText;
+using gear_test::ToolRun;
+
+namespace {
+
+const std::string kParams = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
+
+class AnalyzeBag : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new gear_test::ScratchDir("analyze_bag_test");
+    std::string e;
+    ASSERT_TRUE(gear_sim::loadSimConfigFile(kParams, &config_, &e)) << e;
+    config_.simulation.duration = 4e-3;  // four 1 ms segments
+    ASSERT_TRUE(gear_sim::simulate(config_, &table_, &e)) << e;
+  }
+  static void TearDownTestSuite() { delete scratch_; }
+  static fs::path dir() { return scratch_->path(); }
+
+  // Writes the simulated record as a bag, chunk by chunk, letting `edit` change or drop each
+  // chunk (return false to drop it) before it is written.
+  static fs::path writeBag(const std::string& name,
+                           const std::function<bool(size_t, gear_damping::SignalChunk*)>& edit,
+                           bool with_params = true, const std::string& topic = "/gear/signal") {
+    const fs::path p = dir() / name;
+    rosbag::Bag bag(p.string(), rosbag::bagmode::Write);
+    const ros::Time base(1.0);
+    if (with_params) bag.write("/gear/params", base, gear_sim_ros::toMsg(config_.gearModel()));
+    gear_damping::SignalChunk c;
+    const Eigen::Index chunk = 500;
+    for (Eigen::Index b = 0, k = 0; b < table_.size(); b += chunk, ++k) {
+      gear_sim_ros::toChunk(table_, b, std::min(chunk, table_.size() - b),
+                            config_.simulation.sample_rate, static_cast<std::uint64_t>(b), &c);
+      if (!edit(static_cast<size_t>(k), &c)) continue;
+      bag.write(topic, base + ros::Duration(1e-3 * static_cast<double>(k + 1)), c);
+    }
+    bag.close();
+    return p;
+  }
+  static fs::path intactBag() {
+    return writeBag("intact.bag", [](size_t, gear_damping::SignalChunk*) { return true; });
+  }
+  static ToolRun analyze(const std::string& args) { return gear_test::runTool("analyze", args, dir()); }
+
+  static gear_test::ScratchDir* scratch_;
+  static gear_sim::SimConfig config_;
+  static gear_sim::SignalTable table_;
+};
+gear_test::ScratchDir* AnalyzeBag::scratch_ = nullptr;
+gear_sim::SimConfig AnalyzeBag::config_;
+gear_sim::SignalTable AnalyzeBag::table_;
+
+TEST_F(AnalyzeBag, BagAndCsvInputsGiveIdenticalResults) {
+  const fs::path bag = intactBag(), csv = dir() / "roundtrip.csv", back = dir() / "back.bag";
+  // The converter both ways: bag -> CSV -> bag.
+  ToolRun r = gear_test::runTool("convert", "--input " + bag.string() + " --output " + csv.string(), dir());
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = gear_test::runTool("convert", "--input " + csv.string() + " --output " + back.string() +
+                                        " --params " + kParams, dir());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string models = " --model piecewise --model constant --model load_law";
+  const fs::path jb = dir() / "bag.json", jc = dir() / "csv.json", jbb = dir() / "back.json";
+  // Parameters from the bag's GearParams message for the bags, from the YAML for the CSV.
+  r = analyze("--input " + bag.string() + " --output " + jb.string() + models);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = analyze("--input " + csv.string() + " --params " + kParams + " --output " + jc.string() + models);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = analyze("--input " + back.string() + " --output " + jbb.string() + models);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto b = nlohmann::json::parse(readText(jb)), c = nlohmann::json::parse(readText(jc)),
+             bb = nlohmann::json::parse(readText(jbb));
+  EXPECT_EQ(b.at("identification"), c.at("identification"));
+  EXPECT_EQ(b.at("runs"), c.at("runs"));
+  EXPECT_EQ(bb.at("runs"), c.at("runs"));
+  EXPECT_EQ(b.at("identification").at("segments").size(), 4u);
+}
+
+TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
+  const fs::path bag = intactBag(), jw = dir() / "whole.json", js = dir() / "stream.json",
+                 out = dir() / "results.bag";
+  ToolRun r = analyze("--input " + bag.string() + " --refine never --output " + jw.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = analyze("--input " + bag.string() + " --refine never --max-in-memory 1500 --output " +
+              js.string() + " --bag-out " + out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto w = nlohmann::json::parse(readText(jw)), s = nlohmann::json::parse(readText(js));
+  EXPECT_TRUE(s.at("input").at("streaming").get<bool>());
+  const auto& ws = w.at("identification").at("segments");
+  const auto& ss = s.at("identification").at("segments");
+  ASSERT_EQ(ws.size(), ss.size());
+  // Piecewise unknowns are segment-local: the streamed estimate is the whole-record one.
+  for (size_t i = 0; i < ws.size(); ++i) {
+    const double a = ws[i].at("C").get<double>(), b = ss[i].at("C").get<double>();
+    EXPECT_NEAR(b, a, 1e-9 * a) << i;
+  }
+  gear_sim_ros::BagSignalInfo info;
+  std::string e;
+  EXPECT_FALSE(gear_sim_ros::scanSignalBag(out.string(), "", &info, &e));  // results, no signal
+  EXPECT_NE(e.find("no topic of type"), std::string::npos) << e;
+  EXPECT_TRUE(fs::is_regular_file(out));
+}
+
+TEST_F(AnalyzeBag, AGapOrANanChunkMakesOnlyItsSegmentNotIdentifiable) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const fs::path gap = writeBag("gap.bag", [](size_t k, gear_damping::SignalChunk*) { return k != 3; });
+  const fs::path bad = writeBag("nan.bag", [&](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 5) c->dte[17] = nan;
+    return true;
+  });
+  for (const auto& [bag, warning] : {std::make_pair(gap, std::string("gap of 500 samples")),
+                                     std::make_pair(bad, std::string())}) {
+    const fs::path j = dir() / "partial.json";
+    const ToolRun r = analyze("--input " + bag.string() + " --output " + j.string());
+    ASSERT_EQ(r.code, 0) << bag << ": " << r.err;
+    if (!warning.empty()) {
+      EXPECT_NE(r.err.find(warning), std::string::npos) << r.err;
+    }
+    const auto segs = nlohmann::json::parse(readText(j)).at("identification").at("segments");
+    ASSERT_EQ(segs.size(), 4u) << bag;
+    // Chunk 3 (samples 1500-1999) lies in segment 1, chunk 5 in segment 2.
+    const size_t hit = bag == gap ? 1 : 2;
+    for (size_t i = 0; i < 4; ++i) {
+      EXPECT_EQ(segs[i].at("identifiable").get<bool>(), i != hit) << bag << " segment " << i;
+      EXPECT_EQ(segs[i].at("C").is_number(), i != hit) << bag << " segment " << i;
+    }
+  }
+}
+
+TEST_F(AnalyzeBag, RejectsBadBagsWithAOneLineMessageAndExitCode) {
+  const fs::path intact = intactBag();
+  const fs::path empty = dir() / "empty.bag", corrupt = dir() / "corrupt.bag",
+                 truncated = dir() / "truncated.bag";
+  std::ofstream(empty.string()).close();
+  {
+    std::ofstream f(corrupt.string(), std::ios::binary);
+    for (int i = 0; i < 4096; ++i) f.put(static_cast<char>((i * 7919) & 0xff));
+  }
+  {
+    const std::string bytes = readText(intact);
+    std::ofstream f(truncated.string(), std::ios::binary);
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size() / 2));
+  }
+  const fs::path dup = writeBag("dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 4) c->first_index -= 500;  // repeats chunk 3's indices
+    return true;
+  });
+  const fs::path rate = writeBag("rate.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 2) c->sample_rate *= 2;
+    return true;
+  });
+  const fs::path slow = writeBag("slow.bag", [](size_t, gear_damping::SignalChunk* c) {
+    c->sample_rate = 40e3;  // 4 samples per natural period (about 10 kHz)
+    return true;
+  });
+  const fs::path noparams = writeBag("noparams.bag", [](size_t, gear_damping::SignalChunk*) { return true; }, false);
+  const fs::path shortrec = writeBag("short.bag", [](size_t k, gear_damping::SignalChunk*) { return k == 0; });
+  {  // two signal topics
+    rosbag::Bag b((dir() / "two.bag").string(), rosbag::bagmode::Write);
+    gear_damping::SignalChunk c;
+    gear_sim_ros::toChunk(table_, 0, 100, 1e6, 0, &c);
+    b.write("/a/signal", ros::Time(1.0), c);
+    b.write("/b/signal", ros::Time(1.0), c);
+  }
+  struct Case {
+    std::string name, args;
+    int code;
+    std::string message;
+  };
+  const std::string i = "--input ";
+  const std::vector<Case> cases = {
+      {"empty file", i + empty.string(), 2, "cannot read as a bag"},
+      {"corrupt file", i + corrupt.string(), 2, "cannot read as a bag"},
+      {"truncated file", i + truncated.string(), 2, "cannot read as a bag"},
+      {"missing topic", i + intact.string() + " --topic /nope", 2, "no topic '/nope'"},
+      {"wrong message type", i + intact.string() + " --topic /gear/params", 2,
+       "has type gear_damping/GearParams"},
+      {"two candidate topics", i + (dir() / "two.bag").string(), 2, "/a/signal, /b/signal"},
+      {"duplicated indices", i + dup.string(), 2, "duplicated or out-of-order"},
+      {"sample rate change", i + rate.string(), 2, "sample_rate changed"},
+      {"sample rate too low", i + slow.string(), 2, "too low for the natural frequency"},
+      {"no gear parameters", i + noparams.string(), 1, "--params"},
+      {"shorter than a segment", i + shortrec.string(), 2, "shorter than one damping segment"},
+  };
+  for (const auto& c : cases) {
+    const fs::path out = dir() / "never.json";
+    const ToolRun r = analyze(c.args + " --output " + out.string());
+    EXPECT_EQ(r.code, c.code) << c.name << ": " << r.err;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.name << ": " << r.err;
+    EXPECT_FALSE(fs::exists(out)) << c.name;
+  }
+}
+
+}  // namespace

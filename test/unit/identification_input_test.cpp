@@ -1,0 +1,379 @@
+// Issue 4 acceptance on inputs and API: bad data is reported per segment with a reason (never a
+// silent NaN in a segment reported identifiable), missing columns / non-uniform time / invalid
+// options are rejected with messages naming the problem, and the streaming IntegralMethod fed
+// segment by segment reproduces identify() on the whole table.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <limits>
+
+#include "id_test_support.hpp"
+
+namespace {
+
+using gear_damping_id::GearConstants;
+using gear_damping_id::IntegralMethod;
+using gear_damping_id::SegmentEstimate;
+using gear_damping_id::SignalView;
+using namespace gear_id_test;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// Bar for the segments untouched by the bad data (noise-free: the issue's 0.05 %).
+constexpr double kCleanCTol = 5e-4;
+
+class IdentificationInput : public PiecewiseDefaultCase {
+ protected:
+  static GearConstants gear() { return gear_damping_id::gearConstants(config_->gearModel()); }
+  static IdentificationOptions opts(Formulation f = Formulation::Known,
+                                    DampingModel m = DampingModel::Piecewise) {
+    IdentificationOptions o;
+    o.formulation = f;
+    o.model = m;
+    return o;
+  }
+};
+
+// Every number of an identifiable estimate is finite; a non-identifiable one says why and
+// carries no number.
+void expectNoSilentNaN(const SegmentEstimate& s, const std::string& what) {
+  if (s.identifiable) {
+    EXPECT_TRUE(std::isfinite(s.C) && std::isfinite(s.C_std) && std::isfinite(s.c) &&
+                std::isfinite(s.xi))
+        << what << ": identifiable with C = " << s.C << ", C_std = " << s.C_std;
+  } else {
+    EXPECT_FALSE(s.reason.empty()) << what;
+    EXPECT_TRUE(std::isnan(s.C) && std::isnan(s.C_std) && std::isnan(s.c) && std::isnan(s.xi))
+        << what << ": not identifiable but C = " << s.C;
+  }
+}
+
+void expectNoSilentNaN(const IdentificationResult& r) {
+  for (size_t i = 0; i < r.segments.size(); ++i) {
+    expectNoSilentNaN(r.segments[i], "segment " + std::to_string(i));
+  }
+  if (r.constant) expectNoSilentNaN(*r.constant, "constant");
+  if (r.load_law && r.load_law->identifiable) {
+    EXPECT_TRUE(std::isfinite(r.load_law->c0) && std::isfinite(r.load_law->c1) &&
+                std::isfinite(r.load_law->c0_std) && std::isfinite(r.load_law->c1_std));
+  }
+}
+
+// NaN in the DTE of segment 3 and Inf in the torque of segment 7: those two segments are not
+// identifiable, with a reason naming the channel; the other eight meet the noise-free bar, with
+// and without the output-error refinement, and the shared-damping models leave the bad segments
+// out instead of being poisoned by them.
+TEST_F(IdentificationInput, NonFiniteSamplesMakeOnlyTheirSegmentUnidentifiable) {
+  SignalTable t = *clean_;
+  t.dte[3456] = kNaN;
+  t.torque[7890] = kInf;
+  for (auto refine :
+       {IdentificationOptions::Refine::Never, IdentificationOptions::Refine::Always}) {
+    IdentificationOptions o = opts();
+    o.refine = refine;
+    const IdentificationResult r = identifyOrFail(t, *config_, o);
+    ASSERT_EQ(r.segments.size(), 10u);
+    expectNoSilentNaN(r);
+    for (size_t i = 0; i < r.segments.size(); ++i) {
+      const auto& s = r.segments[i];
+      if (i == 3 || i == 7) {
+        EXPECT_FALSE(s.identifiable) << i;
+        EXPECT_NE(s.reason.find(i == 3 ? "dte" : "torque"), std::string::npos) << s.reason;
+        EXPECT_NE(s.reason.find("NaN/Inf"), std::string::npos) << s.reason;
+      } else {
+        ASSERT_TRUE(s.identifiable) << i << ": " << s.reason;
+        const double truth = trueC(t, *config_, s.t_start, s.t_end);
+        EXPECT_LT(std::abs(s.C - truth) / truth, kCleanCTol) << "segment " << i;
+      }
+    }
+  }
+  for (DampingModel m : {DampingModel::Constant, DampingModel::LoadLaw}) {
+    const IdentificationResult r = identifyOrFail(t, *config_, opts(Formulation::Known, m));
+    expectNoSilentNaN(r);
+    EXPECT_FALSE(r.segments[3].identifiable);
+    EXPECT_FALSE(r.segments[7].identifiable);
+    if (r.constant) {
+      EXPECT_TRUE(r.constant->identifiable) << r.constant->reason;
+    }
+    if (r.load_law) {
+      EXPECT_TRUE(r.load_law->identifiable) << r.load_law->reason;
+    }
+  }
+}
+
+TEST_F(IdentificationInput, TooFewSamplesAreReportedNotGuessed) {
+  const SignalView v = SignalView::of(*clean_);
+  IdentificationOptions o = opts();
+  o.window_length = gear_damping_id::defaultWindowLength(v, gear());
+  IntegralMethod m(o, gear());
+  for (Eigen::Index len : {1, 2, 3}) {
+    const SegmentEstimate s = m.addSegment(v, 5000, 5000 + len);
+    EXPECT_FALSE(s.identifiable) << len;
+    EXPECT_NE(s.reason.find("too few samples"), std::string::npos) << s.reason;
+    expectNoSilentNaN(s, "segment of " + std::to_string(len) + " samples");
+  }
+  // Through identify(): 3-sample segments (segment_length = 3 dt) over the whole record.
+  o.segment_length = 3e-6;
+  o.window_length = 0.0;
+  const IdentificationResult r = identifyOrFail(*clean_, *config_, o);
+  ASSERT_FALSE(r.segments.empty());
+  for (const auto& s : r.segments) EXPECT_FALSE(s.identifiable);
+  expectNoSilentNaN(r);
+  EXPECT_NE(r.segments.front().reason.find("too few samples"), std::string::npos);
+}
+
+// No dynamic content: all-zero DTE (a rig that recorded nothing) and a constant DTE (an offset):
+// the damping column vanishes once the window's nuisance terms are removed.
+TEST_F(IdentificationInput, NoMotionIsNotIdentifiable) {
+  for (double level : {0.0, 3e-6}) {
+    SignalTable t = *clean_;
+    t.dte.setConstant(level);
+    for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
+      const IdentificationResult r = identifyOrFail(t, *config_, opts(f));
+      ASSERT_EQ(r.segments.size(), 10u);
+      expectNoSilentNaN(r);
+      for (const auto& s : r.segments) {
+        EXPECT_FALSE(s.identifiable) << "level " << level << " " << gear_damping_id::toString(f);
+        EXPECT_NE(s.reason.find("no motion"), std::string::npos) << s.reason;
+      }
+    }
+  }
+}
+
+// Greybox needs a stiffness switch in every segment to separate K0 and dK: a segment shorter
+// than the mesh state's plateaus (0.6 ms and 0.4 ms at 1 kHz mesh) has none in some places,
+// and is reported, not solved.
+TEST_F(IdentificationInput, GreyboxSegmentWithoutASwitchIsNotIdentifiable) {
+  IdentificationOptions o = opts(Formulation::Greybox);
+  o.segment_length = 0.25e-3;
+  const IdentificationResult r = identifyOrFail(*clean_, *config_, o);
+  expectNoSilentNaN(r);
+  int without = 0;
+  for (const auto& s : r.segments) {
+    if (!s.identifiable) {
+      ++without;
+      // A switch exactly at the segment's end sample lies outside its intervals: the state
+      // column is then zero and the solve reports the rank deficiency instead.
+      EXPECT_TRUE(s.reason.find("mesh state constant") != std::string::npos ||
+                  s.reason.find("rank deficient") != std::string::npos)
+          << s.t_start << ": " << s.reason;
+    }
+  }
+  EXPECT_GT(without, 0);
+}
+
+TEST_F(IdentificationInput, MissingColumnIsNamed) {
+  struct Case {
+    Formulation f;
+    DampingModel m;
+    Eigen::VectorXd SignalTable::*column;
+    const char* name;
+  };
+  const Case cases[] = {
+      {Formulation::Known, DampingModel::Piecewise, &SignalTable::stiffness, "stiffness"},
+      {Formulation::Known, DampingModel::Piecewise, &SignalTable::torque, "torque"},
+      {Formulation::Greybox, DampingModel::Piecewise, &SignalTable::mesh_state, "mesh_state"},
+      {Formulation::Greybox, DampingModel::Piecewise, &SignalTable::torque, "torque"},
+      {Formulation::Paper, DampingModel::LoadLaw, &SignalTable::torque, "torque"},
+  };
+  for (const Case& c : cases) {
+    SignalTable t = *clean_;
+    (t.*c.column).resize(0);
+    const std::string e =
+        gear_damping_id::checkSignalTable(t, c.f, c.m, IdentificationOptions().time_tolerance);
+    EXPECT_NE(e.find(std::string("'") + c.name + "'"), std::string::npos)
+        << gear_damping_id::toString(c.f) << "/" << gear_damping_id::toString(c.m) << ": " << e;
+    IdentificationResult r;
+    std::string err;
+    EXPECT_FALSE(gear_damping_id::identify(t, gear(), opts(c.f, c.m), &r, &err));
+    EXPECT_EQ(err, e);
+  }
+  // The paper formulation with a piecewise C needs only the DTE.
+  SignalTable t = *clean_;
+  t.stiffness.resize(0);
+  t.torque.resize(0);
+  t.mesh_state.resize(0);
+  EXPECT_EQ(gear_damping_id::checkSignalTable(t, Formulation::Paper, DampingModel::Piecewise), "");
+}
+
+TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
+  SignalTable t = *clean_;
+  const double dt = 1e-6;
+  t.time[4321] += 0.01 * dt;  // 1 % of a step: far above the 1e-6 tolerance
+  const std::string e =
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+  EXPECT_NE(e.find("not uniformly sampled"), std::string::npos) << e;
+  EXPECT_NE(e.find("sample 4321"), std::string::npos) << e;  // 0-based index of the sample
+  const std::string with_line =
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise, 1e-6, 2);
+  EXPECT_NE(with_line.find("line 4323"), std::string::npos) << with_line;  // CSV: header + 1
+  IdentificationResult r;
+  std::string err;
+  EXPECT_FALSE(gear_damping_id::identify(t, gear(), opts(), &r, &err));
+  EXPECT_EQ(err, e);
+  // Within tolerance (rounding of time stamps) is fine.
+  SignalTable ok = *clean_;
+  ok.time[4321] += 1e-9 * dt;
+  EXPECT_EQ(gear_damping_id::checkSignalTable(ok, Formulation::Known, DampingModel::Piecewise), "");
+}
+
+TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
+  struct Case {
+    const char* field;
+    void (*set)(IdentificationOptions*);
+  };
+  const Case cases[] = {
+      {"segment_length", [](IdentificationOptions* o) { o->segment_length = -1e-3; }},
+      {"segment_length", [](IdentificationOptions* o) { o->segment_length = kNaN; }},
+      {"window_length", [](IdentificationOptions* o) { o->window_length = -2e-4; }},
+      {"window_length", [](IdentificationOptions* o) { o->window_length = kInf; }},
+      {"t_start", [](IdentificationOptions* o) { o->t_start = 0.005, o->t_end = 0.002; }},
+      {"t_start", [](IdentificationOptions* o) { o->t_start = kNaN; }},
+      {"max_condition", [](IdentificationOptions* o) { o->max_condition = 0.5; }},
+      {"max_condition", [](IdentificationOptions* o) { o->max_condition = 1e12; }},
+      {"time_tolerance", [](IdentificationOptions* o) { o->time_tolerance = 0.0; }},
+      {"refine_threshold", [](IdentificationOptions* o) { o->refine_threshold = -1.0; }},
+      {"max_iterations", [](IdentificationOptions* o) { o->max_iterations = 0; }},
+  };
+  EXPECT_EQ(IdentificationOptions().validate(), "");
+  const SimConfig c = table1Config();
+  SimConfig short_case = c;
+  short_case.simulation.duration = 1e-3;
+  const SignalTable t = simulateOrFail(short_case);
+  for (const Case& k : cases) {
+    IdentificationOptions o;
+    k.set(&o);
+    const std::string e = o.validate();
+    EXPECT_EQ(e.rfind(k.field, 0), 0u)
+        << "expected a message starting with " << k.field << ": " << e;
+    IdentificationResult r;
+    std::string err;
+    EXPECT_FALSE(
+        gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r, &err));
+    EXPECT_EQ(err, e);
+  }
+}
+
+// An analysed time range [t_start, t_end] picks the segments starting at t_start; with the same
+// segment starts as the whole-record analysis, each segment's estimate is the same (the record
+// outside the range still serves the interpolation stencils). t_end is inclusive: half a sample
+// before 8 ms ends the range at sample 7999.
+TEST_F(IdentificationInput, AnalysedTimeRangeSelectsTheSameSegments) {
+  constexpr double kRel = 1e-12;
+  IdentificationOptions o = opts();
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult whole = identifyOrFail(*clean_, *config_, o);
+  o.t_start = 2e-3;
+  o.t_end = 8e-3 - 0.5e-6;
+  const IdentificationResult part = identifyOrFail(*clean_, *config_, o);
+  ASSERT_EQ(part.segments.size(), 6u);
+  for (size_t i = 0; i < part.segments.size(); ++i) {
+    const auto& a = part.segments[i];
+    const auto& b = whole.segments[i + 2];
+    EXPECT_NEAR(a.t_start, b.t_start, 1e-12);
+    EXPECT_NEAR(a.t_end, b.t_end, 1e-12);
+    EXPECT_NEAR(a.C, b.C, kRel * b.C) << "segment " << i;
+  }
+  // A range outside the record is an error, not an empty result.
+  o.t_start = 1.0;
+  o.t_end = 2.0;
+  IdentificationResult r;
+  std::string err;
+  EXPECT_FALSE(gear_damping_id::identify(*clean_, gear(), o, &r, &err));
+  EXPECT_NE(err.find("no samples in the analysed time range"), std::string::npos) << err;
+}
+
+// A rig's clock does not start at zero: the same record stamped from t = 12.345 s gives the same
+// estimates (the time step is recovered from stamps whose rounding is ~1e-15 s, so ~1e-9 of C).
+TEST_F(IdentificationInput, TimeOriginDoesNotChangeTheEstimates) {
+  constexpr double kRel = 1e-9;
+  SignalTable shifted = *clean_;
+  for (Eigen::Index i = 0; i < shifted.size(); ++i) {
+    shifted.time[i] = 12.345 + static_cast<double>(i) * 1e-6;
+  }
+  const IdentificationResult a = identifyOrFail(*clean_, *config_, opts());
+  const IdentificationResult b = identifyOrFail(shifted, *config_, opts());
+  ASSERT_EQ(a.segments.size(), b.segments.size());
+  for (size_t i = 0; i < a.segments.size(); ++i) {
+    ASSERT_TRUE(b.segments[i].identifiable) << b.segments[i].reason;
+    EXPECT_NEAR(b.segments[i].C, a.segments[i].C, kRel * a.segments[i].C) << "segment " << i;
+    EXPECT_NEAR(b.segments[i].t_start, 12.345 + a.segments[i].t_start, 1e-9);
+  }
+}
+
+// A node feeds the IntegralMethod segment by segment as data arrives, each time with a view of
+// just that segment and the two samples of interpolation context on either side; the result is
+// the one identify() computes over the whole table. Per-segment estimates of the piecewise model
+// are final when addSegment returns; finish() can be called repeatedly (cumulative estimate) and
+// the object holds one record per segment (segmentCount), forgotten by reset().
+TEST_F(IdentificationInput, StreamingSegmentBySegmentEqualsIdentifyOnTheWholeTable) {
+  constexpr double kRel = 1e-12;  // same arithmetic, only the views' time origins differ
+  // Noisy (40 dB), so that the residual and hence C_std are well above rounding.
+  SignalTable t = *clean_;
+  addWhiteNoise(&t.dte, 40.0, 7);
+  const SignalView whole = SignalView::of(t);
+  for (DampingModel model :
+       {DampingModel::Piecewise, DampingModel::Constant, DampingModel::LoadLaw}) {
+    for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
+      const std::string label =
+          gear_damping_id::toString(f) + "/" + gear_damping_id::toString(model);
+      IdentificationOptions o = opts(f, model);
+      o.refine = IdentificationOptions::Refine::Never;
+      const IdentificationResult batch = identifyOrFail(t, *config_, o);
+      o.window_length = gear_damping_id::defaultWindowLength(whole, gear());
+      const auto ranges = gear_damping_id::segmentRanges(whole, o);
+      ASSERT_EQ(ranges.size(), batch.segments.size());
+      IntegralMethod m(o, gear());
+      std::vector<SegmentEstimate> immediate;
+      for (size_t i = 0; i < ranges.size(); ++i) {
+        const Eigen::Index b = ranges[i].first, e = ranges[i].second;
+        const Eigen::Index lo = std::max<Eigen::Index>(0, b - 2);
+        const Eigen::Index hi = std::min<Eigen::Index>(whole.n, e + 2);
+        SignalView chunk = whole;  // pointers shifted to the chunk, as a node's buffer would be
+        chunk.t0 = whole.time(lo);
+        chunk.n = hi - lo;
+        chunk.dte += lo;
+        chunk.stiffness += lo;
+        chunk.torque += lo;
+        chunk.mesh_state += lo;
+        chunk.mesh_phase += lo;
+        immediate.push_back(m.addSegment(chunk, b - lo, e - lo));
+        EXPECT_EQ(m.segmentCount(), i + 1);
+        if (i == 4) {
+          const IdentificationResult partial = m.finish();  // a cumulative live estimate
+          EXPECT_EQ(partial.segments.size(), 5u);
+          expectNoSilentNaN(partial);
+        }
+      }
+      const IdentificationResult r = m.finish();
+      ASSERT_EQ(r.segments.size(), batch.segments.size()) << label;
+      for (size_t i = 0; i < r.segments.size(); ++i) {
+        const auto& a = r.segments[i];
+        const auto& b = batch.segments[i];
+        ASSERT_TRUE(a.identifiable && b.identifiable) << label << " " << i;
+        EXPECT_NEAR(a.C, b.C, kRel * std::abs(b.C)) << label << " segment " << i;
+        EXPECT_NEAR(a.C_std, b.C_std, 1e-9 * b.C_std) << label << " segment " << i;
+        EXPECT_NEAR(a.t_start, b.t_start, 1e-12) << label;
+        if (model == DampingModel::Piecewise) {
+          EXPECT_NEAR(immediate[i].C, b.C, kRel * std::abs(b.C)) << label << " segment " << i;
+        } else {
+          EXPECT_TRUE(immediate[i].identifiable);  // provisional: C only after finish()
+        }
+      }
+      if (batch.constant) {
+        EXPECT_NEAR(r.constant->C, batch.constant->C, kRel * batch.constant->C);
+      }
+      if (batch.load_law) {
+        EXPECT_NEAR(r.load_law->c0, batch.load_law->c0, kRel * std::abs(batch.load_law->c0));
+        EXPECT_NEAR(r.load_law->c1, batch.load_law->c1, kRel * std::abs(batch.load_law->c1));
+      }
+      EXPECT_NEAR(r.omega0, batch.omega0, kRel * batch.omega0) << label;
+      m.reset();
+      EXPECT_EQ(m.segmentCount(), 0u);
+      EXPECT_TRUE(m.finish().segments.empty());
+    }
+  }
+}
+
+}  // namespace
