@@ -17,7 +17,7 @@ namespace {
 // Same samples, same view, same arithmetic: only summation order could differ (it does not).
 constexpr double kSameComputationRelTol = 1e-12;
 // Per-segment vs whole-record output-error refinement: independent segment problems, each
-// Gauss-Newton run to its own convergence tolerance (measured 6e-11 on 40 dB data).
+// Gauss-Newton run to its own convergence tolerance (measured 1e-12 on 40 dB data).
 constexpr double kRefinementRelTol = 1e-8;
 
 struct Case {
