@@ -13,9 +13,9 @@
 // segment_length 0 or inf: one segment that closes only at a gap or at the end of the stream.
 //
 // Runs: a run is a contiguous stretch of accepted samples. A segment is emitted (nextSegment)
-// once the run holds its samples plus `context` samples after it (the integral method's
-// interpolation stencils read up to two samples beyond a segment, so the live result equals the
-// offline one), or when the run closes early. A run closes at
+// once the run holds its samples plus `context` samples after it (IntegralMethod::addSegment may
+// read up to two samples beyond a segment; giving it the same neighbours as the offline record
+// keeps the live result equal to the offline one), or when the run closes early. A run closes at
 // - a gap (missing indices, after waiting for up to `reorder_chunks` later chunks for the
 //   missing one): the samples on either side are never integrated together; the part of the
 //   segment before the gap and the part after it are emitted as separate (partial) segments;
