@@ -34,8 +34,8 @@ install(TARGETS gear_damping_id_core gear_damping_id_io gear_id_ros_conversions 
 install(DIRECTORY gear_damping_id/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_DESTINATION})
 
 # ---------------------------------------------------------------------------------------------
-# Live nodes (issue 6): damping_id_node, wavelet_node, and the conversions only they need
-# (chunk -> StreamAssembler input, wavelet result -> WaveletModes). The sequencing and
+# Live nodes (issue 6): damping_id_node, wavelet_node, and the conversion only they need
+# (chunk -> StreamAssembler input). The sequencing and
 # segment-by-segment identification they share (StreamAssembler, LiveIdentification) are in the
 # core library above.
 add_library(gear_live_ros_conversions gear_damping_id/ros/live_conversions.cpp)
@@ -49,7 +49,7 @@ add_dependencies(gear_live_ros_conversions ${PROJECT_NAME}_generate_messages_cpp
 foreach(node damping_id_node wavelet_node)
   add_executable(${node} gear_damping_id/nodes/${node}.cpp)
   target_link_libraries(${node} gear_live_ros_conversions gear_id_ros_conversions
-                        gear_ros_conversions gear_sim_io ${catkin_LIBRARIES})
+                        gear_damping_id_io gear_ros_conversions gear_sim_io ${catkin_LIBRARIES})
   target_compile_options(${node} PRIVATE ${GEAR_WARNINGS})
   add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp)
 endforeach()

@@ -19,7 +19,9 @@
 #include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
 
+#include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_ros/id_conversions.hpp"
 #include "node_common.hpp"
 
 namespace gd = gear_damping_id;
@@ -166,6 +168,7 @@ class WaveletNode {
       return;
     }
     gd::attachIntegralDampingRatio(&r, xi_integral_);
+    gd::shiftWaveletTimes(&r, t_start);  // onto the record's time axis
     auto msg =
         gear_damping_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
     msg.header.stamp = ros::Time::now();
