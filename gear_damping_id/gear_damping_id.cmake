@@ -33,6 +33,11 @@ install(TARGETS gear_damping_id_core gear_damping_id_io gear_id_ros_conversions 
         RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 install(DIRECTORY gear_damping_id/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_DESTINATION})
 
+# `rosrun gear_damping report RESULT_DIR`: figures and index.html (Python 3 + matplotlib).
+catkin_install_python(PROGRAMS gear_damping_id/scripts/report
+                      DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(FILES gear_damping_id/scripts/gear_report.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+
 # ---------------------------------------------------------------------------------------------
 # Live nodes (issue 6): damping_id_node, wavelet_node, and the conversion only they need
 # (chunk -> StreamAssembler input). The sequencing and
