@@ -37,3 +37,28 @@ install(DIRECTORY gear_damping_id/include/ DESTINATION ${CATKIN_GLOBAL_INCLUDE_D
 catkin_install_python(PROGRAMS gear_damping_id/scripts/report
                       DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 install(FILES gear_damping_id/scripts/gear_report.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+
+# ---------------------------------------------------------------------------------------------
+# Live nodes (issue 6): damping_id_node, wavelet_node, and the conversion only they need
+# (chunk -> StreamAssembler input). The sequencing and
+# segment-by-segment identification they share (StreamAssembler, LiveIdentification) are in the
+# core library above.
+add_library(gear_live_ros_conversions gear_damping_id/ros/live_conversions.cpp)
+target_include_directories(gear_live_ros_conversions PUBLIC
+  ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/ros/include
+  ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
+target_link_libraries(gear_live_ros_conversions PUBLIC gear_id_ros_conversions gear_damping_id_core
+                      ${catkin_LIBRARIES})
+target_compile_options(gear_live_ros_conversions PRIVATE ${GEAR_WARNINGS})
+add_dependencies(gear_live_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
+foreach(node damping_id_node wavelet_node)
+  add_executable(${node} gear_damping_id/nodes/${node}.cpp)
+  target_link_libraries(${node} gear_live_ros_conversions gear_id_ros_conversions
+                        gear_damping_id_io gear_ros_conversions gear_sim_io ${catkin_LIBRARIES})
+  target_compile_options(${node} PRIVATE ${GEAR_WARNINGS})
+  add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp)
+endforeach()
+install(TARGETS gear_live_ros_conversions damping_id_node wavelet_node
+        ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+        RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

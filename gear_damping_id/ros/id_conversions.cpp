@@ -56,4 +56,23 @@ gear_damping::ModeledResponse toMsg(const gd::ModeledResponse& m, double sample_
   return out;
 }
 
+gear_damping::WaveletModes toMsg(const gd::WaveletResult& r, double t_start, double t_end) {
+  gear_damping::WaveletModes msg;
+  msg.t_start = t_start;
+  msg.t_end = t_end;
+  msg.wavelet_parameter = r.omega0;
+  for (const auto& m : r.modes) {
+    gear_damping::WaveletMode w;
+    w.frequency_hz = m.frequency_hz;
+    w.damping_ratio = m.damping_ratio;
+    w.r2 = m.r2;
+    w.decay_t_start = m.t_start;
+    w.decay_t_end = m.t_end;
+    w.xi_integral = m.integral_xi;
+    w.warning = m.warning;
+    msg.modes.push_back(w);
+  }
+  return msg;
+}
+
 }  // namespace gear_damping_ros

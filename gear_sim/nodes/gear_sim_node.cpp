@@ -11,8 +11,11 @@
 //   ~repeat     [bool]      false: publish the record once, then stay up (latched params);
 //                           true: publish it forever, restarting at index 0 each time (default
 //                           false)
-//   ~wait_for_subscribers [s]  in "fast" mode, how long to wait for a /gear/signal subscriber
-//                           before publishing anyway (default 10)
+//   ~wait_for_subscribers [s]  in "fast" mode, how long to wait for ~min_subscribers
+//                           /gear/signal subscribers before publishing anyway (default 10)
+//   ~min_subscribers        in "fast" mode, subscribers to wait for (default 1; the pipeline
+//                           sets 2, so the wavelet node does not miss a burst that the first
+//                           connected subscriber triggered)
 // Stamps: header.stamp is ros::Time::now() at publication (sim time when /use_sim_time is set);
 // the sample time itself is first_index / sample_rate.
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -32,6 +35,7 @@ struct NodeOptions {
   std::string pace = "fast";
   bool repeat = false;
   double wait_for_subscribers = 10.0;
+  int min_subscribers = 1;
 };
 
 // Loads and validates every parameter; false (after ROS_FATAL naming the parameter) if invalid.
@@ -60,6 +64,11 @@ bool loadParameters(ros::NodeHandle& pnh, NodeOptions* o) {
   pnh.param("pace", o->pace, o->pace);
   pnh.param("repeat", o->repeat, o->repeat);
   pnh.param("wait_for_subscribers", o->wait_for_subscribers, o->wait_for_subscribers);
+  pnh.param("min_subscribers", o->min_subscribers, o->min_subscribers);
+  if (o->min_subscribers < 1) {
+    ROS_FATAL("~min_subscribers = %d: must be >= 1", o->min_subscribers);
+    return false;
+  }
   if (o->chunk_size < 1) {
     ROS_FATAL("~chunk_size = %d: must be >= 1 [samples]", o->chunk_size);
     return false;
@@ -102,7 +111,9 @@ class GearSimNode {
     if (o_.pace == "fast") {
       const ros::WallTime deadline =
           ros::WallTime::now() + ros::WallDuration(o_.wait_for_subscribers);
-      while (ros::ok() && signal_pub_.getNumSubscribers() == 0 && ros::WallTime::now() < deadline) {
+      while (ros::ok() &&
+             signal_pub_.getNumSubscribers() < static_cast<uint32_t>(o_.min_subscribers) &&
+             ros::WallTime::now() < deadline) {
         ros::WallDuration(0.01).sleep();
         updater_.update();
       }

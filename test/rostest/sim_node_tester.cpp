@@ -18,6 +18,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "run_command.hpp"
 
 namespace {
 
@@ -70,39 +71,30 @@ TEST(GearSimNode, PublishesTheWholeRecordContiguouslyWithLatchedParameters) {
   EXPECT_EQ(received.torque, expected.torque);
 }
 
-// Runs a command, returns (exit status, combined output).
-std::pair<int, std::string> run(const std::string& cmd) {
-  std::array<char, 512> buf;
-  std::string out;
-  std::unique_ptr<FILE, int (*)(FILE*)> p(popen((cmd + " 2>&1").c_str(), "r"), &pclose);
-  if (!p) return {-1, ""};
-  while (fgets(buf.data(), buf.size(), p.get())) out += buf.data();
-  const int status = pclose(p.release());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using gear_test::runCommand;
 
 TEST(GearSimNode, InvalidParametersStopTheNodeNamingTheParameter) {
   // Missing configuration.
-  auto r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_a");
+  auto r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_a");
   EXPECT_NE(r.first, 0);
   EXPECT_NE(r.first, 124) << "timed out instead of exiting";
   EXPECT_NE(r.second.find("~pinion: missing"), std::string::npos) << r.second;
   // A valid configuration with one invalid value.
-  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_b").first, 0);
+  ASSERT_EQ(runCommand("rosparam load " + configPath() + " /bad_sim_b").first, 0);
   ros::param::set("/bad_sim_b/mesh/contact_ratio", 2.5);
-  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_b");
+  r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_b");
   EXPECT_NE(r.first, 0);
   EXPECT_NE(r.first, 124);
   EXPECT_NE(r.second.find("mesh.contact_ratio = 2.5"), std::string::npos) << r.second;
   // An unknown key (a typo must not fall back to a default).
-  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_c").first, 0);
+  ASSERT_EQ(runCommand("rosparam load " + configPath() + " /bad_sim_c").first, 0);
   ros::param::set("/bad_sim_c/load/amplitud", 10.0);
-  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_c");
+  r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_c");
   EXPECT_NE(r.first, 0);
   EXPECT_NE(r.second.find("load.amplitud: unknown key"), std::string::npos) << r.second;
   ros::param::set("/bad_sim_d/chunk_size", 0);
-  ASSERT_EQ(run("rosparam load " + configPath() + " /bad_sim_d").first, 0);
-  r = run("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_d");
+  ASSERT_EQ(runCommand("rosparam load " + configPath() + " /bad_sim_d").first, 0);
+  r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_d");
   EXPECT_NE(r.first, 0);
   EXPECT_NE(r.second.find("~chunk_size = 0"), std::string::npos) << r.second;
 }

@@ -1,0 +1,197 @@
+// Assembly of a live stream of sample chunks into damping segments (DESIGN.md §6 "Topics", issue
+// 6). No ROS: the nodes convert gear_damping/SignalChunk messages into ChunkData and feed them
+// here; everything about sequencing lives in this class so it is unit-tested without roscore.
+//
+// Index and time convention: sample g of the stream (g = first_index + i of a chunk) is at
+// t = g / sample_rate [s] (t = 0 at the start of the record), as in SignalChunk.
+//
+// Segments: boundaries at t_first + i*segment_length, i = 0, 1, ..., where t_first is the time
+// of the first sample at or after options.t_start (sample 0 when t_start <= 0): segment i holds
+// the samples g with ceil((t_first + i*dT)*fs - 1e-3) <= g < ceil((t_first + (i+1)*dT)*fs - 1e-3),
+// exactly the ranges of gear_damping_id::segmentRanges for a record starting at sample 0. With a
+// finite t_end, a final partial segment shorter than half dT joins the previous one (as offline).
+// segment_length 0 or inf: one segment that closes only at a gap or at the end of the stream.
+//
+// Runs: a run is a contiguous stretch of accepted samples. A segment is emitted (nextSegment)
+// once the run holds its samples plus `context` samples after it (IntegralMethod::addSegment may
+// read up to two samples beyond a segment; giving it the same neighbours as the offline record
+// keeps the live result equal to the offline one), or when the run closes early. A run closes at
+// - a gap (missing indices, after waiting for up to `reorder_chunks` later chunks for the
+//   missing one): the samples on either side are never integrated together; the part of the
+//   segment before the gap and the part after it are emitted as separate (partial) segments;
+// - a change of the set of channels present;
+// - a restart (a chunk with first_index 0 after later samples: the publisher started over),
+//   which also starts a new epoch: the consumer resets its estimates when the epoch changes;
+// - endOfStream() (end of a bag, an idle publisher, or a trigger).
+// Rejected (never enter a run, counted): chunks with a non-finite value in any channel present,
+// a sample rate different from the run's (relative tolerance 1e-9), malformed chunks (no
+// samples, sample rate not finite and > 0, an index beyond 2^52, fewer than 4 samples per
+// segment at the chunk's rate). Ignored (counted): exact duplicates, chunks that
+// arrive after their indices were declared a gap ("late"); a chunk overlapping accepted samples
+// contributes only its new samples.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <deque>
+#include <limits>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "gear_damping_id/integral_method.hpp"
+
+namespace gear_damping_id {
+
+/// One chunk of consecutive samples (pointers valid during push only). Optional channels are
+/// null when absent; every present channel holds n values.
+struct ChunkData {
+  std::uint64_t first_index = 0;       ///< global index of the first sample
+  double sample_rate = 0.0;            ///< [Hz]
+  size_t n = 0;                        ///< samples
+  const double* dte = nullptr;         ///< [m] required
+  const double* stiffness = nullptr;   ///< [N/m]
+  const double* torque = nullptr;      ///< [N*m]
+  const double* mesh_state = nullptr;  ///< [0/1]
+  const double* mesh_phase = nullptr;  ///< [mesh cycles]
+};
+
+struct StreamOptions {
+  /// Damping segment length dT [s]; 0 or inf: one segment per run (closed at a gap or the end).
+  double segment_length = 1e-3;
+  /// Analysed time range [s] (samples outside are ignored, apart from the stencil context).
+  double t_start = -std::numeric_limits<double>::infinity();
+  double t_end = std::numeric_limits<double>::infinity();
+  /// Chunks held while waiting for a missing earlier chunk (out-of-order delivery) before the
+  /// missing samples are declared a gap. 0: a missing index is a gap at once.
+  int reorder_chunks = 8;
+  /// Samples kept on either side of a segment for the quadrature stencils (2 = what the
+  /// integral method reads).
+  int context = 2;
+  /// Empty when valid; else names the field, the value and the rule broken.
+  std::string validate() const;
+};
+
+/// What happened to a chunk given to push().
+enum class ChunkStatus {
+  kAccepted,           ///< appended to the current run (possibly after trimming an overlap)
+  kHeld,               ///< ahead of the expected index: held for reordering
+  kDuplicate,          ///< every sample already accepted: ignored
+  kLate,               ///< its samples were already declared missing (a gap): ignored
+  kRejectedNonFinite,  ///< NaN/Inf in a channel: rejected
+  kRejectedRate,       ///< sample rate differs from the stream's: rejected
+  kRejectedMalformed   ///< no samples, no dte, bad sample rate or index: rejected
+};
+const char* toString(ChunkStatus s);
+
+/// Event counters since construction or reset().
+struct StreamCounters {
+  unsigned long chunks_received = 0;
+  unsigned long chunks_accepted = 0;  ///< appended (incl. trimmed overlaps and released holds)
+  unsigned long samples_accepted = 0;
+  unsigned long gaps = 0;             ///< runs closed by missing indices
+  unsigned long samples_missing = 0;  ///< samples in those gaps
+  unsigned long duplicates = 0;
+  unsigned long overlaps = 0;      ///< chunks partly overlapping accepted samples (trimmed)
+  unsigned long late = 0;          ///< chunks arriving after their gap was declared
+  unsigned long out_of_order = 0;  ///< chunks held and released in order
+  unsigned long rejected_nonfinite = 0;
+  unsigned long rejected_rate = 0;
+  unsigned long rejected_malformed = 0;
+  unsigned long restarts = 0;
+  unsigned long channel_changes = 0;
+  unsigned long segments_emitted = 0;
+  unsigned long partial_segments = 0;  ///< emitted shorter than dT (closed by a gap/restart/end)
+};
+
+/// A segment ready for identification, with its own copy of the samples: samples [begin, end)
+/// of view() are the segment, the rest (up to `context` on each side) stencil context.
+struct StreamSegment {
+  std::uint64_t first_index = 0;  ///< global index of view() sample 0
+  double sample_rate = 0.0;       ///< [Hz]
+  Eigen::Index begin = 0, end = 0;
+  long segment_number = 0;  ///< i of the boundary grid (several partial pieces may share it)
+  bool partial = false;     ///< shorter than its grid segment (a gap, restart or end cut it)
+  unsigned long epoch = 0;  ///< restarts before this segment
+  std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;  ///< empty = absent
+  /// View with t0 = first_index / sample_rate, dt = 1 / sample_rate (global stream time).
+  SignalView view() const;
+};
+
+/// Name of the first channel that `formulation`/`model` need and `view` lacks (stiffness and
+/// torque for known; mesh_state and torque for greybox; torque for load_law), or "" if none.
+/// The integral method must not be given a view without them.
+std::string missingChannel(const SignalView& view, Formulation formulation, DampingModel model);
+
+class StreamAssembler {
+ public:
+  /// `options` must be valid.
+  explicit StreamAssembler(const StreamOptions& options);
+
+  /// Takes one chunk (see the header comment for the rules). `detail` (may be null) receives a
+  /// human-readable reason for rejections, gaps and restarts ("" otherwise). Never throws on
+  /// any content.
+  ChunkStatus push(const ChunkData& chunk, std::string* detail = nullptr);
+
+  /// End of the stream (or of a burst): held chunks are released (missing indices before them
+  /// become gaps) and the current run closes, emitting its last, possibly partial, segment. A
+  /// later chunk continuing at the next index starts a new run (not counted as a gap).
+  void endOfStream();
+
+  /// Pops the oldest ready segment; false if none.
+  bool nextSegment(StreamSegment* out);
+  size_t readySegments() const { return ready_.size(); }
+
+  /// Forgets everything (runs, held chunks, ready segments, counters); keeps the options.
+  void reset();
+
+  const StreamCounters& counters() const { return counters_; }
+  const StreamOptions& options() const { return options_; }
+  unsigned long epoch() const { return epoch_; }
+  /// Samples accepted in the current run and held chunks (for diagnostics).
+  size_t bufferedSamples() const { return static_cast<size_t>(run_.dte.size()); }
+  size_t heldChunks() const { return held_.size(); }
+  /// Global index expected next (valid once a chunk was accepted).
+  std::uint64_t nextIndex() const { return next_index_; }
+  double sampleRate() const { return rate_; }
+
+ private:
+  struct Buffer {  // the current run from global index `first` on
+    std::uint64_t first = 0;
+    std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
+  };
+  struct Held {
+    double sample_rate = 0.0;
+    unsigned mask = 0;
+    std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
+  };
+
+  static unsigned channelMask(const ChunkData& c);
+  void append(const ChunkData& c, size_t skip);
+  void releaseHeld(bool force);
+  void closeRun();
+  void emitReady(bool closing);
+  std::uint64_t firstAnalysed() const;     // first global index >= t_start
+  std::uint64_t endAnalysed() const;       // one past the last index <= t_end (max if inf)
+  std::uint64_t boundary(long i) const;    // start of grid segment i
+  long segmentOf(std::uint64_t g) const;   // grid segment holding g
+  std::uint64_t segmentEnd(long i) const;  // end of grid segment i (tail merge applied)
+  bool wholeRun() const;
+  bool inRecentGap(std::uint64_t a, std::uint64_t b) const;
+
+  StreamOptions options_;
+  StreamCounters counters_;
+  double rate_ = 0.0;             // 0: not yet known
+  unsigned mask_ = 0;             // channels present in the current run
+  bool have_run_ = false;         // a run is open
+  bool seen_any_ = false;         // a chunk was accepted since construction/reset/restart
+  std::uint64_t next_index_ = 0;  // expected next global index
+  std::uint64_t seg_begin_ = 0;   // first index not yet emitted in the current run
+  unsigned long epoch_ = 0;
+  Buffer run_;
+  std::map<std::uint64_t, Held> held_;
+  std::deque<std::pair<std::uint64_t, std::uint64_t>> recent_gaps_;
+  std::deque<StreamSegment> ready_;
+};
+
+}  // namespace gear_damping_id

@@ -1,0 +1,380 @@
+// damping_id_node: live mesh-damping identification (DESIGN.md §4) on a stream of
+// gear_damping/SignalChunk messages.
+//
+// Subscribes:  /gear/signal (SignalChunk; remap e.g. /gear/signal:=/rig/signal), /gear/params
+//              (GearParams, latched), unless ~gear_config names a YAML file.
+// Publishes:   /gear/damping (DampingArray, latched): cumulative estimate since start/reset/restart
+//              /gear/damping_segment (DampingArray): one per completed segment
+//              /gear/modeled_response (ModeledResponse): per completed segment
+//              /gear/damping_C (std_msgs/Float64) [1/s], /gear/damping_xi (std_msgs/Float64) [-]
+//              /diagnostics
+// Services:    ~reset (std_srvs/Empty), ~get_damping (gear_damping/GetDamping)
+// Parameters:  see loadParameters() and docs/live.md.
+//
+// Live semantics (gear_damping_id/live_identification.hpp): segments are those of the offline
+// analysis (boundaries at multiples of ~segment_length from sample 0 or ~t_start, see
+// StreamAssembler); each is identified by the streaming IntegralMethod as soon as its samples (plus
+// two of stencil context) have arrived, so with ~refine never the numbers equal
+// `analyze`/identify() on the same record. With the piecewise model a segment is refined by output
+// error on its own (auto: when noisy, as offline; segment problems are independent, so this equals
+// the offline refinement up to the solver's convergence tolerance). The shared-damping models
+// (constant, load_law) publish the cumulative integral-method estimate, updated per segment; they
+// are not refined live. Differences from offline: the default window comes from the first segment's
+// mean stiffness (offline: the record's), legacy's mean forcing is an unknown (offline: the record
+// mean), and a final partial segment is identified on its own (offline merges a tail shorter than
+// half a segment into the previous one, unless ~t_end is finite, where live does the same).
+//
+// Threading: one thread (ros::spin). Callbacks convert and buffer; identification of a segment
+// (~0.1 ms for 1000 samples) runs in the chunk callback, and the subscriber queue (~queue_size
+// chunks, default 10000 = 10 s at the simulator's full speed) absorbs any burst meanwhile.
+#include <gear_damping/GearParams.h>
+#include <gear_damping/GetDamping.h>
+#include <std_msgs/Float64.h>
+#include <std_srvs/Empty.h>
+
+#include <deque>
+#include <memory>
+
+#include "gear_damping_id/live_identification.hpp"
+#include "gear_damping_ros/id_conversions.hpp"
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim_ros/conversions.hpp"
+#include "node_common.hpp"
+
+namespace gd = gear_damping_id;
+namespace nodes = gear_damping_nodes;
+
+namespace {
+
+struct NodeOptions {
+  gd::IdentificationOptions id;
+  gd::StreamOptions stream;
+  nodes::IntakeOptions intake;
+  bool publish_modeled_response = true;
+  double cumulative_period = 0.1;  // [s] wall: most frequent /gear/damping update
+  std::string gear_config;         // YAML path; empty: /gear/params
+};
+
+// Reads and validates every private parameter; false after ROS_FATAL naming the parameter.
+bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
+  nodes::ParamReader p(pnh);
+  std::string formulation = "known", model = "piecewise", refine = "auto";
+  int max_iterations = o->id.max_iterations;
+  if (!p.get("formulation", &formulation) || !p.get("model", &model) ||
+      !p.getDouble("segment_length", &o->id.segment_length, "s") ||
+      !p.getDouble("window_length", &o->id.window_length, "s") ||
+      !p.getDouble("t_start", &o->id.t_start, "s") || !p.getDouble("t_end", &o->id.t_end, "s") ||
+      !p.getDouble("max_condition", &o->id.max_condition) || !p.get("refine", &refine) ||
+      !p.getDouble("refine_threshold", &o->id.refine_threshold) ||
+      !p.get("max_iterations", &max_iterations) || !nodes::readIntakeParams(p, &o->intake) ||
+      !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
+      !p.get("publish_modeled_response", &o->publish_modeled_response) ||
+      !p.get("gear_config", &o->gear_config)) {
+    return false;
+  }
+  p.allow("diagnostic_period");  // read by diagnostic_updater
+  if (!p.rejectUnknown()) return false;
+  if (!gd::parseFormulation(formulation, &o->id.formulation)) {
+    ROS_FATAL("~formulation = '%s': must be known, greybox, paper or legacy", formulation.c_str());
+    return false;
+  }
+  if (!gd::parseDampingModel(model, &o->id.model)) {
+    ROS_FATAL("~model = '%s': must be piecewise, constant or load_law", model.c_str());
+    return false;
+  }
+  using R = gd::IdentificationOptions::Refine;
+  if (refine == "auto")
+    o->id.refine = R::Auto;
+  else if (refine == "always")
+    o->id.refine = R::Always;
+  else if (refine == "never")
+    o->id.refine = R::Never;
+  else {
+    ROS_FATAL("~refine = '%s': must be auto, always or never", refine.c_str());
+    return false;
+  }
+  o->id.max_iterations = max_iterations;
+  std::string e = o->id.validate();
+  if (e.empty()) {
+    o->stream.segment_length = o->id.segment_length;
+    o->stream.t_start = o->id.t_start;
+    o->stream.t_end = o->id.t_end;
+    o->stream.reorder_chunks = o->intake.reorder_chunks;
+    e = o->stream.validate();
+  }
+  if (!e.empty()) {
+    ROS_FATAL("%s", nodes::paramError(e).c_str());
+    return false;
+  }
+  if (!(o->cumulative_period >= 0.0)) {
+    ROS_FATAL("~cumulative_period = %g: must be >= 0 [s]", o->cumulative_period);
+    return false;
+  }
+  ROS_INFO("damping_id_node:%s", p.summary().c_str());
+  return true;
+}
+
+class DampingIdNode {
+ public:
+  DampingIdNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
+      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
+    damping_pub_ = nh.advertise<gear_damping::DampingArray>("/gear/damping", 1, true);
+    segment_pub_ = nh.advertise<gear_damping::DampingArray>("/gear/damping_segment", 100);
+    response_pub_ = nh.advertise<gear_damping::ModeledResponse>("/gear/modeled_response", 100);
+    c_pub_ = nh.advertise<std_msgs::Float64>("/gear/damping_C", 100);
+    xi_pub_ = nh.advertise<std_msgs::Float64>("/gear/damping_xi", 100);
+    reset_srv_ = pnh.advertiseService("reset", &DampingIdNode::onReset, this);
+    get_srv_ = pnh.advertiseService("get_damping", &DampingIdNode::onGet, this);
+    updater_.setHardwareID("damping_id");
+    updater_.add("stream", this, &DampingIdNode::diagnoseStream);
+    updater_.add("identification", this, &DampingIdNode::diagnoseIdentification);
+    // Absolute names, remappable (e.g. /gear/signal:=/rig/chunks).
+    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
+                               &DampingIdNode::onChunk, this, ros::TransportHints().tcpNoDelay());
+    timer_ = nh.createWallTimer(ros::WallDuration(0.05), &DampingIdNode::onTimer, this);
+    if (o_.gear_config.empty()) {
+      params_sub_ = nh.subscribe("/gear/params", 1, &DampingIdNode::onParams, this);
+    }
+  }
+
+  // Gear constants from ~gear_config (if set); false after ROS_FATAL when it cannot be used.
+  bool loadGearConfig() {
+    if (o_.gear_config.empty()) return true;
+    gear_sim::SimConfig cfg;
+    std::string e;
+    if (!gear_sim::loadSimConfigFile(o_.gear_config, &cfg, &e)) {
+      ROS_FATAL("~gear_config = '%s': %s", o_.gear_config.c_str(), e.c_str());
+      return false;
+    }
+    return setGear(gd::gearConstants(cfg.gearModel()));
+  }
+
+ private:
+  bool setGear(const gd::GearConstants& g) {
+    const std::string e = g.validate();
+    if (!e.empty()) {
+      ROS_ERROR_THROTTLE(5.0, "gear parameters ignored: %s", e.c_str());
+      return false;
+    }
+    if (gear_ && gear_->equivalent_mass == g.equivalent_mass &&
+        gear_->force_factor == g.force_factor && gear_->contact_ratio == g.contact_ratio &&
+        gear_->mean_stiffness == g.mean_stiffness) {
+      return true;  // unchanged (e.g. the latched message again)
+    }
+    if (gear_) ROS_WARN("gear parameters changed: estimates reset");
+    gear_ = std::make_unique<gd::GearConstants>(g);
+    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_);
+    clearEstimates();
+    ROS_INFO("gear constants: Me = %.6g kg, mean stiffness %.6g N/m", g.equivalent_mass,
+             g.mean_stiffness);
+    while (!early_.empty()) {  // chunks that came before the parameters
+      intake_.push(*early_.front());
+      early_.pop_front();
+    }
+    processReady();
+    return true;
+  }
+
+  void onParams(const gear_damping::GearParams::ConstPtr& msg) {
+    gear_sim::GearModel model;
+    std::string e;
+    if (!gear_sim_ros::fromMsg(*msg, &model, &e)) {
+      ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", e.c_str());
+      return;
+    }
+    setGear(gd::gearConstants(model));
+  }
+
+  void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
+    if (!gear_) {  // keep until the gear parameters arrive
+      if (early_.size() >= static_cast<size_t>(o_.intake.queue_size)) {
+        early_.pop_front();
+        ++dropped_early_;
+      }
+      early_.push_back(msg);
+      ROS_WARN_THROTTLE(5.0, "waiting for gear parameters (%s): chunks buffered",
+                        params_sub_ ? params_sub_.getTopic().c_str() : "~gear_config");
+      return;
+    }
+    intake_.push(*msg);
+    processReady();
+  }
+
+  void onTimer(const ros::WallTimerEvent&) {
+    if (gear_ && intake_.idle(o_.intake.end_of_stream_timeout)) {
+      intake_.assembler().endOfStream();  // the publisher paused or stopped: flush
+      processReady();
+      publishCumulative(true);
+      updater_.force_update();
+    }
+    if (dirty_ && (ros::WallTime::now() - last_cumulative_).toSec() >= o_.cumulative_period) {
+      publishCumulative(true);
+    }
+    updater_.update();
+  }
+
+  // Identifies every segment the assembler has completed.
+  void processReady() {
+    gd::StreamSegment s;
+    bool any = false;
+    while (intake_.assembler().nextSegment(&s)) {
+      if (s.epoch != epoch_) {  // the publisher restarted: a new record
+        publishCumulative(true);
+        epoch_ = s.epoch;
+        clearEstimates();
+        ROS_WARN("stream restarted (epoch %lu): estimates reset", epoch_);
+      }
+      identify(s);
+      any = true;
+    }
+    if (any) publishCumulative(false);
+  }
+
+  void identify(const gd::StreamSegment& s) {
+    const ros::WallTime t0 = ros::WallTime::now();
+    const gd::SignalView v = s.view();
+    const gd::LiveIdentification::SegmentOutput out = live_->add(v, s.begin, s.end);
+    const gd::SegmentEstimate& est = out.estimate;
+    const gd::IdentificationResult& seg = out.result;
+    if (!out.warning.empty()) ROS_WARN_THROTTLE(5.0, "%s", out.warning.c_str());
+    if (est.identifiable) {
+      ++identified_;
+    } else {
+      ++not_identifiable_;
+      last_reason_ = est.reason;
+      ROS_WARN_THROTTLE(2.0, "segment [%.6f, %.6f] s not identifiable: %s", est.t_start, est.t_end,
+                        est.reason.c_str());
+    }
+    if (s.partial) ++partial_;
+    latest_ = est;
+    dirty_ = true;
+
+    gear_damping::DampingArray one = gear_damping_ros::toMsg(seg);
+    one.header.stamp = ros::Time::now();
+    segment_pub_.publish(one);
+    if (est.identifiable && std::isfinite(est.C)) {
+      std_msgs::Float64 m;
+      m.data = est.C;
+      c_pub_.publish(m);
+      m.data = est.xi;
+      xi_pub_.publish(m);
+    }
+    if (o_.publish_modeled_response && est.identifiable && std::isfinite(est.C)) {
+      gd::ModeledResponse mr;
+      std::string why;
+      if (gd::modeledResponse(v, *gear_, seg, &mr, &why)) {
+        auto msg = gear_damping_ros::toMsg(mr, s.sample_rate,
+                                           s.first_index + static_cast<std::uint64_t>(mr.begin));
+        msg.header.stamp = ros::Time::now();
+        response_pub_.publish(msg);
+        last_fit_ = mr.fit_percent;
+      } else {
+        ROS_WARN_THROTTLE(5.0, "modeled response: %s", why.c_str());
+      }
+    }
+    const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
+    last_ms_ = ms;
+    max_ms_ = std::max(max_ms_, ms);
+    sum_ms_ += ms;
+  }
+
+  gear_damping::DampingArray cumulative() const {
+    gear_damping::DampingArray a =
+        live_ ? gear_damping_ros::toMsg(live_->cumulative()) : gear_damping::DampingArray();
+    a.header.stamp = ros::Time::now();
+    return a;
+  }
+
+  void publishCumulative(bool force) {
+    if (!dirty_) return;
+    if (!force && (ros::WallTime::now() - last_cumulative_).toSec() < o_.cumulative_period) return;
+    damping_pub_.publish(cumulative());
+    last_cumulative_ = ros::WallTime::now();
+    dirty_ = false;
+  }
+
+  void clearEstimates() {
+    if (live_) live_->reset();
+    dirty_ = true;
+  }
+
+  bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+    intake_.assembler().reset();
+    epoch_ = 0;
+    clearEstimates();
+    identified_ = not_identifiable_ = partial_ = 0;
+    last_reason_.clear();
+    publishCumulative(true);
+    ROS_INFO("damping_id_node: reset");
+    return true;
+  }
+
+  bool onGet(gear_damping::GetDamping::Request&, gear_damping::GetDamping::Response& res) {
+    res.damping = cumulative();
+    return true;
+  }
+
+  void diagnoseStream(diagnostic_updater::DiagnosticStatusWrapper& s) {
+    s.summary(diagnostic_msgs::DiagnosticStatus::OK,
+              gear_ ? "receiving" : "waiting for gear parameters");
+    intake_.report(s);
+    s.add("chunks dropped waiting for gear parameters", dropped_early_);
+  }
+
+  void diagnoseIdentification(diagnostic_updater::DiagnosticStatusWrapper& s) {
+    const unsigned long n = identified_ + not_identifiable_;
+    s.summary(diagnostic_msgs::DiagnosticStatus::OK, "identifying");
+    if (not_identifiable_ != reported_not_identifiable_) {
+      s.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                "segments not identifiable: " + last_reason_);
+    }
+    reported_not_identifiable_ = not_identifiable_;
+    s.add("formulation", gd::toString(o_.id.formulation));
+    s.add("model", gd::toString(o_.id.model));
+    s.add("segments identified", identified_);
+    s.add("segments not identifiable", not_identifiable_);
+    s.add("last not identifiable reason", last_reason_);
+    s.add("partial segments (cut by gap/restart/end)", partial_);
+    s.add("segments in current estimate", live_ ? live_->segmentCount() : 0);
+    s.add("processing time last segment [ms]", last_ms_);
+    s.add("processing time mean [ms]", n ? sum_ms_ / static_cast<double>(n) : 0.0);
+    s.add("processing time max [ms]", max_ms_);
+    s.add("last fit [%]", last_fit_);
+    if (latest_.identifiable) {
+      s.add("latest C [1/s]", latest_.C);
+      s.add("latest xi", latest_.xi);
+    }
+  }
+
+  NodeOptions o_;
+  nodes::ChunkIntake intake_;
+  diagnostic_updater::Updater updater_;
+  ros::Publisher damping_pub_, segment_pub_, response_pub_, c_pub_, xi_pub_;
+  ros::Subscriber signal_sub_, params_sub_;
+  ros::ServiceServer reset_srv_, get_srv_;
+  ros::WallTimer timer_;
+  std::unique_ptr<gd::GearConstants> gear_;
+  std::unique_ptr<gd::LiveIdentification> live_;
+  std::deque<gear_damping::SignalChunk::ConstPtr> early_;
+  gd::SegmentEstimate latest_;
+  unsigned long epoch_ = 0, identified_ = 0, not_identifiable_ = 0, partial_ = 0;
+  unsigned long reported_not_identifiable_ = 0, dropped_early_ = 0;
+  std::string last_reason_;
+  double last_fit_ = gd::kNaN;
+  double last_ms_ = 0, max_ms_ = 0, sum_ms_ = 0;
+  bool dirty_ = false;
+  ros::WallTime last_cumulative_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "damping_id_node");
+  ros::NodeHandle nh, pnh("~");
+  NodeOptions options;
+  if (!loadParameters(pnh, &options)) return 1;
+  DampingIdNode node(nh, pnh, std::move(options));
+  if (!node.loadGearConfig()) return 1;
+  ros::spin();
+  return 0;
+}

@@ -1,0 +1,235 @@
+// Shared ROS glue of damping_id_node and wavelet_node: private-parameter reading with type and
+// typo checks, and the chunk intake (message -> StreamAssembler, throttled warnings, input-rate
+// and event diagnostics). Header-only; the sequencing logic itself is the ROS-free
+// gear_damping_id::StreamAssembler.
+#pragma once
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <ros/ros.h>
+
+#include <cctype>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "gear_damping/SignalChunk.h"
+#include "gear_damping_id/stream_assembler.hpp"
+#include "gear_damping_ros/live_conversions.hpp"
+
+namespace gear_damping_nodes {
+
+/// Reads optional private parameters: absent -> the default (logged once in the summary);
+/// present with the wrong type -> ROS_FATAL naming it (never a silent fallback). Parameter names
+/// read are remembered, so unknown names (typos) in the private namespace can be rejected.
+class ParamReader {
+ public:
+  explicit ParamReader(const ros::NodeHandle& pnh) : pnh_(pnh) {}
+
+  template <class T>
+  bool get(const std::string& name, T* value, const char* unit = "") {
+    known_.insert(name);
+    if (pnh_.hasParam(name) && !pnh_.getParam(name, *value)) {
+      ROS_FATAL("~%s: wrong type (expected %s)", name.c_str(), typeName(*value));
+      return false;
+    }
+    summary_ << " " << name << "=" << str(*value) << (unit[0] ? " " : "") << unit << ";";
+    return true;
+  }
+  /// Doubles also accept ".inf"/"-.inf" strings (roslaunch <param> passes them as strings).
+  bool getDouble(const std::string& name, double* value, const char* unit = "") {
+    known_.insert(name);
+    std::string s;
+    if (pnh_.getParam(name, s)) {
+      if (s == ".inf" || s == "inf")
+        *value = std::numeric_limits<double>::infinity();
+      else if (s == "-.inf" || s == "-inf")
+        *value = -std::numeric_limits<double>::infinity();
+      else {
+        ROS_FATAL("~%s = '%s': wrong type (expected a number [%s])", name.c_str(), s.c_str(), unit);
+        return false;
+      }
+      summary_ << " " << name << "=" << *value << " " << unit << ";";
+      return true;
+    }
+    return get(name, value, unit);
+  }
+  void allow(const std::string& name) { known_.insert(name); }
+  /// ROS_FATAL naming the first private parameter that no get()/allow() asked for.
+  bool rejectUnknown() const {
+    std::vector<std::string> names;
+    ros::param::getParamNames(names);
+    const std::string prefix = pnh_.getNamespace() + "/";
+    for (const auto& n : names) {
+      if (n.compare(0, prefix.size(), prefix) != 0) continue;
+      const std::string key = n.substr(prefix.size());
+      const std::string top = key.substr(0, key.find('/'));
+      if (known_.count(top) == 0) {
+        ROS_FATAL("~%s: unknown parameter (a typo would otherwise fall back to a default)",
+                  key.c_str());
+        return false;
+      }
+    }
+    return true;
+  }
+  std::string summary() const { return summary_.str(); }
+
+ private:
+  static const char* typeName(double) { return "a number"; }
+  static const char* typeName(int) { return "an integer"; }
+  static const char* typeName(bool) { return "a boolean"; }
+  static const char* typeName(const std::string&) { return "a string"; }
+  static const char* typeName(const std::vector<double>&) { return "a list of numbers"; }
+  template <class T>
+  static std::string str(const T& v) {
+    std::ostringstream o;
+    o << v;
+    return o.str();
+  }
+  static std::string str(const std::vector<double>& v) {
+    std::ostringstream o;
+    o << "[";
+    for (size_t i = 0; i < v.size(); ++i) o << (i ? ", " : "") << v[i];
+    o << "]";
+    return o.str();
+  }
+  ros::NodeHandle pnh_;
+  std::set<std::string> known_;
+  std::ostringstream summary_;
+};
+
+/// Parameters of the chunk intake shared by both nodes.
+struct IntakeOptions {
+  int reorder_chunks = 8;              // [chunks] held while waiting for a missing chunk
+  int queue_size = 10000;              // [chunks] subscriber queue (10 s of the default stream)
+  double end_of_stream_timeout = 0.5;  // [s] wall time without chunks that ends the stream
+};
+
+/// Reads and validates ~reorder_chunks, ~queue_size, ~end_of_stream_timeout (ROS_FATAL + false
+/// when invalid).
+inline bool readIntakeParams(ParamReader& p, IntakeOptions* o) {
+  if (!p.get("reorder_chunks", &o->reorder_chunks, "chunks") ||
+      !p.get("queue_size", &o->queue_size, "chunks") ||
+      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s")) {
+    return false;
+  }
+  if (o->queue_size < 1) {
+    ROS_FATAL("~queue_size = %d: must be >= 1 [chunks]", o->queue_size);
+    return false;
+  }
+  if (!(o->end_of_stream_timeout > 0.0)) {
+    ROS_FATAL("~end_of_stream_timeout = %g: must be > 0 [s]", o->end_of_stream_timeout);
+    return false;
+  }
+  return true;  // reorder_chunks is checked by StreamOptions::validate
+}
+
+/// Chunk intake: converts messages, feeds the assembler, warns (throttled) about rejections,
+/// gaps and restarts, measures the input rate, and reports everything to diagnostics.
+/// Times are wall-clock (ros::WallTime): input rate and idle detection concern the transport,
+/// not the recorded signal, and must work whether or not /use_sim_time is set.
+class ChunkIntake {
+ public:
+  explicit ChunkIntake(const gear_damping_id::StreamOptions& o) : assembler_(o) {}
+
+  gear_damping_id::StreamAssembler& assembler() { return assembler_; }
+
+  void push(const gear_damping::SignalChunk& msg) {
+    last_chunk_ = ros::WallTime::now();
+    ++messages_;
+    std::string why;
+    gear_damping_id::ChunkData c;
+    if (!gear_damping_ros::toChunkData(msg, &state_, &c, &why)) {
+      c = gear_damping_id::ChunkData();  // empty: the assembler counts it as malformed
+      c.first_index = msg.first_index;
+      c.sample_rate = msg.sample_rate;
+      assembler_.push(c);
+      ROS_WARN_THROTTLE(2.0, "chunk at index %lu rejected: malformed (%s)",
+                        static_cast<unsigned long>(msg.first_index), why.c_str());
+      return;
+    }
+    const auto status = assembler_.push(c, &why);
+    switch (status) {
+      case gear_damping_id::ChunkStatus::kRejectedNonFinite:
+      case gear_damping_id::ChunkStatus::kRejectedRate:
+      case gear_damping_id::ChunkStatus::kRejectedMalformed:
+        ROS_WARN_THROTTLE(2.0, "%s: %s", toString(status), why.c_str());
+        break;
+      case gear_damping_id::ChunkStatus::kDuplicate:
+      case gear_damping_id::ChunkStatus::kLate:
+        ROS_WARN_THROTTLE(2.0, "chunk at index %lu ignored: %s",
+                          static_cast<unsigned long>(msg.first_index), toString(status));
+        break;
+      default:
+        if (!why.empty()) ROS_WARN_THROTTLE(2.0, "%s", why.c_str());  // gap or restart
+    }
+  }
+
+  /// True once no chunk arrived for `timeout` [s] while samples are buffered or held.
+  bool idle(double timeout) const {
+    return messages_ > 0 && (ros::WallTime::now() - last_chunk_).toSec() >= timeout &&
+           (assembler_.bufferedSamples() > 0 || assembler_.heldChunks() > 0);
+  }
+
+  /// Input statistics and sequencing events.
+  void report(diagnostic_updater::DiagnosticStatusWrapper& s) {
+    const auto& k = assembler_.counters();
+    const ros::WallTime now = ros::WallTime::now();
+    const double span = last_report_.isZero() ? 0.0 : (now - last_report_).toSec();
+    const double rate =
+        span > 0.0 ? static_cast<double>(k.samples_accepted - last_samples_) / span : 0.0;
+    const double chunk_rate =
+        span > 0.0 ? static_cast<double>(k.chunks_received - last_chunks_) / span : 0.0;
+    last_report_ = now;
+    last_samples_ = k.samples_accepted;
+    last_chunks_ = k.chunks_received;
+    s.add("input rate [samples/s]", rate);
+    s.add("input rate [chunks/s]", chunk_rate);
+    s.add("chunks received", k.chunks_received);
+    s.add("samples received", k.samples_accepted);
+    s.add("sample rate [Hz]", assembler_.sampleRate());
+    s.add("gaps", k.gaps);
+    s.add("samples missing", k.samples_missing);
+    s.add("duplicate chunks", k.duplicates);
+    s.add("late chunks", k.late);
+    s.add("overlapping chunks", k.overlaps);
+    s.add("out-of-order chunks", k.out_of_order);
+    s.add("rejected chunks (NaN/Inf)", k.rejected_nonfinite);
+    s.add("rejected chunks (sample rate)", k.rejected_rate);
+    s.add("rejected chunks (malformed)", k.rejected_malformed);
+    s.add("dropped chunks", k.rejected_nonfinite + k.rejected_rate + k.rejected_malformed);
+    s.add("restarts", k.restarts);
+    s.add("channel changes", k.channel_changes);
+    s.add("held chunks", assembler_.heldChunks());
+    s.add("buffered samples", assembler_.bufferedSamples());
+    const unsigned long events = k.gaps + k.duplicates + k.late + k.rejected_nonfinite +
+                                 k.rejected_rate + k.rejected_malformed + k.restarts;
+    if (events != last_events_) {
+      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                     "stream events (gaps/duplicates/rejections/restarts) since last report");
+    }
+    last_events_ = events;
+  }
+
+ private:
+  gear_damping_id::StreamAssembler assembler_;
+  std::vector<double> state_;
+  unsigned long messages_ = 0;
+  ros::WallTime last_chunk_, last_report_;
+  unsigned long last_samples_ = 0, last_chunks_ = 0, last_events_ = 0;
+};
+
+/// A core options error ("field = value: rule", possibly "Struct.field = ...") in the node's
+/// "~field = value: rule" form.
+inline std::string paramError(const std::string& e) {
+  const size_t eq = e.find(" = "), dot = e.find('.');
+  if (dot != std::string::npos && eq != std::string::npos && dot < eq &&
+      std::isupper(static_cast<unsigned char>(e[0]))) {
+    return "~" + e.substr(dot + 1);
+  }
+  return "~" + e;
+}
+
+}  // namespace gear_damping_nodes

@@ -1,0 +1,229 @@
+// wavelet_node: Morlet-wavelet damping validation (DESIGN.md §5) on a stream of
+// gear_damping/SignalChunk messages.
+//
+// Subscribes:  /gear/signal (SignalChunk; remappable, e.g. /gear/signal:=/rig/signal),
+// /gear/damping
+//              (DampingArray, for the integral-method xi shown beside each mode)
+// Publishes:   /gear/wavelet_modes (WaveletModes): one per analysed window; /diagnostics
+// Services:    ~analyze (std_srvs/Trigger): analyse what is buffered now (closes the window)
+//              ~reset (std_srvs/Empty)
+// Windows: ~window [s] > 0: consecutive windows of that length from sample 0 (the stream
+// assembler's segments, so gaps, duplicates, restarts are handled as in damping_id_node: a gap
+// or restart closes the window early and it is analysed if long enough); ~window 0 (default):
+// the whole run, analysed at the end of the stream (no chunk for ~end_of_stream_timeout [s] of
+// wall time) or on ~analyze. Windows shorter than ~min_window_samples are skipped and counted.
+// Threading: one thread; the analysis (only the rows the fits need, no full scalogram) runs in
+// the callback that completes a window, the subscriber queue absorbs chunks meanwhile.
+#include <gear_damping/DampingArray.h>
+#include <gear_damping/WaveletModes.h>
+#include <std_srvs/Empty.h>
+#include <std_srvs/Trigger.h>
+
+#include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_ros/id_conversions.hpp"
+#include "node_common.hpp"
+
+namespace gd = gear_damping_id;
+namespace nodes = gear_damping_nodes;
+
+namespace {
+
+struct NodeOptions {
+  gd::WaveletOptions wavelet;
+  gd::StreamOptions stream;
+  double window = 0.0;           // [s] 0 = whole run
+  int min_window_samples = 256;  // [samples]
+  nodes::IntakeOptions intake;
+};
+
+bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
+  nodes::ParamReader p(pnh);
+  gd::WaveletOptions& w = o->wavelet;
+  int n_scales = w.n_scales, max_modes = w.max_modes;
+  if (!p.getDouble("window", &o->window, "s") ||
+      !p.get("min_window_samples", &o->min_window_samples, "samples") ||
+      !p.getDouble("f_min", &w.f_min, "Hz") || !p.getDouble("f_max", &w.f_max, "Hz") ||
+      !p.get("n_scales", &n_scales) || !p.getDouble("omega0", &w.omega0) ||
+      !p.getDouble("peak_omega0", &w.peak_omega0) || !p.getDouble("fit_omega0", &w.fit_omega0) ||
+      !p.getDouble("max_fit_omega0", &w.max_fit_omega0) ||
+      !p.getDouble("peak_prominence", &w.peak_prominence) ||
+      !p.getDouble("min_separation_hz", &w.min_separation_hz, "Hz") ||
+      !p.get("max_modes", &max_modes) || !p.getDouble("coi_factor", &w.coi_factor) ||
+      !p.getDouble("floor_factor", &w.floor_factor) ||
+      !p.get("mode_frequencies", &w.mode_frequencies, "Hz") ||
+      !nodes::readIntakeParams(p, &o->intake)) {
+    return false;
+  }
+  p.allow("diagnostic_period");
+  if (!p.rejectUnknown()) return false;
+  w.n_scales = n_scales;
+  w.max_modes = max_modes;
+  w.full_scalogram = false;  // no figure here: only the rows the fits need
+  if (!(o->window >= 0.0)) {
+    ROS_FATAL("~window = %g: must be >= 0 [s] (0 = whole run)", o->window);
+    return false;
+  }
+  if (o->min_window_samples < 64) {
+    ROS_FATAL("~min_window_samples = %d: must be >= 64 [samples]", o->min_window_samples);
+    return false;
+  }
+  o->stream.segment_length = o->window;
+  o->stream.reorder_chunks = o->intake.reorder_chunks;
+  o->stream.context = 0;
+  std::string e = w.validate();
+  if (e.empty()) e = o->stream.validate();
+  if (!e.empty()) {
+    ROS_FATAL("%s", nodes::paramError(e).c_str());
+    return false;
+  }
+  ROS_INFO("wavelet_node:%s", p.summary().c_str());
+  return true;
+}
+
+class WaveletNode {
+ public:
+  WaveletNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
+      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
+    modes_pub_ = nh.advertise<gear_damping::WaveletModes>("/gear/wavelet_modes", 10, true);
+    analyze_srv_ = pnh.advertiseService("analyze", &WaveletNode::onAnalyze, this);
+    reset_srv_ = pnh.advertiseService("reset", &WaveletNode::onReset, this);
+    updater_.setHardwareID("wavelet");
+    updater_.add("stream", this, &WaveletNode::diagnoseStream);
+    updater_.add("wavelet", this, &WaveletNode::diagnoseWavelet);
+    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
+                               &WaveletNode::onChunk, this, ros::TransportHints().tcpNoDelay());
+    damping_sub_ = nh.subscribe("/gear/damping", 1, &WaveletNode::onDamping, this);
+    timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
+  }
+
+ private:
+  void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
+    intake_.push(*msg);
+    processReady();
+  }
+
+  void onDamping(const gear_damping::DampingArray::ConstPtr& msg) {
+    double sum = 0.0;
+    int n = 0;
+    for (const auto& s : msg->segments) {
+      if (s.identifiable && std::isfinite(s.xi)) sum += s.xi, ++n;
+    }
+    xi_integral_ = n > 0 ? sum / n : gd::kNaN;
+  }
+
+  void onTimer(const ros::WallTimerEvent&) {
+    if (intake_.idle(o_.intake.end_of_stream_timeout)) {
+      intake_.assembler().endOfStream();
+      processReady();
+      updater_.force_update();
+    }
+    updater_.update();
+  }
+
+  bool onAnalyze(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    const unsigned long before = windows_analysed_;
+    intake_.assembler().endOfStream();
+    processReady();
+    res.success = windows_analysed_ > before;
+    res.message =
+        res.success
+            ? "analysed " + std::to_string(windows_analysed_ - before) + " window(s), last with " +
+                  std::to_string(last_modes_) + " mode(s)"
+            : "nothing analysed: " +
+                  (last_problem_.empty() ? std::string("no samples buffered") : last_problem_);
+    return true;
+  }
+
+  bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+    intake_.assembler().reset();
+    ROS_INFO("wavelet_node: reset");
+    return true;
+  }
+
+  void processReady() {
+    gd::StreamSegment s;
+    while (intake_.assembler().nextSegment(&s)) analyse(s);
+  }
+
+  void analyse(const gd::StreamSegment& s) {
+    const long n = static_cast<long>(s.end - s.begin);
+    const double t_start = static_cast<double>(s.first_index + s.begin) / s.sample_rate;
+    if (n < o_.min_window_samples) {
+      ++windows_skipped_;
+      last_problem_ = "window at " + std::to_string(t_start) + " s has " + std::to_string(n) +
+                      " samples (< ~min_window_samples)";
+      ROS_WARN_THROTTLE(2.0, "%s", last_problem_.c_str());
+      return;
+    }
+    const ros::WallTime t0 = ros::WallTime::now();
+    gd::WaveletResult r = gd::validateWavelet(s.dte.data() + s.begin, static_cast<size_t>(n),
+                                              s.sample_rate, o_.wavelet);
+    last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
+    if (!r.ok()) {
+      ++windows_failed_;
+      last_problem_ = r.error;
+      ROS_WARN_THROTTLE(2.0, "wavelet analysis of the window at %.6f s failed: %s", t_start,
+                        r.error.c_str());
+      return;
+    }
+    gd::attachIntegralDampingRatio(&r, xi_integral_);
+    gd::shiftWaveletTimes(&r, t_start);  // onto the record's time axis
+    auto msg =
+        gear_damping_ros::toMsg(r, t_start, t_start + static_cast<double>(n) / s.sample_rate);
+    msg.header.stamp = ros::Time::now();
+    modes_pub_.publish(msg);
+    ++windows_analysed_;
+    last_modes_ = r.modes.size();
+    if (!r.modes.empty()) {
+      last_frequency_ = r.modes.front().frequency_hz;
+      last_xi_ = r.modes.front().damping_ratio;
+    }
+  }
+
+  void diagnoseStream(diagnostic_updater::DiagnosticStatusWrapper& s) {
+    s.summary(diagnostic_msgs::DiagnosticStatus::OK, "receiving");
+    intake_.report(s);
+  }
+
+  void diagnoseWavelet(diagnostic_updater::DiagnosticStatusWrapper& s) {
+    s.summary(diagnostic_msgs::DiagnosticStatus::OK, "analysing");
+    if (windows_failed_ + windows_skipped_ != reported_problems_) {
+      s.summary(diagnostic_msgs::DiagnosticStatus::WARN, "window not analysable: " + last_problem_);
+    }
+    reported_problems_ = windows_failed_ + windows_skipped_;
+    s.add("windows analysed", windows_analysed_);
+    s.add("windows failed", windows_failed_);
+    s.add("windows skipped (too short)", windows_skipped_);
+    s.add("last problem", last_problem_);
+    s.add("processing time last window [ms]", last_ms_);
+    s.add("modes in last window", last_modes_);
+    s.add("lowest mode frequency [Hz]", last_frequency_);
+    s.add("lowest mode damping ratio", last_xi_);
+  }
+
+  NodeOptions o_;
+  nodes::ChunkIntake intake_;
+  diagnostic_updater::Updater updater_;
+  ros::Publisher modes_pub_;
+  ros::Subscriber signal_sub_, damping_sub_;
+  ros::ServiceServer analyze_srv_, reset_srv_;
+  ros::WallTimer timer_;
+  double xi_integral_ = gd::kNaN, last_ms_ = 0, last_frequency_ = gd::kNaN, last_xi_ = gd::kNaN;
+  unsigned long windows_analysed_ = 0, windows_failed_ = 0, windows_skipped_ = 0;
+  unsigned long reported_problems_ = 0;
+  size_t last_modes_ = 0;
+  std::string last_problem_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "wavelet_node");
+  ros::NodeHandle nh, pnh("~");
+  NodeOptions options;
+  if (!loadParameters(pnh, &options)) return 1;
+  WaveletNode node(nh, pnh, std::move(options));
+  ros::spin();
+  return 0;
+}

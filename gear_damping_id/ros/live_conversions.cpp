@@ -1,0 +1,35 @@
+#include "gear_damping_ros/live_conversions.hpp"
+
+namespace gear_damping_ros {
+
+namespace gd = gear_damping_id;
+
+bool toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh_state,
+                 gd::ChunkData* out, std::string* error) {
+  const size_t n = msg.dte.size();
+  auto check = [&](size_t len, const char* name) {
+    if (len == 0 || len == n) return true;
+    *error =
+        std::string(name) + " has " + std::to_string(len) + " samples, dte " + std::to_string(n);
+    return false;
+  };
+  if (!check(msg.stiffness.size(), "stiffness") || !check(msg.torque.size(), "torque") ||
+      !check(msg.mesh_state.size(), "mesh_state") || !check(msg.mesh_phase.size(), "mesh_phase") ||
+      !check(msg.dte_velocity.size(), "dte_velocity") || !check(msg.damping.size(), "damping")) {
+    return false;
+  }
+  auto ptr = [n](const std::vector<double>& v) { return n > 0 && !v.empty() ? v.data() : nullptr; };
+  *out = gd::ChunkData();
+  out->first_index = msg.first_index;
+  out->sample_rate = msg.sample_rate;
+  out->n = n;
+  out->dte = n > 0 ? msg.dte.data() : nullptr;
+  out->stiffness = ptr(msg.stiffness);
+  out->torque = ptr(msg.torque);
+  out->mesh_phase = ptr(msg.mesh_phase);
+  mesh_state->assign(msg.mesh_state.begin(), msg.mesh_state.end());
+  out->mesh_state = ptr(*mesh_state);
+  return true;
+}
+
+}  // namespace gear_damping_ros

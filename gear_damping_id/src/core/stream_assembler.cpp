@@ -1,0 +1,405 @@
+// Chunk sequencing and segment assembly for the live nodes (see stream_assembler.hpp).
+#include "gear_damping_id/stream_assembler.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace gear_damping_id {
+
+namespace {
+
+constexpr double kIndexEps = 1e-3;       // as segmentRanges: boundaries within 1e-3 of a sample
+constexpr double kRateTolerance = 1e-9;  // relative sample-rate change that rejects a chunk
+constexpr size_t kRecentGaps = 64;       // gaps remembered to tell late chunks from duplicates
+constexpr std::uint64_t kNoEnd = std::numeric_limits<std::uint64_t>::max();
+// Largest accepted global index: 2^52, so index/time arithmetic in doubles stays exact (142
+// years at 1 MHz). Segments must hold at least kMinSegmentSamples samples at the stream's rate.
+constexpr std::uint64_t kMaxIndex = std::uint64_t{1} << 52;
+constexpr double kMinSegmentSamples = 4.0;
+
+enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
+
+}  // namespace
+
+const char* toString(ChunkStatus s) {
+  switch (s) {
+    case ChunkStatus::kAccepted:
+      return "accepted";
+    case ChunkStatus::kHeld:
+      return "held for reordering";
+    case ChunkStatus::kDuplicate:
+      return "duplicate";
+    case ChunkStatus::kLate:
+      return "late (after its gap)";
+    case ChunkStatus::kRejectedNonFinite:
+      return "rejected: NaN/Inf";
+    case ChunkStatus::kRejectedRate:
+      return "rejected: sample rate changed";
+    case ChunkStatus::kRejectedMalformed:
+      return "rejected: malformed";
+  }
+  return "?";
+}
+
+std::string StreamOptions::validate() const {
+  std::ostringstream e;
+  if (!(segment_length >= 0.0)) {
+    e << "segment_length = " << segment_length << ": must be >= 0 [s] (0 or .inf = whole run)";
+  } else if (std::isnan(t_start) || std::isnan(t_end) || !(t_end > t_start)) {
+    e << "t_start = " << t_start << ", t_end = " << t_end << ": need t_start < t_end [s]";
+  } else if (reorder_chunks < 0 || reorder_chunks > 100000) {
+    e << "reorder_chunks = " << reorder_chunks << ": must be in [0, 100000]";
+  } else if (context < 0 || context > 1000) {
+    e << "context = " << context << ": must be in [0, 1000] [samples]";
+  }
+  return e.str();
+}
+
+std::string missingChannel(const SignalView& v, Formulation f, DampingModel m) {
+  if (v.dte == nullptr) return "dte";
+  if (f == Formulation::Known && v.stiffness == nullptr) return "stiffness";
+  if (f == Formulation::Greybox && v.mesh_state == nullptr) return "mesh_state";
+  const bool torque =
+      f == Formulation::Known || f == Formulation::Greybox || m == DampingModel::LoadLaw;
+  if (torque && v.torque == nullptr) return "torque";
+  return "";
+}
+
+SignalView StreamSegment::view() const {
+  SignalView v;
+  v.t0 = static_cast<double>(first_index) / sample_rate;
+  v.dt = 1.0 / sample_rate;
+  v.n = static_cast<Eigen::Index>(dte.size());
+  auto ptr = [](const std::vector<double>& c) { return c.empty() ? nullptr : c.data(); };
+  v.dte = ptr(dte);
+  v.stiffness = ptr(stiffness);
+  v.torque = ptr(torque);
+  v.mesh_state = ptr(mesh_state);
+  v.mesh_phase = ptr(mesh_phase);
+  return v;
+}
+
+StreamAssembler::StreamAssembler(const StreamOptions& options) : options_(options) {}
+
+void StreamAssembler::reset() {
+  counters_ = StreamCounters();
+  rate_ = 0.0;
+  mask_ = 0;
+  have_run_ = seen_any_ = false;
+  next_index_ = seg_begin_ = 0;
+  epoch_ = 0;
+  run_ = Buffer();
+  held_.clear();
+  recent_gaps_.clear();
+  ready_.clear();
+}
+
+unsigned StreamAssembler::channelMask(const ChunkData& c) {
+  return (c.stiffness ? kStiffness : 0u) | (c.torque ? kTorque : 0u) |
+         (c.mesh_state ? kState : 0u) | (c.mesh_phase ? kPhase : 0u);
+}
+
+bool StreamAssembler::wholeRun() const {
+  return !(options_.segment_length > 0.0) || !std::isfinite(options_.segment_length);
+}
+
+std::uint64_t StreamAssembler::firstAnalysed() const {
+  if (!(options_.t_start > 0.0)) return 0;
+  return static_cast<std::uint64_t>(std::ceil(options_.t_start * rate_ - kIndexEps));
+}
+
+std::uint64_t StreamAssembler::endAnalysed() const {
+  if (!std::isfinite(options_.t_end)) return kNoEnd;
+  if (options_.t_end < 0.0) return 0;
+  const double last = std::floor(options_.t_end * rate_ + kIndexEps);
+  if (last >= 1.8e19) return kNoEnd;
+  return static_cast<std::uint64_t>(last) + 1;
+}
+
+std::uint64_t StreamAssembler::boundary(long i) const {
+  const double t_first = static_cast<double>(firstAnalysed()) / rate_;
+  const double t = t_first + static_cast<double>(i) * options_.segment_length;
+  const double g = std::ceil(t * rate_ - kIndexEps);
+  return g <= 0.0 ? 0 : g >= 1.8e19 ? kNoEnd : static_cast<std::uint64_t>(g);
+}
+
+long StreamAssembler::segmentOf(std::uint64_t g) const {
+  if (wholeRun()) return 0;
+  const double t_first = static_cast<double>(firstAnalysed()) / rate_;
+  const double x = (static_cast<double>(g) / rate_ - t_first) / options_.segment_length;
+  long i = x > 0.0 ? static_cast<long>(std::floor(x)) : 0;
+  while (boundary(i + 1) <= g) ++i;
+  while (i > 0 && boundary(i) > g) --i;
+  return i;
+}
+
+std::uint64_t StreamAssembler::segmentEnd(long i) const {
+  const std::uint64_t end = endAnalysed();
+  if (wholeRun()) return end;
+  const std::uint64_t e = boundary(i + 1);
+  if (e >= end) return end;
+  // A final partial segment shorter than half dT joins this one (segmentRanges does the same).
+  if (end != kNoEnd && boundary(i + 2) >= end &&
+      static_cast<double>(end - e) < 0.5 * options_.segment_length * rate_) {
+    return end;
+  }
+  return e;
+}
+
+bool StreamAssembler::inRecentGap(std::uint64_t a, std::uint64_t b) const {
+  for (const auto& g : recent_gaps_) {
+    if (a < g.second && b > g.first) return true;
+  }
+  return false;
+}
+
+ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
+  std::string scratch;
+  std::string& why = detail ? *detail : scratch;
+  why.clear();
+  ++counters_.chunks_received;
+  const bool short_segments =
+      !wholeRun() && !(options_.segment_length * c.sample_rate >= kMinSegmentSamples);
+  if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
+      c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
+    ++counters_.rejected_malformed;
+    std::ostringstream m;
+    m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
+      << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
+      << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
+      << (short_segments ? ", fewer than 4 samples per segment" : "");
+    why = m.str();
+    return ChunkStatus::kRejectedMalformed;
+  }
+  const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
+                                                            {c.stiffness, "stiffness"},
+                                                            {c.torque, "torque"},
+                                                            {c.mesh_state, "mesh_state"},
+                                                            {c.mesh_phase, "mesh_phase"}};
+  for (const auto& ch : channels) {
+    if (ch.first == nullptr) continue;
+    for (size_t i = 0; i < c.n; ++i) {
+      if (!std::isfinite(ch.first[i])) {
+        ++counters_.rejected_nonfinite;
+        std::ostringstream m;
+        m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
+          << "] = " << ch.first[i];
+        why = m.str();
+        return ChunkStatus::kRejectedNonFinite;
+      }
+    }
+  }
+  if (seen_any_ && c.first_index == 0 && next_index_ > 0) {
+    // The publisher started over: finish the old record, start a new epoch.
+    releaseHeld(true);
+    closeRun();
+    ++counters_.restarts;
+    ++epoch_;
+    std::ostringstream m;
+    m << "restart: index 0 after index " << next_index_ - 1;
+    why = m.str();
+    seen_any_ = false;
+    rate_ = 0.0;
+    recent_gaps_.clear();
+  }
+  if (seen_any_ && std::abs(c.sample_rate - rate_) > kRateTolerance * rate_) {
+    ++counters_.rejected_rate;
+    std::ostringstream m;
+    m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
+      << " Hz, stream at " << rate_ << " Hz";
+    why = m.str();
+    return ChunkStatus::kRejectedRate;
+  }
+  if (!seen_any_) {
+    seen_any_ = true;
+    rate_ = c.sample_rate;
+    next_index_ = c.first_index;
+  }
+  const std::uint64_t end = c.first_index + c.n;
+  if (end <= next_index_) {
+    if (inRecentGap(c.first_index, end)) {
+      ++counters_.late;
+      return ChunkStatus::kLate;
+    }
+    ++counters_.duplicates;
+    return ChunkStatus::kDuplicate;
+  }
+  if (c.first_index <= next_index_) {
+    if (c.first_index < next_index_) ++counters_.overlaps;
+    if (!held_.empty()) ++counters_.out_of_order;  // it filled the hole before the held chunks
+    append(c, static_cast<size_t>(next_index_ - c.first_index));
+    releaseHeld(false);
+    return ChunkStatus::kAccepted;
+  }
+  // Ahead of the expected index: hold it, waiting for the missing samples.
+  if (held_.count(c.first_index) != 0) {
+    ++counters_.duplicates;
+    return ChunkStatus::kDuplicate;
+  }
+  Held& h = held_[c.first_index];
+  h.sample_rate = c.sample_rate;
+  h.mask = channelMask(c);
+  auto copy = [&](const double* p, std::vector<double>* v) {
+    if (p) v->assign(p, p + c.n);
+  };
+  copy(c.dte, &h.dte);
+  copy(c.stiffness, &h.stiffness);
+  copy(c.torque, &h.torque);
+  copy(c.mesh_state, &h.mesh_state);
+  copy(c.mesh_phase, &h.mesh_phase);
+  const unsigned long gaps_before = counters_.gaps;
+  releaseHeld(false);
+  if (counters_.gaps != gaps_before) {
+    std::ostringstream m;
+    m << "gap: " << recent_gaps_.back().second - recent_gaps_.back().first
+      << " samples missing from index " << recent_gaps_.back().first;
+    why = m.str();
+  }
+  return ChunkStatus::kHeld;
+}
+
+void StreamAssembler::releaseHeld(bool force) {
+  while (!held_.empty()) {
+    auto it = held_.begin();
+    const std::uint64_t first = it->first;
+    const size_t n = it->second.dte.size();
+    if (first + n <= next_index_) {  // became a duplicate meanwhile
+      held_.erase(it);
+      ++counters_.duplicates;
+      continue;
+    }
+    if (first > next_index_) {
+      if (!force && held_.size() <= static_cast<size_t>(options_.reorder_chunks)) break;
+      // The missing samples are not coming: a gap. Never integrate across it.
+      ++counters_.gaps;
+      counters_.samples_missing += first - next_index_;
+      recent_gaps_.emplace_back(next_index_, first);
+      if (recent_gaps_.size() > kRecentGaps) recent_gaps_.pop_front();
+      closeRun();
+      next_index_ = first;
+    }
+    Held h = std::move(it->second);
+    held_.erase(it);
+    ChunkData c;
+    c.first_index = first;
+    c.sample_rate = h.sample_rate;
+    c.n = n;
+    auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
+    c.dte = ptr(h.dte);
+    c.stiffness = ptr(h.stiffness);
+    c.torque = ptr(h.torque);
+    c.mesh_state = ptr(h.mesh_state);
+    c.mesh_phase = ptr(h.mesh_phase);
+    append(c, static_cast<size_t>(next_index_ - first));
+  }
+}
+
+void StreamAssembler::append(const ChunkData& c, size_t skip) {
+  const unsigned m = channelMask(c);
+  if (have_run_ && m != mask_) {
+    ++counters_.channel_changes;
+    closeRun();
+  }
+  if (!have_run_) {
+    run_ = Buffer();
+    run_.first = next_index_;
+    seg_begin_ = next_index_;
+    mask_ = m;
+    have_run_ = true;
+  }
+  auto add = [&](const double* p, std::vector<double>* v) {
+    if (p) v->insert(v->end(), p + skip, p + c.n);
+  };
+  add(c.dte, &run_.dte);
+  add(c.stiffness, &run_.stiffness);
+  add(c.torque, &run_.torque);
+  add(c.mesh_state, &run_.mesh_state);
+  add(c.mesh_phase, &run_.mesh_phase);
+  next_index_ += c.n - skip;
+  ++counters_.chunks_accepted;
+  counters_.samples_accepted += c.n - skip;
+  emitReady(false);
+}
+
+void StreamAssembler::closeRun() {
+  if (!have_run_) return;
+  emitReady(true);
+  have_run_ = false;
+  run_ = Buffer();
+}
+
+void StreamAssembler::endOfStream() {
+  releaseHeld(true);
+  closeRun();
+}
+
+void StreamAssembler::emitReady(bool closing) {
+  const std::uint64_t ctx = static_cast<std::uint64_t>(options_.context);
+  const std::uint64_t run_end = run_.first + run_.dte.size();
+  const std::uint64_t first_analysed = firstAnalysed();
+  const std::uint64_t end_analysed = endAnalysed();
+  for (;;) {
+    const std::uint64_t lo = std::max(seg_begin_, first_analysed);
+    if (lo >= end_analysed || lo >= run_end) break;
+    const long i = segmentOf(lo);
+    const std::uint64_t se = segmentEnd(i);
+    const bool complete = se != kNoEnd && run_end >= se && run_end - se >= ctx;
+    if (!complete && !closing) break;
+    const std::uint64_t piece_end = std::min(se, run_end);
+    const std::uint64_t copy_lo = std::max(run_.first, lo >= ctx ? lo - ctx : 0);
+    const std::uint64_t copy_hi = std::min(piece_end + ctx, run_end);
+    StreamSegment s;
+    s.first_index = copy_lo;
+    s.sample_rate = rate_;
+    s.begin = static_cast<Eigen::Index>(lo - copy_lo);
+    s.end = static_cast<Eigen::Index>(piece_end - copy_lo);
+    s.segment_number = i;
+    s.partial = lo != (wholeRun() ? first_analysed : boundary(i)) || piece_end != se;
+    s.epoch = epoch_;
+    const size_t a = static_cast<size_t>(copy_lo - run_.first);
+    const size_t b = static_cast<size_t>(copy_hi - run_.first);
+    auto slice = [&](const std::vector<double>& v, std::vector<double>* out) {
+      if (!v.empty())
+        out->assign(v.begin() + static_cast<std::ptrdiff_t>(a),
+                    v.begin() + static_cast<std::ptrdiff_t>(b));
+    };
+    slice(run_.dte, &s.dte);
+    slice(run_.stiffness, &s.stiffness);
+    slice(run_.torque, &s.torque);
+    slice(run_.mesh_state, &s.mesh_state);
+    slice(run_.mesh_phase, &s.mesh_phase);
+    ++counters_.segments_emitted;
+    if (s.partial) ++counters_.partial_segments;
+    ready_.push_back(std::move(s));
+    seg_begin_ = piece_end;
+    if (piece_end < se) break;
+  }
+  // Drop what no future segment needs (keep the stencil context before the next segment;
+  // nothing once the analysed range is over).
+  const std::uint64_t next = std::max(seg_begin_, first_analysed);
+  const std::uint64_t keep =
+      next >= end_analysed ? run_end : std::max(run_.first, next >= ctx ? next - ctx : 0);
+  const size_t drop =
+      static_cast<size_t>(std::min<std::uint64_t>(keep - run_.first, run_.dte.size()));
+  if (drop > 0) {
+    auto erase = [&](std::vector<double>* v) {
+      if (!v->empty()) v->erase(v->begin(), v->begin() + static_cast<std::ptrdiff_t>(drop));
+    };
+    erase(&run_.dte);
+    erase(&run_.stiffness);
+    erase(&run_.torque);
+    erase(&run_.mesh_state);
+    erase(&run_.mesh_phase);
+    run_.first += drop;
+  }
+}
+
+bool StreamAssembler::nextSegment(StreamSegment* out) {
+  if (ready_.empty()) return false;
+  *out = std::move(ready_.front());
+  ready_.pop_front();
+  return true;
+}
+
+}  // namespace gear_damping_id
