@@ -647,22 +647,8 @@ int main(int argc, char** argv) {
       if (identification && !runs.empty())
         for (auto& m : wres.modes) m.integral_xi = integralXiOver(runs.front().result, m);
       gd::printWaveletTable(std::cout, wres);
-      gear_damping::WaveletModes msg;
-      msg.t_start = t_first;
-      msg.t_end = t_first + static_cast<double>(wavelet_n) / wavelet_rate;
-      msg.wavelet_parameter = wres.omega0;
-      for (const auto& m : wres.modes) {
-        gear_damping::WaveletMode wm;
-        wm.frequency_hz = m.frequency_hz;
-        wm.damping_ratio = m.damping_ratio;
-        wm.r2 = m.r2;
-        wm.decay_t_start = m.t_start;
-        wm.decay_t_end = m.t_end;
-        wm.xi_integral = m.integral_xi;
-        wm.warning = m.warning;
-        msg.modes.push_back(wm);
-      }
-      bag.write("/gear/wavelet_modes", msg.t_end, msg);
+      const double w_end = t_first + static_cast<double>(wavelet_n) / wavelet_rate;
+      bag.write("/gear/wavelet_modes", w_end, gear_damping_ros::toMsg(wres, t_first, w_end));
     }
   }
 
