@@ -61,6 +61,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -138,7 +139,10 @@ class IntegralMethod {
   /// of the segment alone is not formed, and the segment reports identifiable = true with NaN C
   /// until finish(). A segment with NaN/Inf input, too few samples or no motion is reported as
   /// not identifiable with the reason, and takes no part in shared estimates.
-  SegmentEstimate addSegment(const SignalView& signal, Eigen::Index begin, Eigen::Index end);
+  /// With `estimate` false the piecewise estimate is not formed here (C stays NaN until
+  /// finish()): for callers that call finish() anyway, such as identify().
+  SegmentEstimate addSegment(const SignalView& signal, Eigen::Index begin, Eigen::Index end,
+                             bool estimate = true);
 
   /// Solves the shared unknowns and fills every estimate. Can be called repeatedly (e.g. for a
   /// cumulative live estimate); later addSegment calls continue the same problem.
@@ -158,11 +162,12 @@ class IntegralMethod {
 
  private:
   enum class Column { DampC, DampLoad, StiffK0, StiffDK, ForceConst };
+  static constexpr int kMaxColumns = 5;  // one of each Column at most
   struct WindowRecord {
     double t_start = 0, t_end = 0, dt = 0;  // [s]
     Eigen::Index rows = 0;
     double torque_T = kNaN;           // T1 at the window start (load law)
-    std::vector<double> mean, slope;  // per column and b: mean and p1 coefficient
+    std::array<double, kMaxColumns + 1> mean{}, slope{};  // per column and b: mean, p1 coeff.
   };
   struct SegmentRecord {
     SegmentEstimate estimate;

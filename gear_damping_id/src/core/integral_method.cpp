@@ -2,7 +2,9 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <cassert>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "gear_damping_id/output_error.hpp"
@@ -98,7 +100,17 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
     std::sort(d, d + 3);
     ref = d[1];
   }
-  for (Eigen::Index i = 1; i < n; ++i) {
+  // Blocks of 64 steps are checked branch-free (vectorisable); a failing block is searched
+  // for its first bad step.
+  const double tol = rel_tolerance * ref;
+  const double* tt = t.time.data();
+  Eigen::Index i0 = 1;
+  for (; i0 + 64 <= n; i0 += 64) {
+    bool ok = true;
+    for (int k = 0; k < 64; ++k) ok &= std::abs(tt[i0 + k] - tt[i0 + k - 1] - ref) <= tol;
+    if (!ok) break;
+  }
+  for (Eigen::Index i = i0; i < n; ++i) {
     const double d = t.time[i] - t.time[i - 1];
     if (!(std::abs(d - ref) <= rel_tolerance * ref)) {
       e << "time is not uniformly sampled at ";
@@ -158,12 +170,16 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
 double defaultWindowLength(const SignalView& s, const GearConstants& gear) {
   double kbar = gear.mean_stiffness;
   if (s.stiffness != nullptr && s.n > 0) {
-    double sum = 0.0;
-    long cnt = 0;
-    for (Eigen::Index i = 0; i < s.n; ++i) {
-      if (std::isfinite(s.stiffness[i])) sum += s.stiffness[i], ++cnt;
+    // Mean over the finite samples: one vectorised sum when all are finite (the usual case),
+    // else an element-wise pass that skips the non-finite ones.
+    const Eigen::Map<const Eigen::ArrayXd> k(s.stiffness, s.n);
+    double total = k.sum(), count = static_cast<double>(s.n);
+    if (!std::isfinite(total)) {
+      const auto finite = k.abs() <= std::numeric_limits<double>::max();
+      total = finite.select(k, 0.0).sum();
+      count = static_cast<double>(finite.count());
     }
-    if (cnt > 0 && sum > 0.0) kbar = sum / static_cast<double>(cnt);
+    if (count > 0.0 && total > 0.0) kbar = total / count;
   }
   const double omega0 = std::sqrt(kbar / gear.equivalent_mass);
   return 2.0 * 2.0 * M_PI / omega0;
@@ -174,13 +190,16 @@ double defaultWindowLength(const SignalView& s, const GearConstants& gear) {
 
 namespace {
 
-// Sum of x[lo, hi) with four accumulators (pipelines; a non-finite term makes it non-finite).
+// Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
+// full; a non-finite term makes the sum non-finite).
 double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
-  double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+  double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   Eigen::Index i = lo;
-  for (; i + 4 <= hi; i += 4) a0 += x[i], a1 += x[i + 1], a2 += x[i + 2], a3 += x[i + 3];
-  for (; i < hi; ++i) a0 += x[i];
-  return (a0 + a1) + (a2 + a3);
+  for (; i + 8 <= hi; i += 8) {
+    for (int k = 0; k < 8; ++k) a[k] += x[i + k];
+  }
+  for (; i < hi; ++i) a[0] += x[i];
+  return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
@@ -261,6 +280,7 @@ void IntegralMethod::buildColumns() {
   n_shared_ = static_cast<int>(shared.size());
   columns_ = local;
   columns_.insert(columns_.end(), shared.begin(), shared.end());
+  assert(columns_.size() <= static_cast<size_t>(kMaxColumns));
 }
 
 void IntegralMethod::setLegacyForcing(double fbar) {
@@ -300,6 +320,35 @@ double IntegralMethod::splitFraction(const SignalView& s, Eigen::Index j, bool r
   }
   return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
 }
+
+namespace {
+
+// Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
+// area/moment increments of y (ay, my) and of K y - F (ag, mg), with yb, Tb pointing one
+// sample before the interval's left end and kb at it. Compiled for AVX2 as well as the baseline
+// (chosen at load time): without FMA contraction or reassociation both give the same bits.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
+                             const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
+                             const double* wa, const double* wm, double inv_me, double ff,
+                             double* __restrict__ ay, double* __restrict__ my,
+                             double* __restrict__ ag, double* __restrict__ mg) {
+  const double a0 = wa[0], a1 = wa[1], a2 = wa[2], a3 = wa[3];
+  const double m0 = wm[0], m1 = wm[1], m2 = wm[2], m3 = wm[3];
+  for (Eigen::Index i = lo; i < hi; ++i) {
+    const double A = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
+    const double Mo = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    const double K = kb[i] * inv_me;
+    ay[i] = A;
+    my[i] = Mo;
+    ag[i] = K * A - ff * (a0 * Tb[i] + a1 * Tb[i + 1] + a2 * Tb[i + 2] + a3 * Tb[i + 3]);
+    mg[i] = K * Mo - ff * (m0 * Tb[i] + m1 * Tb[i + 1] + m2 * Tb[i + 2] + m3 * Tb[i + 3]);
+  }
+}
+
+}  // namespace
 
 // Row values of one window [w0, w1): for each row r (sample w0 + r) the q column values and b,
 // stored column-major in rows_ (rows_(r, c)). Cumulative integrals restart at w0.
@@ -352,23 +401,20 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
     const double a0 = h * wa[0], a1 = h * wa[1], a2 = h * wa[2], a3 = h * wa[3];
     const double m0 = h2 * wm[0], m1 = h2 * wm[1], m2 = h2 * wm[2], m3 = h2 * wm[3];
     const double* yb = y + w0 - 1;
-    for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-      ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
-      my[i] = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    if (split_k) {
+      // K held on the interval (a switch inside is fixed up below): the hot path.
+      const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
+      heldStiffnessIncrements(yb, k + w0, T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
+                              ag, mg);
+    } else {
+      for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+        ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
+        my[i] = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+      }
     }
     if (known) {
-      const double* kb = k + w0;
       const double* Tb = T + w0 - 1;
-      if (split_k) {
-        // K held on the interval (a switch inside is fixed up below).
-        for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-          const double K = kb[i] * inv_me;
-          const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2],
-                       F3 = ff * Tb[i + 3];
-          ag[i] = K * ay[i] - (a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
-          mg[i] = K * my[i] - (m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
-        }
-      } else {
+      if (!split_k) {
         const double* kk = k + w0 - 1;
         const double* yy = y + w0 - 1;
         for (Eigen::Index i = i_lo; i < i_hi; ++i) {
@@ -470,7 +516,22 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
     double P = 0.0, G = 0.0, Q = 0.0;
     colC[0] = 0.0;
     colb[0] = y[w0];
-    for (Eigen::Index r = 1; r < L; ++r) {
+    // Two rows per step: each running sum advances by the pair's total, so its add chain is
+    // half as long (the sums are latency-bound); the odd row is formed off the chain.
+    Eigen::Index r = 1;
+    for (; r + 1 < L; r += 2) {
+      const double i1 = h * G + mg[r - 1];
+      const double G1 = G + ag[r - 1];
+      const double i2 = h * G1 + mg[r];
+      colC[r] = -(P + ay[r - 1]);
+      colb[r] = y[w0 + r] + (Q + i1);
+      Q += i1 + i2;
+      G += ag[r - 1] + ag[r];
+      P += ay[r - 1] + ay[r];
+      colC[r + 1] = -P;
+      colb[r + 1] = y[w0 + r + 1] + Q;
+    }
+    for (; r < L; ++r) {
       Q += h * G + mg[r - 1];
       G += ag[r - 1];
       P += ay[r - 1];
@@ -525,22 +586,54 @@ void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, dou
     d0[c] = col[c][0];
     d1[c] = L > 1 ? (col[c][L - 1] - col[c][0]) / static_cast<double>(L - 1) : 0.0;
   }
-  double S[NC] = {0}, SP[NC] = {0}, M[NC][NC] = {{0}};
-  double raw = 0.0;
-  for (Eigen::Index r = 0; r < L; ++r) {
+  // Two lanes (even and odd rows), lane index innermost: rows r and r + 1 of a column are
+  // adjacent in memory, so each lane pair is one packed operation, and the two lanes are
+  // independent add chains. Combined at the end.
+  using P2 = Eigen::Array2d;  // one SSE2 register: rows r and r + 1
+  P2 S2[NC], SP2[NC], M2[NC][NC];
+  for (int a = 0; a < NC; ++a) {
+    S2[a].setZero();
+    SP2[a].setZero();
+    for (int b = 0; b < NC; ++b) M2[a][b].setZero();
+  }
+  P2 raw2 = P2::Zero();
+  P2 rl(0.0, 1.0);
+  const P2 two = P2::Constant(2.0);
+  Eigen::Index r = 0;
+  for (; r + 2 <= L; r += 2, rl += two) {
+    P2 z[NC];
+    const P2 p = rl - half;
+    for (int c = 0; c < NC; ++c) {
+      z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
+      S2[c] += z[c];
+      SP2[c] += p * z[c];
+    }
+    for (int a = 0; a < NC; ++a) {
+      for (int b = a; b < NC; ++b) M2[a][b] += z[a] * z[b];
+    }
+    const P2 rc = Eigen::Map<const P2>(col[raw_col] + r);
+    raw2 += rc * rc;
+  }
+  if (r < L) {  // odd L: the last row in lane 0
     const double rd = static_cast<double>(r);
-    const double p = rd - half;
     double z[NC];
     for (int c = 0; c < NC; ++c) {
       z[c] = col[c][r] - d0[c] - d1[c] * rd;
-      S[c] += z[c];
-      SP[c] += p * z[c];
+      S2[c][0] += z[c];
+      SP2[c][0] += (rd - half) * z[c];
     }
     for (int a = 0; a < NC; ++a) {
-      for (int b = a; b < NC; ++b) M[a][b] += z[a] * z[b];
+      for (int b = a; b < NC; ++b) M2[a][b][0] += z[a] * z[b];
     }
-    raw += col[raw_col][r] * col[raw_col][r];
+    raw2[0] += col[raw_col][r] * col[raw_col][r];
   }
+  double S[NC], SP[NC], M[NC][NC];
+  for (int a = 0; a < NC; ++a) {
+    S[a] = S2[a][0] + S2[a][1];
+    SP[a] = SP2[a][0] + SP2[a][1];
+    for (int b = a; b < NC; ++b) M[a][b] = M2[a][b][0] + M2[a][b][1];
+  }
+  const double raw = raw2[0] + raw2[1];
   *raw_norm += raw;
   for (int c = 0; c < NC; ++c) {
     mean[c] = S[c] / Ld + d0[c] + d1[c] * half;
@@ -559,7 +652,7 @@ void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, dou
 }  // namespace
 
 SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index begin,
-                                           Eigen::Index end) {
+                                           Eigen::Index end, bool estimate) {
   SegmentRecord rec;
   SegmentEstimate& est = rec.estimate;
   est.t_start = s.time(begin);
@@ -597,9 +690,12 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
                               {needsStiffness(f) ? s.stiffness : nullptr, "stiffness"},
                               {use_torque ? s.torque : nullptr, "torque"},
                               {needsState(f) ? s.mesh_state : nullptr, "mesh_state"}};
-  for (const Channel& ch : channels) {
+  double channel_sum[4] = {0, 0, 0, 0};  // reused below for the segment means
+  for (int c = 0; c < 4; ++c) {
+    const Channel& ch = channels[c];
     if (ch.data == nullptr) continue;
-    if (std::isfinite(blockSum(ch.data, c0, c1))) continue;
+    channel_sum[c] = blockSum(ch.data, c0, c1);
+    if (std::isfinite(channel_sum[c])) continue;
     for (Eigen::Index i = c0; i < c1; ++i) {
       if (!std::isfinite(ch.data[i])) {
         std::ostringstream m;
@@ -610,7 +706,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   }
   // Segment means (time-weighted over the segment's intervals; switches split when located).
   if (use_torque) {
-    rec.mean_torque = blockSum(s.torque, begin, end) / static_cast<double>(rows);
+    rec.mean_torque = channel_sum[2] / static_cast<double>(rows);
     est.mean_torque = rec.mean_torque;
   }
   rec.duration = static_cast<double>(rows) * s.dt;
@@ -625,7 +721,19 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     const Eigen::Index last = std::min<Eigen::Index>(end, s.n - 1);
     scan_.resize(static_cast<size_t>(std::max<Eigen::Index>(last - begin, 0)) + 1);
     size_t cnt = 0;
-    for (Eigen::Index i = begin; i < last; ++i) {
+    // Blocks of 16 intervals are first tested as a whole (a branch-free, vectorisable
+    // comparison): switches are a few per mesh period, so most blocks are skipped.
+    Eigen::Index i = begin;
+    for (; i + 16 <= last; i += 16) {
+      bool change = false;
+      for (int k = 0; k < 16; ++k) change |= held[i + k] != held[i + k + 1];
+      if (!change) continue;
+      for (int k = 0; k < 16; ++k) {
+        scan_[cnt] = i + k;
+        cnt += held[i + k] != held[i + k + 1];
+      }
+    }
+    for (; i < last; ++i) {
       scan_[cnt] = i;
       cnt += held[i] != held[i + 1];
     }
@@ -636,7 +744,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     }
   }
   if (s.stiffness) {
-    double sum = blockSum(s.stiffness, begin, end);
+    double sum = channels[1].data ? channel_sum[1] : blockSum(s.stiffness, begin, end);
     if (f == Formulation::Known && gear_.piecewise_constant_stiffness) {
       for (size_t c = 0; c < switches_.size(); ++c) {
         const Eigen::Index j = switches_[c];
@@ -646,7 +754,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     rec.k_integral = sum * s.dt / gear_.equivalent_mass;
   }
   if (s.mesh_state && f == Formulation::Greybox) {
-    double sum = blockSum(s.mesh_state, begin, end);
+    double sum = channels[3].data ? channel_sum[3] : blockSum(s.mesh_state, begin, end);
     for (size_t c = 0; c < switches_.size(); ++c) {
       const Eigen::Index j = switches_[c];
       sum += (1.0 - switch_theta_[c]) * (s.mesh_state[j + 1] - s.mesh_state[j]);
@@ -674,8 +782,6 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     wr.rows = L;
     wr.dt = s.dt;
     wr.torque_T = (use_torque && s.torque) ? s.torque[w0] : kNaN;
-    wr.mean.assign(nc, 0.0);
-    wr.slope.assign(nc, 0.0);
     double raw = 0.0;
     const int rc = std::max(cC, 0);
     switch (nc) {
@@ -711,7 +817,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   }
   est.identifiable = true;
   segments_.push_back(std::move(rec));
-  if (n_shared_ == 0) {
+  if (n_shared_ == 0 && estimate) {
     // Fill the estimate from a finish() of this segment alone (cheap: small matrices).
     const IdentificationResult r = finishRange(segments_.size() - 1, segments_.size());
     return r.segments.back();
@@ -972,7 +1078,7 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
     for (Eigen::Index i = b; i < en; ++i) sum += view.torque[i];
     m.setLegacyForcing(gear.force_factor * sum / static_cast<double>(en - b));
   }
-  for (const auto& r : ranges) m.addSegment(view, r.first, r.second);
+  for (const auto& r : ranges) m.addSegment(view, r.first, r.second, /*estimate=*/false);
   *result = m.finish();
   if (wantsRefinement(o, *result)) {
     IdentificationResult refined = *result;
