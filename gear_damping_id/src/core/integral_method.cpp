@@ -112,7 +112,7 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
   }
   for (Eigen::Index i = i0; i < n; ++i) {
     const double d = t.time[i] - t.time[i - 1];
-    if (!(std::abs(d - ref) <= rel_tolerance * ref)) {
+    if (!(std::abs(d - ref) <= tol)) {
       e << "time is not uniformly sampled at ";
       if (first_line >= 0) e << "line " << first_line + i << " (sample " << i << ", ";
       else e << "sample " << i << " (";
@@ -599,33 +599,28 @@ void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, dou
   P2 raw2 = P2::Zero();
   P2 rl(0.0, 1.0);
   const P2 two = P2::Constant(2.0);
-  Eigen::Index r = 0;
-  for (; r + 2 <= L; r += 2, rl += two) {
-    P2 z[NC];
-    const P2 p = rl - half;
+  // Adds one pair of rows (z: the detrended columns, p: p1, rc: the raw damping column).
+  auto accumulate = [&](const P2* z, const P2& p, const P2& rc) {
     for (int c = 0; c < NC; ++c) {
-      z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
       S2[c] += z[c];
       SP2[c] += p * z[c];
     }
     for (int a = 0; a < NC; ++a) {
       for (int b = a; b < NC; ++b) M2[a][b] += z[a] * z[b];
     }
-    const P2 rc = Eigen::Map<const P2>(col[raw_col] + r);
     raw2 += rc * rc;
+  };
+  Eigen::Index r = 0;
+  for (; r + 2 <= L; r += 2, rl += two) {
+    P2 z[NC];
+    for (int c = 0; c < NC; ++c) z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
+    accumulate(z, rl - half, Eigen::Map<const P2>(col[raw_col] + r));
   }
-  if (r < L) {  // odd L: the last row in lane 0
+  if (r < L) {  // odd L: the last row in lane 0, lane 1 zero (adds nothing)
     const double rd = static_cast<double>(r);
-    double z[NC];
-    for (int c = 0; c < NC; ++c) {
-      z[c] = col[c][r] - d0[c] - d1[c] * rd;
-      S2[c][0] += z[c];
-      SP2[c][0] += (rd - half) * z[c];
-    }
-    for (int a = 0; a < NC; ++a) {
-      for (int b = a; b < NC; ++b) M2[a][b][0] += z[a] * z[b];
-    }
-    raw2[0] += col[raw_col][r] * col[raw_col][r];
+    P2 z[NC];
+    for (int c = 0; c < NC; ++c) z[c] = P2(col[c][r] - d0[c] - d1[c] * rd, 0.0);
+    accumulate(z, P2(rd - half, 0.0), P2(col[raw_col][r], 0.0));
   }
   double S[NC], SP[NC], M[NC][NC];
   for (int a = 0; a < NC; ++a) {
@@ -723,20 +718,19 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     size_t cnt = 0;
     // Blocks of 16 intervals are first tested as a whole (a branch-free, vectorisable
     // comparison): switches are a few per mesh period, so most blocks are skipped.
+    auto scan = [&](Eigen::Index lo, Eigen::Index hi) {  // records the changes in [lo, hi)
+      for (Eigen::Index j = lo; j < hi; ++j) {
+        scan_[cnt] = j;
+        cnt += held[j] != held[j + 1];
+      }
+    };
     Eigen::Index i = begin;
     for (; i + 16 <= last; i += 16) {
       bool change = false;
       for (int k = 0; k < 16; ++k) change |= held[i + k] != held[i + k + 1];
-      if (!change) continue;
-      for (int k = 0; k < 16; ++k) {
-        scan_[cnt] = i + k;
-        cnt += held[i + k] != held[i + k + 1];
-      }
+      if (change) scan(i, i + 16);
     }
-    for (; i < last; ++i) {
-      scan_[cnt] = i;
-      cnt += held[i] != held[i + 1];
-    }
+    scan(i, last);
     for (size_t c = 0; c < cnt; ++c) {
       const Eigen::Index j = scan_[c];
       switches_.push_back(j);
