@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "gear_damping_id/quality_warning.hpp"
+
 namespace gear_damping_id {
 
 /// What is known about stiffness and forcing (DESIGN §4):
@@ -79,6 +81,9 @@ struct SegmentEstimate {
   double mean_torque = kNaN;  ///< [N*m] time-mean T1 over the segment (when known)
   double condition = kNaN;    ///< 2-norm condition number of the equilibrated problem
   bool refined = false;       ///< C (and k levels) from the output-error refinement
+  /// The integral method's own estimate and standard error, kept when `refined` replaces C.
+  double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
+  QualityWarnings warnings;  ///< empty when the estimate is clean
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).

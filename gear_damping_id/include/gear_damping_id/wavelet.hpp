@@ -37,6 +37,8 @@
 // may run concurrently.
 #pragma once
 
+#include "gear_damping_id/quality_warning.hpp"
+
 #include <complex>
 #include <iosfwd>
 #include <limits>
@@ -268,6 +270,10 @@ struct WaveletMode {
   double omega0 = kNaN;          ///< Morlet omega0 used for the fit
   double integral_xi = kNaN;     ///< [-] integral-method xi = C/(2*omega_n), filled by callers
   std::string warning;           ///< empty, or what limits this mode's estimate
+  /// True when the envelope really decays over a long enough region (a damping estimate);
+  /// false for a forced line (steady envelope, mesh/shaft-order harmonic).
+  bool free_decay = true;
+  QualityWarnings warnings;  ///< empty when the mode's estimate is clean
 };
 
 /// Everything analyzeWavelet computes. Frequencies [Hz], times [s], amplitudes in y's unit.
