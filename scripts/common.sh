@@ -15,12 +15,18 @@ GEAR_JOBS=${GEAR_DAMPING_JOBS:-$(nproc)}
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 unset PYTHONHOME PYTHONPATH
 
-# Every system package the build, the tests, the benchmarks and the report need, by name.
+# Every system package the build, the tests, the benchmarks and the report need, by name, and
+# the Python message modules `rostopic echo` / `rosservice` / `dynparam` need for every topic the
+# package publishes (gear_damping/*, std_msgs, diagnostic_msgs, rosgraph_msgs,
+# dynamic_reconfigure). .ci/run installs the same list.
 GEAR_APT_PACKAGES=(
   build-essential cmake pkg-config
   catkin ros-core-dev ros-message-generation ros-message-runtime
   librosbag-dev librostest-dev libstd-msgs-dev libstd-srvs-dev libdiagnostic-updater-dev
+  libdynamic-reconfigure-config-init-mutex-dev
   rosbash python3-rostest python3-rosbag python3-catkin-pkg python3-std-srvs
+  python3-roslaunch python3-rostopic python3-rosservice python3-rosmsg python3-genpy
+  python3-std-msgs python3-diagnostic-msgs python3-rosgraph-msgs python3-dynamic-reconfigure
   libgtest-dev googletest libbenchmark-dev
   libeigen3-dev libfftw3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   python3-numpy python3-matplotlib python3-pywt python3-yaml
@@ -41,13 +47,71 @@ gear_install_deps() {
   fi
 }
 
-gear_build() {
-  mkdir -p "$GEAR_WS/src"
-  # (Re)point the workspace at this checkout, so one workspace serves whichever clone runs.
-  if [ "$(readlink "$GEAR_WS/src/gear_damping" 2>/dev/null)" != "$GEAR_REPO" ]; then
-    rm -rf "$GEAR_WS/src/gear_damping"
-    ln -s "$GEAR_REPO" "$GEAR_WS/src/gear_damping"
+# Makes $GEAR_WS/src/gear_damping this checkout, never deleting or overwriting anything the
+# scripts did not create:
+#   - absent: a symlink to this checkout is created;
+#   - a symlink (ours, from an earlier run, possibly of another clone): re-pointed here (only the
+#     link changes, never what it pointed to);
+#   - this checkout itself (the clone sits at $GEAR_WS/src/gear_damping, or anywhere under
+#     $GEAR_WS/src): used in place, nothing is linked;
+#   - anything else (another clone, a file): refused with a message, return status 1.
+gear_link_checkout() {
+  local src="$GEAR_WS/src" target="$GEAR_WS/src/gear_damping"
+  mkdir -p "$src"
+  local repo_real src_real
+  repo_real=$(realpath "$GEAR_REPO")
+  src_real=$(realpath "$src")
+  case "$repo_real/" in
+    "$src_real"/*)  # the checkout is inside this workspace's src: catkin finds it there
+      if [ -L "$target" ] && [ "$(realpath "$target" 2>/dev/null)" = "$repo_real" ]; then
+        return 0
+      fi
+      if [ -e "$target" ] || [ -L "$target" ]; then
+        if [ "$(realpath "$target" 2>/dev/null)" = "$repo_real" ]; then return 0; fi
+        echo "[gear_damping] refusing to use workspace $GEAR_WS: this checkout ($GEAR_REPO) is in" \
+             "its src/ and $target is another copy of the package (catkin would find two)." >&2
+        return 1
+      fi
+      return 0
+      ;;
+  esac
+  if [ -L "$target" ]; then
+    if [ "$(readlink "$target")" != "$GEAR_REPO" ]; then
+      echo "[gear_damping] re-pointing the symlink $target -> $GEAR_REPO" >&2
+      ln -sfn "$GEAR_REPO" "$target"
+    fi
+    return 0
   fi
+  if [ -e "$target" ]; then
+    echo "[gear_damping] refusing to touch $target: it exists, is not a symlink and is not this" \
+         "checkout ($GEAR_REPO). Move it away, or set GEAR_DAMPING_WS to another workspace (or to" \
+         "the workspace that contains this checkout)." >&2
+    return 1
+  fi
+  ln -s "$GEAR_REPO" "$target"
+}
+
+# Prepares an output directory for the demo: created if absent; reused if empty or written by an
+# earlier demo (it holds the marker .gear_damping_demo); refused (status 1, nothing written) if it
+# holds files the demo did not create. Prints the absolute path.
+gear_prepare_out_dir() {
+  local dir=$1
+  if [ -e "$dir" ] && [ ! -d "$dir" ]; then
+    echo "[gear_damping] refusing to write into $dir: it is not a directory" >&2
+    return 1
+  fi
+  if [ -d "$dir" ] && [ ! -e "$dir/.gear_damping_demo" ] && [ -n "$(ls -A "$dir")" ]; then
+    echo "[gear_damping] refusing to write into $dir: it holds files the demo did not create" \
+         "(no .gear_damping_demo marker). Pass an empty or new directory." >&2
+    return 1
+  fi
+  mkdir -p "$dir"
+  : > "$dir/.gear_damping_demo"
+  (cd "$dir" && pwd)
+}
+
+gear_build() {
+  gear_link_checkout
   (cd "$GEAR_WS" && catkin_make -j"$GEAR_JOBS" \
       -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 "$@")
 }

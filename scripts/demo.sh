@@ -11,7 +11,8 @@
 #   analysis.txt             the analysis tables as printed
 #   report/index.html        figures and tables (rosrun gear_damping report)
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-out=$(mkdir -p "${1:-$GEAR_REPO/results}" && cd "${1:-$GEAR_REPO/results}" && pwd)
+# Never overwrites files it did not write: a non-empty OUT_DIR without the demo's marker is refused.
+out=$(gear_prepare_out_dir "${1:-$GEAR_REPO/results}")
 gear_install_deps
 gear_build
 gear_source_ws
