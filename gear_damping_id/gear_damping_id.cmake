@@ -56,7 +56,7 @@ foreach(node damping_id_node wavelet_node)
   target_link_libraries(${node} gear_live_ros_conversions gear_id_ros_conversions
                         gear_damping_id_io gear_ros_conversions gear_sim_io ${catkin_LIBRARIES})
   target_compile_options(${node} PRIVATE ${GEAR_WARNINGS})
-  add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp)
+  add_dependencies(${node} ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_gencfg)
 endforeach()
 install(TARGETS gear_live_ros_conversions damping_id_node wavelet_node
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}

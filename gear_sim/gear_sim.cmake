@@ -41,7 +41,10 @@ target_compile_options(convert PRIVATE ${GEAR_WARNINGS})
 
 # gear_sim_node: publishes the simulated signal as chunks, the gear parameters latched.
 add_executable(gear_sim_node gear_sim/nodes/gear_sim_node.cpp)
-target_link_libraries(gear_sim_node gear_sim_io gear_ros_conversions ${catkin_LIBRARIES})
+# The strict parameter reader (ParamReader) is shared with the identification nodes.
+target_include_directories(gear_sim_node PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/nodes)
+target_link_libraries(gear_sim_node gear_sim_io gear_ros_conversions gear_live_ros_conversions
+                      ${catkin_LIBRARIES})
 target_compile_options(gear_sim_node PRIVATE ${GEAR_WARNINGS})
 
 install(TARGETS gear_sim_core gear_sim_io gear_ros_conversions simulate convert gear_sim_node

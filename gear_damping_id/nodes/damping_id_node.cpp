@@ -1,13 +1,22 @@
 // damping_id_node: live mesh-damping identification (DESIGN.md §4) on a stream of
 // gear_damping/SignalChunk messages.
 //
-// Subscribes:  /gear/signal (SignalChunk; remap e.g. /gear/signal:=/rig/signal), /gear/params
+// Topic names are relative (under the node's namespace; gear_sim_ros/topics.hpp):
+// Subscribes:  gear/signal (SignalChunk; remap e.g. gear/signal:=/rig/signal), gear/params
 //              (GearParams, latched), unless ~gear_config names a YAML file.
-// Publishes:   /gear/damping (DampingArray, latched): cumulative estimate since start/reset/restart
-//              /gear/damping_segment (DampingArray): one per completed segment
-//              /gear/modeled_response (ModeledResponse): per completed segment
-//              /gear/damping_C (std_msgs/Float64) [1/s], /gear/damping_xi (std_msgs/Float64) [-]
-//              /diagnostics
+// Publishes:   gear/damping (DampingArray, latched): cumulative estimate since
+//              start/reset/restart/reconfigure
+//              gear/damping_segment (DampingArray): one per completed segment
+//              gear/damping_series (DampingSample): one per completed segment, stamped with the
+//              segment's sample time (record start + t_end), for plotting
+//              gear/modeled_response (ModeledResponse): per completed segment
+//              gear/damping_C (std_msgs/Float64) [1/s], gear/damping_xi (std_msgs/Float64) [-]
+//              /diagnostics (global)
+// dynamic_reconfigure (cfg/DampingId.cfg): segment_length, window_length, refine, max_condition.
+// A change applies at the next segment boundary (segments already completed keep the old
+// settings), is logged, and starts a new cumulative estimate; a new segment_length closes the
+// segment being filled early (identified as a partial segment, as at a gap) and the new grid
+// continues from there.
 // Services:    ~reset (std_srvs/Empty), ~get_damping (gear_damping/GetDamping)
 // Parameters:  see loadParameters() and docs/live.md.
 //
@@ -27,6 +36,9 @@
 // Threading: one thread (ros::spin). Callbacks convert and buffer; identification of a segment
 // (~0.1 ms for 1000 samples) runs in the chunk callback, and the subscriber queue (~queue_size
 // chunks, default 10000 = 10 s at the simulator's full speed) absorbs any burst meanwhile.
+#include <dynamic_reconfigure/server.h>
+#include <gear_damping/DampingIdConfig.h>
+#include <gear_damping/DampingSample.h>
 #include <gear_damping/GearParams.h>
 #include <gear_damping/GetDamping.h>
 #include <std_msgs/Float64.h>
@@ -34,15 +46,18 @@
 
 #include <deque>
 #include <memory>
+#include <optional>
 
 #include "gear_damping_id/live_identification.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/topics.hpp"
 #include "node_common.hpp"
 
 namespace gd = gear_damping_id;
 namespace nodes = gear_damping_nodes;
+namespace topics = gear_sim_ros;
 
 namespace {
 
@@ -118,23 +133,35 @@ class DampingIdNode {
  public:
   DampingIdNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
       : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
-    damping_pub_ = nh.advertise<gear_damping::DampingArray>("/gear/damping", 1, true);
-    segment_pub_ = nh.advertise<gear_damping::DampingArray>("/gear/damping_segment", 100);
-    response_pub_ = nh.advertise<gear_damping::ModeledResponse>("/gear/modeled_response", 100);
-    c_pub_ = nh.advertise<std_msgs::Float64>("/gear/damping_C", 100);
-    xi_pub_ = nh.advertise<std_msgs::Float64>("/gear/damping_xi", 100);
+    damping_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingTopic, 1, true);
+    segment_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingSegmentTopic, 100);
+    series_pub_ = nh.advertise<gear_damping::DampingSample>(topics::kDampingSeriesTopic, 1000);
+    response_pub_ = nh.advertise<gear_damping::ModeledResponse>(topics::kModeledResponseTopic, 100);
+    c_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingCTopic, 100);
+    xi_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingXiTopic, 100);
     reset_srv_ = pnh.advertiseService("reset", &DampingIdNode::onReset, this);
     get_srv_ = pnh.advertiseService("get_damping", &DampingIdNode::onGet, this);
     updater_.setHardwareID("damping_id");
     updater_.add("stream", this, &DampingIdNode::diagnoseStream);
     updater_.add("identification", this, &DampingIdNode::diagnoseIdentification);
-    // Absolute names, remappable (e.g. /gear/signal:=/rig/chunks).
-    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
+    // Relative names, remappable (e.g. gear/signal:=/rig/chunks).
+    signal_sub_ = nh.subscribe(topics::kSignalTopic, static_cast<uint32_t>(o_.intake.queue_size),
                                &DampingIdNode::onChunk, this, ros::TransportHints().tcpNoDelay());
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &DampingIdNode::onTimer, this);
     if (o_.gear_config.empty()) {
-      params_sub_ = nh.subscribe("/gear/params", 1, &DampingIdNode::onParams, this);
+      params_sub_ = nh.subscribe(topics::kParamsTopic, 1, &DampingIdNode::onParams, this);
     }
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::DampingIdConfig>>(
+        reconfigure_mutex_, pnh);
+    gear_damping::DampingIdConfig c;
+    c.segment_length = o_.id.segment_length;
+    c.window_length = o_.id.window_length;
+    c.refine = refineName(o_.id.refine);
+    c.max_condition = o_.id.max_condition;
+    reconfigure_->setConfigDefault(c);  // the node's parameters, not the .cfg defaults
+    reconfigure_->updateConfig(c);
+    reconfigure_->setCallback(
+        [this](gear_damping::DampingIdConfig& cfg, uint32_t) { onReconfigure(cfg); });
   }
 
   // Gear constants from ~gear_config (if set); false after ROS_FATAL when it cannot be used.
@@ -186,6 +213,7 @@ class DampingIdNode {
   }
 
   void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
+    noteRecordStart(*msg);
     if (!gear_) {  // keep until the gear parameters arrive
       if (early_.size() >= static_cast<size_t>(o_.intake.queue_size)) {
         early_.pop_front();
@@ -226,8 +254,98 @@ class DampingIdNode {
       }
       identify(s);
       any = true;
+      if (pending_) applyReconfigure();  // at a segment boundary
     }
     if (any) publishCumulative(false);
+  }
+
+  // --- time series (gear/damping_series) -------------------------------------------------------
+  // The record's start on the ROS clock: the stamp of a chunk minus its samples' offset. Taken
+  // from the first chunk of the stream, again after a restart (index 0) or a reset.
+  void noteRecordStart(const gear_damping::SignalChunk& m) {
+    if ((have_record_start_ && m.first_index != 0) || !(m.sample_rate > 0.0)) return;
+    const double offset = static_cast<double>(m.first_index) / m.sample_rate;
+    const double start = m.header.stamp.toSec() - offset;
+    record_start_ = start > 0.0 ? ros::Time(start) : ros::Time(0);
+    have_record_start_ = true;
+  }
+
+  void publishSample(const gd::SegmentEstimate& est, double fit_percent) {
+    gear_damping::DampingSample m;
+    m.header.stamp = record_start_ + ros::Duration(std::isfinite(est.t_end) ? est.t_end : 0.0);
+    m.segment = gear_damping_ros::toMsg(est, o_.id.formulation);
+    m.fit_percent = fit_percent;
+    m.refined = est.refined;
+    series_pub_.publish(m);
+  }
+
+  // --- dynamic_reconfigure ----------------------------------------------------------------------
+  static std::string refineName(gd::IdentificationOptions::Refine r) {
+    using R = gd::IdentificationOptions::Refine;
+    return r == R::Always ? "always" : r == R::Never ? "never" : "auto";
+  }
+
+  // Validates a request; an invalid one is logged and the server's values are put back.
+  void onReconfigure(gear_damping::DampingIdConfig& c) {
+    gd::IdentificationOptions id = pending_ ? pending_->id : o_.id;
+    const gd::IdentificationOptions before = id;
+    using R = gd::IdentificationOptions::Refine;
+    id.segment_length = c.segment_length;
+    id.window_length = c.window_length;
+    id.max_condition = c.max_condition;
+    id.refine = c.refine == "always" ? R::Always : c.refine == "never" ? R::Never : R::Auto;
+    if (c.refine != "always" && c.refine != "never" && c.refine != "auto") {
+      ROS_ERROR("reconfigure refine = '%s' refused: must be auto, always or never",
+                c.refine.c_str());
+      id.refine = before.refine;
+    }
+    gd::StreamOptions stream = o_.stream;
+    stream.segment_length = id.segment_length;
+    std::string e = id.validate();
+    if (e.empty()) e = stream.validate();
+    if (!e.empty()) {
+      ROS_ERROR("reconfigure refused: %s", nodes::paramError(e).c_str());
+      id = before;
+    }
+    c.segment_length = id.segment_length;  // what the server reports back
+    c.window_length = id.window_length;
+    c.max_condition = id.max_condition;
+    c.refine = refineName(id.refine);
+    if (id.segment_length == o_.id.segment_length && id.window_length == o_.id.window_length &&
+        id.max_condition == o_.id.max_condition && id.refine == o_.id.refine) {
+      pending_.reset();
+      return;
+    }
+    pending_ = Pending{id};
+    ROS_INFO(
+        "reconfigure: segment_length %g s, window_length %g s, refine %s, max_condition %g "
+        "requested; applies at the next segment boundary",
+        id.segment_length, id.window_length, c.refine.c_str(), id.max_condition);
+    if (!gear_ || intake_.assembler().bufferedSamples() == 0) applyReconfigure();
+  }
+
+  void applyReconfigure() {
+    const gd::IdentificationOptions id = pending_->id;
+    pending_.reset();
+    if (id.segment_length != o_.id.segment_length) {
+      // The segment being filled is closed now (a partial segment, identified with the old
+      // settings), the new grid starts with the next chunk.
+      intake_.assembler().endOfStream();
+      gd::StreamSegment s;
+      while (gear_ && intake_.assembler().nextSegment(&s)) identify(s);
+      o_.stream.segment_length = id.segment_length;
+      intake_.assembler() = gd::StreamAssembler(o_.stream);
+      epoch_ = intake_.assembler().epoch();
+    }
+    publishCumulative(true);
+    o_.id = id;
+    if (gear_) live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_);
+    clearEstimates();
+    ROS_INFO(
+        "reconfigured: segment_length %g s, window_length %g s, refine %s, max_condition %g "
+        "(new cumulative estimate from here)",
+        o_.id.segment_length, o_.id.window_length, refineName(o_.id.refine).c_str(),
+        o_.id.max_condition);
   }
 
   void identify(const gd::StreamSegment& s) {
@@ -252,6 +370,7 @@ class DampingIdNode {
     gear_damping::DampingArray one = gear_damping_ros::toMsg(seg);
     one.header.stamp = ros::Time::now();
     segment_pub_.publish(one);
+    double fit = gd::kNaN;
     if (est.identifiable && std::isfinite(est.C)) {
       std_msgs::Float64 m;
       m.data = est.C;
@@ -268,10 +387,12 @@ class DampingIdNode {
         msg.header.stamp = ros::Time::now();
         response_pub_.publish(msg);
         last_fit_ = mr.fit_percent;
+        fit = mr.fit_percent;
       } else {
         ROS_WARN_THROTTLE(5.0, "modeled response: %s", why.c_str());
       }
     }
+    publishSample(est, fit);
     const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
     last_ms_ = ms;
     max_ms_ = std::max(max_ms_, ms);
@@ -300,6 +421,7 @@ class DampingIdNode {
 
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
     intake_.assembler().reset();
+    have_record_start_ = false;
     epoch_ = 0;
     clearEstimates();
     identified_ = not_identifiable_ = partial_ = 0;
@@ -349,7 +471,15 @@ class DampingIdNode {
   NodeOptions o_;
   nodes::ChunkIntake intake_;
   diagnostic_updater::Updater updater_;
-  ros::Publisher damping_pub_, segment_pub_, response_pub_, c_pub_, xi_pub_;
+  ros::Publisher damping_pub_, segment_pub_, series_pub_, response_pub_, c_pub_, xi_pub_;
+  ros::Time record_start_;
+  bool have_record_start_ = false;
+  struct Pending {
+    gd::IdentificationOptions id;
+  };
+  std::optional<Pending> pending_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<gear_damping::DampingIdConfig>> reconfigure_;
   ros::Subscriber signal_sub_, params_sub_;
   ros::ServiceServer reset_srv_, get_srv_;
   ros::WallTimer timer_;

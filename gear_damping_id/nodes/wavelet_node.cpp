@@ -1,10 +1,13 @@
 // wavelet_node: Morlet-wavelet damping validation (DESIGN.md §5) on a stream of
 // gear_damping/SignalChunk messages.
 //
-// Subscribes:  /gear/signal (SignalChunk; remappable, e.g. /gear/signal:=/rig/signal),
-// /gear/damping
-//              (DampingArray, for the integral-method xi shown beside each mode)
-// Publishes:   /gear/wavelet_modes (WaveletModes): one per analysed window; /diagnostics
+// Topic names are relative (under the node's namespace; gear_sim_ros/topics.hpp):
+// Subscribes:  gear/signal (SignalChunk; remappable, e.g. gear/signal:=/rig/signal),
+//              gear/damping (DampingArray, for the integral-method xi shown beside each mode)
+// Publishes:   gear/wavelet_modes (WaveletModes): one per analysed window; /diagnostics (global)
+// dynamic_reconfigure (cfg/Wavelet.cfg): f_min, f_max (the band) and window. A change applies
+// from the next window (the window being filled is analysed with the old settings) and is
+// logged; a new window length closes the window being filled early (analysed if long enough).
 // Services:    ~analyze (std_srvs/Trigger): analyse what is buffered now (closes the window)
 //              ~reset (std_srvs/Empty)
 // Windows: ~window [s] > 0: consecutive windows of that length from sample 0 (the stream
@@ -14,14 +17,20 @@
 // wall time) or on ~analyze. Windows shorter than ~min_window_samples are skipped and counted.
 // Threading: one thread; the analysis (only the rows the fits need, no full scalogram) runs in
 // the callback that completes a window, the subscriber queue absorbs chunks meanwhile.
+#include <dynamic_reconfigure/server.h>
 #include <gear_damping/DampingArray.h>
+#include <gear_damping/WaveletConfig.h>
 #include <gear_damping/WaveletModes.h>
 #include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
 
+#include <memory>
+#include <optional>
+
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
+#include "gear_sim_ros/topics.hpp"
 #include "node_common.hpp"
 
 namespace gd = gear_damping_id;
@@ -85,16 +94,28 @@ class WaveletNode {
  public:
   WaveletNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
       : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
-    modes_pub_ = nh.advertise<gear_damping::WaveletModes>("/gear/wavelet_modes", 10, true);
+    modes_pub_ =
+        nh.advertise<gear_damping::WaveletModes>(gear_sim_ros::kWaveletModesTopic, 10, true);
     analyze_srv_ = pnh.advertiseService("analyze", &WaveletNode::onAnalyze, this);
     reset_srv_ = pnh.advertiseService("reset", &WaveletNode::onReset, this);
     updater_.setHardwareID("wavelet");
     updater_.add("stream", this, &WaveletNode::diagnoseStream);
     updater_.add("wavelet", this, &WaveletNode::diagnoseWavelet);
-    signal_sub_ = nh.subscribe("/gear/signal", static_cast<uint32_t>(o_.intake.queue_size),
-                               &WaveletNode::onChunk, this, ros::TransportHints().tcpNoDelay());
-    damping_sub_ = nh.subscribe("/gear/damping", 1, &WaveletNode::onDamping, this);
+    signal_sub_ =
+        nh.subscribe(gear_sim_ros::kSignalTopic, static_cast<uint32_t>(o_.intake.queue_size),
+                     &WaveletNode::onChunk, this, ros::TransportHints().tcpNoDelay());
+    damping_sub_ = nh.subscribe(gear_sim_ros::kDampingTopic, 1, &WaveletNode::onDamping, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::WaveletConfig>>(
+        reconfigure_mutex_, pnh);
+    gear_damping::WaveletConfig c;
+    c.f_min = o_.wavelet.f_min;
+    c.f_max = o_.wavelet.f_max;
+    c.window = o_.window;
+    reconfigure_->setConfigDefault(c);  // the node's parameters, not the .cfg defaults
+    reconfigure_->updateConfig(c);
+    reconfigure_->setCallback(
+        [this](gear_damping::WaveletConfig& cfg, uint32_t) { onReconfigure(cfg); });
   }
 
  private:
@@ -143,7 +164,61 @@ class WaveletNode {
 
   void processReady() {
     gd::StreamSegment s;
-    while (intake_.assembler().nextSegment(&s)) analyse(s);
+    while (intake_.assembler().nextSegment(&s)) {
+      analyse(s);
+      if (pending_) applyReconfigure();  // at a window boundary
+    }
+  }
+
+  // dynamic_reconfigure: validates a request (an invalid one is logged and the current values
+  // are put back), then applies it at the next window boundary (at once when nothing is
+  // buffered).
+  void onReconfigure(gear_damping::WaveletConfig& c) {
+    const Pending before = pending_ ? *pending_ : Pending{o_.wavelet, o_.window};
+    Pending p = before;
+    p.wavelet.f_min = c.f_min;
+    p.wavelet.f_max = c.f_max;
+    p.window = c.window;
+    gd::StreamOptions stream = o_.stream;
+    stream.segment_length = p.window;
+    std::string e = p.wavelet.validate();
+    if (e.empty()) e = stream.validate();
+    if (!e.empty()) {
+      ROS_ERROR("reconfigure refused: %s", nodes::paramError(e).c_str());
+      p = before;
+    }
+    c.f_min = p.wavelet.f_min;  // what the server reports back
+    c.f_max = p.wavelet.f_max;
+    c.window = p.window;
+    if (p.wavelet.f_min == o_.wavelet.f_min && p.wavelet.f_max == o_.wavelet.f_max &&
+        p.window == o_.window) {
+      pending_.reset();
+      return;
+    }
+    pending_ = p;
+    ROS_INFO(
+        "reconfigure: f_min %g Hz, f_max %g Hz, window %g s requested; applies from the "
+        "next window",
+        p.wavelet.f_min, p.wavelet.f_max, p.window);
+    if (intake_.assembler().bufferedSamples() == 0) applyReconfigure();
+  }
+
+  void applyReconfigure() {
+    const Pending p = *pending_;
+    pending_.reset();
+    if (p.window != o_.window) {
+      // The window being filled is closed now (analysed with the old settings if long enough);
+      // the new windows start with the next chunk.
+      intake_.assembler().endOfStream();
+      gd::StreamSegment s;
+      while (intake_.assembler().nextSegment(&s)) analyse(s);
+      o_.window = p.window;
+      o_.stream.segment_length = p.window;
+      intake_.assembler() = gd::StreamAssembler(o_.stream);
+    }
+    o_.wavelet = p.wavelet;
+    ROS_INFO("reconfigured: f_min %g Hz, f_max %g Hz, window %g s", o_.wavelet.f_min,
+             o_.wavelet.f_max, o_.window);
   }
 
   void analyse(const gd::StreamSegment& s) {
@@ -206,6 +281,13 @@ class WaveletNode {
   nodes::ChunkIntake intake_;
   diagnostic_updater::Updater updater_;
   ros::Publisher modes_pub_;
+  struct Pending {
+    gd::WaveletOptions wavelet;
+    double window;
+  };
+  std::optional<Pending> pending_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<gear_damping::WaveletConfig>> reconfigure_;
   ros::Subscriber signal_sub_, damping_sub_;
   ros::ServiceServer analyze_srv_, reset_srv_;
   ros::WallTimer timer_;

@@ -1,21 +1,25 @@
 // gear_sim_node: simulates the gear pair configured in its private namespace (the YAML of
 // `simulate --config`, loaded with `rosparam load FILE ~`) and publishes the record as
-// gear_damping/SignalChunk messages on /gear/signal and the gear parameters, latched, on
-// /gear/params.
+// gear_damping/SignalChunk messages on gear/signal and the gear parameters, latched, on
+// gear/params (relative names: under the node's namespace, gear_sim_ros/topics.hpp).
 //
 // Private parameters (besides the YAML sections pinion, gear, mesh, speed, load, damping,
 // simulation):
 //   ~chunk_size [samples]   samples per chunk (default 1000)
-//   ~pace       [string]    "realtime": one chunk per chunk_size/sample_rate of wall time;
-//                           "fast": as fast as possible once a subscriber is connected (default)
+//   ~pace       [string]    "realtime": at wall-clock speed (a chunk is published when the
+//                           wall time since the start reaches the time of its last sample);
+//                           "fast": as fast as possible (default). Both first wait for
+//                           ~min_subscribers gear/signal subscribers (at most
+//                           ~wait_for_subscribers).
 //   ~repeat     [bool]      false: publish the record once, then stay up (latched params);
 //                           true: publish it forever, restarting at index 0 each time (default
 //                           false)
-//   ~wait_for_subscribers [s]  in "fast" mode, how long to wait for ~min_subscribers
-//                           /gear/signal subscribers before publishing anyway (default 10)
-//   ~min_subscribers        in "fast" mode, subscribers to wait for (default 1; the pipeline
-//                           sets 2, so the wavelet node does not miss a burst that the first
-//                           connected subscriber triggered)
+//   ~wait_for_subscribers [s]  how long to wait for ~min_subscribers gear/signal subscribers
+//                           before publishing anyway (default 10)
+//   ~min_subscribers        subscribers to wait for (default 1; the pipeline sets 2, or 3 with
+//                           record:=true, so no subscriber misses the start of the stream)
+// Parameters are read strictly: a wrong type or an unknown name (a typo) stops the node
+// (ROS_FATAL naming it, exit 1) instead of falling back to a default.
 // Stamps: header.stamp is ros::Time::now() at publication (sim time when /use_sim_time is set);
 // the sample time itself is first_index / sample_rate.
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -26,6 +30,8 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/topics.hpp"
+#include "node_common.hpp"  // ParamReader (gear_damping_id/nodes)
 
 namespace {
 
@@ -60,11 +66,21 @@ bool loadParameters(ros::NodeHandle& pnh, NodeOptions* o) {
     ROS_FATAL("~%s", error.c_str());
     return false;
   }
-  pnh.param("chunk_size", o->chunk_size, o->chunk_size);
-  pnh.param("pace", o->pace, o->pace);
-  pnh.param("repeat", o->repeat, o->repeat);
-  pnh.param("wait_for_subscribers", o->wait_for_subscribers, o->wait_for_subscribers);
-  pnh.param("min_subscribers", o->min_subscribers, o->min_subscribers);
+  gear_damping_nodes::ParamReader p(pnh);
+  for (const char* section : {"pinion", "gear", "mesh", "speed", "load", "damping", "simulation"}) {
+    p.allow(section);  // checked key by key by loadSimConfig
+  }
+  p.allow("diagnostic_period");  // read by diagnostic_updater
+  if (!p.get("chunk_size", &o->chunk_size, "samples") || !p.get("pace", &o->pace) ||
+      !p.get("repeat", &o->repeat) ||
+      !p.getDouble("wait_for_subscribers", &o->wait_for_subscribers, "s") ||
+      !p.get("min_subscribers", &o->min_subscribers) || !p.rejectUnknown()) {
+    return false;
+  }
+  if (!(o->wait_for_subscribers >= 0.0)) {
+    ROS_FATAL("~wait_for_subscribers = %g: must be >= 0 [s]", o->wait_for_subscribers);
+    return false;
+  }
   if (o->min_subscribers < 1) {
     ROS_FATAL("~min_subscribers = %d: must be >= 1", o->min_subscribers);
     return false;
@@ -88,8 +104,9 @@ class GearSimNode {
   GearSimNode(ros::NodeHandle& nh, NodeOptions o) : o_(std::move(o)), updater_(nh) {
     // Queue sized for a whole second of chunks at the default settings, so a subscriber that
     // keeps up on average never loses one; drops, if any, show as index gaps downstream.
-    signal_pub_ = nh.advertise<gear_damping::SignalChunk>("/gear/signal", 1000);
-    params_pub_ = nh.advertise<gear_damping::GearParams>("/gear/params", 1, /*latch=*/true);
+    signal_pub_ = nh.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);
+    params_pub_ =
+        nh.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, /*latch=*/true);
     updater_.setHardwareID("gear_sim");
     updater_.add("simulator", this, &GearSimNode::diagnose);
   }
@@ -108,21 +125,30 @@ class GearSimNode {
     params.header.stamp = ros::Time::now();
     params_pub_.publish(params);
     const double fs = o_.sim.simulation.sample_rate;
-    if (o_.pace == "fast") {
-      const ros::WallTime deadline =
-          ros::WallTime::now() + ros::WallDuration(o_.wait_for_subscribers);
-      while (ros::ok() &&
-             signal_pub_.getNumSubscribers() < static_cast<uint32_t>(o_.min_subscribers) &&
-             ros::WallTime::now() < deadline) {
-        ros::WallDuration(0.01).sleep();
-        updater_.update();
-      }
+    // Both paces wait for the subscribers (a realtime stream published before anyone listens
+    // is lost as surely as a fast one).
+    const ros::WallTime deadline =
+        ros::WallTime::now() + ros::WallDuration(o_.wait_for_subscribers);
+    while (ros::ok() &&
+           signal_pub_.getNumSubscribers() < static_cast<uint32_t>(o_.min_subscribers) &&
+           ros::WallTime::now() < deadline) {
+      ros::WallDuration(0.01).sleep();
+      updater_.update();
     }
-    ros::WallRate rate(fs / o_.chunk_size);
+    if (signal_pub_.getNumSubscribers() < static_cast<uint32_t>(o_.min_subscribers)) {
+      ROS_WARN("gear_sim_node: %u of %d subscribers after %g s: publishing anyway",
+               signal_pub_.getNumSubscribers(), o_.min_subscribers, o_.wait_for_subscribers);
+    }
     gear_damping::SignalChunk chunk;
     do {
+      // Realtime: chunk [b, b+n) goes out when the wall time since the record's start reaches
+      // the time of its last sample, (b+n)/fs.
+      const ros::WallTime start = ros::WallTime::now();
       for (Eigen::Index b = 0; b < table_.size() && ros::ok(); b += o_.chunk_size) {
         const Eigen::Index n = std::min<Eigen::Index>(o_.chunk_size, table_.size() - b);
+        if (o_.pace == "realtime") {
+          ros::WallTime::sleepUntil(start + ros::WallDuration(static_cast<double>(b + n) / fs));
+        }
         gear_sim_ros::toChunk(table_, b, n, fs, static_cast<std::uint64_t>(b), &chunk);
         chunk.header.stamp = ros::Time::now();
         chunk.header.seq = static_cast<std::uint32_t>(chunks_);
@@ -130,7 +156,6 @@ class GearSimNode {
         ++chunks_;
         samples_ += static_cast<unsigned long>(n);
         updater_.update();
-        if (o_.pace == "realtime") rate.sleep();
       }
       ++records_;
     } while (o_.repeat && ros::ok());

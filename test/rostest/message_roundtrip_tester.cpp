@@ -16,6 +16,7 @@
 #include "gear_damping/ModeledResponse.h"
 #include "gear_damping/SignalChunk.h"
 #include "gear_damping/WaveletModes.h"
+#include "gear_sim_ros/topics.hpp"
 
 namespace {
 
@@ -273,17 +274,22 @@ TEST(MessageRoundTrip, EveryMessageSurvivesTopicAndBag) {
   {
     rosbag::Bag bag(path, rosbag::bagmode::Write);
     const ros::Time t(100, 0);
-    bag.write("/gear/signal", t, chunk_rx);
-    bag.write("/gear/params", t, params_rx);
-    bag.write("/gear/damping", t, damping_rx);
-    bag.write("/gear/modeled_response", t, response_rx);
-    bag.write("/gear/wavelet_modes", t, modes_rx);
+    bag.write(gear_sim_ros::bagTopic(gear_sim_ros::kSignalTopic), t, chunk_rx);
+    bag.write(gear_sim_ros::bagTopic(gear_sim_ros::kParamsTopic), t, params_rx);
+    bag.write(gear_sim_ros::bagTopic(gear_sim_ros::kDampingTopic), t, damping_rx);
+    bag.write(gear_sim_ros::bagTopic(gear_sim_ros::kModeledResponseTopic), t, response_rx);
+    bag.write(gear_sim_ros::bagTopic(gear_sim_ros::kWaveletModesTopic), t, modes_rx);
   }
-  expectEqual(chunk, readOnly<gear_damping::SignalChunk>(path, "/gear/signal"));
-  expectEqual(params, readOnly<gear_damping::GearParams>(path, "/gear/params"));
-  expectEqual(damping, readOnly<gear_damping::DampingArray>(path, "/gear/damping"));
-  expectEqual(response, readOnly<gear_damping::ModeledResponse>(path, "/gear/modeled_response"));
-  expectEqual(modes, readOnly<gear_damping::WaveletModes>(path, "/gear/wavelet_modes"));
+  expectEqual(chunk, readOnly<gear_damping::SignalChunk>(
+                         path, gear_sim_ros::bagTopic(gear_sim_ros::kSignalTopic)));
+  expectEqual(params, readOnly<gear_damping::GearParams>(
+                          path, gear_sim_ros::bagTopic(gear_sim_ros::kParamsTopic)));
+  expectEqual(damping, readOnly<gear_damping::DampingArray>(
+                           path, gear_sim_ros::bagTopic(gear_sim_ros::kDampingTopic)));
+  expectEqual(response, readOnly<gear_damping::ModeledResponse>(
+                            path, gear_sim_ros::bagTopic(gear_sim_ros::kModeledResponseTopic)));
+  expectEqual(modes, readOnly<gear_damping::WaveletModes>(
+                         path, gear_sim_ros::bagTopic(gear_sim_ros::kWaveletModesTopic)));
   std::remove(path.c_str());
   std::remove(name);
 }

@@ -34,6 +34,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/topics.hpp"
 #include "run_command.hpp"
 
 namespace gd = gear_damping_id;
@@ -50,16 +51,7 @@ constexpr double kGapBorderRelTol = 1e-6;
 
 std::string packagePath() { return ros::package::getPath("gear_damping"); }
 
-// Waits (spinning) until pred() or the wall-clock timeout [s]; returns pred().
-bool waitFor(const std::function<bool()>& pred, double timeout) {
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout);
-  while (ros::ok() && !pred() && ros::WallTime::now() < deadline) {
-    ros::spinOnce();
-    ros::WallDuration(0.01).sleep();
-  }
-  ros::spinOnce();
-  return pred();
-}
+using gear_test::waitFor;
 
 // Collects what the nodes publish.
 struct Collector {
@@ -75,7 +67,7 @@ struct Collector {
 
   explicit Collector(bool signal_side_topics = true) {
     subs.push_back(nh.subscribe<gear_damping::DampingArray>(
-        "/gear/damping", 10, [this](const gear_damping::DampingArray::ConstPtr& m) {
+        gear_sim_ros::kDampingTopic, 10, [this](const gear_damping::DampingArray::ConstPtr& m) {
           cumulative = *m;
           have_cumulative = true;
         }));
@@ -87,13 +79,13 @@ struct Collector {
         }));
     if (!signal_side_topics) return;
     subs.push_back(nh.subscribe<gear_damping::DampingArray>(
-        "/gear/damping_segment", 1000,
+        gear_sim_ros::kDampingSegmentTopic, 1000,
         [this](const gear_damping::DampingArray::ConstPtr& m) { per_segment.push_back(*m); }));
     subs.push_back(nh.subscribe<gear_damping::ModeledResponse>(
-        "/gear/modeled_response", 1000,
+        gear_sim_ros::kModeledResponseTopic, 1000,
         [this](const gear_damping::ModeledResponse::ConstPtr& m) { responses.push_back(*m); }));
     subs.push_back(nh.subscribe<gear_damping::WaveletModes>(
-        "/gear/wavelet_modes", 10,
+        gear_sim_ros::kWaveletModesTopic, 10,
         [this](const gear_damping::WaveletModes::ConstPtr& m) { modes.push_back(*m); }));
   }
 
@@ -162,11 +154,11 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
 
   gear_sim::SimConfig cfg;
   std::string e;
-  ASSERT_TRUE(simConfigFromParams("/gear_sim", &cfg, &e)) << e;
+  ASSERT_TRUE(simConfigFromParams("gear_sim", &cfg, &e)) << e;
   gear_sim::SignalTable t;
   ASSERT_TRUE(gear_sim::simulate(cfg, &t, &e)) << e;
   const gd::GearConstants gear = gd::gearConstants(cfg.gearModel());
-  const gd::IdentificationOptions o = nodeOptions("/damping_id");
+  const gd::IdentificationOptions o = nodeOptions("damping_id");
   gd::IdentificationResult offline;
   ASSERT_TRUE(gd::identify(t, gear, o, &offline, &e)) << e;
   ASSERT_EQ(offline.segments.size(), col.cumulative.segments.size());
@@ -244,8 +236,8 @@ class CraftedStream {
     ok_ = gear_sim::loadSimConfigFile(packagePath() + "/config/table1.yaml", &cfg_, &e) &&
           gear_sim::simulate(cfg_, &table_, &e);
     error_ = e;
-    signal_ = nh_.advertise<gear_damping::SignalChunk>("/gear/signal", 1000);
-    params_ = nh_.advertise<gear_damping::GearParams>("/gear/params", 1, true);
+    signal_ = nh_.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);
+    params_ = nh_.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, true);
     params_.publish(gear_sim_ros::toMsg(cfg_.gearModel()));
   }
   bool ok() const { return ok_; }
@@ -315,7 +307,7 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
 
   std::string e;
   const gd::GearConstants gear = gd::gearConstants(s.config().gearModel());
-  gd::IdentificationOptions o = nodeOptions("/damping_id");
+  gd::IdentificationOptions o = nodeOptions("damping_id");
   gd::IdentificationResult offline;
   ASSERT_TRUE(gd::identify(s.table(), gear, o, &offline, &e)) << e;
   // Intact segments: 0 1 2 4 6 7 8 9. Those whose neighbours arrived too (0, 1, 7, 8, 9) read
@@ -361,20 +353,20 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
   }
   // Still alive and serving: the current estimate, then a reset.
   gear_damping::GetDamping get;
-  ASSERT_TRUE(ros::service::waitForService("/damping_id/get_damping", 10000));
-  ASSERT_TRUE(ros::service::call("/damping_id/get_damping", get));
+  ASSERT_TRUE(ros::service::waitForService("damping_id/get_damping", 10000));
+  ASSERT_TRUE(ros::service::call("damping_id/get_damping", get));
   EXPECT_EQ(get.response.damping.segments.size(), 10u);
   // wavelet_node analysed the runs of pass A (cut by the gaps) and pass B; nothing is buffered.
   EXPECT_TRUE(
       waitFor([&] { return col.value("wavelet: wavelet", "windows analysed") >= 4.0; }, 30.0))
       << col.value("wavelet: wavelet", "windows analysed");
   std_srvs::Trigger analyze;
-  ASSERT_TRUE(ros::service::waitForService("/wavelet/analyze", 10000));
-  ASSERT_TRUE(ros::service::call("/wavelet/analyze", analyze));
+  ASSERT_TRUE(ros::service::waitForService("wavelet/analyze", 10000));
+  ASSERT_TRUE(ros::service::call("wavelet/analyze", analyze));
   EXPECT_FALSE(analyze.response.success) << analyze.response.message;
   std_srvs::Empty reset;
-  ASSERT_TRUE(ros::service::call("/damping_id/reset", reset));
-  ASSERT_TRUE(ros::service::call("/damping_id/get_damping", get));
+  ASSERT_TRUE(ros::service::call("damping_id/reset", reset));
+  ASSERT_TRUE(ros::service::call("damping_id/get_damping", get));
   EXPECT_EQ(get.response.damping.segments.size(), 0u);
 }
 

@@ -18,6 +18,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/topics.hpp"
 #include "run_command.hpp"
 
 namespace {
@@ -30,10 +31,10 @@ TEST(GearSimNode, PublishesTheWholeRecordContiguouslyWithLatchedParameters) {
   gear_damping::GearParams params;
   bool got_params = false;
   auto s1 = nh.subscribe<gear_damping::SignalChunk>(
-      "/gear/signal", 2000,
+      gear_sim_ros::kSignalTopic, 2000,
       [&](const gear_damping::SignalChunk::ConstPtr& m) { chunks.push_back(*m); });
   auto s2 = nh.subscribe<gear_damping::GearParams>(
-      "/gear/params", 1, [&](const gear_damping::GearParams::ConstPtr& m) {
+      gear_sim_ros::kParamsTopic, 1, [&](const gear_damping::GearParams::ConstPtr& m) {
         params = *m;
         got_params = true;
       });
@@ -97,6 +98,20 @@ TEST(GearSimNode, InvalidParametersStopTheNodeNamingTheParameter) {
   r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_d");
   EXPECT_NE(r.first, 0);
   EXPECT_NE(r.second.find("~chunk_size = 0"), std::string::npos) << r.second;
+  // The node's own parameters are read strictly too: a misspelt name or a wrong type stops it
+  // instead of falling back to a default.
+  ASSERT_EQ(runCommand("rosparam load " + configPath() + " /bad_sim_e").first, 0);
+  ros::param::set("/bad_sim_e/chunk_sise", 500);
+  r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_e");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.first, 124);
+  EXPECT_NE(r.second.find("~chunk_sise: unknown parameter"), std::string::npos) << r.second;
+  ASSERT_EQ(runCommand("rosparam load " + configPath() + " /bad_sim_f").first, 0);
+  ros::param::set("/bad_sim_f/repeat", std::string("yes"));
+  r = runCommand("timeout 20 rosrun gear_damping gear_sim_node __name:=bad_sim_f");
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.first, 124);
+  EXPECT_NE(r.second.find("~repeat: wrong type"), std::string::npos) << r.second;
 }
 
 }  // namespace
