@@ -20,7 +20,7 @@ unset PYTHONHOME PYTHONPATH
 # package publishes (gear_damping/*, std_msgs, diagnostic_msgs, rosgraph_msgs,
 # dynamic_reconfigure). .ci/run installs the same list.
 GEAR_APT_PACKAGES=(
-  build-essential cmake pkg-config
+  build-essential cmake pkg-config ccache
   catkin ros-core-dev ros-message-generation ros-message-runtime
   librosbag-dev librostest-dev libstd-msgs-dev libstd-srvs-dev libdiagnostic-updater-dev
   libdynamic-reconfigure-config-init-mutex-dev
@@ -112,8 +112,15 @@ gear_prepare_out_dir() {
 
 gear_build() {
   gear_link_checkout
+  # ccache when installed (the install-space test rebuilds the package in a sibling workspace:
+  # with the base directory above the workspaces, its objects are cache hits).
+  local launcher=()
+  if command -v ccache >/dev/null; then
+    export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$(dirname "$(realpath "$GEAR_WS")")}
+    launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+  fi
   (cd "$GEAR_WS" && catkin_make -j"$GEAR_JOBS" \
-      -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 "$@")
+      -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 "${launcher[@]}" "$@")
 }
 
 # Sources the workspace's environment (setup.bash reads unset variables: relax -u around it).

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # install_space.sh DIR NS   builds the package's install space in the temporary workspace DIR
-#                           (DIR/ws/src/gear_damping -> this checkout; `catkin_make install`
+#                           (DIR/src/gear_damping -> this checkout; `catkin_make install`
 #                           into DIR/install, without tests and benchmarks, with ccache when it
 #                           is there), then starts `roslaunch gear_damping pipeline.launch ns:=NS`
 #                           from the install space alone (a clean environment: no devel space,
@@ -22,8 +22,8 @@ if [ "${2:-}" = --stop ]; then
 fi
 ns=$2
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
-mkdir -p "$dir/ws/src"
-ln -sfn "$repo" "$dir/ws/src/gear_damping"
+mkdir -p "$dir/src"
+ln -sfn "$repo" "$dir/src/gear_damping"
 # Only what running from the install space needs; the caller's environment is dropped (a devel
 # space on CMAKE_PREFIX_PATH would otherwise be chained), apart from ccache's settings.
 clean_env=(env -i "HOME=$HOME" "PATH=/usr/bin:/bin:/usr/sbin:/sbin" "ROS_MASTER_URI=$ROS_MASTER_URI")
@@ -35,7 +35,7 @@ if command -v ccache >/dev/null; then
   launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 fi
 start=$(date +%s)
-if ! (cd "$dir/ws" && "${clean_env[@]}" catkin_make install -j2 -DCMAKE_BUILD_TYPE=Release \
+if ! (cd "$dir" && "${clean_env[@]}" catkin_make install -j2 -DCMAKE_BUILD_TYPE=Release \
         -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCATKIN_ENABLE_TESTING=OFF \
         -DGEAR_BUILD_BENCHMARKS=OFF -DCMAKE_INSTALL_PREFIX="$dir/install" "${launcher[@]}" \
         >"$dir/build.log" 2>&1); then

@@ -19,6 +19,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -298,8 +299,8 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
   ros::NodeHandle nh;
   std::vector<std::string> log;
   // The nodes' log lines, straight from /rosout (what every node publishes its log to).
-  auto log_sub = nh.subscribe<rosgraph_msgs::Log>(
-      "/rosout", 1000, [&](const rosgraph_msgs::Log::ConstPtr& m) {
+  auto log_sub =
+      nh.subscribe<rosgraph_msgs::Log>("/rosout", 1000, [&](const rosgraph_msgs::Log::ConstPtr& m) {
         if (m->name == "/damping_id" || m->name == "/wavelet") log.push_back(m->msg);
       });
   gear_damping::DampingArray cumulative;
@@ -379,9 +380,19 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
 // ------------------------------------------------------------------------------------------
 TEST(InstallSpace, PipelineLaunchesFromTheInstallSpace) {
   ros::NodeHandle nh;
-  char dir_template[] = "/tmp/gear_damping_install_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
+  // With ccache, the temporary workspace sits beside the workspace running this test, so the
+  // compiler sees the same relative paths (CCACHE_BASEDIR) and every object is a cache hit;
+  // without ccache, in /tmp.
+  std::string parent = "/tmp";
+  const char* prefix_path = std::getenv("CMAKE_PREFIX_PATH");
+  const std::string first =
+      prefix_path ? std::string(prefix_path).substr(0, std::string(prefix_path).find(':')) : "";
+  if (runCommand("command -v ccache").first == 0 && fs::path(first).filename() == "devel") {
+    parent = fs::path(first).parent_path().parent_path().string();
+  }
+  std::string templ = parent + "/.gear_damping_install_XXXXXX";
+  ASSERT_NE(mkdtemp(templ.data()), nullptr) << templ;
+  const std::string dir = templ;
   const std::string script = packagePath() + "/test/install/install_space.sh";
   // Build + install (prints the launch's pid on its last line); the launch runs in namespace
   // `installed` on this test's master.
