@@ -36,6 +36,7 @@
 #include "gear_sim_ros/conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
 #include "run_command.hpp"
+#include "tester_support.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -48,8 +49,6 @@ constexpr double kLiveVsOfflineRelTol = 1e-9;
 // the segment (measured difference 0); a core whose stencils read beyond it would differ at the
 // quadrature-error level (1.3e-8 measured with such a core), which this bound still admits.
 constexpr double kGapBorderRelTol = 1e-6;
-
-std::string packagePath() { return ros::package::getPath("gear_damping"); }
 
 using gear_test::waitFor;
 
@@ -101,15 +100,7 @@ struct Collector {
   }
 };
 
-// The simulator configuration the way gear_sim_node reads it (its private namespace).
-bool simConfigFromParams(const std::string& ns, gear_sim::SimConfig* cfg, std::string* e) {
-  YAML::Node root(YAML::NodeType::Map);
-  XmlRpc::XmlRpcValue tree;
-  for (const char* section : {"pinion", "gear", "mesh", "speed", "load", "damping", "simulation"}) {
-    if (ros::param::get(ns + "/" + section, tree)) root[section] = gear_sim_ros::toYaml(tree);
-  }
-  return gear_sim::loadSimConfig(root, cfg, e);
-}
+using gear_test::simConfigFromParams;
 
 // identify() with the options damping_id_node runs with (its private parameters as set by the
 // .test file; only the ones the tests vary are read).
@@ -228,42 +219,7 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
 }
 
 // ------------------------------------------------------------------------------------------
-class CraftedStream {
- public:
-  CraftedStream() {
-    cfg_ = gear_sim::SimConfig();  // the DESIGN default case (= config/table1.yaml)
-    std::string e;
-    ok_ = gear_sim::loadSimConfigFile(packagePath() + "/config/table1.yaml", &cfg_, &e) &&
-          gear_sim::simulate(cfg_, &table_, &e);
-    error_ = e;
-    signal_ = nh_.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);
-    params_ = nh_.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, true);
-    params_.publish(gear_sim_ros::toMsg(cfg_.gearModel()));
-  }
-  bool ok() const { return ok_; }
-  const std::string& error() const { return error_; }
-  const gear_sim::SignalTable& table() const { return table_; }
-  const gear_sim::SimConfig& config() const { return cfg_; }
-  bool waitForSubscribers(int n) {
-    return waitFor([&] { return signal_.getNumSubscribers() >= static_cast<uint32_t>(n); }, 30);
-  }
-  gear_damping::SignalChunk chunk(int k) const {
-    gear_damping::SignalChunk c;
-    gear_sim_ros::toChunk(table_, 1000 * k, 1000, cfg_.simulation.sample_rate,
-                          static_cast<std::uint64_t>(1000 * k), &c);
-    c.header.stamp = ros::Time::now();
-    return c;
-  }
-  void publish(const gear_damping::SignalChunk& c) { signal_.publish(c); }
-
- private:
-  ros::NodeHandle nh_;
-  ros::Publisher signal_, params_;
-  gear_sim::SimConfig cfg_;
-  gear_sim::SignalTable table_;
-  bool ok_ = false;
-  std::string error_;
-};
+using gear_test::CraftedStream;
 
 TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegments) {
   Collector col;

@@ -36,10 +36,13 @@
 #include "gear_sim_ros/conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
 #include "run_command.hpp"
+#include "tester_support.hpp"
 
 namespace gd = gear_damping_id;
 namespace fs = std::filesystem;
+using gear_test::CraftedStream;
 using gear_test::runCommand;
+using gear_test::simConfigFromParams;
 using gear_test::waitFor;
 
 namespace {
@@ -85,16 +88,6 @@ struct PipelineTap {
     return n;
   }
 };
-
-// The simulator configuration of namespace `n` as gear_sim_node read it.
-bool simConfigFromParams(const std::string& node, gear_sim::SimConfig* cfg, std::string* e) {
-  YAML::Node root(YAML::NodeType::Map);
-  XmlRpc::XmlRpcValue tree;
-  for (const char* section : {"pinion", "gear", "mesh", "speed", "load", "damping", "simulation"}) {
-    if (ros::param::get(node + "/" + section, tree)) root[section] = gear_sim_ros::toYaml(tree);
-  }
-  return gear_sim::loadSimConfig(root, cfg, e);
-}
 
 // identify() over namespace `n`'s record with the node's default options (refine never, as
 // the .test files set, so live = offline exactly) and `segment_length`.
@@ -258,38 +251,13 @@ TEST(RealtimeRecord, RealtimePaceDeliversAndRecordsTheWholeStream) {
 }
 
 // ------------------------------------------------------------------------------------------
-// Publishes chunks of the default case (config/table1.yaml) as a rig would.
-class Rig {
- public:
-  Rig() {
-    std::string e;
-    ok_ = gear_sim::loadSimConfigFile(packagePath() + "/config/table1.yaml", &cfg_, &e) &&
-          gear_sim::simulate(cfg_, &table_, &e);
-    error_ = e;
-    signal_ = nh_.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);
-    params_ = nh_.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, true);
-    params_.publish(gear_sim_ros::toMsg(cfg_.gearModel()));
-  }
-  bool ok() const { return ok_; }
-  const std::string& error() const { return error_; }
-  const gear_sim::SimConfig& config() const { return cfg_; }
-  uint32_t subscribers() const { return signal_.getNumSubscribers(); }
-  void publish(int k) {
-    gear_damping::SignalChunk c;
-    gear_sim_ros::toChunk(table_, 1000 * k, 1000, cfg_.simulation.sample_rate,
-                          static_cast<std::uint64_t>(1000 * k), &c);
-    c.header.stamp = ros::Time::now();
-    signal_.publish(c);
-  }
 
- private:
-  ros::NodeHandle nh_;
-  ros::Publisher signal_, params_;
-  gear_sim::SimConfig cfg_;
-  gear_sim::SignalTable table_;
-  bool ok_ = false;
-  std::string error_;
-};
+bool hasLine(const std::vector<std::string>& log, const std::string& needle) {
+  for (const auto& l : log) {
+    if (l.find(needle) != std::string::npos) return true;
+  }
+  return false;
+}
 
 std::pair<int, std::string> dynparam(const std::string& args) {
   return runCommand("timeout 30 rosrun dynamic_reconfigure dynparam " + args);
@@ -307,12 +275,12 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
   auto damping_sub = nh.subscribe<gear_damping::DampingArray>(
       gear_sim_ros::kDampingTopic, 10,
       [&](const gear_damping::DampingArray::ConstPtr& m) { cumulative = *m; });
-  Rig rig;
+  CraftedStream rig;
   ASSERT_TRUE(rig.ok()) << rig.error();
-  ASSERT_TRUE(waitFor([&] { return rig.subscribers() >= 2; }, 60.0));
+  ASSERT_TRUE(rig.waitForSubscribers(2)) << "damping_id_node and wavelet_node must subscribe";
   ros::WallDuration(0.5).sleep();  // the latched parameters
   // Chunks 0-4 with the 1 ms segments of damping_id.yaml (flushed at the end-of-stream pause).
-  for (int k = 0; k < 5; ++k) rig.publish(k);
+  for (int k = 0; k < 5; ++k) rig.publish(rig.chunk(k));
   ASSERT_TRUE(waitFor([&] { return cumulative.segments.size() == 5; }, 60.0))
       << cumulative.segments.size();
 
@@ -325,21 +293,14 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
   ASSERT_EQ(r.first, 0) << r.second;
   EXPECT_NE(r.second.find("'segment_length': 0.002"), std::string::npos) << r.second;
   EXPECT_NE(r.second.find("'refine': 'never'"), std::string::npos) << r.second;
-  ASSERT_TRUE(waitFor(
-      [&] {
-        for (const auto& l : log) {
-          if (l.find("reconfigured: segment_length 0.002") != std::string::npos) return true;
-        }
-        return false;
-      },
-      30.0))
+  ASSERT_TRUE(waitFor([&] { return hasLine(log, "reconfigured: segment_length 0.002"); }, 30.0))
       << "no 'reconfigured' log line from damping_id";
   ASSERT_TRUE(waitFor([&] { return cumulative.segments.empty(); }, 30.0))
       << "a reconfigure starts a new cumulative estimate";
 
   // Chunks 5-9 on the new grid (multiples of 2 ms): [5, 6) ms (the grid's partial piece),
   // [6, 8), [8, 10) ms.
-  for (int k = 5; k < 10; ++k) rig.publish(k);
+  for (int k = 5; k < 10; ++k) rig.publish(rig.chunk(k));
   ASSERT_TRUE(waitFor([&] { return cumulative.segments.size() == 3; }, 60.0))
       << cumulative.segments.size();
   EXPECT_NEAR(cumulative.segments[0].t_start, 0.005, 1e-12);
@@ -364,16 +325,8 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
   ASSERT_EQ(r.first, 0) << r.second;
   EXPECT_NE(r.second.find("'f_max': 40000.0"), std::string::npos) << r.second;
   EXPECT_NE(r.second.find("'f_min': 2000.0"), std::string::npos) << r.second;
-  EXPECT_TRUE(waitFor(
-      [&] {
-        for (const auto& l : log) {
-          if (l.find("reconfigured: f_min 2000 Hz, f_max 40000 Hz") != std::string::npos) {
-            return true;
-          }
-        }
-        return false;
-      },
-      30.0))
+  EXPECT_TRUE(
+      waitFor([&] { return hasLine(log, "reconfigured: f_min 2000 Hz, f_max 40000 Hz"); }, 30.0))
       << "no 'reconfigured' log line from wavelet";
 }
 

@@ -17,26 +17,14 @@ using gear_test::readText;
 using gear_test::ScratchDir;
 using gear_test::writeText;
 
-struct BashRun {
-  int code = -1;
-  std::string out, err;
-};
-
 // Runs `body` in bash after sourcing `common` (a copy of scripts/common.sh: GEAR_REPO is the
 // directory above the copy's scripts/) with GEAR_DAMPING_WS = `ws`.
-BashRun runBash(const fs::path& common, const fs::path& ws, const std::string& body,
-            const fs::path& scratch) {
-  const fs::path script = scratch / "run.sh", out = scratch / "out.txt", err = scratch / "err.txt";
+gear_test::ToolRun runBash(const fs::path& common, const fs::path& ws, const std::string& body,
+                           const fs::path& scratch) {
+  const fs::path script = scratch / "run.sh";
   writeText(script, "export GEAR_DAMPING_WS='" + ws.string() + "'\nsource '" + common.string() +
                         "'\n" + body + "\n");
-  const std::string cmd =
-      "bash '" + script.string() + "' >'" + out.string() + "' 2>'" + err.string() + "'";
-  const int status = std::system(cmd.c_str());
-  BashRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = readText(out);
-  r.err = readText(err);
-  return r;
+  return gear_test::runShell("bash '" + script.string() + "'", scratch, "bash");
 }
 
 // A fake checkout at `repo`: scripts/common.sh copied from the source tree, plus a marker file.
@@ -57,7 +45,7 @@ class SetupScripts : public ::testing::Test {
 TEST_F(SetupScripts, FreshWorkspaceGetsASymlinkToTheCheckout) {
   const fs::path common = makeCheckout(root() / "clone");
   const fs::path ws = root() / "ws";
-  const BashRun r = runBash(common, ws, "gear_link_checkout", root());
+  const gear_test::ToolRun r = runBash(common, ws, "gear_link_checkout", root());
   ASSERT_EQ(r.code, 0) << r.err;
   const fs::path target = ws / "src/gear_damping";
   ASSERT_TRUE(fs::is_symlink(target));
@@ -70,7 +58,7 @@ TEST_F(SetupScripts, ForeignDirectoryIsRefusedAndKept) {
   const fs::path other = ws / "src/gear_damping";
   fs::create_directories(other);
   writeText(other / "uncommitted_work.cpp", "precious\n");
-  const BashRun r = runBash(common, ws, "gear_link_checkout", root());
+  const gear_test::ToolRun r = runBash(common, ws, "gear_link_checkout", root());
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("refusing"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find(other.string()), std::string::npos) << "message names the path: " << r.err;
@@ -83,7 +71,7 @@ TEST_F(SetupScripts, ForeignFileIsRefusedAndKept) {
   const fs::path ws = root() / "ws";
   fs::create_directories(ws / "src");
   writeText(ws / "src/gear_damping", "a file\n");
-  const BashRun r = runBash(common, ws, "gear_link_checkout", root());
+  const gear_test::ToolRun r = runBash(common, ws, "gear_link_checkout", root());
   EXPECT_NE(r.code, 0);
   EXPECT_EQ(readText(ws / "src/gear_damping"), "a file\n");
 }
@@ -94,7 +82,8 @@ TEST_F(SetupScripts, CloneInsideTheWorkspaceIsUsedInPlace) {
   const fs::path clone = ws / "src/gear_damping";
   const fs::path common = makeCheckout(clone);
   writeText(clone / "uncommitted_work.cpp", "precious\n");
-  const BashRun r = runBash(common, ws, "gear_link_checkout && gear_link_checkout", root());
+  const gear_test::ToolRun r =
+      runBash(common, ws, "gear_link_checkout && gear_link_checkout", root());
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_FALSE(fs::is_symlink(clone));
   EXPECT_EQ(readText(clone / "uncommitted_work.cpp"), "precious\n");
@@ -106,7 +95,7 @@ TEST_F(SetupScripts, CloneInsideTheWorkspaceIsUsedInPlace) {
 TEST_F(SetupScripts, CloneElsewhereUnderSrcIsNotLinkedTwice) {
   const fs::path ws = root() / "catkin_ws";
   const fs::path common = makeCheckout(ws / "src/vendor/gear_damping");
-  const BashRun r = runBash(common, ws, "gear_link_checkout", root());
+  const gear_test::ToolRun r = runBash(common, ws, "gear_link_checkout", root());
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_FALSE(fs::exists(ws / "src/gear_damping"));
 }
@@ -119,7 +108,7 @@ TEST_F(SetupScripts, OldSymlinkIsRepointedAndItsTargetKept) {
   const fs::path ws = root() / "ws";
   fs::create_directories(ws / "src");
   fs::create_directory_symlink(old_clone, ws / "src/gear_damping");
-  const BashRun r = runBash(common, ws, "gear_link_checkout", root());
+  const gear_test::ToolRun r = runBash(common, ws, "gear_link_checkout", root());
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_EQ(fs::canonical(ws / "src/gear_damping"), fs::canonical(root() / "clone"));
   EXPECT_EQ(readText(old_clone / "file.txt"), "kept\n");
@@ -130,7 +119,7 @@ TEST_F(SetupScripts, DemoOutputDirectoryWithForeignFilesIsRefused) {
   const fs::path out = root() / "my_data";
   fs::create_directories(out);
   writeText(out / "signal.csv", "my measurement\n");
-  const BashRun r =
+  const gear_test::ToolRun r =
       runBash(common, root() / "ws", "gear_prepare_out_dir '" + out.string() + "'", root());
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("refusing"), std::string::npos) << r.err;
@@ -141,7 +130,8 @@ TEST_F(SetupScripts, DemoOutputDirectoryWithForeignFilesIsRefused) {
 TEST_F(SetupScripts, DemoOutputDirectoryNewOrOwnIsAccepted) {
   const fs::path common = makeCheckout(root() / "clone");
   const fs::path out = root() / "results";
-  BashRun r = runBash(common, root() / "ws", "gear_prepare_out_dir '" + out.string() + "'", root());
+  gear_test::ToolRun r =
+      runBash(common, root() / "ws", "gear_prepare_out_dir '" + out.string() + "'", root());
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_EQ(r.out, fs::canonical(out).string() + "\n");
   EXPECT_TRUE(fs::exists(out / ".gear_damping_demo"));

@@ -31,17 +31,23 @@ inline void writeText(const std::filesystem::path& p, const std::string& text) {
 
 /// Runs GEAR_TOOL_DIR/`tool` with `args` (shell syntax), stdout and stderr captured via files in
 /// `dir`.
-inline ToolRun runTool(const std::string& tool, const std::string& args,
-                       const std::filesystem::path& dir) {
-  const auto out = dir / (tool + ".stdout"), err = dir / (tool + ".stderr");
-  const std::string cmd = std::string(GEAR_TOOL_DIR) + "/" + tool + " " + args + " >" +
-                          out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
+/// Runs the shell command `cmd`, stdout and stderr captured via files `stem`.stdout/.stderr in
+/// `dir`.
+inline ToolRun runShell(const std::string& cmd, const std::filesystem::path& dir,
+                        const std::string& stem) {
+  const auto out = dir / (stem + ".stdout"), err = dir / (stem + ".stderr");
+  const int status =
+      std::system((cmd + " >'" + out.string() + "' 2>'" + err.string() + "'").c_str());
   ToolRun r;
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   r.out = readText(out);
   r.err = readText(err);
   return r;
+}
+
+inline ToolRun runTool(const std::string& tool, const std::string& args,
+                       const std::filesystem::path& dir) {
+  return runShell(std::string(GEAR_TOOL_DIR) + "/" + tool + " " + args, dir, tool);
 }
 
 /// A fresh scratch directory under the system temp dir, removed by the destructor.
