@@ -333,23 +333,21 @@ TEST(Reconfigure, DynparamSetAppliesAtTheNextSegmentBoundary) {
 // ------------------------------------------------------------------------------------------
 TEST(InstallSpace, PipelineLaunchesFromTheInstallSpace) {
   ros::NodeHandle nh;
-  // With ccache, the temporary workspace sits beside the workspace running this test, so the
-  // compiler sees the same relative paths (CCACHE_BASEDIR) and every object is a cache hit;
-  // without ccache, in /tmp.
-  std::string parent = "/tmp";
+  // The build under test: the workspace whose devel space this test runs from (first entry of
+  // CMAKE_PREFIX_PATH); its install rules are applied into a temporary directory. Without one
+  // (e.g. run from an install space), the script builds a temporary workspace instead.
   const char* prefix_path = std::getenv("CMAKE_PREFIX_PATH");
-  const std::string first =
+  const fs::path devel =
       prefix_path ? std::string(prefix_path).substr(0, std::string(prefix_path).find(':')) : "";
-  if (runCommand("command -v ccache").first == 0 && fs::path(first).filename() == "devel") {
-    parent = fs::path(first).parent_path().parent_path().string();
-  }
-  std::string templ = parent + "/.gear_damping_install_XXXXXX";
-  ASSERT_NE(mkdtemp(templ.data()), nullptr) << templ;
+  const fs::path build = devel.parent_path() / "build";
+  const std::string build_arg =
+      devel.filename() == "devel" && fs::exists(build / "CMakeCache.txt") ? build.string() : "";
+  char templ[] = "/tmp/gear_damping_install_XXXXXX";
+  ASSERT_NE(mkdtemp(templ), nullptr);
   const std::string dir = templ;
   const std::string script = packagePath() + "/test/install/install_space.sh";
-  // Build + install (prints the launch's pid on its last line); the launch runs in namespace
-  // `installed` on this test's master.
-  const auto r = runCommand("bash " + script + " " + dir + " installed");
+  // Install, then launch in namespace `installed` on this test's master.
+  const auto r = runCommand("bash " + script + " " + dir + " installed " + build_arg);
   std::printf("%s\n", r.second.c_str());
   ASSERT_EQ(r.first, 0) << r.second;
   gear_damping::DampingArray cumulative;
