@@ -45,6 +45,7 @@
 #include <std_srvs/Empty.h>
 
 #include <deque>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -58,6 +59,11 @@
 namespace gd = gear_damping_id;
 namespace nodes = gear_damping_nodes;
 namespace topics = gear_sim_ros;
+
+namespace {
+// cfg/DampingId.cfg's maximum segment_length [s]: stands for +inf (one segment per run).
+constexpr double kSegmentLengthMax = 1e9;
+}  // namespace
 
 namespace {
 
@@ -154,7 +160,7 @@ class DampingIdNode {
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::DampingIdConfig>>(
         reconfigure_mutex_, pnh);
     gear_damping::DampingIdConfig c;
-    c.segment_length = o_.id.segment_length;
+    c.segment_length = std::min(o_.id.segment_length, kSegmentLengthMax);
     c.window_length = o_.id.window_length;
     c.refine = refineName(o_.id.refine);
     c.max_condition = o_.id.max_condition;
@@ -290,7 +296,10 @@ class DampingIdNode {
     gd::IdentificationOptions id = pending_ ? pending_->id : o_.id;
     const gd::IdentificationOptions before = id;
     using R = gd::IdentificationOptions::Refine;
-    id.segment_length = c.segment_length;
+    // The .cfg's maximum stands for +inf (dynamic_reconfigure clamps an inf to its maximum).
+    id.segment_length = c.segment_length >= kSegmentLengthMax
+                            ? std::numeric_limits<double>::infinity()
+                            : c.segment_length;
     id.window_length = c.window_length;
     id.max_condition = c.max_condition;
     id.refine = c.refine == "always" ? R::Always : c.refine == "never" ? R::Never : R::Auto;
@@ -307,7 +316,7 @@ class DampingIdNode {
       ROS_ERROR("reconfigure refused: %s", nodes::paramError(e).c_str());
       id = before;
     }
-    c.segment_length = id.segment_length;  // what the server reports back
+    c.segment_length = std::min(id.segment_length, kSegmentLengthMax);  // reported back
     c.window_length = id.window_length;
     c.max_condition = id.max_condition;
     c.refine = refineName(id.refine);

@@ -18,6 +18,9 @@
 //                           before publishing anyway (default 10)
 //   ~min_subscribers        subscribers to wait for (default 1; the pipeline sets 2, or 3 with
 //                           record:=true, so no subscriber misses the start of the stream)
+//   ~start_delay [s]        wall time to wait after that, before the stream (default 0; the
+//                           pipeline sets 2 with record:=true, so the recorder is connected to
+//                           the nodes' outputs too)
 // Parameters are read strictly: a wrong type or an unknown name (a typo) stops the node
 // (ROS_FATAL naming it, exit 1) instead of falling back to a default.
 // Stamps: header.stamp is ros::Time::now() at publication (sim time when /use_sim_time is set);
@@ -41,6 +44,7 @@ struct NodeOptions {
   std::string pace = "fast";
   bool repeat = false;
   double wait_for_subscribers = 10.0;
+  double start_delay = 0.0;
   int min_subscribers = 1;
 };
 
@@ -74,7 +78,12 @@ bool loadParameters(ros::NodeHandle& pnh, NodeOptions* o) {
   if (!p.get("chunk_size", &o->chunk_size, "samples") || !p.get("pace", &o->pace) ||
       !p.get("repeat", &o->repeat) ||
       !p.getDouble("wait_for_subscribers", &o->wait_for_subscribers, "s") ||
-      !p.get("min_subscribers", &o->min_subscribers) || !p.rejectUnknown()) {
+      !p.get("min_subscribers", &o->min_subscribers) ||
+      !p.getDouble("start_delay", &o->start_delay, "s") || !p.rejectUnknown()) {
+    return false;
+  }
+  if (!(o->start_delay >= 0.0)) {
+    ROS_FATAL("~start_delay = %g: must be >= 0 [s]", o->start_delay);
     return false;
   }
   if (!(o->wait_for_subscribers >= 0.0)) {
@@ -138,6 +147,11 @@ class GearSimNode {
     if (signal_pub_.getNumSubscribers() < static_cast<uint32_t>(o_.min_subscribers)) {
       ROS_WARN("gear_sim_node: %u of %d subscribers after %g s: publishing anyway",
                signal_pub_.getNumSubscribers(), o_.min_subscribers, o_.wait_for_subscribers);
+    }
+    const ros::WallTime go = ros::WallTime::now() + ros::WallDuration(o_.start_delay);
+    while (ros::ok() && ros::WallTime::now() < go) {
+      ros::WallDuration(0.01).sleep();
+      updater_.update();
     }
     gear_damping::SignalChunk chunk;
     do {
