@@ -86,8 +86,9 @@ void printSummaryBlock(std::ostream& os, const AnalysisRun& run, const SegmentSu
       const SegmentEstimate& s = r.segments[i];
       os << "  " << std::setw(5) << i << "  " << std::setw(11) << num(s.t_start * 1e3, 6) << "  "
          << std::setw(9) << num(s.t_end * 1e3, 6) << "  " << std::setw(10) << num(s.C, 6) << "  "
-         << std::setw(11) << num(s.C_std, 3) << "  " << std::setw(10) << num(s.xi, 5) << "  "
-         << flagsOf(s) << "\n";
+         << std::setw(11) << num(s.C_std, 3) << "  " << std::setw(10) << num(s.xi, 5);
+      const std::string flags = flagsOf(s);
+      os << (flags.empty() ? "" : "  ") << flags << "\n";
     }
   }
   // The run-level lines (constant, load law, response, warnings) of the table, without its rows.
