@@ -39,6 +39,11 @@ TEST(ProgressBar, RenderShowsBarPercentElapsedAndStep) {
   EXPECT_EQ(line, "analyze [##......]  25 %  3.0 s, ~9.0 s left  run 1");
 }
 
+TEST(ProgressBar, RenderOfAFewCoarseStepsEstimatesNoTimeLeft) {
+  EXPECT_EQ(gear_sim::ProgressBar::render("simulate", 1.0, 2.0, "writing", 1.5, 4),
+            "simulate [##..]  50 %  1.5 s  writing");
+}
+
 TEST(ProgressBar, RenderWithoutTotalShowsElapsedTimeOnly) {
   EXPECT_EQ(gear_sim::ProgressBar::render("analyze", 0.0, 0.0, "wavelet", 75.0, 8),
             "analyze 1 min 15 s  wavelet");

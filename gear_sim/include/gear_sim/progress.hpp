@@ -48,7 +48,8 @@ class ProgressBar {
 
   /// The line for `done` of `total` after `elapsed_s`, e.g.
   /// "analyze [#######.......]  25 %  3.1 s, ~9 s left  known_piecewise" (no bar when
-  /// total <= 0). Exposed for tests.
+  /// total <= 0; the time left only when total >= 100 units, i.e. fine-grained work such as
+  /// samples, not a few steps of unequal length). Exposed for tests.
   static std::string render(const std::string& label, double done, double total,
                             const std::string& what, double elapsed_s, int width);
 

@@ -79,6 +79,8 @@ void ProgressBar::run() {
 
 namespace {
 
+constexpr double kEtaMinUnits = 100.0;
+
 std::string seconds(double s) {
   char buf[32];
   if (s < 60.0)
@@ -102,7 +104,10 @@ std::string ProgressBar::render(const std::string& label, double done, double to
     std::snprintf(pct, sizeof pct, " %3d %%", static_cast<int>(std::floor(100.0 * f)));
     line += " [" + std::string(full, '#') + std::string(w - full, '.') + "]" + pct + "  " +
             seconds(elapsed_s);
-    if (f > 0.02 && f < 1.0) line += ", ~" + seconds(elapsed_s * (1.0 - f) / f) + " left";
+    // A time estimate only for fine-grained work (samples); a few coarse steps rarely take
+    // equal times.
+    if (total >= kEtaMinUnits && f > 0.02 && f < 1.0)
+      line += ", ~" + seconds(elapsed_s * (1.0 - f) / f) + " left";
   } else {
     line += " " + seconds(elapsed_s);
   }
