@@ -456,7 +456,7 @@ class Report:
                            f"<td>{r.get('estimator', '')}</td>"
                            f"<td{flag_attr(c_flag)}>{fmt(c, '.1f')}</td><td>{fmt(ll.get('c0'), '.4f')}</td>"
                            f"<td>{fmt(ll.get('c1'), '.6f')}</td><td{flag_attr(fit_flag)}>{fmt(fit, '.2f')}</td>"
-                           f"<td>{html.escape(summary_line(r.get('segments') or []))}</td>"
+                           f"<td>{html.escape(summary_line(r['segments'])) if r.get('segments') else '–'}</td>"
                            f"<td class='text'>{flags_html(flags)}</td></tr>")
             out.append("</table>")
         if ident and ident.get("segments"):

@@ -100,7 +100,7 @@ void printSummaryBlock(std::ostream& os, const AnalysisRun& run, const SegmentSu
   std::string line;
   while (std::getline(lines, line))
     if (line.rfind("  constant:", 0) == 0 || line.rfind("  load law:", 0) == 0 ||
-        line.rfind("  modeled response:", 0) == 0 || line.rfind("  warning:", 0) == 0)
+        line.rfind("  modeled response:", 0) == 0 || line.rfind("  warning", 0) == 0)
       os << line << "\n";
 }
 
