@@ -26,6 +26,7 @@ add_executable(analyze gear_damping_id/tools/analyze.cpp)
 target_link_libraries(analyze gear_damping_id_io gear_id_ros_conversions gear_sim_io CLI11::CLI11
                       ${catkin_LIBRARIES})
 target_compile_options(analyze PRIVATE ${GEAR_WARNINGS})
+target_compile_definitions(analyze PRIVATE GEAR_DAMPING_VERSION="${gear_damping_VERSION}")
 
 install(TARGETS gear_damping_id_core gear_damping_id_io gear_id_ros_conversions analyze
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}

@@ -2,14 +2,19 @@
 
 RESULT_DIR holds signal.csv, result.json and tables/ as written by scripts/demo.sh and
 `analyze --output RESULT_DIR/result.json --csv-out RESULT_DIR/tables`. Every figure is a
-1200 x 750 px PNG; a figure whose inputs are missing is skipped with a note."""
+1200 x 750 px PNG; a figure whose inputs are missing is skipped with a note. Values that should
+not be trusted as they are (not identifiable, C <= 0, xi >= 1, fit < 0, any warning, a wavelet
+mode that is no free decay) are highlighted with the reason."""
 import csv
+import datetime
+import hashlib
 import html
 import json
 import math
 import os
 import sys
 import tempfile
+import time
 
 import matplotlib
 
@@ -61,9 +66,108 @@ def fval(v):
     return math.nan if v is None else float(v)
 
 
-def new_fig(nrows=1):
-    fig, axes = plt.subplots(nrows, 1, figsize=FIGSIZE, dpi=DPI, sharex=nrows > 1, squeeze=False)
+def fnum(v):
+    """A number from JSON or CSV text; NaN when absent or not a number."""
+    try:
+        return math.nan if v is None or v == "" else float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def new_fig(nrows=1, height_ratios=None):
+    fig, axes = plt.subplots(nrows, 1, figsize=FIGSIZE, dpi=DPI, sharex=nrows > 1, squeeze=False,
+                             gridspec_kw={"height_ratios": height_ratios} if height_ratios else None)
     return fig, [a[0] for a in axes]
+
+
+def warnings_of(obj):
+    """(code, text) of every warning of a segment, run or mode: `warnings` is a list of
+    {code, text} (or of plain strings), `warning` a single text (older results)."""
+    out = []
+    for w in (obj or {}).get("warnings") or []:
+        if isinstance(w, dict):
+            out.append((str(w.get("code") or ""), str(w.get("text") or "")))
+        else:
+            out.append(("", str(w)))
+    if (obj or {}).get("warning"):
+        out.append(("", str(obj["warning"])))
+    return out
+
+
+def segment_flags(s):
+    """Why a segment estimate should not be trusted as is (empty when clean)."""
+    flags = []
+    if s.get("identifiable") is False:
+        flags.append(("not_identifiable", s.get("reason") or "not identifiable"))
+    c, xi = s.get("C"), s.get("xi")
+    if c is not None and c <= 0:
+        flags.append(("non_positive_damping", f"C = {c:.4g} 1/s <= 0"))
+    if xi is not None and xi >= 1:
+        flags.append(("overdamped", f"xi = {xi:.4g} >= 1"))
+    return flags + warnings_of(s)
+
+
+def run_flags(r):
+    flags = []
+    fit = fval((r.get("response") or {}).get("fit_percent"))
+    if math.isfinite(fit) and fit < 0:
+        flags.append(("negative_fit", f"fit {fit:.1f} % < 0: the modeled response is worse than "
+                                      "the mean (diverged)"))
+    const = r.get("constant")
+    if const:
+        flags += segment_flags(const)
+    ll = r.get("load_law")
+    if ll and ll.get("identifiable") is False:
+        flags.append(("not_identifiable", "load law: " + (ll.get("reason") or "not identifiable")))
+    return flags + warnings_of(r)
+
+
+def mode_flags(m):
+    flags = []
+    if m.get("free_decay") is False:
+        flags.append(("forced_line", "a forced line, not a free decay: its xi is not damping"))
+    xi = m.get("damping_ratio")
+    if xi is not None and (xi <= 0 or xi >= 1):
+        flags.append(("implausible_ratio", f"xi = {xi:.4g} outside (0, 1)"))
+    return flags + warnings_of(m)
+
+
+def flags_html(flags):
+    return "; ".join(html.escape(f"{c}: {t}" if c and t else (c or t)) for c, t in flags)
+
+
+def flag_attr(flags):
+    """class and title attributes of a cell or row holding flagged values."""
+    if not flags:
+        return ""
+    return f" class='flag' title='{flags_html(flags)}'"
+
+
+def free_decay_modes(modes):
+    return [m for m in modes if m.get("free_decay") is not False]
+
+
+class Progress:
+    """A progress line on stderr while the figures are drawn, only on a terminal (not --quiet)."""
+
+    def __init__(self, total, enabled):
+        self.total, self.on, self.t0 = total, enabled and sys.stderr.isatty(), time.monotonic()
+        self.width = 0
+
+    def step(self, done, what):
+        if not self.on:
+            return
+        f = min(1.0, done / max(1, self.total))
+        line = (f"report [{'#' * int(24 * f)}{'.' * (24 - int(24 * f))}] {done}/{self.total}  "
+                f"{time.monotonic() - self.t0:.1f} s  {what}")
+        sys.stderr.write("\r" + line + " " * max(0, self.width - len(line)))
+        sys.stderr.flush()
+        self.width = max(self.width, len(line))
+
+    def finish(self):
+        if self.on and self.width:
+            sys.stderr.write("\r" + " " * self.width + "\r")
+            sys.stderr.flush()
 
 
 def save(fig, path):
@@ -89,6 +193,10 @@ class Report:
                 raise Missing("signal.csv not found")
             self._signal = np.genfromtxt(path, delimiter=",", names=True)
         return self._signal
+
+    def mode_is_forced(self, k):
+        modes = self.res.get("wavelet", {}).get("modes", [])
+        return k < len(modes) and modes[k].get("free_decay") is False
 
     def me(self):
         return fval(self.res.get("identification", {}).get("equivalent_mass"))
@@ -121,15 +229,25 @@ class Report:
         run = self.runs.get((formulation, model), {})
         fit = fval(run.get("response", {}).get("fit_percent"))
         t, y, yh = col(rows, "time"), col(rows, "observed"), col(rows, "modeled")
-        fig, (a,) = new_fig()
+        fig, (a, r) = new_fig(2, height_ratios=[3, 1.3])
         a.plot(t * 1e3, y * 1e6, lw=1.2, label="observed")
         lim = np.nanmax(np.abs(y)) * 1e6
+        diverged = np.nanmax(np.abs(yh)) * 1e6 > 3 * lim
         a.plot(t * 1e3, np.clip(yh * 1e6, -3 * lim, 3 * lim), "--", lw=1.0,
-               label=f"modeled, {label} (fit {fit:.1f} %)")
+               label=f"modeled, {label} (fit {fit:.1f} %)" + (", clipped" if diverged else ""))
         a.set_ylim(-1.5 * lim if np.nanmin(y) < 0 else 0, 1.5 * lim)
-        a.set_xlabel("time [ms]")
         a.set_ylabel("DTE y [µm]")
-        a.legend(loc="upper right")
+        a.legend(loc="upper right", fontsize=8)
+        res = (y - yh) * 1e6
+        rms = math.sqrt(np.nanmean(res ** 2)) if np.isfinite(res).any() else math.nan
+        r.plot(t * 1e3, np.clip(res, -3 * lim, 3 * lim), lw=0.7, color="C3",
+               label=f"residual y − ŷ (RMS {rms:.3g} µm)")
+        r.axhline(0, color="0.5", lw=0.6)
+        rl = min(3 * lim, 1.2 * np.nanmax(np.abs(res))) if np.isfinite(res).any() else lim
+        r.set_ylim(-rl, rl)
+        r.set_ylabel("residual [µm]")
+        r.set_xlabel("time [ms]")
+        r.legend(loc="upper right", fontsize=8)
         save(fig, path)
 
     def fig06_response_legacy(self, path):
@@ -183,17 +301,34 @@ class Report:
             raise Missing("wavelet_scalogram.csv not found")
         m = np.loadtxt(p, delimiter=",", comments="#")
         times, freqs, coi, w = m[0, 2:], m[1:, 0], m[1:, 1], m[1:, 2:]
+        peak = np.nanmax(w)
+        if not (peak > 0):
+            raise Missing("wavelet_scalogram.csv holds no non-zero coefficient")
+        db = 20 * np.log10(np.maximum(w, peak * 1e-8) / peak)  # amplitude in dB re the peak
         fig, (a,) = new_fig()
-        pc = a.pcolormesh(times * 1e3, freqs, w * 1e6, shading="auto", cmap="viridis")
-        fig.colorbar(pc, ax=a, label="|W| [µm]")
+        pc = a.pcolormesh(times * 1e3, freqs, db, shading="auto", cmap="magma", vmin=-80, vmax=0)
+        fig.colorbar(pc, ax=a, label="|W| [dB re peak]")
         t0, t1 = times[0], times[-1]
         left = np.minimum(t0 + coi, t1)
         right = np.maximum(t1 - coi, t0)
-        a.fill_betweenx(freqs, t0 * 1e3, left * 1e3, color="w", alpha=0.35, hatch="//", lw=0)
-        a.fill_betweenx(freqs, right * 1e3, t1 * 1e3, color="w", alpha=0.35, hatch="//", lw=0)
+        a.fill_betweenx(freqs, t0 * 1e3, left * 1e3, color="w", alpha=0.3, hatch="//", lw=0)
+        a.fill_betweenx(freqs, right * 1e3, t1 * 1e3, color="w", alpha=0.3, hatch="//", lw=0)
+        a.plot(left * 1e3, freqs, color="w", lw=1)
+        a.plot(right * 1e3, freqs, color="w", lw=1, label="cone of influence (hatched: edge effects)")
+        for k, mode in enumerate(self.res.get("wavelet", {}).get("modes", [])):
+            f = fval(mode.get("frequency_hz"))
+            if not math.isfinite(f):
+                continue
+            forced = mode.get("free_decay") is False
+            a.axhline(f, color="c" if not forced else "0.7", ls="--" if not forced else ":", lw=1)
+            text = (f"mode {k + 1}: {f:.0f} Hz, " +
+                    ("forced line" if forced else f"ξ = {fval(mode.get('damping_ratio')):.4f}"))
+            a.annotate(text, (1.0, f), xycoords=("axes fraction", "data"), xytext=(-4, 3),
+                       textcoords="offset points", ha="right", va="bottom", color="w", fontsize=8)
         a.set_yscale("log")
         a.set_xlabel("time [ms]")
         a.set_ylabel("frequency [Hz]")
+        a.legend(loc="lower left", fontsize=8, framealpha=0.6)
         save(fig, path)
 
     # Fig. 11
@@ -202,21 +337,32 @@ class Report:
         kind = np.array([r["kind"] for r in rows])
         f, p = col(rows, "frequency_hz"), col(rows, "power")
         fig, (a,) = new_fig()
-        psd = (kind == "psd") & (f > 0)
-        a.loglog(f[psd], p[psd], lw=0.6, color="0.6", label="PSD [m²/Hz]")
+
+        def db(sel):  # power in dB re its own peak: both curves on one axis
+            v = p[sel]
+            return 10 * np.log10(np.maximum(v, np.nanmax(v) * 1e-12) / np.nanmax(v))
+
+        psd = (kind == "psd") & (f > 0) & (p > 0)
+        sc = (kind == "scalogram") & (f > 0) & (p > 0)
+        if psd.any():
+            a.semilogx(f[psd], db(psd), lw=0.6, color="0.55", label="PSD (FFT)")
+        if sc.any():
+            a.semilogx(f[sc], db(sc), color="C0", lw=1.6, label="time-averaged scalogram |W|²")
+        for k, m in enumerate(self.res.get("wavelet", {}).get("modes", [])):
+            fm = fval(m.get("frequency_hz"))
+            if not math.isfinite(fm):
+                continue
+            forced = m.get("free_decay") is False
+            a.axvline(fm, color="0.6" if forced else "C3", ls=":" if forced else "--", lw=1,
+                      label=("picked modes" if k == 0 else None))
+            a.annotate(f"{fm:.0f} Hz" + (" (forced)" if forced else ""), (fm, 1.0),
+                       xycoords=("data", "axes fraction"), xytext=(3, -4), textcoords="offset points",
+                       rotation=90, va="top", ha="left", color="0.4" if forced else "C3", fontsize=8)
+        a.set_ylim(-80, 5)
         a.set_xlabel("frequency [Hz]")
-        a.set_ylabel("PSD [m²/Hz]")
-        b = a.twinx()
-        sc = kind == "scalogram"
-        b.loglog(f[sc], p[sc], color="C0", lw=1.5, label="scale-averaged scalogram [m²]")
-        b.set_ylabel("time-averaged |W|² [m²]")
-        for m in self.res.get("wavelet", {}).get("modes", []):
-            if m.get("frequency_hz") is not None:
-                a.axvline(m["frequency_hz"], color="C3", ls="--", lw=1)
-                b.annotate(f"{m['frequency_hz']:.0f} Hz", (m["frequency_hz"], np.nanmax(p[sc])),
-                           color="C3", rotation=90, va="top", ha="right", fontsize=8)
-        a.legend(loc="lower left")
-        b.legend(loc="upper right")
+        a.set_ylabel("power [dB re peak]")
+        a.grid(True, which="both", alpha=0.3)
+        a.legend(loc="lower left", fontsize=8, framealpha=0.9)
         save(fig, path)
 
     # Fig. 12
@@ -229,10 +375,13 @@ class Report:
             sel = (mode == k) & (e > 0)
             if not sel.any():
                 continue
+            forced = self.mode_is_forced(k)
             a.semilogy(t[sel] * 1e3, e[sel] * 1e6, lw=1, color=f"C{k}",
-                       label=f"{float(m['frequency_hz']):.0f} Hz: ξ = {float(m['damping_ratio']):.4f}, "
-                             f"R² = {float(m['r2']):.3f}")
-            sigma, t0, t1 = float(m["sigma_per_s"]), float(m["t_start_s"]), float(m["t_end_s"])
+                       label=f"{fnum(m.get('frequency_hz')):.0f} Hz: " +
+                             ("forced line, not a free decay" if forced else
+                              f"wavelet ξ = {fnum(m.get('damping_ratio')):.4f}, "
+                              f"R² = {fnum(m.get('r2')):.3f}"))
+            sigma, t0, t1 = fnum(m.get("sigma_per_s")), fnum(m.get("t_start_s")), fnum(m.get("t_end_s"))
             if all(math.isfinite(v) for v in (sigma, t0, t1)):
                 reg = sel & (t >= t0) & (t <= t1)
                 if reg.any():
@@ -240,47 +389,157 @@ class Report:
                     tt = np.linspace(t0, t1, 50)
                     a.semilogy(tt * 1e3, np.exp(a0 - sigma * tt) * 1e6, "k--", lw=1.5)
                     a.axvspan(t0 * 1e3, t1 * 1e3, color=f"C{k}", alpha=0.08)
-        a.plot([], [], "k--", label="fit ln|W| = a − σt (decay region shaded)")
+                    # The integral method's xi as a decay rate: sigma = xi wd / sqrt(1 - xi^2).
+                    xi_i, fd = fnum(m.get("integral_damping_ratio")), fnum(m.get("frequency_hz"))
+                    if math.isfinite(xi_i) and 0 < xi_i < 1 and math.isfinite(fd):
+                        s_i = xi_i * 2 * math.pi * fd / math.sqrt(1 - xi_i ** 2)
+                        a.semilogy(tt * 1e3, np.exp(a0 - sigma * t0 - s_i * (tt - t0)) * 1e6,
+                                   ":", color=f"C{k}", lw=2.2,
+                                   label=f"integral method: ξ = {xi_i:.4f}")
+        a.plot([], [], "k--", label="wavelet fit ln|W| = a − σt (decay region shaded)")
         a.set_xlabel("time [ms]")
         a.set_ylabel("envelope |W(f_mode, t)| [µm]")
-        a.legend(loc="best", fontsize=8)
+        a.legend(loc="upper right", fontsize=7, framealpha=0.9)
         save(fig, path)
+
+    def metadata_html(self):
+        """Run metadata: package version, command line, input file (size, SHA-256), date, options."""
+        meta = self.res.get("metadata")
+        inp = self.res.get("input", {})
+        rows = []
+        if not meta:
+            rows.append(("run metadata", "none in result.json (written by an older analyze)"))
+            rows.append(("input", f"{inp.get('file', '')}"))
+        else:
+            mi = meta.get("input") or {}
+            digest, how = input_sha256(mi)
+            size = mi.get("size_bytes")
+            rows += [("package", f"{meta.get('package', '')} {meta.get('version', '')}"),
+                     ("command line", f"<code>{html.escape(str(meta.get('command_line', '')))}</code>"),
+                     ("working directory", html.escape(str(meta.get("working_directory", "")))),
+                     ("analysed", html.escape(str(meta.get("date", "")))),
+                     ("input file", html.escape(str(mi.get("absolute_path") or mi.get("path", "")))),
+                     ("input size", "unknown" if size is None else f"{size:,} bytes".replace(",", " ")),
+                     ("input modified", html.escape(str(mi.get("modified") or "unknown"))),
+                     ("input SHA-256", (f"<code>{digest}</code> " if digest else "") +
+                      f"<small>({html.escape(how)})</small>")]
+            opts = meta.get("options") or {}
+            if opts:
+                rows.append(("options", "<br>".join(
+                    f"<code>{html.escape(k)} {html.escape(' '.join(map(str, v)) if isinstance(v, list) else str(v))}</code>"
+                    for k, v in opts.items())))
+        rows.append(("record", f"{inp.get('samples', '')} samples at {fmt(inp.get('sample_rate'), 'g')} Hz"
+                               f", {fmt(1e3 * fval(inp.get('duration')), '.3f')} ms analysed"))
+        rows.append(("report written", datetime.datetime.now(datetime.timezone.utc)
+                     .strftime("%Y-%m-%dT%H:%M:%SZ")))
+        out = ["<table class='meta'>"]
+        for k, v in rows:
+            out.append(f"<tr><th>{html.escape(k)}</th><td>{v}</td></tr>")
+        out.append("</table>")
+        return "\n".join(out)
 
     def tables_html(self):
         out = []
         ident = self.res.get("identification")
         if self.runs:
             out.append("<h2>Runs</h2><table><tr><th>formulation</th><th>model</th><th>estimator</th>"
-                       "<th>C [1/s]</th><th>c0 [N·s/m]</th><th>c1 [N·s/m/(N·m)]</th><th>fit [%]</th></tr>")
+                       "<th>C [1/s]</th><th>c0 [N·s/m]</th><th>c1 [N·s/m/(N·m)]</th><th>fit [%]</th>"
+                       "<th>segments</th><th>flags</th></tr>")
             for (f, m), r in self.runs.items():
                 c = (r.get("constant") or {}).get("C")
                 ll = r.get("load_law") or {}
                 fit = fval(r.get("response", {}).get("fit_percent"))
-                out.append(f"<tr><td>{f}</td><td>{m}</td><td>{r.get('estimator', '')}</td>"
-                           f"<td>{fmt(c, '.1f')}</td><td>{fmt(ll.get('c0'), '.4f')}</td>"
-                           f"<td>{fmt(ll.get('c1'), '.6f')}</td><td>{fmt(fit, '.2f')}</td></tr>")
+                flags = run_flags(r)
+                fit_flag = [x for x in flags if x[0] == "negative_fit"]
+                c_flag = segment_flags(r["constant"]) if r.get("constant") else []
+                out.append(f"<tr{' class=flagged' if flags else ''}><td>{f}</td><td>{m}</td>"
+                           f"<td>{r.get('estimator', '')}</td>"
+                           f"<td{flag_attr(c_flag)}>{fmt(c, '.1f')}</td><td>{fmt(ll.get('c0'), '.4f')}</td>"
+                           f"<td>{fmt(ll.get('c1'), '.6f')}</td><td{flag_attr(fit_flag)}>{fmt(fit, '.2f')}</td>"
+                           f"<td>{html.escape(summary_line(r['segments'])) if r.get('segments') else '–'}</td>"
+                           f"<td class='text'>{flags_html(flags)}</td></tr>")
             out.append("</table>")
         if ident and ident.get("segments"):
-            out.append(f"<h2>Segments ({html.escape(ident['formulation'])}, {html.escape(ident['model'])})</h2>"
-                       "<table><tr><th>t_start [ms]</th><th>t_end [ms]</th><th>C [1/s]</th><th>C_std [1/s]</th>"
-                       "<th>c [N·s/m]</th><th>ξ</th><th>note</th></tr>")
-            for s in ident["segments"]:
-                out.append(f"<tr><td>{s['t_start'] * 1e3:.3f}</td><td>{s['t_end'] * 1e3:.3f}</td>"
-                           f"<td>{fmt(s.get('C'), '.1f')}</td><td>{fmt(s.get('C_std'), '.2g')}</td>"
-                           f"<td>{fmt(s.get('c'), '.2f')}</td><td>{fmt(s.get('xi'), '.5f')}</td>"
-                           f"<td>{html.escape(s.get('reason', ''))}</td></tr>")
+            segs = ident["segments"]
+            flagged = [i for i, s in enumerate(segs) if segment_flags(s)]
+            shown = range(len(segs)) if len(segs) <= MAX_SEGMENT_ROWS else \
+                sorted(set(flagged[:MAX_SEGMENT_ROWS]) | set(range(min(20, len(segs)))))
+            out.append(f"<h2>Segments ({html.escape(ident['formulation'])}, {html.escape(ident['model'])}): "
+                       f"{html.escape(summary_line(segs))}</h2>")
+            if len(shown) < len(segs):
+                out.append(f"<p>{len(segs)} segments: the first 20 and the flagged ones are listed "
+                           "(all are in result.json and tables/segments.csv).</p>")
+            out.append("<table><tr><th>#</th><th>t_start [ms]</th><th>t_end [ms]</th><th>C [1/s]</th>"
+                       "<th>C_std [1/s]</th><th>c [N·s/m]</th><th>ξ</th><th>flags</th></tr>")
+            for i in shown:
+                s = segs[i]
+                flags = segment_flags(s)
+                cf = [x for x in flags if x[0] in ("not_identifiable", "non_positive_damping")]
+                xf = [x for x in flags if x[0] in ("not_identifiable", "overdamped")]
+                out.append(f"<tr{' class=flagged' if flags else ''}><td>{i}</td>"
+                           f"<td>{fval(s.get('t_start')) * 1e3:.3f}</td><td>{fval(s.get('t_end')) * 1e3:.3f}</td>"
+                           f"<td{flag_attr(cf)}>{fmt(s.get('C'), '.1f')}</td><td>{fmt(s.get('C_std'), '.2g')}</td>"
+                           f"<td>{fmt(s.get('c'), '.2f')}</td><td{flag_attr(xf)}>{fmt(s.get('xi'), '.5f')}</td>"
+                           f"<td class='text'>{flags_html(flags)}</td></tr>")
             out.append("</table>")
         modes = self.res.get("wavelet", {}).get("modes")
         if modes:
-            out.append("<h2>Wavelet modes (paper Table 2)</h2><table><tr><th>frequency [Hz]</th>"
-                       "<th>ξ wavelet</th><th>ξ integral</th><th>R²</th><th>decay region [ms]</th><th>warning</th></tr>")
-            for m in modes:
-                out.append(f"<tr><td>{fmt(m.get('frequency_hz'), '.1f')}</td><td>{fmt(m.get('damping_ratio'), '.5f')}</td>"
+            out.append("<h2>Wavelet modes (as the paper's Table 2)</h2><table><tr><th>mode</th>"
+                       "<th>frequency [Hz]</th><th>ξ wavelet</th><th>ξ integral method</th><th>R²</th>"
+                       "<th>decay region [ms]</th><th>free decay</th><th>flags</th></tr>")
+            for k, m in enumerate(modes):
+                flags = mode_flags(m)
+                forced = m.get("free_decay") is False
+                xi_cell = ("<i>forced line: no damping</i>" if forced else fmt(m.get("damping_ratio"), ".5f"))
+                out.append(f"<tr{' class=flagged' if flags else ''}><td>{k + 1}</td>"
+                           f"<td>{fmt(m.get('frequency_hz'), '.1f')}</td>"
+                           f"<td{flag_attr(flags)}>{xi_cell}</td>"
                            f"<td>{fmt(m.get('integral_damping_ratio'), '.5f')}</td><td>{fmt(m.get('r2'), '.4f')}</td>"
                            f"<td>{fmt(1e3 * fval(m.get('t_start')), '.3f')} – {fmt(1e3 * fval(m.get('t_end')), '.3f')}</td>"
-                           f"<td>{html.escape(m.get('warning', ''))}</td></tr>")
+                           f"<td>{'no' if forced else ('yes' if m.get('free_decay') else '–')}</td>"
+                           f"<td class='text'>{flags_html(flags)}</td></tr>")
             out.append("</table>")
+        wl = self.res.get("wavelet") or {}
+        if warnings_of(wl):
+            out.append(f"<p class='flag'>Wavelet validation: {flags_html(warnings_of(wl))}</p>")
         return "\n".join(out)
+
+
+MAX_SEGMENT_ROWS = 200  # longer segment lists show the first 20 and the flagged ones
+
+
+def summary_line(segments):
+    """"8 of 10 segments clean, 2 flagged (codes)", as analyze prints it."""
+    codes, flagged = {}, 0
+    for s in segments:
+        f = segment_flags(s)
+        if f:
+            flagged += 1
+            for c in sorted({c or "warning" for c, _ in f}):
+                codes[c] = codes.get(c, 0) + 1
+    n = len(segments)
+    line = f"{n - flagged} of {n} segment{'s' if n != 1 else ''} clean"
+    if flagged:
+        line += f", {flagged} flagged (" + ", ".join(f"{c} {k}" for c, k in sorted(codes.items())) + ")"
+    return line
+
+
+def input_sha256(meta_input):
+    """(hex digest or None, how it was obtained) of the analysed input file: hashed here, at report
+    time, when the file is still readable with the size and modification time recorded by analyze."""
+    path = meta_input.get("absolute_path") or meta_input.get("path")
+    if not path or not os.path.isfile(path):
+        return None, "not computed: the input file is not reachable from here"
+    st = os.stat(path)
+    if meta_input.get("size_bytes") is not None and st.st_size != meta_input["size_bytes"]:
+        return None, "not computed: the input file changed size since the analysis"
+    if meta_input.get("modified_unix") is not None and int(st.st_mtime) != meta_input["modified_unix"]:
+        return None, "not computed: the input file was modified after the analysis"
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest(), "computed by the report from the file, whose size and modification time match the analysis"
 
 
 def fmt(v, spec):
@@ -288,37 +547,68 @@ def fmt(v, spec):
     return "–" if not math.isfinite(v) else format(v, spec)
 
 
-def make_report(result_dir, out_dir=None):
+# Marks the page once loaded: data-images / data-images-broken on <body> (read by the browser
+# test) and a visible note under every figure that failed to load.
+IMAGE_CHECK_JS = """<script>
+window.addEventListener('load', function () {
+  var imgs = document.images, broken = 0;
+  for (var i = 0; i < imgs.length; i++) {
+    if (!(imgs[i].complete && imgs[i].naturalWidth > 0)) {
+      broken++;
+      var p = document.createElement('p');
+      p.className = 'flag';
+      p.textContent = 'figure failed to load: ' + imgs[i].getAttribute('src');
+      imgs[i].parentNode.insertBefore(p, imgs[i].nextSibling);
+    }
+  }
+  document.body.setAttribute('data-images', imgs.length);
+  document.body.setAttribute('data-images-broken', broken);
+});
+</script>"""
+
+STYLE = ("body{font-family:sans-serif;max-width:1250px;margin:auto}table{border-collapse:collapse;margin-bottom:1em}"
+         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}td.text{text-align:left;font-size:90%}"
+         "table.meta th,table.meta td{text-align:left}img{width:100%}"
+         ".flag{background:#ffd7d7}tr.flagged td:first-child{border-left:4px solid #d00}"
+         "p.flag{padding:4px 8px}")
+
+
+def make_report(result_dir, out_dir=None, quiet=False):
     """Writes the figures and index.html; returns (figures written, notes of skipped ones)."""
     out_dir = out_dir or os.path.join(result_dir, "report")
     os.makedirs(out_dir, exist_ok=True)
     rep = Report(result_dir, out_dir)
     written, notes = [], []
-    for name, title in FIGURES:
+    progress = Progress(len(FIGURES) + 1, not quiet)
+    for k, (name, title) in enumerate(FIGURES):
+        progress.step(k, name)
         try:
             getattr(rep, name[:-4])(os.path.join(out_dir, name))
             written.append((name, title))
         except Missing as e:
             notes.append((name, title, str(e)))
             plt.close("all")
+    progress.step(len(FIGURES), "index.html (hashing the input)")
     body = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>gear_damping report</title>",
-            "<style>body{font-family:sans-serif;max-width:1250px;margin:auto}table{border-collapse:collapse}"
-            "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}img{width:100%}</style></head><body>",
+            f"<style>{STYLE}</style></head><body>",
             "<h1>gear_damping report</h1>",
-            f"<p>Input: {html.escape(str(rep.res.get('input', {}).get('file', '')))}, "
-            f"{rep.res.get('input', {}).get('samples', '')} samples at "
-            f"{fmt(rep.res.get('input', {}).get('sample_rate'), 'g')} Hz.</p>",
+            rep.metadata_html(),
+            "<p>Highlighted values should not be trusted as they are: the reason is in the row's "
+            "flags (not identifiable, C ≤ 0, ξ ≥ 1, fit &lt; 0, a warning, a wavelet mode that is a "
+            "forced line rather than a free decay).</p>",
             rep.tables_html()]
     for name, title in written:
         body.append(f"<h2>{html.escape(title)}</h2><img src='{name}' alt='{html.escape(title)}'>")
     for name, title, why in notes:
         body.append(f"<p><i>{html.escape(title)}: not drawn ({html.escape(why)}).</i></p>")
+    body.append(IMAGE_CHECK_JS)
     body.append("</body></html>")
     fd, tmp = tempfile.mkstemp(dir=out_dir, suffix=".partial")
     with os.fdopen(fd, "w") as f:
         f.write("\n".join(body))
     os.chmod(tmp, 0o644)
     os.replace(tmp, os.path.join(out_dir, "index.html"))
+    progress.finish()
     return written, notes
 
 
@@ -327,6 +617,7 @@ def main(argv):
     p = argparse.ArgumentParser(description="Figures and index.html from an analysis result directory.")
     p.add_argument("result_dir")
     p.add_argument("--out", help="output directory (default RESULT_DIR/report)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line on stderr")
     a = p.parse_args(argv)
     if not os.path.isdir(a.result_dir):
         print(f"report: {a.result_dir}: no such directory", file=sys.stderr)
@@ -335,7 +626,7 @@ def main(argv):
         print(f"report: {a.result_dir}: no result.json (run analyze --output first)", file=sys.stderr)
         return 2
     try:
-        written, notes = make_report(a.result_dir, a.out)
+        written, notes = make_report(a.result_dir, a.out, a.quiet)
     except (OSError, ValueError, KeyError) as e:
         print(f"report: {a.result_dir}: {e}", file=sys.stderr)
         return 2

@@ -4,6 +4,7 @@
 //     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
 //     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
 //                [--decay-region T0,T1]...]
+//     [--summary | --table] [--quiet]
 //
 // Identifies the mesh damping of a DTE record (CSV with the DESIGN §6 columns, or a bag of
 // gear_damping/SignalChunk messages) with the integral method (DESIGN §4) for every requested
@@ -13,6 +14,9 @@
 // the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
 // Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
+// Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
+// (statistics, flags, worst segments) replaces the rows. A progress line is drawn on stderr when
+// it is a terminal and the job takes more than a second (--quiet: never).
 // Exit codes (README "analyze"): 0 success, 1 invalid command line or option value, 2 invalid
 // input (file, columns, numbers, time axis, chunks, gear parameters, sample rate, length),
 // 3 an output could not be written, 4 nothing identifiable in the record. Messages on stderr.
@@ -20,7 +24,6 @@
 #include <gear_damping/ModeledResponse.h>
 #include <gear_damping/WaveletModes.h>
 #include <rosbag/bag.h>
-#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cmath>
@@ -36,9 +39,12 @@
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/run_metadata.hpp"
+#include "gear_damping_id/run_summary.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
+#include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
@@ -68,29 +74,6 @@ bool anyIdentifiable(const gd::IdentificationResult& r) {
     if (s.identifiable) return true;
   return false;
 }
-
-// Progress on stderr for long records, only when stderr is a terminal.
-class Progress {
- public:
-  explicit Progress(std::int64_t total) : total_(total), on_(isatty(2) && total >= 1000000) {}
-  void update(std::int64_t done) {
-    if (!on_) return;
-    const int pct = static_cast<int>(100.0 * static_cast<double>(done) / static_cast<double>(total_));
-    if (pct == last_) return;
-    last_ = pct;
-    std::fprintf(stderr, "\ranalyze: %3d %% (%lld of %lld samples)", pct,
-                 static_cast<long long>(done), static_cast<long long>(total_));
-    std::fflush(stderr);
-  }
-  ~Progress() {
-    if (on_ && last_ >= 0) std::fprintf(stderr, "\n");
-  }
-
- private:
-  std::int64_t total_;
-  bool on_;
-  int last_ = -1;
-};
 
 // Streaming sums for the NRMSE of a response assembled from blocks (Chan's parallel update).
 struct FitAccumulator {
@@ -176,7 +159,8 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
 // with a warning.
 bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
                       std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
-                      std::vector<double>* wavelet_dte, size_t wavelet_max, std::string* error) {
+                      std::vector<double>* wavelet_dte, size_t wavelet_max,
+                      gear_sim::ProgressBar* progress, std::string* error) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
@@ -217,7 +201,7 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     mean_k.stiffness = &info.stiffness_mean;
     window = gd::defaultWindowLength(mean_k, gear);
   }
-  Progress progress(static_cast<std::int64_t>(ranges.back().second - ranges.front().first));
+  progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
   const bool ok = gear_sim_ros::streamSignalBag(
       info, ranges, [&](const gear_sim::SignalTable& block, size_t r) {
         const gd::SignalView view = gd::SignalView::of(block);
@@ -264,7 +248,8 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
                                                    static_cast<std::uint64_t>(ranges[r].first)));
           }
         }
-        progress.update(ranges[r].second - ranges.front().first);
+        progress->set(static_cast<double>(ranges[r].second - ranges.front().first),
+                      "segment " + std::to_string(r + 1) + " of " + std::to_string(ranges.size()));
         return true;
       },
       error);
@@ -409,6 +394,17 @@ int main(int argc, char** argv) {
                  "wavelet: analyse at most this many samples from the start of the analysed "
                  "record (default 2^18 = 262144: a free decay of a 10 kHz mode lasts milliseconds)")
       ->check(CLI::PositiveNumber);
+  // Output of the run on the terminal (docs/method.md §6 "Trust fields").
+  bool quiet = false, summary = false, table_mode = false;
+  app.add_flag("--quiet,-q", quiet,
+               "no progress line on stderr (warnings and errors are still printed)");
+  auto* summary_opt = app.add_flag(
+      "--summary", summary,
+      "print statistics of C and xi over all segments, flags by code and the worst segments "
+      "instead of one line per segment (default above " +
+          std::to_string(gd::kSummaryAboveSegments) + " segments)");
+  app.add_flag("--table,--no-summary", table_mode, "print one line per segment, however many")
+      ->excludes(summary_opt);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -563,9 +559,10 @@ int main(int argc, char** argv) {
       runs.push_back(std::move(run));
     }
   }
+  gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
     if (!analyzeStreaming(bag_info, gear, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
-                          wavelet_n_record, &error))
+                          wavelet_n_record, &progress, &error))
       return fail(kExitInput, input + ": " + error);
   } else if (streaming && wavelet_on_record) {
     if (!gear_sim_ros::streamSignalBag(
@@ -580,8 +577,10 @@ int main(int argc, char** argv) {
     const gd::SignalView view = gd::SignalView::of(table);
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
+      progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
       if (!gd::identify(table, gear, run.options, &run.result, &error))
         return fail(kExitInput, input + ": " + error);
+      progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
       if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
         run.response = gd::ModeledResponse{};
       } else {
@@ -600,7 +599,12 @@ int main(int argc, char** argv) {
     bag.write(topicOf(runs[k], k == 0, "damping"), whole.t0 + duration,
               gear_damping_ros::toMsg(runs[k].result));
   }
-  if (!runs.empty()) gd::printRunTables(std::cout, runs);
+  progress.finish();  // the terminal is clean before the tables
+  if (!runs.empty())
+    gd::printRuns(std::cout, runs,
+                  summary      ? gd::RunPrintMode::Summary
+                  : table_mode ? gd::RunPrintMode::Table
+                               : gd::RunPrintMode::Auto);
 
   // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
   gd::WaveletResult wres;
@@ -638,7 +642,11 @@ int main(int argc, char** argv) {
     if (wavelet_on_record && wavelet_n < static_cast<size_t>(analysed.back().second - first))
       warn("wavelet validation on the first " + std::to_string(wavelet_n) +
            " samples of the analysed record (--wavelet-max-samples)");
+    gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
+    wavelet_progress.set(
+        0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");
     wres = gd::validateWavelet(wavelet_dte.data(), wavelet_dte.size(), wavelet_rate, wopt);
+    wavelet_progress.finish();
     if (!wres.ok()) {
       if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.error);
       warn("wavelet validation not possible: " + wres.error);
@@ -663,6 +671,11 @@ int main(int argc, char** argv) {
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
   nlohmann::json doc = gd::analysisJson(runs, in);
+  nlohmann::json given = nlohmann::json::object();  // the options set on the command line
+  for (const CLI::Option* o : app.get_options())
+    if (o->count() > 0) given[o->get_name()] = o->results();
+  doc["metadata"] = gd::runMetadata(std::vector<std::string>(argv, argv + argc), input, given,
+                                    GEAR_DAMPING_VERSION);
   if (wavelet) {
     doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
     if (wres.ok()) {

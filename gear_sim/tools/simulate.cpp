@@ -13,6 +13,7 @@
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
+#include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/bag_io.hpp"
@@ -48,6 +49,8 @@ int main(int argc, char** argv) {
                "the difference of two runs, from the static deflection under the mean load and "
                "from the configured initial state (the start-up transient without the forced "
                "part; what the wavelet validation needs, docs/wavelet.md)");
+  bool no_output = false;
+  app.add_flag("--quiet,-q", no_output, "no progress line and no closing note on stderr");
   CLI11_PARSE(app, argc, argv);
 
   if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
@@ -64,6 +67,10 @@ int main(int argc, char** argv) {
   if (sample_rate) c.simulation.sample_rate = *sample_rate;
   if (snr) c.simulation.noise_snr_db = *snr;
   if (seed) c.simulation.seed = *seed;
+  // Progress on a terminal for long runs: simulation (x3 for --free-response), then writing.
+  const double steps = free_response ? 4.0 : 2.0;
+  gear_sim::ProgressBar progress("simulate", steps, !no_output);
+  progress.set(0.0, "simulating " + std::to_string(c.simulation.duration) + " s");
   gear_sim::SignalTable t;
   if (!gear_sim::simulate(c, &t, &error)) {  // validates the overridden values too
     std::cerr << "simulate: " << error << "\n";
@@ -79,6 +86,7 @@ int main(int argc, char** argv) {
     shifted.simulation.initial_dte =
         c.simulation.initial_dte + c.gears.forceFactor() * t.torque.mean() / (w0 * w0);
     gear_sim::SignalTable a, b;
+    progress.set(1.0, "free response");
     if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
       std::cerr << "simulate: " << error << "\n";
       return 1;
@@ -88,6 +96,7 @@ int main(int argc, char** argv) {
     t.dte_velocity = b.dte_velocity - a.dte_velocity;
     t.torque.setZero();  // no forcing in the free response
   }
+  progress.set(steps - 1.0, "writing " + output);
   // Write next to the target and rename on success: no partial file that looks complete.
   const std::string tmp = output + ".partial";
   const gear_sim::GearModel model = c.gearModel();
@@ -95,12 +104,14 @@ int main(int argc, char** argv) {
                       ? gear_sim::writeSignalCsv(tmp, t, &error)
                       : gear_sim_ros::writeSignalBag(tmp, t, c.simulation.sample_rate, &model,
                                                      chunk_size, &error);
+  progress.finish();
   if (!ok || std::rename(tmp.c_str(), output.c_str()) != 0) {
     std::remove(tmp.c_str());
     std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";
     return 2;
   }
-  std::cerr << "simulate: " << t.size() << " samples (" << c.simulation.duration << " s at "
-            << c.simulation.sample_rate << " Hz) -> " << output << "\n";
+  if (!no_output)
+    std::cerr << "simulate: " << t.size() << " samples (" << c.simulation.duration << " s at "
+              << c.simulation.sample_rate << " Hz) -> " << output << "\n";
   return 0;
 }

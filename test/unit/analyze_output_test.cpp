@@ -1,0 +1,118 @@
+// What `analyze` prints and records about a run: the clean/flagged count that ends every run's
+// table, the summary that replaces long tables, no progress line when stderr is not a
+// terminal, and the `metadata` object of the JSON (checked against the files themselves).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <string>
+
+#include "tool_runner.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kParams = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
+
+class AnalyzeOutput : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new gear_test::ScratchDir("analyze_output_test");
+    // The default case: 10 ms, noise-free, so every 1 ms segment is clean.
+    const gear_test::ToolRun s = gear_test::runTool(
+        "simulate", "--config " + kParams + " --output " + signal().string(), scratch_->path());
+    ASSERT_EQ(s.code, 0) << s.err;
+  }
+  static void TearDownTestSuite() {
+    delete scratch_;
+    scratch_ = nullptr;
+  }
+  static fs::path signal() { return scratch_->path() / "signal.csv"; }
+  static gear_test::ToolRun analyze(const std::string& extra) {
+    return gear_test::runTool("analyze",
+                              "--input " + signal().string() + " --params " + kParams + " " + extra,
+                              scratch_->path());
+  }
+  static gear_test::ScratchDir* scratch_;
+};
+gear_test::ScratchDir* AnalyzeOutput::scratch_ = nullptr;
+
+size_t count(const std::string& text, const std::string& what) {
+  size_t n = 0;
+  for (size_t p = text.find(what); p != std::string::npos; p = text.find(what, p + 1)) ++n;
+  return n;
+}
+
+TEST_F(AnalyzeOutput, EveryRunsTableEndsWithItsCleanAndFlaggedCount) {
+  const gear_test::ToolRun r = analyze("--model piecewise --model constant --refine never");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(count(r.out, "  10 of 10 segments clean\n"), 2u) << r.out;
+  EXPECT_NE(r.out.find("\n  seg   t_start"), std::string::npos);  // ten rows: a table
+  EXPECT_EQ(r.out.find("summary of"), std::string::npos);
+}
+
+TEST_F(AnalyzeOutput, LegacyFormulationsNegativeDampingIsCountedAsFlagged) {
+  // The constant-load method on a varying load (paper §4.1) gives C < 0 in some segments.
+  const gear_test::ToolRun r = analyze("--formulation legacy --refine never");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::regex line("  ([0-9]+) of 10 segments clean, ([0-9]+) flagged \\(([^)]*)\\)\n");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.out, m, line)) << r.out;
+  EXPECT_EQ(std::stoi(m[1]) + std::stoi(m[2]), 10);
+  EXPECT_NE(m[3].str().find("non_positive_damping"), std::string::npos);
+}
+
+TEST_F(AnalyzeOutput, SummaryReplacesTheRowsOnRequestAndForLongRuns) {
+  const gear_test::ToolRun asked = analyze("--summary --refine never");
+  ASSERT_EQ(asked.code, 0) << asked.err;
+  EXPECT_NE(asked.out.find("summary of 10 segments"), std::string::npos) << asked.out;
+  EXPECT_NE(asked.out.find("C [1/s]"), std::string::npos);
+  EXPECT_NE(asked.out.find("worst segments"), std::string::npos);
+  EXPECT_EQ(asked.out.find("\n  seg   t_start"), std::string::npos);
+  EXPECT_NE(asked.out.find("10 of 10 segments clean"), std::string::npos);
+
+  // 0.1 ms segments: 100 of them, above the 50 where the summary becomes the default.
+  const std::string fine = "--segment 1e-4 --window 1e-4 --refine never";
+  const gear_test::ToolRun long_run = analyze(fine);
+  ASSERT_EQ(long_run.code, 0) << long_run.err;
+  EXPECT_NE(long_run.out.find("summary of 100 segments"), std::string::npos) << long_run.out;
+  EXPECT_LT(count(long_run.out, "\n"), 30u);
+  const gear_test::ToolRun table = analyze(fine + " --table");
+  ASSERT_EQ(table.code, 0) << table.err;
+  EXPECT_GT(count(table.out, "\n"), 100u);
+  EXPECT_EQ(table.out.find("summary of"), std::string::npos);
+
+  EXPECT_EQ(analyze("--summary --table").code, 1);  // contradictory
+}
+
+TEST_F(AnalyzeOutput, NoProgressLineWhenStderrIsNotATerminal) {
+  const gear_test::ToolRun r = analyze("--wavelet");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err.find('\r'), std::string::npos) << r.err;
+  EXPECT_EQ(analyze("--quiet").code, 0);
+}
+
+TEST_F(AnalyzeOutput, JsonRecordsVersionCommandLineInputAndOptions) {
+  const fs::path out = scratch_->path() / "result.json";
+  const gear_test::ToolRun r = analyze("--segment 2e-3 --output " + out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json meta = nlohmann::json::parse(gear_test::readText(out)).at("metadata");
+  // The version of package.xml, read here independently of the build.
+  std::smatch m;
+  const std::string xml = gear_test::readText(fs::path(GEAR_SOURCE_DIR) / "package.xml");
+  ASSERT_TRUE(std::regex_search(xml, m, std::regex("<version>([^<]+)</version>")));
+  EXPECT_EQ(meta.at("version"), m[1].str());
+  EXPECT_EQ(meta.at("package"), "gear_damping");
+  const std::string line = meta.at("command_line");
+  EXPECT_NE(line.find("--segment 2e-3"), std::string::npos) << line;
+  EXPECT_NE(line.find(signal().string()), std::string::npos) << line;
+  EXPECT_EQ(meta.at("input").at("size_bytes"), fs::file_size(signal()));
+  EXPECT_EQ(meta.at("input").at("absolute_path"), fs::absolute(signal()).string());
+  EXPECT_EQ(meta.at("options").at("--segment"), nlohmann::json::array({"2e-3"}));
+  EXPECT_TRUE(std::regex_match(meta.at("date").get<std::string>(),
+                               std::regex("[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9:]{8}Z")));
+}
+
+}  // namespace
