@@ -14,7 +14,8 @@ namespace gear_damping_id {
 
 /// What is known about stiffness and forcing (DESIGN §4):
 /// - Known:   K(t), F(t) known series; unknowns per window y_T, alpha; per segment C.
-/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per segment.
+/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per
+/// segment.
 /// - Paper:   eqs. (11)-(16) as printed: K_i and F_i unknown constants per segment.
 /// - Legacy:  the earlier constant-load formulation (forcing = its mean, one unknown constant
 ///            stiffness), kept to reproduce the paper's §4.1 failure.
@@ -62,6 +63,19 @@ struct IdentificationOptions {
   std::string validate() const;
 };
 
+/// Statistics of the output-error refinement's residual r_n = y_n - yhat_n over one segment
+/// (NaN when the segment was not refined), for the quality checks: a residual RMS well above the
+/// noise level or a whitened residual that is still correlated means that the model cannot
+/// reproduce the data.
+struct ResidualStatistics {
+  double rms = kNaN;             ///< [m] root mean square of r
+  double lag1 = kNaN;            ///< [-] lag-1 autocorrelation of r (coloured noise: near rho)
+  double whitened_lag1 = kNaN;   ///< [-] lag-1 autocorrelation of the prewhitened residual
+                                 ///< (~ +-2/sqrt(samples) when the noise model fits)
+  double innovation_std = kNaN;  ///< [m] std of the prewhitened residual (= rms when white)
+  int ar_order = 0;              ///< order of the record's AR noise model (0: white)
+};
+
 /// One damping segment's estimate. Every number is NaN when `identifiable` is false.
 struct SegmentEstimate {
   double t_start = kNaN;  ///< [s]
@@ -70,20 +84,23 @@ struct SegmentEstimate {
   double C_std = kNaN;    ///< [1/s] standard error
   double c = kNaN;        ///< [N*s/m] = C * Me
   double xi = kNaN;       ///< [-] = C / (2*omega0)
-  double k_min = kNaN;    ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
-  double k_max = kNaN;    ///< [N/m]
+  double k_min =
+      kNaN;  ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
+  double k_max = kNaN;                        ///< [N/m]
   double k_min_std = kNaN, k_max_std = kNaN;  ///< [N/m] standard errors (greybox)
-  long samples = 0;       ///< samples used
-  int windows = 0;        ///< integration windows in the segment
+  long samples = 0;                           ///< samples used
+  int windows = 0;                            ///< integration windows in the segment
   bool identifiable = false;
-  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input", "rank deficient", ...)
-  double forcing = kNaN;      ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
+  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input",
+                          ///< "rank deficient", ...)
+  double forcing = kNaN;  ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
   double mean_torque = kNaN;  ///< [N*m] time-mean T1 over the segment (when known)
   double condition = kNaN;    ///< 2-norm condition number of the equilibrated problem
   bool refined = false;       ///< C (and k levels) from the output-error refinement
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
-  QualityWarnings warnings;  ///< empty when the estimate is clean
+  QualityWarnings warnings;                         ///< empty when the estimate is clean
+  ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).
@@ -117,9 +134,14 @@ struct IdentificationResult {
   std::vector<WindowEstimate> windows;
   /// "integral" or "output_error" (the estimator whose numbers are reported).
   std::string estimator = "integral";
-  int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
-  double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
-  std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
+  int iterations = 0;       ///< Gauss-Newton iterations of the refinement
+  double noise_std = kNaN;  ///< [m] residual standard deviation of the refinement
+  /// Autoregressive model of the refinement's residual, fitted over all refined segments:
+  /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std. Empty
+  /// (order 0) for white noise; the refinement then is the plain output error.
+  std::vector<double> noise_ar;
+  double noise_innovation_std = kNaN;  ///< [m]
+  std::vector<std::string> warnings;   ///< e.g. switches that mesh_phase could not locate
 };
 
 }  // namespace gear_damping_id
