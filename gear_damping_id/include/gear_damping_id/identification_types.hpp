@@ -14,8 +14,7 @@ namespace gear_damping_id {
 
 /// What is known about stiffness and forcing (DESIGN §4):
 /// - Known:   K(t), F(t) known series; unknowns per window y_T, alpha; per segment C.
-/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per
-/// segment.
+/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per segment.
 /// - Paper:   eqs. (11)-(16) as printed: K_i and F_i unknown constants per segment.
 /// - Legacy:  the earlier constant-load formulation (forcing = its mean, one unknown constant
 ///            stiffness), kept to reproduce the paper's §4.1 failure.
@@ -84,22 +83,20 @@ struct SegmentEstimate {
   double C_std = kNaN;    ///< [1/s] standard error
   double c = kNaN;        ///< [N*s/m] = C * Me
   double xi = kNaN;       ///< [-] = C / (2*omega0)
-  double k_min =
-      kNaN;  ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
-  double k_max = kNaN;                        ///< [N/m]
+  double k_min = kNaN;    ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
+  double k_max = kNaN;    ///< [N/m]
   double k_min_std = kNaN, k_max_std = kNaN;  ///< [N/m] standard errors (greybox)
-  long samples = 0;                           ///< samples used
-  int windows = 0;                            ///< integration windows in the segment
+  long samples = 0;       ///< samples used
+  int windows = 0;        ///< integration windows in the segment
   bool identifiable = false;
-  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input",
-                          ///< "rank deficient", ...)
-  double forcing = kNaN;  ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
+  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input", "rank deficient", ...)
+  double forcing = kNaN;      ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
   double mean_torque = kNaN;  ///< [N*m] time-mean T1 over the segment (when known)
   double condition = kNaN;    ///< 2-norm condition number of the equilibrated problem
   bool refined = false;       ///< C (and k levels) from the output-error refinement
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
-  QualityWarnings warnings;                         ///< empty when the estimate is clean
+  QualityWarnings warnings;  ///< empty when the estimate is clean
   ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
 };
 
@@ -134,14 +131,14 @@ struct IdentificationResult {
   std::vector<WindowEstimate> windows;
   /// "integral" or "output_error" (the estimator whose numbers are reported).
   std::string estimator = "integral";
-  int iterations = 0;       ///< Gauss-Newton iterations of the refinement
-  double noise_std = kNaN;  ///< [m] residual standard deviation of the refinement
+  int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
+  double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
   /// Autoregressive model of the refinement's residual, fitted over all refined segments:
   /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std. Empty
   /// (order 0) for white noise; the refinement then is the plain output error.
   std::vector<double> noise_ar;
   double noise_innovation_std = kNaN;  ///< [m]
-  std::vector<std::string> warnings;   ///< e.g. switches that mesh_phase could not locate
+  std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
 };
 
 }  // namespace gear_damping_id
