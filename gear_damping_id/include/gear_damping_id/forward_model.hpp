@@ -10,11 +10,19 @@
 //   from sample j+1 on (sample and hold). A channel changes only where its samples change.
 // - smooth stiffness (trapezoid, fourier, a rig's measured channel): the local four-point cubic
 //   through the samples, on the same stencil as the quadrature (quadrature.hpp), bounded by the
-//   segment so that a segment reads no sample outside itself.
+//   segment so that a segment reads no sample outside itself. Kinks (a jump of the slope, as at
+//   the ends of a trapezoid's ramps) are located from the samples: a kink at t_j + th h between
+//   straight pieces makes the second differences d_j = h ds (1 - th) and d_{j+1} = h ds th, both
+//   of the sign of ds, while the neighbouring d_{j-1}, d_{j+2} see no kink; an interval is a kink
+//   interval when |d_j| + |d_{j+1}| exceeds kKinkRatio times |d_{j-1}| + |d_{j+2}| (a smooth
+//   curve gives a ratio near 1). On it K follows the line through the two samples on each side
+//   up to th = d_{j+1} / (d_j + d_{j+1}) and from there, and the intervals next to it use the
+//   one-sided cubic that does not reach across the kink.
 // - forcing F = force_factor T1 with T1 the same local cubic of the torque samples.
 #pragma once
 
 #include <Eigen/Core>
+#include <vector>
 
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/integral_method.hpp"
@@ -41,9 +49,11 @@ class ForwardModel {
   }
   /// Whether the known stiffness is interpolated (true) or held between switch instants.
   bool smoothStiffness() const { return smooth_; }
-  /// Split fraction of interval j for the held channel of the formulation (known stiffness when
-  /// held, greybox mesh state); 1 when there is none.
+  /// Split fraction of interval j: the switch of the held channel of the formulation (known
+  /// stiffness when held, greybox mesh state) or the kink of a smooth stiffness; 1 when none.
   double heldSplit(Index j) const;
+  /// Intervals j whose smooth stiffness has a kink (sorted), and their kink fractions.
+  const std::vector<Index>& kinkIntervals() const { return kinks_; }
   /// Known stiffness K = k/Me [1/s^2] at u of interval j; `right` picks the held value after
   /// the split (ignored for smooth stiffness).
   double knownStiffness(Index j, double u, bool right, Index lo, Index hi) const;
@@ -60,7 +70,12 @@ class ForwardModel {
   Formulation formulation_;
   bool smooth_;
   double inv_me_;
+  double kink(Index j) const;   // kink fraction of interval j, or 1
+  int kinkSide(Index j) const;  // -1: interval j is just before a kink, +1: just after, 0: no
   CubicRules rules_;
+  std::vector<Index> kinks_;
+  std::vector<double> kink_th_;
+  CubicIntervalRule::Weights mid_first_, mid_interior_, mid_last_;  // value(0.5) of each rule
 };
 
 }  // namespace gear_damping_id

@@ -34,10 +34,13 @@ namespace gear_damping_id {
 /// Sets result->estimator = "output_error", iterations and noise_std. Only the known and greybox
 /// formulations are refined; for the others it returns true and leaves `result` as it is.
 /// Returns false with `*error` when the iteration diverges (the integral estimate is then kept).
+/// `reference_integration` (for tests): step every sample interval with the generic RK4 of the
+/// state and sensitivities instead of the closed-form affine maps (same numbers to rounding).
 bool refineOutputError(const SignalView& signal,
                        const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                        const GearConstants& gear, const IdentificationOptions& options,
-                       IdentificationResult* result, std::string* error);
+                       IdentificationResult* result, std::string* error,
+                       bool reference_integration = false);
 
 /// Whether options.refine asks for refinement of this result (Auto: the median relative standard
 /// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.

@@ -38,7 +38,8 @@ struct Params {
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
-  explicit SegmentSimulator(const ForwardModel& fm) : fm_(fm) {}
+  // `fast`: closed-form per-step affine maps where they apply (see run()).
+  SegmentSimulator(const ForwardModel& fm, bool fast) : fm_(fm), fast_(fast) {}
 
   // Integrates over samples [b, e) from (p.y0, p.v0). Calls visit(n, z) for each sample with the
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
@@ -55,8 +56,40 @@ class SegmentSimulator {
     const double h = fm_.signal().dt;
     const bool grey = fm_.formulation() == Formulation::Greybox;
     const bool smooth = fm_.smoothStiffness();
+    // Fast path: with K and the mesh state held on a whole sample interval, C constant (no load
+    // law) and one step per sample, RK4 is an affine map of the state and the three stage
+    // torques, z+ = M z + G T, the same for every such interval with the same K: formed once
+    // (by stepping unit vectors) and applied in its block structure: the state x = (y, v) by
+    // R x + Gx T, each sensitivity pair z_k by R z_k + S_k x + H_k T (S_k = H_k = 0 for the
+    // initial-state sensitivities). Algebraically the same numbers as the RK4 step.
+    bool fast = fast_ && !smooth && substeps == 1;
+    for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
+    AffineMap maps[kMaxMaps];
+    int n_maps = 0;
     for (Index j = b; j + 1 < e; ++j) {
       const double th = fm_.heldSplit(j);
+      if (fast && th >= 1.0) {
+        double sv = 0.0, Kc;
+        if (grey) {
+          sv = fm_.meshState(j, false);
+          Kc = p.K0 + p.dK * sv;
+        } else {
+          Kc = fm_.knownStiffness(j, 0.0, false, b, e);
+        }
+        int im = 0;
+        while (im < n_maps && !(maps[im].K == Kc && maps[im].sv == sv)) ++im;
+        if (im == n_maps && n_maps < kMaxMaps) {
+          maps[im] = affineMap(D, p, Kc, sv, h);
+          ++n_maps;
+        }
+        if (im < n_maps) {
+          const double T[3] = {fm_.torque(j, 0.0, b, e), fm_.torque(j, 0.5, b, e),
+                               fm_.torque(j, 1.0, b, e)};
+          maps[im].apply(z, p.m, T);
+          visit(j + 1, z);
+          continue;
+        }
+      }
       const double parts[2][2] = {{0.0, th}, {th, 1.0}};
       for (int piece = 0; piece < 2; ++piece) {
         const double u0 = parts[piece][0], u1 = parts[piece][1];
@@ -95,6 +128,59 @@ class SegmentSimulator {
   struct Stage {
     double K[3], T[3];  // at the step's start, midpoint and end
   };
+  static constexpr int kMaxMaps = 4;  // distinct held K values cached per run (square: 2)
+  struct AffineMap {
+    double K = 0, sv = 0;
+    double R[2][2], G[2][3];
+    double S[kMaxParams][2][2], H[kMaxParams][2][3];
+    bool coupled[kMaxParams];
+    void apply(double* z, int m, const double* T) const {
+      const double y = z[0], v = z[1];
+      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
+      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
+      for (int k = 0; k < m; ++k) {
+        double* w = z + 2 + 2 * k;
+        const double a = w[0], c = w[1];
+        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
+        if (coupled[k]) {
+          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
+                H[k][0][2] * T[2];
+          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
+                H[k][1][2] * T[2];
+        }
+        w[0] = n0, w[1] = n1;
+      }
+    }
+  };
+
+  // The affine map of one RK4 step of length h with K and the mesh state sv held.
+  AffineMap affineMap(int D, const Params& p, double K, double sv, double h) const {
+    AffineMap a;
+    a.K = K, a.sv = sv;
+    Stage st;
+    st.K[0] = st.K[1] = st.K[2] = K;
+    double col[kMaxState];
+    auto stepOf = [&](int unit_state, int unit_torque) {
+      std::fill(col, col + D, 0.0);
+      if (unit_state >= 0) col[unit_state] = 1.0;
+      for (int q = 0; q < 3; ++q) st.T[q] = q == unit_torque ? 1.0 : 0.0;
+      step(col, D, p, st, sv, h);
+    };
+    for (int c = 0; c < 2; ++c) {  // columns of x
+      stepOf(c, -1);
+      a.R[0][c] = col[0], a.R[1][c] = col[1];
+      for (int k = 0; k < p.m; ++k) a.S[k][0][c] = col[2 + 2 * k], a.S[k][1][c] = col[3 + 2 * k];
+    }
+    for (int q = 0; q < 3; ++q) {  // stage torques
+      stepOf(-1, q);
+      a.G[0][q] = col[0], a.G[1][q] = col[1];
+      for (int k = 0; k < p.m; ++k) a.H[k][0][q] = col[2 + 2 * k], a.H[k][1][q] = col[3 + 2 * k];
+    }
+    for (int k = 0; k < p.m; ++k) {
+      a.coupled[k] = p.role[k] != Role::Y0 && p.role[k] != Role::V0;
+    }
+    return a;
+  }
 
   // One RK4 step of length hs with the coefficients at the stage times.
   void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
@@ -140,6 +226,7 @@ class SegmentSimulator {
   }
 
   const ForwardModel& fm_;
+  bool fast_;
 };
 
 // Substeps per sample so that omega * h_step <= 0.1 (RK4 error well below the bars).
@@ -210,7 +297,7 @@ bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult&
 
 bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
                        const GearConstants& gear, const IdentificationOptions& o,
-                       IdentificationResult* res, std::string* error) {
+                       IdentificationResult* res, std::string* error, bool reference_integration) {
   if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return true;
   if (ranges.size() != res->segments.size()) {
     *error = "refinement: segment ranges do not match the result";
@@ -221,7 +308,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   const bool load = o.model == DampingModel::LoadLaw;
   const bool piecewise = o.model == DampingModel::Piecewise;
   const ForwardModel fm(s, gear, o.formulation);
-  const SegmentSimulator sim(fm);
+  const SegmentSimulator sim(fm, !reference_integration);
   const int substeps = substepsFor(res->omega0, s.dt);
 
   // Unknowns: per segment locals [y0, v0, (theta0 if piecewise), (K0, dK if greybox)];
@@ -338,7 +425,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     long count = 0, rows = 0;
     const int P = nm.p;
     sim.run(ranges[i].first, ranges[i].second, p, substeps, [&](Index n, const double* z) {
-      double cur[kMaxParams + 1];
+      double cur[kMaxParams + 1] = {0};
       cur[0] = s.dte[n] - z[0];
       for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
       const double r = cur[0];
@@ -346,7 +433,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
       const int lags = static_cast<int>(std::min<long>(count, kMaxArOrder));
       for (int k = 1; k <= lags; ++k) out.acov[k] += r * rhist[k - 1];
       if (count >= P) {
-        double w[kMaxParams + 1];
+        double w[kMaxParams + 1] = {0};
         for (int c = 0; c <= m; ++c) {
           double v = cur[c];
           for (int k = 0; k < P; ++k) v += nm.a[k] * hist[k][c];
@@ -416,6 +503,23 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   // model, whose segments are independent problems; all for shared damping). Returns the
   // iterations; *converged false when the iteration limit stopped it.
   std::vector<Normal> normals(nseg);
+  // Converged when the damping (and stiffness) unknowns move by less than 1e-10 relative.
+  constexpr double kConvergenceTol = 1e-10;
+  auto relativeChange = [&](const std::vector<size_t>& set, const std::vector<Eigen::VectorXd>& dl,
+                            const Eigen::VectorXd& dg, double step) {
+    double rel = 0.0;
+    for (int k = 0; k < ns; ++k) {
+      const double to = sh[k] + step * dg[k];
+      rel = std::max(rel, std::abs(step * dg[k]) / std::max(std::abs(to), 1e-300));
+    }
+    for (size_t i : set) {
+      for (int k = 2; k < nl; ++k) {
+        const double to = loc[i][k] + step * dl[i][k];
+        rel = std::max(rel, std::abs(step * dl[i][k]) / std::max(std::abs(to), 1e-300));
+      }
+    }
+    return rel;
+  };
   auto gaussNewton = [&](const std::vector<size_t>& set, const NoiseModel& nm, bool* converged,
                          bool* finite) {
     double cost = 0.0;
@@ -431,6 +535,10 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
       std::vector<Eigen::VectorXd> dl(nseg);
       Eigen::VectorXd dg;
       solveStep(set, normals, &dl, &dg, nullptr, nullptr);
+      if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
+        *converged = true;  // the full step would move nothing: no need to evaluate it
+        break;
+      }
       double step = 1.0;
       bool accepted = false;
       for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
@@ -445,18 +553,8 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
         }
         if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
           accepted = true;
-          // Converged when the damping (and stiffness) unknowns moved by less than 1e-10
-          // relative.
-          double rel = 0.0;
-          for (int k = 0; k < ns; ++k) {
-            rel = std::max(rel, std::abs(step * dg[k]) / std::max(std::abs(g1[k]), 1e-300));
-          }
-          for (size_t i : set) {
-            for (int k = 2; k < nl; ++k) {
-              rel = std::max(rel, std::abs(step * dl[i][k]) / std::max(std::abs(x1[i][k]), 1e-300));
-            }
-          }
-          *converged = rel < 1e-10 || c1 >= cost * (1.0 - 1e-14);
+          *converged =
+              relativeChange(set, dl, dg, step) < kConvergenceTol || c1 >= cost * (1.0 - 1e-14);
           for (size_t i : set) {
             loc[i] = x1[i];
             normals[i] = std::move(n1[i]);
