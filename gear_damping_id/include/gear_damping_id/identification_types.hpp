@@ -72,7 +72,10 @@ struct ResidualStatistics {
   double whitened_lag1 = kNaN;   ///< [-] lag-1 autocorrelation of the prewhitened residual
                                  ///< (~ +-2/sqrt(samples) when the noise model fits)
   double innovation_std = kNaN;  ///< [m] std of the prewhitened residual (= rms when white)
-  int ar_order = 0;              ///< order of the record's AR noise model (0: white)
+  /// AR model of the noise the refinement prewhitened with, e_n = r_n + sum_k ar[k-1] r_{n-k}
+  /// (empty: white noise), fitted to this segment's residual (piecewise model) or to all
+  /// segments' (shared damping).
+  std::vector<double> ar;
 };
 
 /// One damping segment's estimate. Every number is NaN when `identifiable` is false.
@@ -133,9 +136,9 @@ struct IdentificationResult {
   std::string estimator = "integral";
   int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
   double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
-  /// Autoregressive model of the refinement's residual, fitted over all refined segments:
-  /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std. Empty
-  /// (order 0) for white noise; the refinement then is the plain output error.
+  /// Autoregressive model of the refinement's residual fitted over all refined segments:
+  /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std; empty for
+  /// white noise. The model each segment was prewhitened with is in its `residuals.ar`.
   std::vector<double> noise_ar;
   double noise_innovation_std = kNaN;  ///< [m]
   std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate

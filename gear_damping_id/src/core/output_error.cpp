@@ -580,11 +580,24 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   }
   std::vector<char> converged(nseg, 1);
   int iterations = 0;
-  // Round 0: white noise. Then the AR model of the residuals and the prewhitened problem,
-  // refitted until the noise model settles.
-  NoiseModel noise;
-  for (int round = 0; round < kMaxNoiseRounds; ++round) {
-    for (const auto& set : problems) {
+  // AR model fitted to the pooled residual autocovariances of a set of segments.
+  auto pooledFit = [&](const std::vector<size_t>& set) {
+    double acov[kMaxArOrder + 1] = {0}, count = 0.0;
+    for (size_t i : set) {
+      for (int k = 0; k <= kMaxArOrder; ++k) acov[k] += normals[i].acov[k];
+      count += static_cast<double>(normals[i].samples);
+    }
+    for (int k = 0; k <= kMaxArOrder; ++k) acov[k] /= count;
+    return fitNoiseModel(acov, count);
+  };
+  // Per problem (a segment of the piecewise model, which therefore gives the same result
+  // refined alone, as live; all segments for shared damping): round 0 assumes white noise; then
+  // the AR model of its residuals and the prewhitened problem, refitted until the noise model
+  // settles.
+  std::vector<NoiseModel> noise_of(nseg);
+  for (const auto& set : problems) {
+    NoiseModel noise;
+    for (int round = 0; round < kMaxNoiseRounds; ++round) {
       bool conv = false, finite = true;
       iterations += gaussNewton(set, noise, &conv, &finite);
       if (!finite) {
@@ -593,18 +606,11 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
         return false;
       }
       for (size_t i : set) converged[i] = conv;
+      const NoiseModel next = pooledFit(set);
+      if (maxChange(next, noise) < kArChangeTol || round + 1 == kMaxNoiseRounds) break;
+      noise = next;
     }
-    double acov[kMaxArOrder + 1] = {0}, count = 0.0;
-    for (size_t i = 0; i < nseg; ++i) {
-      if (!active[i]) continue;
-      for (int k = 0; k <= kMaxArOrder; ++k) acov[k] += normals[i].acov[k];
-      count += static_cast<double>(normals[i].samples);
-    }
-    for (int k = 0; k <= kMaxArOrder; ++k) acov[k] /= count;
-    const NoiseModel next = fitNoiseModel(acov, count);
-    const bool settled = maxChange(next, noise) < kArChangeTol;
-    if (settled || round + 1 == kMaxNoiseRounds) break;
-    noise = next;
+    for (size_t i : set) noise_of[i] = noise;
   }
 
   // Covariances at the solution.
@@ -636,7 +642,10 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   const double sigma2_pooled = cost_total / static_cast<double>(rows_total - unknowns);
   res->noise_std = std::sqrt(raw_total / static_cast<double>(n_total - unknowns));
   res->noise_innovation_std = std::sqrt(sigma2_pooled);
-  res->noise_ar.assign(noise.a, noise.a + noise.p);
+  std::vector<size_t> all;
+  for (const auto& set : problems) all.insert(all.end(), set.begin(), set.end());
+  const NoiseModel record_noise = pooledFit(all);
+  res->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
   res->estimator = "output_error";
   res->iterations = iterations;
 
@@ -687,7 +696,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     rs.lag1 = nm.raw > 0.0 ? nm.acov[1] / nm.raw : kNaN;
     rs.whitened_lag1 = nm.cost > 0.0 ? nm.wlag1 / nm.cost : kNaN;
     rs.innovation_std = std::sqrt(nm.cost / static_cast<double>(nm.rows));
-    rs.ar_order = noise.p;
+    rs.ar.assign(noise_of[i].a, noise_of[i].a + noise_of[i].p);
     if (!converged[i]) {
       all_converged = false;
       e.warnings.push_back({"refine_not_converged", not_converged});
