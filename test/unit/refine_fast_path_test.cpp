@@ -66,3 +66,39 @@ TEST(RefineFastPath, SameEstimatesAsTheGenericRk4) {
 }
 
 }  // namespace
+
+namespace {
+
+// The integral estimate is kept beside the refined one, and a refinement stopped by the
+// iteration limit says so on every segment it touched.
+TEST(RefineBookkeeping, KeepsTheIntegralEstimateAndFlagsNonConvergence) {
+  SimConfig c = table1Config();
+  c.simulation.duration = 0.004;
+  setPiecewiseTruth(&c, 1e-3);
+  SignalTable t = simulateOrFail(c);
+  addWhiteNoise(&t.dte, 30.0, 21);
+  IdentificationOptions o;
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult integral = identifyOrFail(t, c, o);
+  o.refine = IdentificationOptions::Refine::Always;
+  const IdentificationResult refined = identifyOrFail(t, c, o);
+  ASSERT_EQ(refined.segments.size(), integral.segments.size());
+  for (size_t i = 0; i < refined.segments.size(); ++i) {
+    const SegmentEstimate& e = refined.segments[i];
+    EXPECT_TRUE(e.refined);
+    EXPECT_EQ(e.C_integral, integral.segments[i].C);
+    EXPECT_EQ(e.C_integral_std, integral.segments[i].C_std);
+    EXPECT_TRUE(e.warnings.empty());
+    EXPECT_TRUE(std::isfinite(e.residuals.rms) && e.residuals.rms > 0.0);
+  }
+  // One Gauss-Newton step from the integral estimate at 30 dB cannot reach 1e-10.
+  o.max_iterations = 1;
+  const IdentificationResult stopped = identifyOrFail(t, c, o);
+  int flagged = 0;
+  for (const SegmentEstimate& e : stopped.segments) {
+    for (const auto& w : e.warnings) flagged += w.code == "refine_not_converged";
+  }
+  EXPECT_EQ(flagged, static_cast<int>(stopped.segments.size()));
+}
+
+}  // namespace

@@ -30,6 +30,14 @@
 
 namespace gear_damping_id {
 
+/// Split fraction th in [0, 1] of sample interval j at which `mesh_phase` reaches the next switch
+/// phase of the square-wave mesh (rising, into double contact: an integer; falling:
+/// m + contact_ratio - 1): 1 without a phase channel or with a non-increasing phase; NaN when the
+/// phase places no switch within the interval (the caller then holds the sample value, th = 1).
+/// Shared by the integral method's quadrature and the forward model.
+double switchFractionFromPhase(const double* mesh_phase, Eigen::Index j, Eigen::Index n,
+                               bool rising, double contact_ratio);
+
 class ForwardModel {
  public:
   using Index = Eigen::Index;

@@ -52,20 +52,25 @@ int ForwardModel::kinkSide(Index j) const {
   return 0;
 }
 
-double ForwardModel::switchFraction(const double* ch, Index j) const {
-  const SignalView& s = signal_;
-  if (ch == nullptr || j + 1 >= s.n || ch[j] == ch[j + 1]) return 1.0;
+double switchFractionFromPhase(const double* phase, Eigen::Index j, Eigen::Index n, bool rising,
+                               double contact_ratio) {
   // The held value changes between samples j and j+1: the switch lies in (t_j, t_{j+1}].
-  if (s.mesh_phase == nullptr) return 1.0;
-  const double ua = s.mesh_phase[j], ub = s.mesh_phase[j + 1];
+  if (phase == nullptr || j + 1 >= n) return 1.0;
+  const double ua = phase[j], ub = phase[j + 1];
   if (!(ub > ua)) return 1.0;
   // Switch phases: integers (into the stiffer, double-contact phase: rising) and m + eps - 1.
-  const bool rising = ch[j + 1] > ch[j];
-  const double off = rising ? 0.0 : gear_.contact_ratio - 1.0;
+  const double off = rising ? 0.0 : contact_ratio - 1.0;
   const double tol = 1e-9 * std::max(1.0, std::abs(ua));
   const double c = std::ceil(ua - off - tol) + off;  // first switch phase >= ua (to rounding)
-  if (c > ub + (ub - ua)) return 1.0;  // the phase disagrees with the samples: sample and hold
+  if (c > ub + (ub - ua)) return kNaN;               // the phase disagrees with the samples
   return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
+}
+
+double ForwardModel::switchFraction(const double* ch, Index j) const {
+  if (ch == nullptr || j + 1 >= signal_.n || ch[j] == ch[j + 1]) return 1.0;
+  const double th = switchFractionFromPhase(signal_.mesh_phase, j, signal_.n, ch[j + 1] > ch[j],
+                                            gear_.contact_ratio);
+  return std::isnan(th) ? 1.0 : th;  // unlocated: sample and hold
 }
 
 double ForwardModel::cubic(const double* ch, Index j, double u, Index lo, Index hi) const {
