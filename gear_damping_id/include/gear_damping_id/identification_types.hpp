@@ -62,6 +62,22 @@ struct IdentificationOptions {
   std::string validate() const;
 };
 
+/// Statistics of the output-error refinement's residual r_n = y_n - yhat_n over one segment
+/// (NaN when the segment was not refined), for the quality checks: a residual RMS well above the
+/// noise level or a whitened residual that is still correlated means that the model cannot
+/// reproduce the data.
+struct ResidualStatistics {
+  double rms = kNaN;             ///< [m] root mean square of r
+  double lag1 = kNaN;            ///< [-] lag-1 autocorrelation of r (coloured noise: near rho)
+  double whitened_lag1 = kNaN;   ///< [-] lag-1 autocorrelation of the prewhitened residual
+                                 ///< (~ +-2/sqrt(samples) when the noise model fits)
+  double innovation_std = kNaN;  ///< [m] std of the prewhitened residual (= rms when white)
+  /// AR model of the noise the refinement prewhitened with, e_n = r_n + sum_k ar[k-1] r_{n-k}
+  /// (empty: white noise), fitted to this segment's residual (piecewise model) or to all
+  /// segments' (shared damping).
+  std::vector<double> ar;
+};
+
 /// One damping segment's estimate. Every number is NaN when `identifiable` is false.
 struct SegmentEstimate {
   double t_start = kNaN;  ///< [s]
@@ -84,6 +100,7 @@ struct SegmentEstimate {
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
   QualityWarnings warnings;  ///< empty when the estimate is clean
+  ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).
@@ -119,6 +136,11 @@ struct IdentificationResult {
   std::string estimator = "integral";
   int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
   double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
+  /// Autoregressive model of the refinement's residual fitted over all refined segments:
+  /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std; empty for
+  /// white noise. The model each segment was prewhitened with is in its `residuals.ar`.
+  std::vector<double> noise_ar;
+  double noise_innovation_std = kNaN;  ///< [m]
   std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
 };
 

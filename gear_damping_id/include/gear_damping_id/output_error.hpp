@@ -1,21 +1,36 @@
-// Output-error refinement of the integral-method estimate, and the modeled response
-// (DESIGN.md §4). No ROS.
+// Output-error refinement of the integral-method estimate, and the modeled response. No ROS.
 //
-// Refinement: with white measurement noise on y, the integral method's regressors (integrals of
-// the noisy y) are noisy too, which biases C and inflates its scatter (about 1 % at 40 dB SNR and
-// 10 % at 20 dB on the default case). The maximum-likelihood estimate for white noise minimises
-// the output error sum_n (y_n - yhat_n)^2, where yhat solves eq. (4) on each damping segment
-// [T_i, T_i+1) from a free initial state (y0_i, v0_i), with
+// Refinement: with measurement noise on y, the integral method's regressors (integrals of the
+// noisy y) are noisy too, which biases C and inflates its scatter (about 1 % at 40 dB SNR and
+// 10 % at 20 dB on the default case). The maximum-likelihood estimate minimises the output error
+// of the model y'' + C(t) y' + K(t) y = F(t) on each damping segment [T_i, T_i+1) from a free
+// initial state (y0_i, v0_i), with
 //   C(t) = C_i (piecewise) | C (constant) | theta0 + theta1 T1(t) (load_law),
-//   K(t) = k(t)/Me (known)  | K0_i + dK_i s(t) (greybox),   F(t) = force_factor T1(t).
-// It is minimised by Gauss-Newton started from the integral-method estimate (which is close, so
-// the iteration converges in a few steps), with the Jacobian from the forward sensitivity
-// equations (z_p = dyhat/dp):  z_p'' + C z_p' + K z_p = -(dC/dp) yhat' - (dK/dp) yhat,
-// integrated together with eq. (4) by classical RK4 on the sample grid, every step split at the
-// stiffness switch instants (as the simulator does), the load interpolated at the stage times by
-// the local cubic of quadrature.hpp. Step halving guards against a cost increase. Standard errors
-// are sigma^2 (J^T J)^-1 with sigma^2 = RSS / (N - unknowns) (per segment for segment-local
-// unknowns, pooled for shared ones): honest for white noise, which a test checks over many seeds.
+//   K(t) = k(t)/Me (known)  | K0_i + dK_i s(t) (greybox),   F(t) = force_factor T1(t),
+// where K(t), s(t) and T1(t) are the channels as the integral method's quadrature sees them
+// (forward_model.hpp: held values split at the switches located from mesh_phase, smooth
+// stiffness and the torque by the quadrature's local cubic, kinks located from the samples), so
+// that both estimators fit one and the same model.
+//
+// Noise: white noise first (sum of squared residuals); then an autoregressive model AR(p),
+// p <= 6 chosen by BIC, is fitted to the residuals (per segment for the piecewise model, pooled
+// for shared damping) and the prewhitened output error sum_n e_n^2, e_n = r_n + sum a_k r_{n-k},
+// is minimised (generalised least squares, conditional on the first p samples), refitting the AR
+// model until it settles. With white noise BIC keeps p = 0 and the estimate is the plain output
+// error (maximum likelihood, at the Cramer-Rao bound); with coloured noise (anti-aliasing
+// filters, encoder interpolation) the standard errors stay honest.
+//
+// Iteration: Gauss-Newton with step halving, started from the integral-method estimate, per
+// segment for the piecewise model (the segments are independent problems) and jointly with the
+// segment-local unknowns eliminated (Schur complement) for shared damping. Jacobian from the
+// forward sensitivity equations (z_p = dyhat/dp):  z_p'' + C z_p' + K z_p = -(dC/dp) yhat' -
+// (dK/dp) yhat, integrated with eq. (4) by classical RK4 on the sample grid with every step split
+// at the switch instants and kinks. Where K is held over a whole sample interval and C is
+// constant (piecewise/constant damping, one step per sample), the RK4 step is an affine map of
+// the state and the three stage torques, formed once per held K value and applied in its block
+// structure (same numbers to rounding; the generic RK4 is kept as the reference path).
+// Standard errors: sigma^2 (J^T J)^-1 of the prewhitened problem, sigma^2 = prewhitened RSS /
+// (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones).
 #pragma once
 
 #include <Eigen/Core>
@@ -23,6 +38,7 @@
 #include <utility>
 #include <vector>
 
+#include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/integral_method.hpp"
 
@@ -31,13 +47,19 @@ namespace gear_damping_id {
 /// Refines `result` (an IntegralMethod result for the same `signal`, `ranges` and `options`) in
 /// place: C, C_std, c, xi (and the greybox k levels) of every identifiable segment, the constant
 /// and load-law estimates, and result->windows (one per segment: the refined initial states).
-/// Sets result->estimator = "output_error", iterations and noise_std. Only the known and greybox
+/// Keeps the integral estimate in C_integral/C_integral_std and fills each refined segment's
+/// `residuals`; a segment (or the shared estimate) whose iteration hit max_iterations gets the
+/// warning "refine_not_converged". Sets result->estimator = "output_error", iterations,
+/// noise_std, noise_ar and noise_innovation_std. Only the known and greybox
 /// formulations are refined; for the others it returns true and leaves `result` as it is.
 /// Returns false with `*error` when the iteration diverges (the integral estimate is then kept).
+/// `reference_integration` (for tests): step every sample interval with the generic RK4 of the
+/// state and sensitivities instead of the closed-form affine maps (same numbers to rounding).
 bool refineOutputError(const SignalView& signal,
                        const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                        const GearConstants& gear, const IdentificationOptions& options,
-                       IdentificationResult* result, std::string* error);
+                       IdentificationResult* result, std::string* error,
+                       bool reference_integration = false);
 
 /// Whether options.refine asks for refinement of this result (Auto: the median relative standard
 /// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.
@@ -47,7 +69,8 @@ bool wantsRefinement(const IdentificationOptions& options, const IdentificationR
 /// Modeled response (paper Figs. 6, 7, 9): eq. (4) re-simulated over samples [begin, end) of
 /// `signal` with the identified damping (and, for greybox/paper/legacy, the identified stiffness
 /// and forcing), from the identified state at the first sample, with gear_sim's RK4 driver
-/// stepping onto every switch instant and segment boundary.
+/// stepping onto every switch instant, kink and segment boundary; K(t) and F(t) from the same
+/// forward model as the refinement (forward_model.hpp).
 struct ModeledResponse {
   Eigen::Index begin = 0;     ///< first sample index
   Eigen::VectorXd observed;   ///< [m]

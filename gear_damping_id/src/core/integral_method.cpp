@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_sim/models.hpp"
 
@@ -306,19 +307,10 @@ double IntegralMethod::switchFraction(Eigen::Index j) const {
 }
 
 double IntegralMethod::splitFraction(const SignalView& s, Eigen::Index j, bool rising) const {
-  // The held value changes between samples j and j+1: the switch lies in (t_j, t_{j+1}].
-  if (s.mesh_phase == nullptr || j + 1 >= s.n) return 1.0;
-  const double ua = s.mesh_phase[j], ub = s.mesh_phase[j + 1];
-  if (!(ub > ua)) return 1.0;
-  // Switch phases: integers (into the stiffer, double-contact phase: rising) and m + eps - 1.
-  const double off = rising ? 0.0 : gear_.contact_ratio - 1.0;
-  const double tol = 1e-9 * std::max(1.0, std::abs(ua));
-  const double c = std::ceil(ua - off - tol) + off;  // first switch phase >= ua (to rounding)
-  if (c > ub + (ub - ua)) {
-    ++unlocated_switches_;
-    return 1.0;  // the phase channel disagrees with the sampled values: sample-and-hold
-  }
-  return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
+  const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, rising, gear_.contact_ratio);
+  if (!std::isnan(th)) return th;
+  ++unlocated_switches_;
+  return 1.0;  // the phase channel disagrees with the sampled values: sample-and-hold
 }
 
 namespace {

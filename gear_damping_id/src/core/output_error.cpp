@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "gear_damping_id/forward_model.hpp"
 #include "gear_sim/sdof_integrator.hpp"
 
 namespace gear_damping_id {
@@ -16,58 +17,29 @@ using Index = Eigen::Index;
 // Roles of the unknowns of one segment's output-error problem.
 enum class Role { Y0, V0, Theta0, Theta1, K0, DK };
 
-constexpr int kMaxParams = 7;              // y0, v0, theta0, theta1, K0, dK (+ spare)
+constexpr int kMaxParams = 7;  // y0, v0, theta0, theta1, K0, dK (+ spare)
 constexpr int kMaxState = 2 + 2 * kMaxParams;
+// Largest order of the autoregressive noise model fitted to the residuals: enough for the
+// correlation of anti-aliasing filters and encoder interpolation, small against a segment.
+constexpr int kMaxArOrder = 6;
+// Outer rounds of (AR fit, prewhitened Gauss-Newton): the AR estimate from the residuals of a
+// consistent estimate is itself consistent, so one refit after the first prewhitened solve is
+// enough; the third round only runs when the coefficients still moved.
+constexpr int kMaxNoiseRounds = 3;
+constexpr double kArChangeTol = 1e-3;  // max |a_k| change that ends the rounds
 
-// Held values of a piecewise-constant channel on interval j: left value on [0, th), right value
-// on [th, 1] (local coordinate). th = 1 when the value does not change.
-struct Held {
-  double left, right, th;
+// Parameters of one segment: roles and values.
+struct Params {
+  int m = 0;
+  Role role[kMaxParams];
+  double theta0 = 0, theta1 = 0, K0 = 0, dK = 0, y0 = 0, v0 = 0;
 };
 
-// Everything needed to integrate eq. (4) and its sensitivities over one damping segment.
+// Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
-  SegmentSimulator(const SignalView& s, const GearConstants& g, Formulation f)
-      : s_(s), g_(g), f_(f) {}
-
-  // Split fraction of interval j for a channel whose held value changes (see IntegralMethod).
-  double split(Index j, bool rising) const {
-    if (s_.mesh_phase == nullptr || j + 1 >= s_.n) return 1.0;
-    const double ua = s_.mesh_phase[j], ub = s_.mesh_phase[j + 1];
-    if (!(ub > ua)) return 1.0;
-    const double off = rising ? 0.0 : g_.contact_ratio - 1.0;
-    const double tol = 1e-9 * std::max(1.0, std::abs(ua));
-    const double c = std::ceil(ua - off - tol) + off;
-    if (c > ub + (ub - ua)) return 1.0;
-    return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
-  }
-
-  Held held(const double* ch, Index j) const {
-    const double a = ch[j];
-    const double b = j + 1 < s_.n ? ch[j + 1] : a;
-    if (a == b) return {a, a, 1.0};
-    return {a, b, split(j, b > a)};
-  }
-
-  // Torque at local coordinate u of interval j (cubic through the neighbouring samples).
-  double torqueAt(Index j, double u) const {
-    if (s_.torque == nullptr) return 0.0;
-    if (u == 0.0) return s_.torque[j];
-    if (u == 1.0 && j + 1 < s_.n) return s_.torque[j + 1];
-    const CubicIntervalRule& r = rules_.forInterval(j, 0, s_.n);
-    const auto w = r.value(u);
-    const Index b = j + r.offset();
-    return w[0] * s_.torque[b] + w[1] * s_.torque[b + 1] + w[2] * s_.torque[b + 2] +
-           w[3] * s_.torque[b + 3];
-  }
-
-  // Parameters of one segment: roles and values.
-  struct Params {
-    int m = 0;
-    Role role[kMaxParams];
-    double theta0 = 0, theta1 = 0, K0 = 0, dK = 0, y0 = 0, v0 = 0;
-  };
+  // `fast`: closed-form per-step affine maps where they apply (see run()).
+  SegmentSimulator(const ForwardModel& fm, bool fast) : fm_(fm), fast_(fast) {}
 
   // Integrates over samples [b, e) from (p.y0, p.v0). Calls visit(n, z) for each sample with the
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
@@ -81,29 +53,71 @@ class SegmentSimulator {
       if (p.role[k] == Role::V0) z[3 + 2 * k] = 1.0;
     }
     visit(b, z);
-    const double h = s_.dt;
-    const bool grey = f_ == Formulation::Greybox;
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const bool smooth = fm_.smoothStiffness();
+    // Fast path: with K and the mesh state held on a whole sample interval, C constant (no load
+    // law) and one step per sample, RK4 is an affine map of the state and the three stage
+    // torques, z+ = M z + G T, the same for every such interval with the same K: formed once
+    // (by stepping unit vectors) and applied in its block structure: the state x = (y, v) by
+    // R x + Gx T, each sensitivity pair z_k by R z_k + S_k x + H_k T (S_k = H_k = 0 for the
+    // initial-state sensitivities). Algebraically the same numbers as the RK4 step.
+    bool fast = fast_ && !smooth && substeps == 1;
+    for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
+    AffineMap maps[kMaxMaps];
+    int n_maps = 0;
     for (Index j = b; j + 1 < e; ++j) {
-      // Stiffness pieces on this interval.
-      double Kl, Kr, sl = 0, sr = 0, th;
-      if (grey) {
-        const Held hs = held(s_.mesh_state, j);
-        sl = hs.left, sr = hs.right, th = hs.th;
-        Kl = p.K0 + p.dK * sl, Kr = p.K0 + p.dK * sr;
-      } else {
-        const Held hk = held(s_.stiffness, j);
-        Kl = hk.left / g_.equivalent_mass, Kr = hk.right / g_.equivalent_mass, th = hk.th;
-        if (!g_.piecewise_constant_stiffness) th = 1.0;  // smooth: handled by interpolation
+      const double th = fm_.heldSplit(j);
+      if (fast && th >= 1.0) {
+        double sv = 0.0, Kc;
+        if (grey) {
+          sv = fm_.meshState(j, false);
+          Kc = p.K0 + p.dK * sv;
+        } else {
+          Kc = fm_.knownStiffness(j, 0.0, false, b, e);
+        }
+        int im = 0;
+        while (im < n_maps && !(maps[im].K == Kc && maps[im].sv == sv)) ++im;
+        if (im == n_maps && n_maps < kMaxMaps) {
+          maps[im] = affineMap(D, p, Kc, sv, h);
+          ++n_maps;
+        }
+        if (im < n_maps) {
+          const double T[3] = {fm_.torque(j, 0.0, b, e), fm_.torque(j, 0.5, b, e),
+                               fm_.torque(j, 1.0, b, e)};
+          maps[im].apply(z, p.m, T);
+          visit(j + 1, z);
+          continue;
+        }
       }
       const double parts[2][2] = {{0.0, th}, {th, 1.0}};
       for (int piece = 0; piece < 2; ++piece) {
         const double u0 = parts[piece][0], u1 = parts[piece][1];
         if (!(u1 > u0)) continue;
-        const double K = piece == 0 ? Kl : Kr, sv = piece == 0 ? sl : sr;
+        const bool right = piece == 1;
+        double sv = 0.0, Kc = 0.0;
+        if (grey) {
+          sv = fm_.meshState(j, right);
+          Kc = p.K0 + p.dK * sv;
+        } else if (!smooth) {
+          Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+        }
         const double du = (u1 - u0) / substeps;
         for (int q = 0; q < substeps; ++q) {
-          const double ua = u0 + q * du, ub = ua + du, um = 0.5 * (ua + ub);
-          step(z, D, p, K, sv, h * du, j, ua, um, ub);
+          const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
+          const double um = 0.5 * (ua + ub);
+          Stage st;
+          st.T[0] = fm_.torque(j, ua, b, e);
+          st.T[1] = fm_.torque(j, um, b, e);
+          st.T[2] = fm_.torque(j, ub, b, e);
+          if (smooth) {
+            st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
+            st.K[1] = fm_.knownStiffness(j, um, right, b, e);
+            st.K[2] = fm_.knownStiffness(j, ub, right, b, e);
+          } else {
+            st.K[0] = st.K[1] = st.K[2] = Kc;
+          }
+          step(z, D, p, st, sv, h * (ub - ua));
         }
       }
       visit(j + 1, z);
@@ -111,52 +125,154 @@ class SegmentSimulator {
   }
 
  private:
-  // One RK4 step of length hs over local coordinates ua -> ub (midpoint um) of interval j, with
-  // K (and mesh state sv) constant on it.
-  void step(double* z, int D, const Params& p, double K, double sv, double hs, Index j, double ua,
-            double um, double ub) const {
+  struct Stage {
+    double K[3], T[3];  // at the step's start, midpoint and end
+  };
+  static constexpr int kMaxMaps = 4;  // distinct held K values cached per run (square: 2)
+  struct AffineMap {
+    double K = 0, sv = 0;
+    double R[2][2], G[2][3];
+    double S[kMaxParams][2][2], H[kMaxParams][2][3];
+    bool coupled[kMaxParams];
+    void apply(double* z, int m, const double* T) const {
+      const double y = z[0], v = z[1];
+      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
+      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
+      for (int k = 0; k < m; ++k) {
+        double* w = z + 2 + 2 * k;
+        const double a = w[0], c = w[1];
+        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
+        if (coupled[k]) {
+          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
+                H[k][0][2] * T[2];
+          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
+                H[k][1][2] * T[2];
+        }
+        w[0] = n0, w[1] = n1;
+      }
+    }
+  };
+
+  // The affine map of one RK4 step of length h with K and the mesh state sv held.
+  AffineMap affineMap(int D, const Params& p, double K, double sv, double h) const {
+    AffineMap a;
+    a.K = K, a.sv = sv;
+    Stage st;
+    st.K[0] = st.K[1] = st.K[2] = K;
+    double col[kMaxState];
+    auto stepOf = [&](int unit_state, int unit_torque) {
+      std::fill(col, col + D, 0.0);
+      if (unit_state >= 0) col[unit_state] = 1.0;
+      for (int q = 0; q < 3; ++q) st.T[q] = q == unit_torque ? 1.0 : 0.0;
+      step(col, D, p, st, sv, h);
+    };
+    for (int c = 0; c < 2; ++c) {  // columns of x
+      stepOf(c, -1);
+      a.R[0][c] = col[0], a.R[1][c] = col[1];
+      for (int k = 0; k < p.m; ++k) a.S[k][0][c] = col[2 + 2 * k], a.S[k][1][c] = col[3 + 2 * k];
+    }
+    for (int q = 0; q < 3; ++q) {  // stage torques
+      stepOf(-1, q);
+      a.G[0][q] = col[0], a.G[1][q] = col[1];
+      for (int k = 0; k < p.m; ++k) a.H[k][0][q] = col[2 + 2 * k], a.H[k][1][q] = col[3 + 2 * k];
+    }
+    for (int k = 0; k < p.m; ++k) {
+      a.coupled[k] = p.role[k] != Role::Y0 && p.role[k] != Role::V0;
+    }
+    return a;
+  }
+
+  // One RK4 step of length hs with the coefficients at the stage times.
+  void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
     double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
-    const double Ta = torqueAt(j, ua), Tm = torqueAt(j, um), Tb = torqueAt(j, ub);
-    deriv(z, D, p, K, sv, Ta, k1);
+    deriv(z, D, p, st.K[0], sv, st.T[0], k1);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
-    deriv(tmp, D, p, K, sv, Tm, k2);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], k2);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k2[i];
-    deriv(tmp, D, p, K, sv, Tm, k3);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], k3);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
-    deriv(tmp, D, p, K, sv, Tb, k4);
+    deriv(tmp, D, p, st.K[2], sv, st.T[2], k4);
     for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
   }
 
   void deriv(const double* z, int D, const Params& p, double K, double sv, double T1,
              double* dz) const {
     const double C = p.theta0 + p.theta1 * T1;
-    const double F = g_.force_factor * T1;
+    const double F = fm_.gear().force_factor * T1;
     const double y = z[0], v = z[1];
     dz[0] = v;
     dz[1] = F - C * v - K * y;
     for (int k = 0, i = 2; i < D; ++k, i += 2) {
       double forcing = 0.0;
       switch (p.role[k]) {
-        case Role::Theta0: forcing = -v; break;
-        case Role::Theta1: forcing = -T1 * v; break;
-        case Role::K0: forcing = -y; break;
-        case Role::DK: forcing = -sv * y; break;
-        default: break;
+        case Role::Theta0:
+          forcing = -v;
+          break;
+        case Role::Theta1:
+          forcing = -T1 * v;
+          break;
+        case Role::K0:
+          forcing = -y;
+          break;
+        case Role::DK:
+          forcing = -sv * y;
+          break;
+        default:
+          break;
       }
       dz[i] = z[i + 1];
       dz[i + 1] = forcing - C * z[i + 1] - K * z[i];
     }
   }
 
-  const SignalView& s_;
-  const GearConstants& g_;
-  Formulation f_;
-  CubicRules rules_;
+  const ForwardModel& fm_;
+  bool fast_;
 };
 
 // Substeps per sample so that omega * h_step <= 0.1 (RK4 error well below the bars).
 int substepsFor(double omega, double dt) {
   return std::max(1, static_cast<int>(std::ceil(omega * dt / 0.1)));
+}
+
+// Autoregressive model of the measurement noise: the innovation (whitened residual) is
+// e_n = r_n + sum_{k=1..p} a_k r_{n-k}. p = 0 is white noise.
+struct NoiseModel {
+  int p = 0;
+  double a[kMaxArOrder] = {0};
+};
+
+// AR(p) fit by Levinson-Durbin on the pooled autocovariance r[0..kMaxArOrder] of `count`
+// residuals; the order minimises the Bayesian information criterion (white noise: p = 0 unless
+// a coefficient is several standard errors, sqrt(1/count), from zero).
+NoiseModel fitNoiseModel(const double* acov, double count) {
+  NoiseModel best;
+  if (!(acov[0] > 0.0) || !(count > 4.0 * kMaxArOrder)) return best;
+  double a[kMaxArOrder + 1] = {1.0}, tmp[kMaxArOrder + 1];
+  double err = acov[0];
+  double best_bic = count * std::log(err);
+  for (int p = 1; p <= kMaxArOrder; ++p) {
+    double acc = acov[p];
+    for (int k = 1; k < p; ++k) acc += a[k] * acov[p - k];
+    const double refl = -acc / err;
+    if (!(std::abs(refl) < 1.0)) break;
+    std::copy(a, a + p, tmp);
+    for (int k = 1; k < p; ++k) a[k] = tmp[k] + refl * tmp[p - k];
+    a[p] = refl;
+    err *= 1.0 - refl * refl;
+    const double bic = count * std::log(err) + p * std::log(count);
+    if (bic < best_bic) {
+      best_bic = bic;
+      best.p = p;
+      for (int k = 1; k <= p; ++k) best.a[k - 1] = a[k];
+    }
+  }
+  return best;
+}
+
+double maxChange(const NoiseModel& x, const NoiseModel& y) {
+  double d = x.p == y.p ? 0.0 : 1.0;
+  for (int k = 0; k < kMaxArOrder; ++k) d = std::max(d, std::abs(x.a[k] - y.a[k]));
+  return d;
 }
 
 }  // namespace
@@ -181,7 +297,7 @@ bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult&
 
 bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
                        const GearConstants& gear, const IdentificationOptions& o,
-                       IdentificationResult* res, std::string* error) {
+                       IdentificationResult* res, std::string* error, bool reference_integration) {
   if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return true;
   if (ranges.size() != res->segments.size()) {
     *error = "refinement: segment ranges do not match the result";
@@ -191,7 +307,8 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   const bool grey = o.formulation == Formulation::Greybox;
   const bool load = o.model == DampingModel::LoadLaw;
   const bool piecewise = o.model == DampingModel::Piecewise;
-  const SegmentSimulator sim(s, gear, o.formulation);
+  const ForwardModel fm(s, gear, o.formulation);
+  const SegmentSimulator sim(fm, !reference_integration);
   const int substeps = substepsFor(res->omega0, s.dt);
 
   // Unknowns: per segment locals [y0, v0, (theta0 if piecewise), (K0, dK if greybox)];
@@ -209,6 +326,12 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   std::vector<char> active(nseg, 0);
   std::vector<Eigen::VectorXd> loc(nseg, Eigen::VectorXd::Zero(nl));
   Eigen::VectorXd sh = Eigen::VectorXd::Zero(ns);
+  // Keep the integral method's estimates beside the refined ones.
+  auto keepIntegral = [](SegmentEstimate* e) {
+    if (!e->refined) e->C_integral = e->C, e->C_integral_std = e->C_std;
+  };
+  for (auto& e : res->segments) keepIntegral(&e);
+  if (res->constant) keepIntegral(&*res->constant);
   // Start values from the integral method.
   if (!piecewise) {
     if (load && res->load_law && res->load_law->identifiable) {
@@ -242,72 +365,121 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     }
   }
 
-  auto makeParams = [&](size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g) {
-    SegmentSimulator::Params p;
+  auto makeParams = [&](const Eigen::VectorXd& x, const Eigen::VectorXd& g) {
+    Params p;
     p.m = m;
     for (int k = 0; k < nl; ++k) p.role[k] = local_roles[k];
     for (int k = 0; k < ns; ++k) p.role[nl + k] = shared_roles[k];
     auto set = [&](Role r, double v) {
       switch (r) {
-        case Role::Y0: p.y0 = v; break;
-        case Role::V0: p.v0 = v; break;
-        case Role::Theta0: p.theta0 = v; break;
-        case Role::Theta1: p.theta1 = v; break;
-        case Role::K0: p.K0 = v; break;
-        case Role::DK: p.dK = v; break;
+        case Role::Y0:
+          p.y0 = v;
+          break;
+        case Role::V0:
+          p.v0 = v;
+          break;
+        case Role::Theta0:
+          p.theta0 = v;
+          break;
+        case Role::Theta1:
+          p.theta1 = v;
+          break;
+        case Role::K0:
+          p.K0 = v;
+          break;
+        case Role::DK:
+          p.dK = v;
+          break;
       }
     };
     for (int k = 0; k < nl; ++k) set(local_roles[k], x[k]);
     for (int k = 0; k < ns; ++k) set(shared_roles[k], g[k]);
-    (void)i;
     return p;
   };
 
-  // Normal equations of one segment at (x, g): N = J^T J (m x m), rhs = J^T r, cost = r^T r.
+  // Normal equations of one segment at (x, g) for the prewhitened output error: with the
+  // residual r_n = y_n - yhat_n and the sensitivities J_n = dyhat_n/dp filtered alike,
+  // e_n = r_n + sum a_k r_{n-k} (from the segment's (p+1)-th sample on),
+  // N = sum Je Je^T, rhs = sum Je e, cost = sum e^2; plus the raw residual's statistics.
   struct Normal {
     Eigen::MatrixXd N;
     Eigen::VectorXd rhs;
-    double cost = 0;
-    bool finite = true;
+    double cost = 0;  // whitened sum of squares (the objective)
+    long rows = 0;    // whitened rows
+    double raw = 0;   // sum r^2 over the segment
+    long samples = 0;
+    double acov[kMaxArOrder + 1] = {0};  // sum_n r_n r_{n-k} within the segment
+    double wlag1 = 0;                    // sum_n e_n e_{n-1}
   };
   auto evaluate = [&](size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
-                      bool jacobian) {
+                      const NoiseModel& nm) {
     Normal out;
     out.N = Eigen::MatrixXd::Zero(m, m);
     out.rhs = Eigen::VectorXd::Zero(m);
-    SegmentSimulator::Params p = makeParams(i, x, g);
-    if (!jacobian) p.m = 0;
+    const Params p = makeParams(x, g);
     double Nacc[kMaxParams][kMaxParams] = {{0}};
     double racc[kMaxParams] = {0};
-    double cost = 0.0;
-    const int mm = p.m;
+    double hist[kMaxArOrder][kMaxParams + 1] = {{0}};  // previous raw [r, J] rows, newest first
+    double rhist[kMaxArOrder] = {0};                   // previous raw residuals, newest first
+    double cost = 0.0, raw = 0.0, wlag = 0.0, wprev = 0.0;
+    long count = 0, rows = 0;
+    const int P = nm.p;
     sim.run(ranges[i].first, ranges[i].second, p, substeps, [&](Index n, const double* z) {
-      const double r = s.dte[n] - z[0];
-      cost += r * r;
-      for (int a = 0; a < mm; ++a) {
-        const double ja = z[2 + 2 * a];
-        racc[a] += ja * r;
-        for (int b = 0; b <= a; ++b) Nacc[a][b] += ja * z[2 + 2 * b];
+      double cur[kMaxParams + 1] = {0};
+      cur[0] = s.dte[n] - z[0];
+      for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
+      const double r = cur[0];
+      raw += r * r;
+      const int lags = static_cast<int>(std::min<long>(count, kMaxArOrder));
+      for (int k = 1; k <= lags; ++k) out.acov[k] += r * rhist[k - 1];
+      if (count >= P) {
+        double w[kMaxParams + 1] = {0};
+        for (int c = 0; c <= m; ++c) {
+          double v = cur[c];
+          for (int k = 0; k < P; ++k) v += nm.a[k] * hist[k][c];
+          w[c] = v;
+        }
+        cost += w[0] * w[0];
+        if (rows > 0) wlag += w[0] * wprev;
+        wprev = w[0];
+        ++rows;
+        for (int a = 0; a < m; ++a) {
+          const double ja = w[a + 1];
+          racc[a] += ja * w[0];
+          for (int b = 0; b <= a; ++b) Nacc[a][b] += ja * w[b + 1];
+        }
       }
+      for (int k = std::min(P, kMaxArOrder) - 1; k > 0; --k) {
+        for (int c = 0; c <= m; ++c) hist[k][c] = hist[k - 1][c];
+      }
+      if (P > 0) {
+        for (int c = 0; c <= m; ++c) hist[0][c] = cur[c];
+      }
+      for (int k = kMaxArOrder - 1; k > 0; --k) rhist[k] = rhist[k - 1];
+      rhist[0] = r;
+      ++count;
     });
-    for (int a = 0; a < mm; ++a) {
+    for (int a = 0; a < m; ++a) {
       out.rhs[a] = racc[a];
       for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = Nacc[a][b];
     }
     out.cost = cost;
-    out.finite = std::isfinite(cost);
+    out.rows = rows;
+    out.raw = raw;
+    out.acov[0] = raw;
+    out.samples = count;
+    out.wlag1 = wlag;
     return out;
   };
 
-  // Gauss-Newton with step halving. Locals are eliminated per segment (Schur complement).
-  auto solveStep = [&](const std::vector<Normal>& normals, std::vector<Eigen::VectorXd>* dl,
-                       Eigen::VectorXd* dg, Eigen::MatrixXd* shared_inv,
-                       std::vector<Eigen::MatrixXd>* local_inv) {
+  // Gauss-Newton step of a set of segments: locals eliminated per segment (Schur complement).
+  auto solveStep = [&](const std::vector<size_t>& set, const std::vector<Normal>& normals,
+                       std::vector<Eigen::VectorXd>* dl, Eigen::VectorXd* dg,
+                       Eigen::MatrixXd* shared_inv, std::vector<Eigen::MatrixXd>* local_inv) {
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
     std::vector<Eigen::MatrixXd> Nll_inv(nseg);
-    for (size_t i = 0; i < nseg; ++i) {
-      if (!active[i]) continue;
+    for (size_t i : set) {
       const Normal& nm = normals[i];
       Nll_inv[i] = nm.N.topLeftCorner(nl, nl).ldlt().solve(Eigen::MatrixXd::Identity(nl, nl));
       const Eigen::MatrixXd Nsl = nm.N.block(nl, 0, ns, nl);
@@ -317,93 +489,165 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     Eigen::MatrixXd Ainv = Eigen::MatrixXd::Zero(ns, ns);
     if (ns > 0) Ainv = A.ldlt().solve(Eigen::MatrixXd::Identity(ns, ns));
     *dg = Ainv * rhs;
-    for (size_t i = 0; i < nseg; ++i) {
-      if (!active[i]) continue;
+    for (size_t i : set) {
       const Normal& nm = normals[i];
       (*dl)[i] = Nll_inv[i] * (nm.rhs.head(nl) - nm.N.block(0, nl, nl, ns) * *dg);
     }
     if (shared_inv) *shared_inv = Ainv;
-    if (local_inv) *local_inv = Nll_inv;
+    if (local_inv) {
+      for (size_t i : set) (*local_inv)[i] = Nll_inv[i];
+    }
   };
 
+  // Gauss-Newton with step halving on the segments of `set` (one segment for the piecewise
+  // model, whose segments are independent problems; all for shared damping). Returns the
+  // iterations; *converged false when the iteration limit stopped it.
   std::vector<Normal> normals(nseg);
-  double cost = 0.0;
+  // Converged when the damping (and stiffness) unknowns move by less than 1e-10 relative.
+  constexpr double kConvergenceTol = 1e-10;
+  auto relativeChange = [&](const std::vector<size_t>& set, const std::vector<Eigen::VectorXd>& dl,
+                            const Eigen::VectorXd& dg, double step) {
+    double rel = 0.0;
+    for (int k = 0; k < ns; ++k) {
+      const double to = sh[k] + step * dg[k];
+      rel = std::max(rel, std::abs(step * dg[k]) / std::max(std::abs(to), 1e-300));
+    }
+    for (size_t i : set) {
+      for (int k = 2; k < nl; ++k) {
+        const double to = loc[i][k] + step * dl[i][k];
+        rel = std::max(rel, std::abs(step * dl[i][k]) / std::max(std::abs(to), 1e-300));
+      }
+    }
+    return rel;
+  };
+  auto gaussNewton = [&](const std::vector<size_t>& set, const NoiseModel& nm, bool* converged,
+                         bool* finite) {
+    double cost = 0.0;
+    for (size_t i : set) {
+      normals[i] = evaluate(i, loc[i], sh, nm);
+      cost += normals[i].cost;
+    }
+    *finite = std::isfinite(cost);
+    *converged = false;
+    if (!*finite) return 0;
+    int it = 0;
+    for (; it < o.max_iterations && !*converged; ++it) {
+      std::vector<Eigen::VectorXd> dl(nseg);
+      Eigen::VectorXd dg;
+      solveStep(set, normals, &dl, &dg, nullptr, nullptr);
+      if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
+        *converged = true;  // the full step would move nothing: no need to evaluate it
+        break;
+      }
+      double step = 1.0;
+      bool accepted = false;
+      for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
+        std::vector<Eigen::VectorXd> x1(nseg);
+        const Eigen::VectorXd g1 = sh + step * dg;
+        std::vector<Normal> n1(nseg);
+        double c1 = 0.0;
+        for (size_t i : set) {
+          x1[i] = loc[i] + step * dl[i];
+          n1[i] = evaluate(i, x1[i], g1, nm);
+          c1 += n1[i].cost;
+        }
+        if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
+          accepted = true;
+          *converged =
+              relativeChange(set, dl, dg, step) < kConvergenceTol || c1 >= cost * (1.0 - 1e-14);
+          for (size_t i : set) {
+            loc[i] = x1[i];
+            normals[i] = std::move(n1[i]);
+          }
+          sh = g1;
+          cost = c1;
+        }
+      }
+      if (!accepted) *converged = true;  // no descent left: at the minimum to rounding
+    }
+    return it;
+  };
+
+  std::vector<std::vector<size_t>> problems;
   for (size_t i = 0; i < nseg; ++i) {
     if (!active[i]) continue;
-    normals[i] = evaluate(i, loc[i], sh, true);
-    cost += normals[i].cost;
+    if (piecewise || problems.empty()) problems.emplace_back();
+    problems.back().push_back(i);
   }
-  if (!std::isfinite(cost)) {
-    *error = "refinement: the model response is not finite at the integral-method estimate";
+  if (problems.empty()) {
+    *error = "refinement: no identifiable segment";
     return false;
   }
-  int it = 0;
-  bool converged = false;
-  for (; it < o.max_iterations && !converged; ++it) {
-    std::vector<Eigen::VectorXd> dl(nseg, Eigen::VectorXd::Zero(nl));
-    Eigen::VectorXd dg;
-    solveStep(normals, &dl, &dg, nullptr, nullptr);
-    double step = 1.0;
-    bool accepted = false;
-    for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
-      std::vector<Eigen::VectorXd> x1(nseg);
-      const Eigen::VectorXd g1 = sh + step * dg;
-      std::vector<Normal> n1(nseg);
-      double c1 = 0.0;
-      for (size_t i = 0; i < nseg; ++i) {
-        if (!active[i]) continue;
-        x1[i] = loc[i] + step * dl[i];
-        n1[i] = evaluate(i, x1[i], g1, true);
-        c1 += n1[i].cost;
-      }
-      if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
-        accepted = true;
-        // Converged when the damping unknowns moved by less than 1e-10 relative.
-        double rel = 0.0;
-        for (int k = 0; k < ns; ++k) {
-          rel = std::max(rel, std::abs(step * dg[k]) / std::max(std::abs(g1[k]), 1e-300));
-        }
-        for (size_t i = 0; i < nseg; ++i) {
-          if (!active[i]) continue;
-          for (int k = 2; k < nl; ++k) {
-            rel = std::max(rel,
-                           std::abs(step * dl[i][k]) / std::max(std::abs(x1[i][k]), 1e-300));
-          }
-        }
-        converged = rel < 1e-10 || c1 >= cost * (1.0 - 1e-14);
-        for (size_t i = 0; i < nseg; ++i) {
-          if (active[i]) loc[i] = x1[i];
-        }
-        sh = g1;
-        normals = std::move(n1);
-        cost = c1;
-      }
+  std::vector<char> converged(nseg, 1);
+  int iterations = 0;
+  // AR model fitted to the pooled residual autocovariances of a set of segments.
+  auto pooledFit = [&](const std::vector<size_t>& set) {
+    double acov[kMaxArOrder + 1] = {0}, count = 0.0;
+    for (size_t i : set) {
+      for (int k = 0; k <= kMaxArOrder; ++k) acov[k] += normals[i].acov[k];
+      count += static_cast<double>(normals[i].samples);
     }
-    if (!accepted) {
-      converged = true;  // no descent left: at the minimum to rounding
+    for (int k = 0; k <= kMaxArOrder; ++k) acov[k] /= count;
+    return fitNoiseModel(acov, count);
+  };
+  // Per problem (a segment of the piecewise model, which therefore gives the same result
+  // refined alone, as live; all segments for shared damping): round 0 assumes white noise; then
+  // the AR model of its residuals and the prewhitened problem, refitted until the noise model
+  // settles.
+  std::vector<NoiseModel> noise_of(nseg);
+  for (const auto& set : problems) {
+    NoiseModel noise;
+    for (int round = 0; round < kMaxNoiseRounds; ++round) {
+      bool conv = false, finite = true;
+      iterations += gaussNewton(set, noise, &conv, &finite);
+      if (!finite) {
+        *error = "refinement: the model response is not finite at the " +
+                 std::string(round == 0 ? "integral-method estimate" : "white-noise estimate");
+        return false;
+      }
+      for (size_t i : set) converged[i] = conv;
+      const NoiseModel next = pooledFit(set);
+      if (maxChange(next, noise) < kArChangeTol || round + 1 == kMaxNoiseRounds) break;
+      noise = next;
     }
+    for (size_t i : set) noise_of[i] = noise;
   }
 
   // Covariances at the solution.
-  std::vector<Eigen::VectorXd> dl(nseg, Eigen::VectorXd::Zero(nl));
-  Eigen::VectorXd dg;
-  Eigen::MatrixXd Ainv;
-  std::vector<Eigen::MatrixXd> Nll_inv;
-  solveStep(normals, &dl, &dg, &Ainv, &Nll_inv);
-  long n_total = 0;
-  int n_active = 0;
-  for (size_t i = 0; i < nseg; ++i) {
-    if (active[i]) n_total += ranges[i].second - ranges[i].first, ++n_active;
+  std::vector<Eigen::MatrixXd> Nll_inv(nseg);
+  std::vector<Eigen::MatrixXd> Ainv_of(nseg);
+  {
+    std::vector<Eigen::VectorXd> dl(nseg);
+    Eigen::VectorXd dg;
+    for (const auto& set : problems) {
+      Eigen::MatrixXd Ainv;
+      solveStep(set, normals, &dl, &dg, &Ainv, &Nll_inv);
+      for (size_t i : set) Ainv_of[i] = Ainv;
+    }
   }
-  const long dof_total = n_total - static_cast<long>(n_active) * nl - ns;
-  if (dof_total < 1) {
+  long n_total = 0, rows_total = 0;
+  int n_active = 0;
+  double raw_total = 0.0, cost_total = 0.0;
+  for (size_t i = 0; i < nseg; ++i) {
+    if (!active[i]) continue;
+    n_total += normals[i].samples, rows_total += normals[i].rows, ++n_active;
+    raw_total += normals[i].raw, cost_total += normals[i].cost;
+  }
+  const long unknowns = static_cast<long>(n_active) * nl + ns;
+  if (rows_total - unknowns < 1) {
     *error = "refinement: too few samples for the unknowns";
     return false;
   }
-  const double sigma2_pooled = cost / static_cast<double>(dof_total);
-  res->noise_std = std::sqrt(sigma2_pooled);
+  // Innovation variance (white noise: the residual variance) for the covariance.
+  const double sigma2_pooled = cost_total / static_cast<double>(rows_total - unknowns);
+  res->noise_std = std::sqrt(raw_total / static_cast<double>(n_total - unknowns));
+  res->noise_innovation_std = std::sqrt(sigma2_pooled);
+  std::vector<size_t> all;
+  for (const auto& set : problems) all.insert(all.end(), set.begin(), set.end());
+  const NoiseModel record_noise = pooledFit(all);
+  res->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
   res->estimator = "output_error";
-  res->iterations = it;
+  res->iterations = iterations;
 
   const double omega0 = res->omega0;
   auto fillC = [&](SegmentEstimate* e, double C, double var) {
@@ -413,19 +657,22 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     e->xi = C / (2.0 * omega0);
     e->refined = true;
   };
+  const std::string not_converged = "output-error refinement stopped after the iteration limit (" +
+                                    std::to_string(o.max_iterations) +
+                                    ") without converging to 1e-10";
   res->windows.clear();
-  double k_int = 0.0, dur = 0.0;
+  bool all_converged = true;
   for (size_t i = 0; i < nseg; ++i) {
     if (!active[i]) continue;
     SegmentEstimate& e = res->segments[i];
     const Eigen::VectorXd& x = loc[i];
-    const long ni = ranges[i].second - ranges[i].first;
-    const double sigma2 = piecewise ? normals[i].cost / static_cast<double>(ni - nl) : sigma2_pooled;
-    // Full covariance of this segment's unknowns [locals, shared].
-    const Eigen::MatrixXd Nsl = normals[i].N.block(nl, 0, ns, nl);
+    const Normal& nm = normals[i];
+    const double sigma2 = piecewise ? nm.cost / static_cast<double>(nm.rows - nl) : sigma2_pooled;
+    const Eigen::MatrixXd& Ainv = Ainv_of[i];
+    // Covariance of this segment's unknowns [locals, shared].
+    const Eigen::MatrixXd Nsl = nm.N.block(nl, 0, ns, nl);
     const Eigen::MatrixXd B = Nll_inv[i] * Nsl.transpose();
     const Eigen::MatrixXd cov_ll = sigma2 * (Nll_inv[i] + B * Ainv * B.transpose());
-    const Eigen::MatrixXd cov_ls = -sigma2 * B * Ainv;
     const Eigen::MatrixXd cov_ss = sigma2 * Ainv;
     int k = 2;
     if (piecewise) {
@@ -437,13 +684,22 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     } else {
       fillC(&e, sh[0], cov_ss(0, 0));
     }
-    (void)cov_ls;
     if (grey) {
       const int a = k, b = k + 1;
       e.k_min = me * x[a];
       e.k_max = me * (x[a] + x[b]);
       e.k_min_std = me * std::sqrt(std::max(cov_ll(a, a), 0.0));
       e.k_max_std = me * std::sqrt(std::max(cov_ll(a, a) + cov_ll(b, b) + 2 * cov_ll(a, b), 0.0));
+    }
+    ResidualStatistics& rs = e.residuals;
+    rs.rms = std::sqrt(nm.raw / static_cast<double>(nm.samples));
+    rs.lag1 = nm.raw > 0.0 ? nm.acov[1] / nm.raw : kNaN;
+    rs.whitened_lag1 = nm.cost > 0.0 ? nm.wlag1 / nm.cost : kNaN;
+    rs.innovation_std = std::sqrt(nm.cost / static_cast<double>(nm.rows));
+    rs.ar.assign(noise_of[i].a, noise_of[i].a + noise_of[i].p);
+    if (!converged[i]) {
+      all_converged = false;
+      e.warnings.push_back({"refine_not_converged", not_converged});
     }
     WindowEstimate w;
     w.t_start = e.t_start;
@@ -452,21 +708,19 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     w.velocity = x[1];
     w.alpha = kNaN;
     res->windows.push_back(w);
-    (void)k_int, (void)dur;
   }
   if (res->constant && !piecewise && !load) {
-    fillC(&*res->constant, sh[0], sigma2_pooled * Ainv(0, 0));
+    fillC(&*res->constant, sh[0], sigma2_pooled * Ainv_of[problems[0][0]](0, 0));
+    if (!all_converged) res->constant->warnings.push_back({"refine_not_converged", not_converged});
   }
   if (res->load_law && load) {
+    const Eigen::MatrixXd& Ainv = Ainv_of[problems[0][0]];
     res->load_law->c0 = me * sh[0];
     res->load_law->c1 = me * sh[1];
     res->load_law->c0_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(0, 0), 0.0));
     res->load_law->c1_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(1, 1), 0.0));
   }
-  if (!converged) {
-    res->warnings.push_back("output-error refinement stopped after " + std::to_string(it) +
-                            " iterations without converging to 1e-10");
-  }
+  if (!all_converged) res->warnings.push_back(not_converged);
   return true;
 }
 
@@ -515,7 +769,8 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
     return false;
   }
   for (int i = static_cast<int>(seg.size()) - 1, next = -1; i >= 0; --i) {
-    if (r.segments[i].identifiable) next = i;
+    if (r.segments[i].identifiable)
+      next = i;
     else if (next >= 0 && !std::isfinite(seg[i].C)) {
       const double t0 = seg[i].t_start, t1 = seg[i].t_end;
       seg[i] = seg[next];
@@ -523,8 +778,8 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
     }
   }
   const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
-  const Index end = std::min<Index>(
-      s.n, static_cast<Index>(std::llround((seg.back().t_end - s.t0) / s.dt)));
+  const Index end =
+      std::min<Index>(s.n, static_cast<Index>(std::llround((seg.back().t_end - s.t0) / s.dt)));
   if (begin < 0 || end - begin < 2) {
     *error = "modeled response: the segments do not lie in the record";
     return false;
@@ -540,48 +795,49 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   const bool load = r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable;
   const double th0 = load ? r.load_law->c0 / me : 0.0, th1 = load ? r.load_law->c1 / me : 0.0;
   const Formulation f = r.formulation;
-  const SegmentSimulator sim(s, gear, f);
-  CubicRules rules;
-  // Breakpoints: switch instants of the stiffness/mesh-state channel, and segment boundaries.
+  const ForwardModel fm(s, gear, f);
+  // Breakpoints: switch instants of the held stiffness/mesh-state channel, and segment
+  // boundaries.
   std::vector<double> bps;
-  const double* ch = f == Formulation::Known     ? s.stiffness
-                     : f == Formulation::Greybox ? s.mesh_state
-                                                 : nullptr;
-  if (ch != nullptr) {
-    for (Index j = begin; j + 1 < end; ++j) {
-      if (ch[j] != ch[j + 1]) bps.push_back(s.time(j) + sim.held(ch, j).th * s.dt);
-    }
+  for (Index j = begin; j + 1 < end; ++j) {
+    const double th = fm.heldSplit(j);
+    if (th < 1.0) bps.push_back(s.time(j) + th * s.dt);
   }
   for (const auto& e : seg) bps.push_back(e.t_start);
-  auto segmentAt = [&](double t) -> const SegmentEstimate& {
+  std::sort(bps.begin(), bps.end());
+  auto segmentAt = [&](double t) -> size_t {
     size_t lo = 0, hi = seg.size();
     while (hi - lo > 1) {
       const size_t mid = (lo + hi) / 2;
-      if (seg[mid].t_start <= t) lo = mid;
-      else hi = mid;
+      if (seg[mid].t_start <= t)
+        lo = mid;
+      else
+        hi = mid;
     }
-    return seg[lo];
+    return lo;
+  };
+  // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
+  // integral method and the refinement.
+  auto sampleOf = [&](double t) {
+    return std::clamp<Index>(static_cast<Index>(std::llround((t - s.t0) / s.dt)), 0, s.n);
   };
   auto coeffs = [&](double t, double t_ref) {
-    double u = (t - s.t0) / s.dt;
     const double uref = (t_ref - s.t0) / s.dt;
-    Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
-    u -= static_cast<double>(j);
-    const double T1 = s.torque ? sim.torqueAt(j, std::clamp(u, 0.0, 1.0)) : 0.0;
-    const SegmentEstimate& e = segmentAt(t_ref);
+    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
+    const double u = std::clamp((t - s.t0) / s.dt - static_cast<double>(j), 0.0, 1.0);
+    const SegmentEstimate& e = seg[segmentAt(t_ref)];
+    const Index lo = sampleOf(e.t_start), hi = std::max(sampleOf(e.t_end), lo);
+    const double T1 = fm.torque(j, u, lo, hi);
+    const bool right = uref - static_cast<double>(j) >= fm.heldSplit(j);
     gear_sim::SdofCoefficients c;
     c.C = load ? th0 + th1 * T1 : e.C;
-    const double uref_local = uref - static_cast<double>(j);
     switch (f) {
-      case Formulation::Known: {
-        const Held hk = sim.held(s.stiffness, j);
-        c.K = (uref_local < hk.th ? hk.left : hk.right) / me;
+      case Formulation::Known:
+        c.K = fm.knownStiffness(j, u, right, lo, hi);
         c.F = gear.force_factor * T1;
         break;
-      }
       case Formulation::Greybox: {
-        const Held hs = sim.held(s.mesh_state, j);
-        const double sv = uref_local < hs.th ? hs.left : hs.right;
+        const double sv = fm.meshState(j, right);
         c.K = (e.k_min + (e.k_max - e.k_min) * sv) / me;
         c.F = gear.force_factor * T1;
         break;

@@ -1,0 +1,104 @@
+// The refinement's closed-form affine maps (held stiffness, constant damping per segment, one
+// RK4 step per sample) give the same estimates and standard errors as the generic RK4 of the
+// state and sensitivities they replace: the RK4 step of a linear system with held coefficients
+// is exactly affine in the state and the stage torques, so the two differ by rounding only.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "id_test_support.hpp"
+
+namespace {
+
+using namespace gear_id_test;
+using gear_damping_id::SegmentEstimate;
+
+// Rounding differences of ~1e-16 per step grow through ~1e3 steps per segment and the
+// Gauss-Newton solve (condition ~1e2): 1e-9 relative leaves a wide margin and is the bar.
+constexpr double kSameTol = 1e-9;
+
+void expectSame(double a, double b, const std::string& what) {
+  EXPECT_LE(std::abs(a - b), kSameTol * std::abs(b)) << what << ": " << a << " vs " << b;
+}
+
+void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
+  SimConfig c = table1Config();
+  c.simulation.duration = 0.005;
+  if (m == DampingModel::Piecewise) setPiecewiseTruth(&c, 1e-3);
+  SignalTable t = simulateOrFail(c);
+  addWhiteNoise(&t.dte, snr_db, seed);
+  const auto gear = gear_damping_id::gearConstants(c.gearModel());
+  const auto view = gear_damping_id::SignalView::of(t);
+  IdentificationOptions o;
+  o.formulation = f;
+  o.model = m;
+  o.refine = IdentificationOptions::Refine::Never;
+  o.window_length = gear_damping_id::defaultWindowLength(view, gear);
+  IdentificationResult start;
+  std::string e;
+  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
+  const auto ranges = gear_damping_id::segmentRanges(view, o);
+  IdentificationResult fast = start, reference = start;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &fast, &e, false)) << e;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &reference, &e, true)) << e;
+  ASSERT_EQ(fast.segments.size(), reference.segments.size());
+  const std::string label = gear_damping_id::toString(f) + " " + gear_damping_id::toString(m);
+  EXPECT_EQ(fast.noise_ar.size(), reference.noise_ar.size()) << label;
+  for (size_t i = 0; i < fast.segments.size(); ++i) {
+    const SegmentEstimate& a = fast.segments[i];
+    const SegmentEstimate& b = reference.segments[i];
+    ASSERT_TRUE(a.refined && b.refined) << label;
+    expectSame(a.C, b.C, label + " C");
+    expectSame(a.C_std, b.C_std, label + " C_std");
+    if (f == Formulation::Greybox) {
+      expectSame(a.k_min, b.k_min, label + " k_min");
+      expectSame(a.k_max_std, b.k_max_std, label + " k_max_std");
+    }
+  }
+  expectSame(fast.noise_std, reference.noise_std, label + " noise_std");
+}
+
+TEST(RefineFastPath, SameEstimatesAsTheGenericRk4) {
+  compare(Formulation::Known, DampingModel::Piecewise, 40.0, 11);
+  compare(Formulation::Known, DampingModel::Piecewise, 20.0, 12);
+  compare(Formulation::Greybox, DampingModel::Piecewise, 40.0, 13);
+  compare(Formulation::Known, DampingModel::Constant, 40.0, 14);
+}
+
+}  // namespace
+
+namespace {
+
+// The integral estimate is kept beside the refined one, and a refinement stopped by the
+// iteration limit says so on every segment it touched.
+TEST(RefineBookkeeping, KeepsTheIntegralEstimateAndFlagsNonConvergence) {
+  SimConfig c = table1Config();
+  c.simulation.duration = 0.004;
+  setPiecewiseTruth(&c, 1e-3);
+  SignalTable t = simulateOrFail(c);
+  addWhiteNoise(&t.dte, 30.0, 21);
+  IdentificationOptions o;
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult integral = identifyOrFail(t, c, o);
+  o.refine = IdentificationOptions::Refine::Always;
+  const IdentificationResult refined = identifyOrFail(t, c, o);
+  ASSERT_EQ(refined.segments.size(), integral.segments.size());
+  for (size_t i = 0; i < refined.segments.size(); ++i) {
+    const SegmentEstimate& e = refined.segments[i];
+    EXPECT_TRUE(e.refined);
+    EXPECT_EQ(e.C_integral, integral.segments[i].C);
+    EXPECT_EQ(e.C_integral_std, integral.segments[i].C_std);
+    EXPECT_TRUE(e.warnings.empty());
+    EXPECT_TRUE(std::isfinite(e.residuals.rms) && e.residuals.rms > 0.0);
+  }
+  // One Gauss-Newton step from the integral estimate at 30 dB cannot reach 1e-10.
+  o.max_iterations = 1;
+  const IdentificationResult stopped = identifyOrFail(t, c, o);
+  int flagged = 0;
+  for (const SegmentEstimate& e : stopped.segments) {
+    for (const auto& w : e.warnings) flagged += w.code == "refine_not_converged";
+  }
+  EXPECT_EQ(flagged, static_cast<int>(stopped.segments.size()));
+}
+
+}  // namespace
