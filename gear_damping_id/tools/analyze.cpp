@@ -35,6 +35,7 @@
 #include "gear_damping_id/input_checks.hpp"
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
@@ -281,8 +282,10 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
                            std::to_string(info.samples) +
                            " samples): the shared model's response needs the whole record";
       run.result.warnings.push_back(
-          "output-error refinement skipped: a record analysed streaming is refined per segment "
-          "only for the piecewise model");
+          {gd::quality_code::kRefineSkipped,
+           "output-error refinement skipped: a record analysed streaming is refined per segment "
+           "only for the piecewise model"});
+      gd::applyQualityFlags(run.options, &run.result);
     }
   }
   return true;

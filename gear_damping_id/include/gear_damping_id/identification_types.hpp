@@ -83,7 +83,11 @@ struct SegmentEstimate {
   bool refined = false;       ///< C (and k levels) from the output-error refinement
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
-  QualityWarnings warnings;  ///< empty when the estimate is clean
+  /// Quality flags (quality_flags.hpp): what the segment's data and fit look like.
+  double noise_std = kNaN;     ///< [m] model-free noise estimate: RMS third difference / sqrt(20)
+  double signal_std = kNaN;    ///< [m] standard deviation of the DTE about its segment mean
+  double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations at the estimate
+  QualityWarnings warnings;    ///< empty when the estimate is clean (codes: quality_flags.hpp)
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).
@@ -119,7 +123,9 @@ struct IdentificationResult {
   std::string estimator = "integral";
   int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
   double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
-  std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
+  /// Run-level warnings (codes: quality_flags.hpp), e.g. switches that mesh_phase could not
+  /// locate, a refinement that failed or did not converge. Empty when all is well.
+  QualityWarnings warnings;
 };
 
 }  // namespace gear_damping_id

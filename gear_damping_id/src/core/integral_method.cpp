@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
 
 namespace gear_damping_id {
@@ -200,6 +201,23 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   }
   for (; i < hi; ++i) a[0] += x[i];
   return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+// Noise and signal levels of a segment's DTE y[0, n) (sum: its sum): the noise standard
+// deviation from the RMS of the third differences (for white noise their variance is 20 sigma^2;
+// the smooth dynamics contribute (omega0 dt)^3 of the amplitude, negligible at the sampling rates
+// the method needs), and the standard deviation about the mean.
+void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, double* signal) {
+  if (n < 4) return;
+  const double mean = sum / static_cast<double>(n);
+  double d3 = 0.0, var = 0.0;
+  for (Eigen::Index i = 0; i + 3 < n; ++i) {
+    const double d = y[i + 3] - 3.0 * y[i + 2] + 3.0 * y[i + 1] - y[i];
+    d3 += d * d;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) var += (y[i] - mean) * (y[i] - mean);
+  *noise = std::sqrt(d3 / (20.0 * static_cast<double>(n - 3)));
+  *signal = std::sqrt(var / static_cast<double>(n));
 }
 
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
@@ -699,6 +717,8 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
       }
     }
   }
+  // Model-free noise and signal levels for the quality flags (quality_flags.hpp).
+  segmentLevels(s.dte + c0, c1 - c0, channel_sum[0], &est.noise_std, &est.signal_std);
   // Segment means (time-weighted over the segment's intervals; switches split when located).
   if (use_torque) {
     rec.mean_torque = channel_sum[2] / static_cast<double>(rows);
@@ -974,6 +994,14 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
       } else if (options_.formulation == Formulation::Legacy) {
         e.forcing = legacy_fbar_;
       }
+      // RMS residual of the integral equations at the estimate (shared unknowns included).
+      {
+        const Eigen::MatrixXd& G = rec.gram;
+        const double rss = G(q, q) - 2.0 * p.theta.dot(G.col(q).head(q)) +
+                           p.theta.dot(G.topLeftCorner(q, q) * p.theta);
+        e.residual_rms = std::sqrt(std::max(rss, kRssFloor * G(q, q)) /
+                                   static_cast<double>(std::max(rec.rows, 1L)));
+      }
       // Windows: nuisance estimates for the modeled response.
       for (const WindowRecord& w : rec.window_records) {
         double m = w.mean[q], sl = w.slope[q];
@@ -1035,10 +1063,11 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
     res.load_law = l;
   }
   if (unlocated_switches_ > 0) {
-    res.warnings.push_back(std::to_string(unlocated_switches_) +
-                           " stiffness switches could not be located from mesh_phase (values "
-                           "held from the sample instead): check contact_ratio and the phase "
-                           "origin");
+    res.warnings.push_back({quality_code::kSwitchesUnlocated,
+                            std::to_string(unlocated_switches_) +
+                                " stiffness switches could not be located from mesh_phase "
+                                "(values held from the sample instead): check contact_ratio and "
+                                "the phase origin"});
   }
   return res;
 }
@@ -1074,16 +1103,22 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
   }
   for (const auto& r : ranges) m.addSegment(view, r.first, r.second, /*estimate=*/false);
   *result = m.finish();
+  // Segments whose information is below the noise are not identifiable before the refinement
+  // (which then leaves them alone); the flags are recomputed on the final estimates.
+  applyQualityFlags(o, result);
   if (wantsRefinement(o, *result)) {
     IdentificationResult refined = *result;
     std::string why;
     if (refineOutputError(view, ranges, gear, o, &refined, &why)) {
+      keepIntegralEstimates(*result, &refined);
       *result = std::move(refined);
     } else {
-      result->warnings.push_back("output-error refinement failed (" + why +
-                                 "): integral-method estimates reported");
+      result->warnings.push_back({quality_code::kRefineFailed,
+                                  "output-error refinement failed (" + why +
+                                      "): integral-method estimates reported"});
     }
   }
+  applyQualityFlags(o, result);
   return true;
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/sdof_integrator.hpp"
 
 namespace gear_damping_id {
@@ -464,8 +465,9 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     res->load_law->c1_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(1, 1), 0.0));
   }
   if (!converged) {
-    res->warnings.push_back("output-error refinement stopped after " + std::to_string(it) +
-                            " iterations without converging to 1e-10");
+    res->warnings.push_back({quality_code::kRefineNotConverged,
+                             "output-error refinement stopped after " + std::to_string(it) +
+                                 " iterations without converging to 1e-10"});
   }
   return true;
 }
