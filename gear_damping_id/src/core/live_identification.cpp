@@ -42,7 +42,7 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     single_.addSegment(v, begin, end);
     seg = single_.finish();
     applyQualityFlags(options_, &seg);  // below-noise segments are not refined (as identify())
-    if (seg.segments.size() == 1 && seg.segments[0].identifiable &&
+    if (seg.segments.size() == 1 && seg.segments[0].identifiable && options_.refinable() &&
         wantsRefinement(options_, seg)) {
       IdentificationResult refined = seg;
       std::string why;
