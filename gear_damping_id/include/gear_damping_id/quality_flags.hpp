@@ -12,8 +12,10 @@
 //   nonpositive_damping  C <= 0
 //   overdamped           xi >= 1
 //   model_mismatch       the model cannot reproduce the data: the integral equations' residual
-//                        RMS exceeds kMismatchNoiseRatio times the model-free noise estimate AND
-//                        kMismatchSignalFraction of the DTE's standard deviation
+//                        RMS exceeds kMismatchNoiseRatio times the model-free noise estimate (so
+//                        it is model error, not noise) AND either kMismatchGross of the DTE's
+//                        standard deviation, or kMismatchSignalFraction of it with a possible
+//                        bias of C (sqrt(N) C_std) above kMismatchBias of C
 //   refine_disagrees     the refined and integral estimates differ by more than
 //                        kDisagreeSE combined standard errors
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
@@ -48,9 +50,17 @@ struct QualityLimits {
   /// not to reproduce the data. A correct model leaves the noise plus the noise the double
   /// integrals of K y carry (measured 1.0-2.4x the noise on the test cases at 20-40 dB).
   static constexpr double kMismatchNoiseRatio = 5.0;
-  /// ... and the residual over the DTE's standard deviation (fit below 95 %): a residual far
-  /// above a tiny noise level but small against the signal is quadrature error, not mismatch.
-  static constexpr double kMismatchSignalFraction = 0.05;
+  /// A residual above the noise is model error. Above this fraction of the DTE's standard
+  /// deviation (fit below 95 %) it is flagged outright.
+  static constexpr double kMismatchGross = 0.05;
+  /// Below that, model error of RMS rho can move C by at most rho sqrt(N) / ||x_C|| =
+  /// sqrt(N) C_std (Cauchy-Schwarz, x_C the damping regressor after the nuisance projection,
+  /// N samples): flagged when that bound exceeds this fraction of C...
+  static constexpr double kMismatchBias = 0.1;
+  /// ... and the residual exceeds this fraction of the signal: on noise-free data the noise
+  /// estimate is at the quadrature level, and a correct model's residual stays below 1e-5 of
+  /// the signal (measured up to 7e-6 on the exact greybox shapes); 1e-3 leaves a margin.
+  static constexpr double kMismatchSignalFraction = 1e-3;
   /// Refined vs integral estimate: combined standard errors allowed between them.
   static constexpr double kDisagreeSE = 5.0;
 };

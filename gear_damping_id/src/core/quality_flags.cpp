@@ -55,14 +55,19 @@ void flagEstimate(SegmentEstimate* e) {
     w.push_back({quality_code::kOverdamped, "damping ratio xi = " + num(e->xi) +
                                                 " >= 1: an overdamped mesh is not plausible"});
   }
+  const double bias_bound = std::sqrt(static_cast<double>(e->samples)) * e->C_std;
   if (std::isfinite(e->residual_rms) && std::isfinite(e->noise_std) &&
       std::isfinite(e->signal_std) && e->residual_rms > L::kMismatchNoiseRatio * e->noise_std &&
-      e->residual_rms > L::kMismatchSignalFraction * e->signal_std) {
+      (e->residual_rms > L::kMismatchGross * e->signal_std ||
+       (e->residual_rms > L::kMismatchSignalFraction * e->signal_std &&
+        !(bias_bound <= L::kMismatchBias * std::abs(e->C))))) {
     w.push_back({quality_code::kModelMismatch,
                  "the model does not reproduce the data: residual RMS " + num(e->residual_rms) +
                      " m is " + num(e->residual_rms / e->noise_std) + "x the noise estimate and " +
                      num(100.0 * e->residual_rms / e->signal_std) +
-                     " % of the DTE's standard deviation (wrong stiffness shape or forcing?)"});
+                     " % of the DTE's standard deviation; it can move C by up to " +
+                     num(100.0 * bias_bound / std::abs(e->C)) +
+                     " % (wrong stiffness shape, forcing or damping model?)"});
   }
   if (e->refined && std::isfinite(e->C_integral)) {
     const double se =

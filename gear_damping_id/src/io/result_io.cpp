@@ -78,6 +78,15 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
     j["C_integral"] = s.C_integral;
     j["C_integral_std"] = num(s.C_integral_std);
   }
+  if (!s.stiffness_curve.empty()) {
+    json k = json::array(), ks = json::array();
+    for (size_t i = 0; i < s.stiffness_curve.size(); ++i) {
+      k.push_back(num(s.stiffness_curve[i]));
+      ks.push_back(num(i < s.stiffness_curve_std.size() ? s.stiffness_curve_std[i] : kNaN));
+    }
+    j["stiffness_curve"] = k;
+    j["stiffness_curve_std"] = ks;
+  }
   j["noise_std"] = num(s.noise_std);
   j["signal_std"] = num(s.signal_std);
   j["residual_rms"] = num(s.residual_rms);
@@ -97,6 +106,9 @@ json runJson(const AnalysisRun& run) {
   j["omega0"] = num(r.omega0);
   j["window_length"] = num(r.window_length);
   j["segment_length"] = num(run.options.segment_length);
+  if (r.formulation == Formulation::Greybox) {
+    j["stiffness_shape"] = toString(run.options.stiffness_shape);
+  }
   j["segments"] = json::array();
   for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
@@ -310,7 +322,7 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
   }
   std::ostringstream seg, sum;
   seg << "formulation,model,segment,t_start,t_end,C,C_std,c,xi,k_min,k_max,identifiable,reason,"
-         "warnings\n";
+         "warnings,stiffness_curve\n";
   sum << "formulation,model,estimator,C,C_std,c,xi,c0,c0_std,c1,c1_std,nrmse,fit_percent,"
          "warnings\n";
   for (const auto& run : runs) {
@@ -322,7 +334,11 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
           << csvNum(s.C) << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi)
           << "," << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0)
           << "," << (s.identifiable ? std::string() : csvText(s.reason)) << ","
-          << joinCodes(s.warnings, ";") << "\n";
+          << joinCodes(s.warnings, ";") << ",";
+      for (size_t k = 0; k < s.stiffness_curve.size(); ++k) {
+        seg << (k > 0 ? ";" : "") << csvNum(s.stiffness_curve[k]);
+      }
+      seg << "\n";
     }
     const SegmentEstimate* c = sharedEstimate(r);
     const LoadLawEstimate* l = r.load_law ? &*r.load_law : nullptr;
