@@ -94,15 +94,22 @@ Tally overSeeds(const SimConfig& c, const SignalTable& clean, Formulation f, dou
   return t;
 }
 
+// The tally of the noise-free record.
+Tally noiseFree(const SimConfig& c, const SignalTable& clean, Formulation f,
+                const std::string& label) {
+  IdentificationOptions o;
+  o.formulation = f;
+  Tally t0;
+  t0.add(identifyOrFail(clean, c, o), clean, c);
+  std::cout << "[ measured ] " << label << " " << gd::toString(f) << " noise-free: " << t0.str()
+            << "\n";
+  return t0;
+}
+
 void expectHomeCaseClean(const SimConfig& c, const std::string& label) {
   const SignalTable clean = simulateOrFail(c);
   for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
-    IdentificationOptions o;
-    o.formulation = f;
-    Tally t0;
-    t0.add(identifyOrFail(clean, c, o), clean, c);
-    std::cout << "[ measured ] " << label << " " << gd::toString(f) << " noise-free: " << t0.str()
-              << "\n";
+    const Tally t0 = noiseFree(c, clean, f, label);
     EXPECT_EQ(t0.flagged, 0) << label << " noise-free " << gd::toString(f) << ": " << t0.str();
     for (double db : {40.0, 20.0}) {
       const Tally t = overSeeds(c, clean, f, db, kSeeds);
@@ -130,11 +137,7 @@ TEST(QualityFlags, HeldOutCaseIsRightOrFlagged) {
   const SimConfig c = piecewise(heldOutCase());
   const SignalTable clean = simulateOrFail(c);
   for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
-    IdentificationOptions o;
-    o.formulation = f;
-    Tally t0;
-    t0.add(identifyOrFail(clean, c, o), clean, c);
-    std::cout << "[ measured ] held-out " << gd::toString(f) << " noise-free: " << t0.str() << "\n";
+    noiseFree(c, clean, f, "held-out");
     overSeeds(c, clean, f, 40.0, kSeeds);
   }
 }
@@ -220,23 +223,22 @@ void expectTransientHandled(const SimConfig& c, double db, const std::string& la
   EXPECT_GT(tally.codes[qc::kBelowNoise], 0) << label;
 }
 
+// `base` with constant stiffness k [N/m], constant load T [N*m] and damping ratio xi.
+SimConfig transientCase(SimConfig base, double k, double T, double xi) {
+  base.mesh.model = gear_sim::StiffnessModel::Constant;
+  base.mesh.k_mean = k;
+  base.load.profile = gear_sim::LoadProfile::Constant;
+  base.load.mean = T;
+  base.damping.model = gear_sim::DampingModel::ConstantRatio;
+  base.damping.ratio = xi;
+  return base;
+}
+
 TEST(QualityFlags, TransientSinkingUnderNoiseIsNotIdentifiable) {
-  SimConfig c = table1Config();
-  c.mesh.model = gear_sim::StiffnessModel::Constant;
-  c.mesh.k_mean = 3.2e8;
-  c.load.profile = gear_sim::LoadProfile::Constant;
-  c.damping.model = gear_sim::DampingModel::ConstantRatio;
-  c.damping.ratio = 0.05;
-  expectTransientHandled(c, 40.0, "xi 0.05, 40 dB");
+  expectTransientHandled(transientCase(table1Config(), 3.2e8, 100.0, 0.05), 40.0, "xi 0.05, 40 dB");
   // Held-out: other gear, stiffness, load, damping, sample rate and SNR.
-  SimConfig h = heldOutCase();
-  h.mesh.model = gear_sim::StiffnessModel::Constant;
-  h.mesh.k_mean = 2.5e8;
-  h.load.profile = gear_sim::LoadProfile::Constant;
-  h.load.mean = 60.0;
-  h.damping.model = gear_sim::DampingModel::ConstantRatio;
-  h.damping.ratio = 0.08;
-  expectTransientHandled(h, 30.0, "held-out xi 0.08, 30 dB");
+  expectTransientHandled(transientCase(heldOutCase(), 2.5e8, 60.0, 0.08), 30.0,
+                         "held-out xi 0.08, 30 dB");
 }
 
 // The sub-table of samples [b, e).
@@ -297,11 +299,8 @@ void expectPathsAgree(const SimConfig& c, Formulation f, double db) {
 }
 
 TEST(QualityFlags, BatchStreamedAndLiveAgree) {
-  SimConfig tr = table1Config();
-  tr.mesh.model = gear_sim::StiffnessModel::Constant;
-  tr.load.profile = gear_sim::LoadProfile::Constant;
-  tr.damping.model = gear_sim::DampingModel::ConstantRatio;
-  expectPathsAgree(tr, Formulation::Known, 40.0);  // below_noise
+  expectPathsAgree(transientCase(table1Config(), 3.2e8, 100.0, 0.05), Formulation::Known,
+                   40.0);  // below_noise
   SimConfig tz = table1Config();
   tz.mesh.model = gear_sim::StiffnessModel::Trapezoid;
   tz.mesh.transition_fraction = 0.1;
