@@ -37,6 +37,7 @@ gear_damping::DampingSegment toMsg(const gd::SegmentEstimate& s, gd::Formulation
   m.k_min = levels ? s.k_min : gd::kNaN;
   m.k_max = levels ? s.k_max : gd::kNaN;
   m.warnings = warningMsgs(s.warnings);
+  if (s.identifiable) m.stiffness_curve = s.stiffness_curve;
   return m;
 }
 
