@@ -80,6 +80,7 @@ struct NodeOptions {
 bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
   nodes::ParamReader p(pnh);
   std::string formulation = "known", model = "piecewise", refine = "auto";
+  std::string stiffness_shape = "square";
   int max_iterations = o->id.max_iterations;
   if (!p.get("formulation", &formulation) || !p.get("model", &model) ||
       !p.getDouble("segment_length", &o->id.segment_length, "s") ||
@@ -87,7 +88,8 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.getDouble("t_start", &o->id.t_start, "s") || !p.getDouble("t_end", &o->id.t_end, "s") ||
       !p.getDouble("max_condition", &o->id.max_condition) || !p.get("refine", &refine) ||
       !p.getDouble("refine_threshold", &o->id.refine_threshold) ||
-      !p.get("max_iterations", &max_iterations) || !nodes::readIntakeParams(p, &o->intake) ||
+      !p.get("max_iterations", &max_iterations) || !p.get("stiffness_shape", &stiffness_shape) ||
+      !nodes::readIntakeParams(p, &o->intake) ||
       !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
       !p.get("publish_modeled_response", &o->publish_modeled_response) ||
       !p.get("gear_config", &o->gear_config)) {
@@ -115,6 +117,11 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     return false;
   }
   o->id.max_iterations = max_iterations;
+  if (!gd::parseStiffnessShape(stiffness_shape, &o->id.stiffness_shape)) {
+    ROS_FATAL("~stiffness_shape = '%s': must be square, fourier:H (1..16) or table:N (3..32)",
+              stiffness_shape.c_str());
+    return false;
+  }
   std::string e = o->id.validate();
   if (e.empty()) {
     o->stream.segment_length = o->id.segment_length;

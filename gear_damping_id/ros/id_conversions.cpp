@@ -6,6 +6,22 @@ namespace gear_damping_ros {
 
 namespace gd = gear_damping_id;
 
+namespace {
+
+// Quality warnings (segment or run) as messages.
+std::vector<gear_damping::QualityWarning> warningMsgs(const gd::QualityWarnings& ws) {
+  std::vector<gear_damping::QualityWarning> out;
+  for (const auto& w : ws) {
+    gear_damping::QualityWarning m;
+    m.code = w.code;
+    m.text = w.text;
+    out.push_back(m);
+  }
+  return out;
+}
+
+}  // namespace
+
 gear_damping::DampingSegment toMsg(const gd::SegmentEstimate& s, gd::Formulation f) {
   gear_damping::DampingSegment m;
   m.t_start = s.t_start;
@@ -20,6 +36,8 @@ gear_damping::DampingSegment toMsg(const gd::SegmentEstimate& s, gd::Formulation
   const bool levels = s.identifiable && f != gd::Formulation::Known;
   m.k_min = levels ? s.k_min : gd::kNaN;
   m.k_max = levels ? s.k_max : gd::kNaN;
+  m.warnings = warningMsgs(s.warnings);
+  if (s.identifiable) m.stiffness_curve = s.stiffness_curve;
   return m;
 }
 
@@ -41,6 +59,7 @@ gear_damping::DampingArray toMsg(const gd::IdentificationResult& r) {
     a.c1 = r.load_law->c1;
     a.c1_std = r.load_law->c1_std;
   }
+  a.warnings = warningMsgs(r.warnings);
   return a;
 }
 

@@ -1,6 +1,7 @@
 // rosrun gear_damping analyze --input FILE.csv|FILE.bag [--params GEAR.yaml] [--output result.json]
 //     [--formulation known|greybox|paper|legacy]... [--model piecewise|constant|load_law]...
 //     [--segment S] [--window S] [--t-start S] [--t-end S] [--refine auto|always|never]
+//     [--stiffness-shape square|fourier:H|table:N]
 //     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
 //     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
 //                [--decay-region T0,T1]...]
@@ -38,6 +39,7 @@
 #include "gear_damping_id/input_checks.hpp"
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
@@ -266,8 +268,10 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
                            std::to_string(info.samples) +
                            " samples): the shared model's response needs the whole record";
       run.result.warnings.push_back(
-          "output-error refinement skipped: a record analysed streaming is refined per segment "
-          "only for the piecewise model");
+          {gd::quality_code::kRefineSkipped,
+           "output-error refinement skipped: a record analysed streaming is refined per segment "
+           "only for the piecewise model"});
+      gd::applyQualityFlags(run.options, &run.result);
     }
   }
   return true;
@@ -319,7 +323,7 @@ int main(int argc, char** argv) {
       "the damping with Morlet wavelets."};
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
-  std::string refine = "auto";
+  std::string refine = "auto", stiffness_shape = "square";
   gd::IdentificationOptions base;
   std::optional<double> t_start, t_end;
   long max_in_memory = 1000000;
@@ -354,6 +358,16 @@ int main(int argc, char** argv) {
   app.add_option("--refine", refine,
                  "output-error refinement: auto (when the data are noisy) | always | never")
       ->check(CLI::IsMember({"auto", "always", "never"}));
+  app.add_option("--stiffness-shape", stiffness_shape,
+                 "greybox stiffness: square (two levels switched by mesh_state) | fourier:H (mean + "
+                 "H harmonics of mesh_phase) | table:N (periodic piecewise linear over N nodes of "
+                 "mesh_phase); fourier/table are not refined (default square)")
+      ->check([](const std::string& v) {
+        gd::StiffnessShape s;
+        return gd::parseStiffnessShape(v, &s) ? std::string()
+                                              : "expected square, fourier:H (1..16) or table:N "
+                                                "(3..32), got '" + v + "'";
+      });
   app.add_option("--max-condition", base.max_condition,
                  "largest condition number of an identifiable segment (default 1e6)");
   app.add_option("--time-tolerance", base.time_tolerance,
@@ -424,6 +438,7 @@ int main(int argc, char** argv) {
   base.refine = refine == "always"  ? gd::IdentificationOptions::Refine::Always
                 : refine == "never" ? gd::IdentificationOptions::Refine::Never
                                     : gd::IdentificationOptions::Refine::Auto;
+  gd::parseStiffnessShape(stiffness_shape, &base.stiffness_shape);  // checked by the option
   std::vector<gd::IdentificationOptions> runs_options;
   for (const auto& f : formulations) {
     for (const auto& m : models) {

@@ -31,6 +31,25 @@ bool parseDampingModel(const std::string& s, DampingModel* out);
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+/// Parametrisation of the unknown stiffness of the greybox formulation, as a function of the
+/// mesh phase u (mesh cycles, from the `mesh_phase` channel for fourier/table):
+/// - square:     K = K0 + dK s(t), s the mesh state (0/1): the two levels of eq. (2);
+/// - fourier:H:  K = a0 + sum_{h=1..H} (a_h cos(2 pi h u) + b_h sin(2 pi h u)), 2H+1 unknowns;
+/// - table:N:    K periodic piecewise linear through N values at the phases u = j/N, j < N.
+/// The unknowns enter the integral equations linearly: IIKy = sum_j theta_j IIb_j(u) y.
+struct StiffnessShape {
+  enum class Kind { Square, Fourier, Table } kind = Kind::Square;
+  int n = 0;  ///< H (fourier) or N (table)
+  static constexpr int kMaxHarmonics = 16, kMaxNodes = 32;
+  /// Number of stiffness unknowns: 2 (square), 2H+1 (fourier), N (table).
+  int unknowns() const;
+  /// The basis functions at mesh phase u (fourier/table; `out` holds unknowns() values).
+  void basis(double u, double* out) const;
+};
+std::string toString(const StiffnessShape& s);
+/// Parses "square", "fourier:H" (1 <= H <= 16) or "table:N" (3 <= N <= 32); false if invalid.
+bool parseStiffnessShape(const std::string& s, StiffnessShape* out);
+
 struct IdentificationOptions {
   Formulation formulation = Formulation::Known;
   DampingModel model = DampingModel::Piecewise;
@@ -57,6 +76,15 @@ struct IdentificationOptions {
   enum class Refine { Auto, Always, Never } refine = Refine::Auto;
   double refine_threshold = 2e-4;
   int max_iterations = 30;  ///< Gauss-Newton iterations of the refinement
+  /// Greybox stiffness parametrisation (ignored by the other formulations). fourier/table need
+  /// the `mesh_phase` channel and are not refined (the refinement's forward model knows the
+  /// square levels only): their estimates are the integral method's.
+  StiffnessShape stiffness_shape;
+  /// Whether the output-error refinement can run on these options (square greybox shape).
+  bool refinable() const {
+    return formulation != Formulation::Greybox ||
+           stiffness_shape.kind == StiffnessShape::Kind::Square;
+  }
 
   /// Empty when valid; otherwise names the field, the value and the rule broken.
   std::string validate() const;
@@ -89,6 +117,10 @@ struct SegmentEstimate {
   double k_min = kNaN;    ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
   double k_max = kNaN;    ///< [N/m]
   double k_min_std = kNaN, k_max_std = kNaN;  ///< [N/m] standard errors (greybox)
+  /// Greybox fourier/table shapes: the identified stiffness unknowns [N/m] in the order of
+  /// StiffnessShape (fourier: a0, a1, b1, a2, b2, ...; table: the node values) and their
+  /// standard errors; k_min/k_max are then the curve's extremes over a mesh cycle (no std).
+  std::vector<double> stiffness_curve, stiffness_curve_std;
   long samples = 0;       ///< samples used
   int windows = 0;        ///< integration windows in the segment
   bool identifiable = false;
@@ -99,7 +131,11 @@ struct SegmentEstimate {
   bool refined = false;       ///< C (and k levels) from the output-error refinement
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
-  QualityWarnings warnings;  ///< empty when the estimate is clean
+  /// Quality flags (quality_flags.hpp): what the segment's data and fit look like.
+  double noise_std = kNaN;     ///< [m] model-free noise estimate: RMS third difference / sqrt(20)
+  double signal_std = kNaN;    ///< [m] standard deviation of the DTE about its segment mean
+  double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations at the estimate
+  QualityWarnings warnings;    ///< empty when the estimate is clean (codes: quality_flags.hpp)
   ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
 };
 
@@ -141,7 +177,9 @@ struct IdentificationResult {
   /// white noise. The model each segment was prewhitened with is in its `residuals.ar`.
   std::vector<double> noise_ar;
   double noise_innovation_std = kNaN;  ///< [m]
-  std::vector<std::string> warnings;  ///< e.g. switches that mesh_phase could not locate
+  /// Run-level warnings (codes: quality_flags.hpp), e.g. switches that mesh_phase could not
+  /// locate, a refinement that failed or did not converge. Empty when all is well.
+  QualityWarnings warnings;
 };
 
 }  // namespace gear_damping_id

@@ -32,6 +32,11 @@
 //              small within a window, so its second-order error is negligible); the y_T terms are
 //              absorbed by alpha, so alpha = y'(T) + C(T) y_T as before.
 //
+// Greybox stiffness shapes (IdentificationOptions::stiffness_shape): square uses the mesh state as
+// above; fourier:H and table:N replace the two stiffness columns by one column -IIb_j(u) y per
+// basis function b_j of the mesh phase u (2H+1 or N unknowns per segment), K y integrated as a
+// smooth product of the samples.
+//
 // Quadrature (see quadrature.hpp): the samples are interpolated by local cubics and integrated
 // exactly; where K or s changes between two samples the interval is split at the switch instant
 // (from `mesh_phase` when given; otherwise the new value holds from the sample where it is first
@@ -161,8 +166,10 @@ class IntegralMethod {
   size_t segmentCount() const { return segments_.size(); }
 
  private:
-  enum class Column { DampC, DampLoad, StiffK0, StiffDK, ForceConst };
-  static constexpr int kMaxColumns = 5;  // one of each Column at most
+  // StiffBasis: the greybox fourier/table shape's unknowns, StiffnessShape::unknowns() adjacent
+  // columns; every other kind appears at most once.
+  enum class Column { DampC, DampLoad, StiffK0, StiffDK, ForceConst, StiffBasis };
+  static constexpr int kMaxColumns = 2 + 2 * StiffnessShape::kMaxHarmonics + 1;
   struct WindowRecord {
     double t_start = 0, t_end = 0, dt = 0;  // [s]
     Eigen::Index rows = 0;
@@ -178,6 +185,7 @@ class IntegralMethod {
     double mean_state = kNaN;  // time-mean of the mesh state (greybox)
     double k_integral = 0.0;   // integral of K over the segment [1/s] (known: for omega0)
     double duration = 0.0;     // [s]
+    std::vector<double> basis_mean;  // time-means of the shape's basis functions (greybox)
     std::vector<WindowRecord> window_records;
   };
 
@@ -199,6 +207,10 @@ class IntegralMethod {
   Eigen::MatrixXd inc_;              // one window's per-interval increments (scratch)
   std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
   std::vector<double> switch_theta_;           // their split fractions
+  bool shape_ = false;          // greybox fourier/table stiffness shape
+  int n_basis_ = 0;             // its unknowns
+  Eigen::MatrixXd basis_;       // current segment: basis values, one column per sample
+  Eigen::MatrixXd basis_inc_;   // one window's per-interval basis increments (scratch)
   double legacy_fbar_ = kNaN;        // [m/s^2]
   Eigen::Index seg_lo_ = 0, seg_hi_ = 0;  // current segment's samples (quadrature stencils)
   mutable long unlocated_switches_ = 0;

@@ -1,5 +1,6 @@
 #include "gear_damping_id/identification_types.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -45,6 +46,70 @@ bool parseDampingModel(const std::string& s, DampingModel* out) {
   return false;
 }
 
+int StiffnessShape::unknowns() const {
+  switch (kind) {
+    case Kind::Square: return 2;
+    case Kind::Fourier: return 2 * n + 1;
+    case Kind::Table: return n;
+  }
+  return 0;
+}
+
+void StiffnessShape::basis(double u, double* out) const {
+  const double frac = u - std::floor(u);  // phase within the mesh cycle, [0, 1)
+  if (kind == Kind::Fourier) {
+    out[0] = 1.0;
+    for (int h = 1; h <= n; ++h) {
+      const double a = 2.0 * M_PI * h * frac;
+      out[2 * h - 1] = std::cos(a);
+      out[2 * h] = std::sin(a);
+    }
+  } else if (kind == Kind::Table) {
+    // Periodic hat functions on the nodes j/N.
+    for (int j = 0; j < n; ++j) out[j] = 0.0;
+    const double x = frac * n;
+    const int j0 = std::min(static_cast<int>(std::floor(x)), n - 1);
+    const double w = x - j0;
+    out[j0] += 1.0 - w;
+    out[(j0 + 1) % n] += w;
+  }
+}
+
+std::string toString(const StiffnessShape& s) {
+  switch (s.kind) {
+    case StiffnessShape::Kind::Square: return "square";
+    case StiffnessShape::Kind::Fourier: return "fourier:" + std::to_string(s.n);
+    case StiffnessShape::Kind::Table: return "table:" + std::to_string(s.n);
+  }
+  return "?";
+}
+
+bool parseStiffnessShape(const std::string& s, StiffnessShape* out) {
+  if (s == "square") {
+    *out = StiffnessShape();
+    return true;
+  }
+  const auto colon = s.find(':');
+  if (colon == std::string::npos) return false;
+  const std::string kind = s.substr(0, colon), num = s.substr(colon + 1);
+  if (num.empty() || num.size() > 3 ||
+      num.find_first_not_of("0123456789") != std::string::npos) {
+    return false;
+  }
+  const int n = std::stoi(num);
+  StiffnessShape r;
+  r.n = n;
+  if (kind == "fourier" && n >= 1 && n <= StiffnessShape::kMaxHarmonics) {
+    r.kind = StiffnessShape::Kind::Fourier;
+  } else if (kind == "table" && n >= 3 && n <= StiffnessShape::kMaxNodes) {
+    r.kind = StiffnessShape::Kind::Table;
+  } else {
+    return false;
+  }
+  *out = r;
+  return true;
+}
+
 std::string IdentificationOptions::validate() const {
   std::ostringstream e;
   if (!(segment_length >= 0.0)) {
@@ -62,6 +127,11 @@ std::string IdentificationOptions::validate() const {
     e << "refine_threshold = " << refine_threshold << ": must be >= 0";
   } else if (max_iterations < 1 || max_iterations > 1000) {
     e << "max_iterations = " << max_iterations << ": must be in [1, 1000]";
+  } else if (StiffnessShape parsed;
+             !parseStiffnessShape(toString(stiffness_shape), &parsed)) {
+    e << "stiffness_shape = " << toString(stiffness_shape)
+      << ": must be square, fourier:H (1 <= H <= " << StiffnessShape::kMaxHarmonics
+      << ") or table:N (3 <= N <= " << StiffnessShape::kMaxNodes << ")";
   }
   return e.str();
 }

@@ -9,6 +9,7 @@
 
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
 
 namespace gear_damping_id {
@@ -203,6 +204,23 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
+// Noise and signal levels of a segment's DTE y[0, n) (sum: its sum): the noise standard
+// deviation from the RMS of the third differences (for white noise their variance is 20 sigma^2;
+// the smooth dynamics contribute (omega0 dt)^3 of the amplitude, negligible at the sampling rates
+// the method needs), and the standard deviation about the mean.
+void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, double* signal) {
+  if (n < 4) return;
+  const double mean = sum / static_cast<double>(n);
+  double d3 = 0.0, var = 0.0;
+  for (Eigen::Index i = 0; i + 3 < n; ++i) {
+    const double d = y[i + 3] - 3.0 * y[i + 2] + 3.0 * y[i + 1] - y[i];
+    d3 += d * d;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) var += (y[i] - mean) * (y[i] - mean);
+  *noise = std::sqrt(d3 / (20.0 * static_cast<double>(n - 3)));
+  *signal = std::sqrt(var / static_cast<double>(n));
+}
+
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
 constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
 
@@ -248,6 +266,9 @@ bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, doubl
 
 IntegralMethod::IntegralMethod(const IdentificationOptions& options, const GearConstants& gear)
     : options_(options), gear_(gear), window_length_(options.window_length) {
+  shape_ = options.formulation == Formulation::Greybox &&
+           options.stiffness_shape.kind != StiffnessShape::Kind::Square;
+  n_basis_ = shape_ ? options.stiffness_shape.unknowns() : 0;
   buildColumns();
 }
 
@@ -265,8 +286,12 @@ void IntegralMethod::buildColumns() {
   switch (options_.formulation) {
     case Formulation::Known: break;
     case Formulation::Greybox:
-      local.push_back(Column::StiffK0);
-      local.push_back(Column::StiffDK);
+      if (shape_) {
+        for (int k = 0; k < n_basis_; ++k) local.push_back(Column::StiffBasis);
+      } else {
+        local.push_back(Column::StiffK0);
+        local.push_back(Column::StiffDK);
+      }
       break;
     case Formulation::Paper:
       local.push_back(Column::StiffK0);
@@ -496,6 +521,30 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
       dS[i] = 0.5 * ((T[j] - T_c) + (T[j + 1] - T_c)) * (y[j + 1] - y[j]);
     }
   }
+  // Greybox shape: area/moment increments of b_k(u) y for every basis function, the product
+  // interpolated by the interval's cubic rule (columns 2k: area, 2k + 1: moment).
+  const int nb = shape_ ? n_basis_ : 0;
+  if (nb > 0) {
+    if (basis_inc_.rows() < L || basis_inc_.cols() < 2 * nb) {
+      basis_inc_.resize(std::max<Eigen::Index>(L, 1), 2 * nb);
+    }
+    for (Eigen::Index i = 0; i < ni; ++i) {
+      const Eigen::Index j = w0 + i;
+      const CubicIntervalRule& rule = intervalRule(j);
+      const Eigen::Index b = j + rule.offset();
+      const auto& wa = rule.area();
+      const auto& wm = rule.moment();
+      for (int k = 0; k < nb; ++k) {
+        double sa = 0.0, sm = 0.0;
+        for (int c = 0; c < 4; ++c) {
+          const double g = basis_(k, b + c - seg_lo_) * y[b + c];
+          sa += wa[c] * g, sm += wm[c] * g;
+        }
+        basis_inc_(i, 2 * k) = h * sa;
+        basis_inc_(i, 2 * k + 1) = h2 * sm;
+      }
+    }
+  }
 
   // Pass 2: prefix sums -> rows.
   const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
@@ -534,7 +583,18 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   }
   double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0,
          Dr = 0.0;
+  const int cB = columnIndex(Column::StiffBasis);
+  double Gb[kMaxColumns] = {}, Qb[kMaxColumns] = {};  // shape: running single/double integrals
   for (Eigen::Index r = 0; r < L; ++r) {
+    if (nb > 0) {
+      for (int k = 0; k < nb; ++k) {
+        if (r > 0) {
+          Qb[k] += h * Gb[k] + basis_inc_(r - 1, 2 * k + 1);
+          Gb[k] += basis_inc_(r - 1, 2 * k);
+        }
+        rows_(r, cB + k) = -Qb[k];
+      }
+    }
     if (r > 0) {
       const Eigen::Index i = r - 1;
       if (need_iiy) Qy += h * Gy + my[i], Gy += ay[i];
@@ -565,15 +625,18 @@ namespace {
 // remains is small and oscillatory, so forming the projected Gram from its moments,
 //   G_ab = sum z_a z_b - (sum z_a)(sum z_b)/L - (sum p1 z_a)(sum p1 z_b)/sum p1^2,
 // does not cancel the leading digits the way raw moments of the trend-dominated integrals would.
-template <int NC>
+// NC = 0: the column count is the run-time `n_dyn` (at most CAP), for the greybox shapes' many
+// columns; otherwise NC is compiled in (the common small cases).
+template <int NC, int CAP = NC>
 void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, double* mean,
-                   double* slope, double* raw_norm, Eigen::MatrixXd* gram) {
+                   double* slope, double* raw_norm, Eigen::MatrixXd* gram, int n_dyn = NC) {
+  const int n = NC > 0 ? NC : n_dyn;
   const double half = 0.5 * static_cast<double>(L - 1);
   const double Ld = static_cast<double>(L);
   const double sp2 = Ld * (Ld * Ld - 1.0) / 12.0;  // sum of p1^2
-  const double* col[NC];
-  double d0[NC], d1[NC];
-  for (int c = 0; c < NC; ++c) {
+  const double* col[CAP] = {};
+  double d0[CAP], d1[CAP];
+  for (int c = 0; c < n; ++c) {
     col[c] = &rows(0, c);
     d0[c] = col[c][0];
     d1[c] = L > 1 ? (col[c][L - 1] - col[c][0]) / static_cast<double>(L - 1) : 0.0;
@@ -582,52 +645,52 @@ void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, dou
   // adjacent in memory, so each lane pair is one packed operation, and the two lanes are
   // independent add chains. Combined at the end.
   using P2 = Eigen::Array2d;  // one SSE2 register: rows r and r + 1
-  P2 S2[NC], SP2[NC], M2[NC][NC];
-  for (int a = 0; a < NC; ++a) {
+  P2 S2[CAP], SP2[CAP], M2[CAP][CAP];
+  for (int a = 0; a < n; ++a) {
     S2[a].setZero();
     SP2[a].setZero();
-    for (int b = 0; b < NC; ++b) M2[a][b].setZero();
+    for (int b = 0; b < n; ++b) M2[a][b].setZero();
   }
   P2 raw2 = P2::Zero();
   P2 rl(0.0, 1.0);
   const P2 two = P2::Constant(2.0);
   // Adds one pair of rows (z: the detrended columns, p: p1, rc: the raw damping column).
   auto accumulate = [&](const P2* z, const P2& p, const P2& rc) {
-    for (int c = 0; c < NC; ++c) {
+    for (int c = 0; c < n; ++c) {
       S2[c] += z[c];
       SP2[c] += p * z[c];
     }
-    for (int a = 0; a < NC; ++a) {
-      for (int b = a; b < NC; ++b) M2[a][b] += z[a] * z[b];
+    for (int a = 0; a < n; ++a) {
+      for (int b = a; b < n; ++b) M2[a][b] += z[a] * z[b];
     }
     raw2 += rc * rc;
   };
   Eigen::Index r = 0;
   for (; r + 2 <= L; r += 2, rl += two) {
-    P2 z[NC];
-    for (int c = 0; c < NC; ++c) z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
+    P2 z[CAP];
+    for (int c = 0; c < n; ++c) z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
     accumulate(z, rl - half, Eigen::Map<const P2>(col[raw_col] + r));
   }
   if (r < L) {  // odd L: the last row in lane 0, lane 1 zero (adds nothing)
     const double rd = static_cast<double>(r);
-    P2 z[NC];
-    for (int c = 0; c < NC; ++c) z[c] = P2(col[c][r] - d0[c] - d1[c] * rd, 0.0);
+    P2 z[CAP];
+    for (int c = 0; c < n; ++c) z[c] = P2(col[c][r] - d0[c] - d1[c] * rd, 0.0);
     accumulate(z, P2(rd - half, 0.0), P2(col[raw_col][r], 0.0));
   }
-  double S[NC], SP[NC], M[NC][NC];
-  for (int a = 0; a < NC; ++a) {
+  double S[CAP], SP[CAP], M[CAP][CAP];
+  for (int a = 0; a < n; ++a) {
     S[a] = S2[a][0] + S2[a][1];
     SP[a] = SP2[a][0] + SP2[a][1];
-    for (int b = a; b < NC; ++b) M[a][b] = M2[a][b][0] + M2[a][b][1];
+    for (int b = a; b < n; ++b) M[a][b] = M2[a][b][0] + M2[a][b][1];
   }
   const double raw = raw2[0] + raw2[1];
   *raw_norm += raw;
-  for (int c = 0; c < NC; ++c) {
+  for (int c = 0; c < n; ++c) {
     mean[c] = S[c] / Ld + d0[c] + d1[c] * half;
     slope[c] = (sp2 > 0.0 ? SP[c] / sp2 : 0.0) + d1[c];
   }
-  for (int a = 0; a < NC; ++a) {
-    for (int b = a; b < NC; ++b) {
+  for (int a = 0; a < n; ++a) {
+    for (int b = a; b < n; ++b) {
       const double g =
           M[a][b] - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
       (*gram)(a, b) += g;
@@ -691,6 +754,8 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
       }
     }
   }
+  // Model-free noise and signal levels for the quality flags (quality_flags.hpp).
+  segmentLevels(s.dte + c0, c1 - c0, channel_sum[0], &est.noise_std, &est.signal_std);
   // Segment means (time-weighted over the segment's intervals; switches split when located).
   if (use_torque) {
     rec.mean_torque = channel_sum[2] / static_cast<double>(rows);
@@ -701,7 +766,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   // with the switch's fraction of the interval: found once per segment by a branch-free scan.
   const double* held = (f == Formulation::Known && gear_.piecewise_constant_stiffness)
                            ? s.stiffness
-                           : (f == Formulation::Greybox ? s.mesh_state : nullptr);
+                           : (f == Formulation::Greybox && !shape_ ? s.mesh_state : nullptr);
   switches_.clear();
   switch_theta_.clear();
   if (held != nullptr) {
@@ -739,7 +804,24 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     }
     rec.k_integral = sum * s.dt / gear_.equivalent_mass;
   }
-  if (s.mesh_state && f == Formulation::Greybox) {
+  if (shape_) {
+    // The shape's basis functions at every sample of the segment, and their time-means.
+    if (s.mesh_phase == nullptr) {
+      return fail("missing channel mesh_phase (needed by the greybox stiffness shape " +
+                  toString(options_.stiffness_shape) + ")");
+    }
+    basis_.resize(n_basis_, rows);
+    for (Eigen::Index i = begin; i < end; ++i) {
+      if (!std::isfinite(s.mesh_phase[i])) {
+        std::ostringstream m;
+        m << "NaN/Inf in input (mesh_phase at t = " << s.time(i) << " s)";
+        return fail(m.str());
+      }
+      options_.stiffness_shape.basis(s.mesh_phase[i], &basis_(0, i - begin));
+    }
+    rec.basis_mean.resize(static_cast<size_t>(n_basis_));
+    for (int k = 0; k < n_basis_; ++k) rec.basis_mean[k] = basis_.row(k).mean();
+  } else if (s.mesh_state && f == Formulation::Greybox) {
     double sum = channels[3].data ? channel_sum[3] : blockSum(s.mesh_state, begin, end);
     for (size_t c = 0; c < switches_.size(); ++c) {
       const Eigen::Index j = switches_[c];
@@ -775,7 +857,11 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
       case 3: projectedGram<3>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
       case 4: projectedGram<4>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
       case 5: projectedGram<5>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
-      default: projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      case 6: projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      default:
+        projectedGram<0, kMaxColumns + 1>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw,
+                                          &rec.gram, nc);
+        break;
     }
     raw_c += raw;
     rec.window_records.push_back(std::move(wr));
@@ -914,6 +1000,9 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
       kmean = rec.k_integral / rec.duration;
     } else if (cK0 >= 0) {
       kmean = p.theta[cK0] + (cDK >= 0 ? p.theta[cDK] * rec.mean_state : 0.0);
+    } else if (const int cB = columnIndex(Column::StiffBasis); cB >= 0) {
+      kmean = 0.0;
+      for (int k = 0; k < n_basis_; ++k) kmean += p.theta[cB + k] * rec.basis_mean[k];
     }
     seg_kmean[i - s_begin] = kmean;
     if (std::isfinite(kmean)) k_int += kmean * rec.duration, dur += rec.duration;
@@ -960,11 +1049,38 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
           e.k_min_std = e.k_max_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
         }
       }
+      if (const int cB = columnIndex(Column::StiffBasis); cB >= 0) {
+        // The identified curve, and its extremes over a mesh cycle (for the tables).
+        e.stiffness_curve.resize(n_basis_);
+        e.stiffness_curve_std.resize(n_basis_);
+        for (int k = 0; k < n_basis_; ++k) {
+          e.stiffness_curve[k] = me * p.theta[cB + k];
+          e.stiffness_curve_std[k] = me * std::sqrt(std::max(p.cov(cB + k, cB + k), 0.0));
+        }
+        constexpr int kGrid = 720;
+        std::vector<double> b(n_basis_);
+        e.k_min = std::numeric_limits<double>::infinity();
+        e.k_max = -e.k_min;
+        for (int g = 0; g < kGrid; ++g) {
+          options_.stiffness_shape.basis(static_cast<double>(g) / kGrid, b.data());
+          double k = 0.0;
+          for (int j = 0; j < n_basis_; ++j) k += e.stiffness_curve[j] * b[j];
+          e.k_min = std::min(e.k_min, k), e.k_max = std::max(e.k_max, k);
+        }
+      }
       const int cF = columnIndex(Column::ForceConst);
       if (cF >= 0) {
         e.forcing = p.theta[cF];
       } else if (options_.formulation == Formulation::Legacy) {
         e.forcing = legacy_fbar_;
+      }
+      // RMS residual of the integral equations at the estimate (shared unknowns included).
+      {
+        const Eigen::MatrixXd& G = rec.gram;
+        const double rss = G(q, q) - 2.0 * p.theta.dot(G.col(q).head(q)) +
+                           p.theta.dot(G.topLeftCorner(q, q) * p.theta);
+        e.residual_rms = std::sqrt(std::max(rss, kRssFloor * G(q, q)) /
+                                   static_cast<double>(std::max(rec.rows, 1L)));
       }
       // Windows: nuisance estimates for the modeled response.
       for (const WindowRecord& w : rec.window_records) {
@@ -1027,10 +1143,11 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
     res.load_law = l;
   }
   if (unlocated_switches_ > 0) {
-    res.warnings.push_back(std::to_string(unlocated_switches_) +
-                           " stiffness switches could not be located from mesh_phase (values "
-                           "held from the sample instead): check contact_ratio and the phase "
-                           "origin");
+    res.warnings.push_back({quality_code::kSwitchesUnlocated,
+                            std::to_string(unlocated_switches_) +
+                                " stiffness switches could not be located from mesh_phase "
+                                "(values held from the sample instead): check contact_ratio and "
+                                "the phase origin"});
   }
   return res;
 }
@@ -1066,16 +1183,27 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
   }
   for (const auto& r : ranges) m.addSegment(view, r.first, r.second, /*estimate=*/false);
   *result = m.finish();
-  if (wantsRefinement(o, *result)) {
+  // Segments whose information is below the noise are not identifiable before the refinement
+  // (which then leaves them alone); the flags are recomputed on the final estimates.
+  applyQualityFlags(o, result);
+  if (wantsRefinement(o, *result) && !o.refinable()) {
+    result->warnings.push_back(
+        {quality_code::kRefineSkipped,
+         "output-error refinement skipped: not available for the greybox stiffness shape " +
+             toString(o.stiffness_shape) + " (integral-method estimates reported)"});
+  } else if (wantsRefinement(o, *result)) {
     IdentificationResult refined = *result;
     std::string why;
     if (refineOutputError(view, ranges, gear, o, &refined, &why)) {
+      keepIntegralEstimates(*result, &refined);
       *result = std::move(refined);
     } else {
-      result->warnings.push_back("output-error refinement failed (" + why +
-                                 "): integral-method estimates reported");
+      result->warnings.push_back({quality_code::kRefineFailed,
+                                  "output-error refinement failed (" + why +
+                                      "): integral-method estimates reported"});
     }
   }
+  applyQualityFlags(o, result);
   return true;
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "gear_damping_id/input_checks.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/stream_assembler.hpp"
 
 namespace gear_damping_id {
@@ -40,21 +41,26 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     single_.reset();
     single_.addSegment(v, begin, end);
     seg = single_.finish();
-    if (seg.segments.size() == 1 && seg.segments[0].identifiable &&
+    applyQualityFlags(options_, &seg);  // below-noise segments are not refined (as identify())
+    if (seg.segments.size() == 1 && seg.segments[0].identifiable && options_.refinable() &&
         wantsRefinement(options_, seg)) {
       IdentificationResult refined = seg;
       std::string why;
       if (refineOutputError(v, {{begin, end}}, gear_, options_, &refined, &why)) {
+        keepIntegralEstimates(seg, &refined);
         seg = std::move(refined);
       } else {
         out.warning = "output-error refinement failed (" + why + "): integral estimate kept";
+        seg.warnings.push_back({quality_code::kRefineFailed, out.warning});
       }
     }
+    applyQualityFlags(options_, &seg);
     if (!seg.segments.empty()) est = seg.segments.front();
     method_.addSegment(v, begin, end);  // for the cumulative omega0 (xi), as offline
   } else {
     method_.addSegment(v, begin, end);
     shared_ = method_.finish();
+    applyQualityFlags(options_, &shared_);
     est = shared_.segments.back();
     seg = shared_;
     seg.segments = {est};
@@ -95,6 +101,7 @@ IdentificationResult LiveIdentification::cumulative() const {
       if (e.identifiable) e.xi = e.C / (2.0 * r.omega0);
     }
   }
+  applyQualityFlags(options_, &r);  // xi changed with the cumulative omega0
   return r;
 }
 

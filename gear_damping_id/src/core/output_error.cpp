@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "gear_damping_id/forward_model.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/sdof_integrator.hpp"
 
 namespace gear_damping_id {
@@ -699,7 +700,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     rs.ar.assign(noise_of[i].a, noise_of[i].a + noise_of[i].p);
     if (!converged[i]) {
       all_converged = false;
-      e.warnings.push_back({"refine_not_converged", not_converged});
+      e.warnings.push_back({quality_code::kRefineNotConverged, not_converged});
     }
     WindowEstimate w;
     w.t_start = e.t_start;
@@ -711,7 +712,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   }
   if (res->constant && !piecewise && !load) {
     fillC(&*res->constant, sh[0], sigma2_pooled * Ainv_of[problems[0][0]](0, 0));
-    if (!all_converged) res->constant->warnings.push_back({"refine_not_converged", not_converged});
+    if (!all_converged) res->constant->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
   }
   if (res->load_law && load) {
     const Eigen::MatrixXd& Ainv = Ainv_of[problems[0][0]];
@@ -720,7 +721,7 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     res->load_law->c0_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(0, 0), 0.0));
     res->load_law->c1_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(1, 1), 0.0));
   }
-  if (!all_converged) res->warnings.push_back(not_converged);
+  if (!all_converged) res->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
   return true;
 }
 

@@ -1,5 +1,6 @@
 #include "gear_damping_id/result_io.hpp"
 
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/signal_csv.hpp"
 
 #include <cmath>
@@ -34,6 +35,13 @@ std::string csvText(const std::string& s) {
   return q + "\"";
 }
 
+// Quality warnings as [{code, text}] (empty array when clean).
+json warningsJson(const QualityWarnings& ws) {
+  json a = json::array();
+  for (const auto& w : ws) a.push_back({{"code", w.code}, {"text", w.text}});
+  return a;
+}
+
 const SegmentEstimate* sharedEstimate(const IdentificationResult& r) {
   return r.constant ? &*r.constant : nullptr;
 }
@@ -66,6 +74,23 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
   }
   if (std::isfinite(s.mean_torque)) j["mean_torque"] = s.mean_torque;
   if (std::isfinite(s.forcing)) j["forcing"] = s.forcing;
+  if (std::isfinite(s.C_integral)) {
+    j["C_integral"] = s.C_integral;
+    j["C_integral_std"] = num(s.C_integral_std);
+  }
+  if (!s.stiffness_curve.empty()) {
+    json k = json::array(), ks = json::array();
+    for (size_t i = 0; i < s.stiffness_curve.size(); ++i) {
+      k.push_back(num(s.stiffness_curve[i]));
+      ks.push_back(num(i < s.stiffness_curve_std.size() ? s.stiffness_curve_std[i] : kNaN));
+    }
+    j["stiffness_curve"] = k;
+    j["stiffness_curve_std"] = ks;
+  }
+  j["noise_std"] = num(s.noise_std);
+  j["signal_std"] = num(s.signal_std);
+  j["residual_rms"] = num(s.residual_rms);
+  j["warnings"] = warningsJson(s.warnings);
   return j;
 }
 
@@ -81,6 +106,9 @@ json runJson(const AnalysisRun& run) {
   j["omega0"] = num(r.omega0);
   j["window_length"] = num(r.window_length);
   j["segment_length"] = num(run.options.segment_length);
+  if (r.formulation == Formulation::Greybox) {
+    j["stiffness_shape"] = toString(run.options.stiffness_shape);
+  }
   j["segments"] = json::array();
   for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
@@ -91,7 +119,7 @@ json runJson(const AnalysisRun& run) {
                      {"identifiable", l.identifiable}};
     if (!l.identifiable) j["load_law"]["reason"] = l.reason;
   }
-  j["warnings"] = r.warnings;
+  j["warnings"] = warningsJson(r.warnings);
   if (run.response_error.empty()) {
     j["response"] = {{"nrmse", num(run.response.nrmse)},
                      {"fit_percent", num(run.response.fit_percent)}};
@@ -146,6 +174,7 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
            << "  " << std::setw(11) << fmt(s.c, 6) << "  " << std::setw(10) << fmt(s.xi, 5);
         if (levels) os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
                        << fmt(s.k_max, 6);
+        if (!s.warnings.empty()) os << "  flagged: " << joinCodes(s.warnings, ",");
         os << "\n";
       }
     }
@@ -153,6 +182,7 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
       os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3) << " 1/s, c = "
          << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
       if (!c->identifiable) os << " (not identifiable: " << c->reason << ")";
+      if (!c->warnings.empty()) os << "  flagged: " << joinCodes(c->warnings, ",");
       os << "\n";
     }
     if (r.load_law) {
@@ -168,7 +198,7 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
     } else {
       os << "  modeled response: not available (" << run.response_error << ")\n";
     }
-    for (const auto& w : r.warnings) os << "  warning: " << w << "\n";
+    for (const auto& w : r.warnings) os << "  warning [" << w.code << "]: " << w.text << "\n";
   }
 }
 
@@ -291,8 +321,10 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
     return false;
   }
   std::ostringstream seg, sum;
-  seg << "formulation,model,segment,t_start,t_end,C,C_std,c,xi,k_min,k_max,identifiable,reason\n";
-  sum << "formulation,model,estimator,C,C_std,c,xi,c0,c0_std,c1,c1_std,nrmse,fit_percent\n";
+  seg << "formulation,model,segment,t_start,t_end,C,C_std,c,xi,k_min,k_max,identifiable,reason,"
+         "warnings,stiffness_curve\n";
+  sum << "formulation,model,estimator,C,C_std,c,xi,c0,c0_std,c1,c1_std,nrmse,fit_percent,"
+         "warnings\n";
   for (const auto& run : runs) {
     const IdentificationResult& r = run.result;
     const std::string head = toString(r.formulation) + "," + toString(r.model) + ",";
@@ -301,7 +333,12 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
       seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << ","
           << csvNum(s.C) << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi)
           << "," << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0)
-          << "," << (s.identifiable ? std::string() : csvText(s.reason)) << "\n";
+          << "," << (s.identifiable ? std::string() : csvText(s.reason)) << ","
+          << joinCodes(s.warnings, ";") << ",";
+      for (size_t k = 0; k < s.stiffness_curve.size(); ++k) {
+        seg << (k > 0 ? ";" : "") << csvNum(s.stiffness_curve[k]);
+      }
+      seg << "\n";
     }
     const SegmentEstimate* c = sharedEstimate(r);
     const LoadLawEstimate* l = r.load_law ? &*r.load_law : nullptr;
@@ -310,7 +347,7 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
         << csvNum(c ? c->xi : kNaN) << "," << csvNum(l ? l->c0 : kNaN) << ","
         << csvNum(l ? l->c0_std : kNaN) << "," << csvNum(l ? l->c1 : kNaN) << ","
         << csvNum(l ? l->c1_std : kNaN) << "," << csvNum(run.response.nrmse) << ","
-        << csvNum(run.response.fit_percent) << "\n";
+        << csvNum(run.response.fit_percent) << "," << joinCodes(r.warnings, ";") << "\n";
     if (run.response_error.empty() && run.response.observed.size() > 0) {
       std::ostringstream resp;
       resp << "time,observed,modeled\n";

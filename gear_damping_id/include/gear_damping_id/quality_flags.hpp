@@ -1,0 +1,84 @@
+// Quality flags of the damping identification: the one place that decides whether a segment's
+// estimate is clean, flagged (computed, but with a stated reason not to trust it as is) or not
+// identifiable (its dynamic content is below the noise). Applied by every path that produces
+// segments: identify() (batch), `analyze`'s streaming path and LiveIdentification. No ROS.
+//
+// Segment codes (stable; docs/trust.md says what causes each and what to do):
+//   below_noise          the segment is not identifiable: C is not significantly different from
+//                        zero, i.e. C_std / |C| > 1 / z(1 - alpha/2) with alpha = 5 % (limit
+//                        0.51). By the Cramer-Rao bound C_std / |C| = sigma / ||C dy/dC||, so
+//                        this is the test "the energy of the damping-sensitive part of the
+//                        response is below z^2 times the noise energy".
+//   nonpositive_damping  C <= 0
+//   overdamped           xi >= 1
+//   model_mismatch       the model cannot reproduce the data: the integral equations' residual
+//                        RMS exceeds kMismatchNoiseRatio times the model-free noise estimate (so
+//                        it is model error, not noise) AND either kMismatchGross of the DTE's
+//                        standard deviation, or kMismatchSignalFraction of it with a possible
+//                        bias of C (sqrt(N) C_std) above kMismatchBias of C
+//   refine_disagrees     the refined and integral estimates differ by more than
+//                        kDisagreeSE combined standard errors
+// Each depends on the segment's own estimate and data only, so batch, streamed and live
+// identification flag a segment alike.
+// Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
+// stopped without converging), refine_failed (it diverged: integral estimates reported),
+// refine_skipped (a streamed shared-damping run is not refined), switches_unlocated (stiffness
+// switches that mesh_phase could not locate).
+#pragma once
+
+#include "gear_damping_id/identification_types.hpp"
+
+namespace gear_damping_id {
+
+namespace quality_code {
+inline constexpr const char* kBelowNoise = "below_noise";
+inline constexpr const char* kNonpositiveDamping = "nonpositive_damping";
+inline constexpr const char* kOverdamped = "overdamped";
+inline constexpr const char* kModelMismatch = "model_mismatch";
+inline constexpr const char* kRefineDisagrees = "refine_disagrees";
+inline constexpr const char* kRefineNotConverged = "refine_not_converged";
+inline constexpr const char* kRefineFailed = "refine_failed";
+inline constexpr const char* kRefineSkipped = "refine_skipped";
+inline constexpr const char* kSwitchesUnlocated = "switches_unlocated";
+}  // namespace quality_code
+
+/// Limits of the tests (documented in docs/trust.md).
+struct QualityLimits {
+  /// Two-sided 5 % significance: C must differ from zero by this many standard errors.
+  static constexpr double kSignificanceZ = 1.959963984540054;
+  /// The integral equations' residual over the noise estimate above which the model is said
+  /// not to reproduce the data. A correct model leaves the noise plus the noise the double
+  /// integrals of K y carry (measured 1.0-2.4x the noise on the test cases at 20-40 dB).
+  static constexpr double kMismatchNoiseRatio = 5.0;
+  /// A residual above the noise is model error. Above this fraction of the DTE's standard
+  /// deviation (fit below 95 %) it is flagged outright.
+  static constexpr double kMismatchGross = 0.05;
+  /// Below that, model error of RMS rho can move C by at most rho sqrt(N) / ||x_C|| =
+  /// sqrt(N) C_std (Cauchy-Schwarz, x_C the damping regressor after the nuisance projection,
+  /// N samples): flagged when that bound exceeds this fraction of C...
+  static constexpr double kMismatchBias = 0.1;
+  /// ... and the residual exceeds this fraction of the signal: on noise-free data the noise
+  /// estimate is at the quadrature level, and a correct model's residual stays below 1e-5 of
+  /// the signal (measured up to 7e-6 on the exact greybox shapes); 1e-3 leaves a margin.
+  static constexpr double kMismatchSignalFraction = 1e-3;
+  /// Refined vs integral estimate: combined standard errors allowed between them.
+  static constexpr double kDisagreeSE = 5.0;
+};
+
+/// Flags every segment of `result` (and the shared constant estimate): adds the segment codes
+/// above to SegmentEstimate::warnings, and makes a below-noise segment not identifiable (its
+/// numbers NaN, `reason` says why). Idempotent: the codes it owns are recomputed, others kept.
+void applyQualityFlags(const IdentificationOptions& options, IdentificationResult* result);
+
+/// After an output-error refinement of `integral` into `refined` (same segments), keeps the
+/// integral method's C and C_std in C_integral / C_integral_std of every refined segment that
+/// does not already carry them.
+void keepIntegralEstimates(const IdentificationResult& integral, IdentificationResult* refined);
+
+/// Whether `warnings` holds `code`.
+bool hasCode(const QualityWarnings& warnings, const std::string& code);
+
+/// The codes of `warnings` joined by `sep` (e.g. for a CSV cell or a printed table).
+std::string joinCodes(const QualityWarnings& warnings, const std::string& sep = ";");
+
+}  // namespace gear_damping_id

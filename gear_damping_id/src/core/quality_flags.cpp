@@ -1,0 +1,123 @@
+// Quality flags of the damping identification (see quality_flags.hpp).
+#include "gear_damping_id/quality_flags.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace gear_damping_id {
+
+namespace {
+
+using L = QualityLimits;
+
+bool ownedCode(const std::string& c) {
+  return c == quality_code::kNonpositiveDamping || c == quality_code::kOverdamped ||
+         c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees;
+}
+
+std::string num(double v) {
+  std::ostringstream s;
+  s.precision(4);
+  s << v;
+  return s.str();
+}
+
+// Flags one identifiable estimate in place.
+void flagEstimate(SegmentEstimate* e) {
+  if (!e->identifiable || !std::isfinite(e->C)) return;
+  auto& w = e->warnings;
+  w.erase(
+      std::remove_if(w.begin(), w.end(), [](const QualityWarning& q) { return ownedCode(q.code); }),
+      w.end());
+  // Below the noise: C not significantly different from zero.
+  const double max_rel = 1.0 / L::kSignificanceZ;
+  if (std::isfinite(e->C_std) && !(e->C_std <= max_rel * std::abs(e->C))) {
+    const std::string why = "below noise: C = " + num(e->C) + " +- " + num(e->C_std) +
+                            " 1/s is not significantly different from zero (relative standard "
+                            "error " +
+                            num(e->C_std / std::abs(e->C)) + " > " + num(max_rel) +
+                            "): the damping-sensitive part of the response is below the noise";
+    e->identifiable = false;
+    e->reason = why;
+    e->C = e->C_std = e->c = e->xi = kNaN;
+    e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
+    e->C_integral = e->C_integral_std = kNaN;
+    e->refined = false;
+    w.push_back({quality_code::kBelowNoise, why});
+    return;
+  }
+  if (!(e->C > 0.0)) {
+    w.push_back({quality_code::kNonpositiveDamping,
+                 "C = " + num(e->C) + " 1/s <= 0: no physical damping fits the data"});
+  }
+  if (e->xi >= 1.0) {
+    w.push_back({quality_code::kOverdamped, "damping ratio xi = " + num(e->xi) +
+                                                " >= 1: an overdamped mesh is not plausible"});
+  }
+  const double bias_bound = std::sqrt(static_cast<double>(e->samples)) * e->C_std;
+  if (std::isfinite(e->residual_rms) && std::isfinite(e->noise_std) &&
+      std::isfinite(e->signal_std) && e->residual_rms > L::kMismatchNoiseRatio * e->noise_std &&
+      (e->residual_rms > L::kMismatchGross * e->signal_std ||
+       (e->residual_rms > L::kMismatchSignalFraction * e->signal_std &&
+        !(bias_bound <= L::kMismatchBias * std::abs(e->C))))) {
+    w.push_back({quality_code::kModelMismatch,
+                 "the model does not reproduce the data: residual RMS " + num(e->residual_rms) +
+                     " m is " + num(e->residual_rms / e->noise_std) + "x the noise estimate and " +
+                     num(100.0 * e->residual_rms / e->signal_std) +
+                     " % of the DTE's standard deviation; it can move C by up to " +
+                     num(100.0 * bias_bound / std::abs(e->C)) +
+                     " % (wrong stiffness shape, forcing or damping model?)"});
+  }
+  if (e->refined && std::isfinite(e->C_integral)) {
+    const double se =
+        std::hypot(e->C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
+    const double d = std::abs(e->C - e->C_integral);
+    if (!(d <= L::kDisagreeSE * se)) {
+      w.push_back({quality_code::kRefineDisagrees,
+                   "refined C = " + num(e->C) + " 1/s and integral C = " + num(e->C_integral) +
+                       " 1/s differ by " + num(se > 0.0 ? d / se : INFINITY) +
+                       " combined standard errors (> " + num(L::kDisagreeSE) + ")"});
+    }
+  }
+}
+
+}  // namespace
+
+bool hasCode(const QualityWarnings& warnings, const std::string& code) {
+  return std::any_of(warnings.begin(), warnings.end(),
+                     [&](const QualityWarning& w) { return w.code == code; });
+}
+
+std::string joinCodes(const QualityWarnings& warnings, const std::string& sep) {
+  std::string out;
+  for (const auto& w : warnings) {
+    if (!out.empty()) out += sep;
+    out += w.code;
+  }
+  return out;
+}
+
+void applyQualityFlags(const IdentificationOptions& /*options*/, IdentificationResult* r) {
+  for (auto& e : r->segments) flagEstimate(&e);
+  if (r->constant) flagEstimate(&*r->constant);
+}
+
+void keepIntegralEstimates(const IdentificationResult& integral, IdentificationResult* refined) {
+  if (integral.segments.size() == refined->segments.size()) {
+    for (size_t i = 0; i < integral.segments.size(); ++i) {
+      SegmentEstimate& e = refined->segments[i];
+      if (e.refined && std::isnan(e.C_integral)) {
+        e.C_integral = integral.segments[i].C;
+        e.C_integral_std = integral.segments[i].C_std;
+      }
+    }
+  }
+  if (integral.constant && refined->constant && refined->constant->refined &&
+      std::isnan(refined->constant->C_integral)) {
+    refined->constant->C_integral = integral.constant->C;
+    refined->constant->C_integral_std = integral.constant->C_std;
+  }
+}
+
+}  // namespace gear_damping_id

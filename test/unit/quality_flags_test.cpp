@@ -1,0 +1,337 @@
+// Quality flags (issue 13): every estimate is right within its standard error or visibly
+// flagged. Cases simulated with parameters of our own, each with a held-out variant:
+//  - the Table 1 case (square stiffness, sine load, load-dependent damping) stays clean: the
+//    false-flag rate over noise seeds is measured and bounded;
+//  - greybox (square-wave stiffness levels) on a stiffness it cannot represent (trapezoid,
+//    Fourier) is flagged in every segment;
+//  - a free transient that sinks under the noise (constant stiffness and load) gives segments
+//    that are not identifiable once the transient is below the noise;
+//  - in every case no clean identifiable segment is further than kCleanSE standard errors from
+//    the truth;
+//  - batch identify(), the per-segment identify() of analyze's streaming path and
+//    LiveIdentification flag each segment alike.
+#include "gear_damping_id/quality_flags.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <map>
+#include <set>
+
+#include "gear_damping_id/live_identification.hpp"
+#include "id_test_support.hpp"
+
+namespace {
+
+using namespace gear_id_test;
+using gear_damping_id::SegmentEstimate;
+namespace gd = gear_damping_id;
+namespace qc = gear_damping_id::quality_code;
+
+constexpr int kSeeds = 10;
+// Flags on the home case (noise-free and white noise at 40 / 20 dB) must stay rare: measured
+// 1 of 100 segments per formulation and SNR (a refined estimate 5 SE from its integral one).
+// Allowed: 1 in 20, above which a flag would no longer single out a suspect estimate.
+constexpr double kMaxFalseFlagRate = 0.05;
+// A clean estimate with an honest standard error is within 4 SE of the truth except with
+// probability 6e-5 per segment (normal); the truth of a segment is the time-mean of the true
+// C(t) over it, which the piecewise model's estimate differs from by well under 1 SE here.
+constexpr double kCleanSE = 4.0;
+// Noise-free data carry the simulator's integration error, which no standard error describes:
+// there a clean estimate is held to the method's noise-free accuracy bar instead (the known
+// formulation's 0.05 %, identification_accuracy_test).
+constexpr double kNoiseFreeRel = 5e-4;
+
+struct Tally {
+  int segments = 0, flagged = 0, not_identifiable = 0, clean_wrong = 0;
+  std::map<std::string, int> codes;
+  void add(const IdentificationResult& r, const SignalTable& t, const SimConfig& c) {
+    for (const auto& s : r.segments) {
+      ++segments;
+      if (!s.identifiable) ++not_identifiable;
+      if (!s.warnings.empty()) ++flagged;
+      for (const auto& w : s.warnings) ++codes[w.code];
+      if (s.identifiable && s.warnings.empty()) {
+        const double truth = trueC(t, c, s.t_start, s.t_end);
+        const bool ok =
+            std::abs(s.C - truth) <= std::max(kCleanSE * s.C_std, kNoiseFreeRel * std::abs(truth));
+        EXPECT_TRUE(ok) << "clean segment [" << s.t_start << ", " << s.t_end << "): C = " << s.C
+                        << " +- " << s.C_std << ", truth " << truth;
+        clean_wrong += !ok;
+      }
+    }
+  }
+  double flagRate() const { return segments > 0 ? double(flagged) / segments : 0.0; }
+  std::string str() const {
+    std::string o = std::to_string(flagged) + " of " + std::to_string(segments) + " flagged, " +
+                    std::to_string(not_identifiable) + " not identifiable, " +
+                    std::to_string(clean_wrong) + " clean but > 4 SE off;";
+    for (const auto& [code, n] : codes) o += " " + code + ":" + std::to_string(n);
+    return o;
+  }
+};
+
+SignalTable noisy(const SignalTable& clean, double snr_db, unsigned long seed,
+                  double* sigma = nullptr) {
+  SignalTable t = clean;
+  const double s = addWhiteNoise(&t.dte, snr_db, seed);
+  if (sigma) *sigma = s;
+  return t;
+}
+
+// Noise-free and noisy runs of `c` over seeds; returns the tally of the noisy runs.
+Tally overSeeds(const SimConfig& c, const SignalTable& clean, Formulation f, double db, int seeds) {
+  IdentificationOptions o;
+  o.formulation = f;
+  Tally t;
+  for (int s = 1; s <= seeds; ++s) {
+    const SignalTable n = noisy(clean, db, 700 + s);
+    t.add(identifyOrFail(n, c, o), n, c);
+  }
+  std::cout << "[ measured ] " << gd::toString(f) << " " << db << " dB over " << seeds
+            << " seeds: " << t.str() << "\n";
+  return t;
+}
+
+// The tally of the noise-free record.
+Tally noiseFree(const SimConfig& c, const SignalTable& clean, Formulation f,
+                const std::string& label) {
+  IdentificationOptions o;
+  o.formulation = f;
+  Tally t0;
+  t0.add(identifyOrFail(clean, c, o), clean, c);
+  std::cout << "[ measured ] " << label << " " << gd::toString(f) << " noise-free: " << t0.str()
+            << "\n";
+  return t0;
+}
+
+void expectHomeCaseClean(const SimConfig& c, const std::string& label) {
+  const SignalTable clean = simulateOrFail(c);
+  for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
+    const Tally t0 = noiseFree(c, clean, f, label);
+    EXPECT_EQ(t0.flagged, 0) << label << " noise-free " << gd::toString(f) << ": " << t0.str();
+    for (double db : {40.0, 20.0}) {
+      const Tally t = overSeeds(c, clean, f, db, kSeeds);
+      EXPECT_LE(t.flagRate(), kMaxFalseFlagRate) << label << " " << db << " dB: " << t.str();
+      EXPECT_EQ(t.not_identifiable, 0) << label << " " << db << " dB: " << t.str();
+    }
+  }
+}
+
+// Piecewise-constant true damping aligned with the 1 ms segments, so that each segment has one
+// true C (with a load-dependent truth the segment's C(t) varies within it).
+SimConfig piecewise(SimConfig c) {
+  setPiecewiseTruth(&c, 1e-3);
+  return c;
+}
+
+TEST(QualityFlags, Table1CaseStaysClean) {
+  expectHomeCaseClean(piecewise(table1Config()), "table1");
+}
+
+// Held-out: another gear, speed, load, sample rate. Its refined estimates can be wrong by many
+// SE (the refinement's forward model; issue 13 deliverable 1): those must be flagged, which the
+// tally's clean-but-wrong check asserts; the false-flag rate is only reported here.
+TEST(QualityFlags, HeldOutCaseIsRightOrFlagged) {
+  const SimConfig c = piecewise(heldOutCase());
+  const SignalTable clean = simulateOrFail(c);
+  for (Formulation f : {Formulation::Known, Formulation::Greybox}) {
+    noiseFree(c, clean, f, "held-out");
+    overSeeds(c, clean, f, 40.0, kSeeds);
+  }
+}
+
+// Greybox with square-wave levels on a stiffness shape it cannot represent.
+void expectGreyboxFlagged(const SimConfig& c, const std::string& label) {
+  const SignalTable clean = simulateOrFail(c);
+  IdentificationOptions o;
+  o.formulation = Formulation::Greybox;
+  for (double db : {std::numeric_limits<double>::infinity(), 40.0}) {
+    const SignalTable t = std::isfinite(db) ? noisy(clean, db, 11) : clean;
+    const IdentificationResult r = identifyOrFail(t, c, o);
+    Tally tally;
+    tally.add(r, t, c);
+    std::cout << "[ measured ] greybox on " << label << " at " << db << " dB: " << tally.str()
+              << "\n";
+    for (const auto& s : r.segments) {
+      EXPECT_TRUE(!s.identifiable || !s.warnings.empty())
+          << label << " " << db << " dB segment at " << s.t_start << ": C = " << s.C
+          << " reported clean";
+    }
+    // The cause named: most segments say the model does not reproduce the data.
+    EXPECT_GE(2 * tally.codes[qc::kModelMismatch], tally.segments) << label << " " << db;
+  }
+}
+
+TEST(QualityFlags, GreyboxOnTrapezoidStiffnessIsFlagged) {
+  SimConfig c = table1Config();
+  c.mesh.model = gear_sim::StiffnessModel::Trapezoid;
+  c.mesh.transition_fraction = 0.12;
+  expectGreyboxFlagged(c, "trapezoid (12 % transitions)");
+  SimConfig h = heldOutCase();
+  h.mesh.model = gear_sim::StiffnessModel::Trapezoid;
+  h.mesh.transition_fraction = 0.07;
+  expectGreyboxFlagged(h, "held-out trapezoid (7 % transitions)");
+}
+
+TEST(QualityFlags, GreyboxOnFourierStiffnessIsFlagged) {
+  SimConfig c = table1Config();
+  c.mesh.model = gear_sim::StiffnessModel::Fourier;
+  c.mesh.k_mean = 3.0e8;
+  c.mesh.fourier_cos = {6.0e7, -1.5e7};
+  c.mesh.fourier_sin = {2.0e7, 1.0e7};
+  expectGreyboxFlagged(c, "fourier (2 harmonics)");
+  SimConfig h = heldOutCase();
+  h.mesh.model = gear_sim::StiffnessModel::Fourier;
+  h.mesh.k_mean = 2.6e8;
+  h.mesh.fourier_cos = {4.0e7, 0.0, 8.0e6};
+  h.mesh.fourier_sin = {-3.0e7, 1.2e7, 0.0};
+  expectGreyboxFlagged(h, "held-out fourier (3 harmonics)");
+}
+
+// A free transient (constant stiffness and load, start from rest away from the static
+// deflection) that decays below white noise: once the envelope is below the noise, a segment is
+// not identifiable or flagged (a pure-noise segment passes the 5 % significance test one time
+// in 20; then C <= 0, xi >= 1 or the SE itself tell); every clean one is within kCleanSE.
+void expectTransientHandled(const SimConfig& c, double db, const std::string& label) {
+  const SignalTable clean = simulateOrFail(c);
+  const double me = c.gears.equivalentMass();
+  const double C = c.damping.ratio * 2.0 * std::sqrt(c.mesh.k_mean / me);
+  const double static_dte = clean.dte[clean.size() - 1];  // settled
+  Tally tally;
+  int below = 0, clean_below = 0;
+  for (int seed = 1; seed <= 5; ++seed) {
+    double sigma = 0.0;
+    const SignalTable t = noisy(clean, db, 40 + seed, &sigma);
+    const IdentificationResult r = identifyOrFail(t, c, IdentificationOptions());
+    tally.add(r, t, c);
+    for (const auto& s : r.segments) {
+      // Transient amplitude at the segment start (from rest: A0 = static deflection).
+      const double envelope = std::abs(static_dte) * std::exp(-0.5 * C * s.t_start);
+      if (envelope < sigma) {
+        ++below;
+        clean_below += s.identifiable && s.warnings.empty();
+        EXPECT_TRUE(!s.identifiable || !s.warnings.empty())
+            << label << " seed " << seed << " segment at " << s.t_start << ": transient "
+            << envelope / sigma << " x noise, C = " << s.C << " +- " << s.C_std;
+      }
+    }
+  }
+  std::cout << "[ measured ] transient " << label << ": " << tally.str() << "; " << below
+            << " segments below the noise, " << clean_below << " of them reported clean\n";
+  EXPECT_GT(tally.codes[qc::kBelowNoise], 0) << label;
+}
+
+// `base` with constant stiffness k [N/m], constant load T [N*m] and damping ratio xi.
+SimConfig transientCase(SimConfig base, double k, double T, double xi) {
+  base.mesh.model = gear_sim::StiffnessModel::Constant;
+  base.mesh.k_mean = k;
+  base.load.profile = gear_sim::LoadProfile::Constant;
+  base.load.mean = T;
+  base.damping.model = gear_sim::DampingModel::ConstantRatio;
+  base.damping.ratio = xi;
+  return base;
+}
+
+TEST(QualityFlags, TransientSinkingUnderNoiseIsNotIdentifiable) {
+  expectTransientHandled(transientCase(table1Config(), 3.2e8, 100.0, 0.05), 40.0, "xi 0.05, 40 dB");
+  // Held-out: other gear, stiffness, load, damping, sample rate and SNR.
+  expectTransientHandled(transientCase(heldOutCase(), 2.5e8, 60.0, 0.08), 30.0,
+                         "held-out xi 0.08, 30 dB");
+}
+
+// The sub-table of samples [b, e).
+SignalTable slice(const SignalTable& t, Eigen::Index b, Eigen::Index e) {
+  SignalTable s;
+  auto cut = [&](const Eigen::VectorXd& v) {
+    return v.size() > 0 ? Eigen::VectorXd(v.segment(b, e - b)) : Eigen::VectorXd();
+  };
+  s.time = cut(t.time), s.dte = cut(t.dte), s.stiffness = cut(t.stiffness);
+  s.torque = cut(t.torque), s.mesh_state = cut(t.mesh_state), s.mesh_phase = cut(t.mesh_phase);
+  s.damping = cut(t.damping);
+  return s;
+}
+
+std::set<std::string> codesOf(const SegmentEstimate& s) {
+  std::set<std::string> o;
+  for (const auto& w : s.warnings) o.insert(w.code);
+  return o;
+}
+
+// Batch, streamed (analyze: identify() per segment block) and live flags agree per segment.
+// Without refinement, so that every path has the same estimates: the refinement iterates all
+// segments of a batch together (one convergence test, one step length) and a streamed or live
+// segment alone, so a poorly determined segment's refined numbers differ between the paths.
+void expectPathsAgree(const SimConfig& c, Formulation f, double db) {
+  const SignalTable t = noisy(simulateOrFail(c), db, 5);
+  const gd::GearConstants gear = gd::gearConstants(c.gearModel());
+  IdentificationOptions o;
+  o.formulation = f;
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult batch = identifyOrFail(t, c, o);
+  const gd::SignalView view = gd::SignalView::of(t);
+  IdentificationOptions ow = o;
+  ow.window_length = gd::defaultWindowLength(view, gear);
+  const auto ranges = gd::segmentRanges(view, ow);
+  ASSERT_EQ(ranges.size(), batch.segments.size());
+  gd::LiveIdentification live(ow, gear);
+  int flagged = 0;
+  for (size_t i = 0; i < ranges.size(); ++i) {
+    const auto [b, e] = ranges[i];
+    const SegmentEstimate live_est = live.add(view, b, e).estimate;
+    IdentificationOptions os = ow;
+    os.segment_length = std::numeric_limits<double>::infinity();
+    const IdentificationResult streamed = identifyOrFail(slice(t, b, e), c, os);
+    ASSERT_EQ(streamed.segments.size(), 1u);
+    const SegmentEstimate& a = batch.segments[i];
+    flagged += !a.warnings.empty() || !a.identifiable;
+    EXPECT_EQ(a.identifiable, live_est.identifiable) << "segment " << i;
+    EXPECT_EQ(a.identifiable, streamed.segments[0].identifiable) << "segment " << i;
+    EXPECT_EQ(codesOf(a), codesOf(live_est))
+        << "segment " << i << ": batch [" << gd::joinCodes(a.warnings) << "] live ["
+        << gd::joinCodes(live_est.warnings) << "]";
+    EXPECT_EQ(codesOf(a), codesOf(streamed.segments[0]))
+        << "segment " << i << ": batch [" << gd::joinCodes(a.warnings) << "] streamed ["
+        << gd::joinCodes(streamed.segments[0].warnings) << "]";
+  }
+  EXPECT_GT(flagged, 0) << "the case must exercise the flags";
+}
+
+TEST(QualityFlags, BatchStreamedAndLiveAgree) {
+  expectPathsAgree(transientCase(table1Config(), 3.2e8, 100.0, 0.05), Formulation::Known,
+                   40.0);  // below_noise
+  SimConfig tz = table1Config();
+  tz.mesh.model = gear_sim::StiffnessModel::Trapezoid;
+  tz.mesh.transition_fraction = 0.1;
+  expectPathsAgree(tz, Formulation::Greybox, 40.0);  // model_mismatch
+}
+
+// The flags are idempotent and re-derived from the numbers: a negative or overdamped estimate
+// is flagged, a clean one is left alone.
+TEST(QualityFlags, PhysicalRangeFlags) {
+  IdentificationResult r;
+  SegmentEstimate e;
+  e.identifiable = true;
+  e.C = 6000.0, e.C_std = 10.0, e.xi = 0.05;
+  r.segments = {e, e, e};
+  r.segments[1].C = -500.0, r.segments[1].xi = -0.004;
+  r.segments[2].C = 2.0e5, r.segments[2].xi = 1.6, r.segments[2].C_std = 100.0;
+  for (int pass = 0; pass < 2; ++pass) {
+    gd::applyQualityFlags(IdentificationOptions(), &r);
+    EXPECT_TRUE(r.segments[0].warnings.empty());
+    EXPECT_EQ(gd::joinCodes(r.segments[1].warnings), qc::kNonpositiveDamping);
+    EXPECT_EQ(gd::joinCodes(r.segments[2].warnings), qc::kOverdamped);
+  }
+  // Relative SE at the 5 % significance limit: 0.50 passes, 0.52 is below the noise.
+  r.segments[0].C_std = 0.50 * r.segments[0].C;
+  gd::applyQualityFlags(IdentificationOptions(), &r);
+  EXPECT_TRUE(r.segments[0].identifiable);
+  r.segments[0].C_std = 0.52 * r.segments[0].C;
+  gd::applyQualityFlags(IdentificationOptions(), &r);
+  EXPECT_FALSE(r.segments[0].identifiable);
+  EXPECT_TRUE(std::isnan(r.segments[0].C));
+  EXPECT_EQ(gd::joinCodes(r.segments[0].warnings), qc::kBelowNoise);
+}
+
+}  // namespace
