@@ -278,7 +278,8 @@ class Report:
                 out.append(f"<tr><td>{fmt(m.get('frequency_hz'), '.1f')}</td><td>{fmt(m.get('damping_ratio'), '.5f')}</td>"
                            f"<td>{fmt(m.get('integral_damping_ratio'), '.5f')}</td><td>{fmt(m.get('r2'), '.4f')}</td>"
                            f"<td>{fmt(1e3 * fval(m.get('t_start')), '.3f')} – {fmt(1e3 * fval(m.get('t_end')), '.3f')}</td>"
-                           f"<td>{html.escape(m.get('warning', ''))}</td></tr>")
+                           f"<td>{'' if m.get('free_decay', True) else '<b>forced line</b> '}"
+                           f"{html.escape('; '.join(w['code'] + ': ' + w['text'] for w in m.get('warnings', [])))}</td></tr>")
             out.append("</table>")
         return "\n".join(out)
 
