@@ -127,10 +127,10 @@ struct WaveletOptions {
 /// Warning codes: `fit_failed` (no usable decay region, too short, phase not advancing),
 /// `not_free_decay` (envelope decays by < min_decay_nepers), `order_harmonic` (a line at a
 /// harmonic of an order frequency that persists), `shared_decay` (decays like a stronger mode
-/// under known parametric excitation), `low_r2` (R^2 < min_r2); flagged but kept:
-/// `close_modes` (a neighbour leaks > 1 % into the row at the omega0 used),
-/// `near_order_harmonic` (a decaying line at an order harmonic), `overlapping_modes` (modal
-/// overlap (sigma_i + sigma_j)/(2 pi |f_i - f_j|) > 0.3 with another mode: xi may be biased).
+/// under known parametric excitation), `low_r2` (R^2 < min_r2), `overlapping_modes` (modal
+/// overlap (sigma_i + sigma_j)/(2 pi |f_i - f_j|) > 0.3 with another mode: the envelope mixes
+/// both decays); flagged but kept: `close_modes` (a neighbour leaks > 1 % into the row at the
+/// omega0 used), `near_order_harmonic` (a decaying line at an order harmonic).
 struct WaveletMode {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   double frequency_hz = kNaN;           ///< [Hz] damped frequency f_d from the ridge phase slope

@@ -61,9 +61,9 @@ constexpr double kSharedDecayTol = 0.15;
 // half-widths over their spacing. Above kMaxModalOverlap the Lorentzian skirts of a heavily
 // damped neighbour reach the mode's row far beyond the wavelet's Gaussian leakage estimate
 // (the `close_modes` check) and the envelope is no longer one exponential:
-// `overlapping_modes` (estimate kept, flagged). 0.3: the mwdi-style multi-sine (0.18-0.19 for
+// `overlapping_modes`, damping ratio NaN. 0.3: the mwdi-style multi-sine (0.18-0.19 for
 // 600/800 Hz at xi 0.02-0.03) is estimated within 1 %; the square-wave gear case's free
-// response (0.5-0.6) is biased by 20 %.
+// response (0.3-1.0) is biased by 20 %.
 constexpr double kMaxModalOverlap = 0.3;
 
 // ------------------------------------------------------------------------------------------
@@ -730,7 +730,9 @@ void overlapWarnings(std::vector<WaveletMode>* modes) {
                        " Hz (half-power half-widths " + num(m.sigma / (2.0 * kPi)) + " + " +
                        num(o.sigma / (2.0 * kPi)) + " Hz over a spacing of " + num(df) +
                        " Hz) exceeds " + num(kMaxModalOverlap) +
-                       ": the envelope mixes both decays and xi may be biased");
+                       ": the envelope mixes both decays (apparent xi " + num(m.damping_ratio) +
+                       ")");
+        m.damping_ratio = kNaN;
         break;
       }
     }
