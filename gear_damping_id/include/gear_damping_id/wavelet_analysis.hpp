@@ -85,6 +85,9 @@ struct WaveletOptions {
   /// full scalograms of long records (the benchmark uses it). The damping fits' few rows
   /// always use kEstimate.
   FftPlanning fft_planning = FftPlanning::kEstimate;
+  /// Threads of the full scalogram (rows in parallel, MorletScalogram; results identical to
+  /// one thread). Rule: in [1, 256].
+  int threads = 1;
 
   /// Minimum weighted R^2 of the ln-envelope line fit for a reported damping ratio (see
   /// docs/wavelet.md, "When to trust the numbers"): below it the mode carries `low_r2` and

@@ -9,6 +9,8 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <numeric>
+#include <thread>
 
 #include "wavelet_detail.hpp"
 
@@ -559,6 +561,144 @@ double MorletCwt::noiseGainAt(double frequency_hz, double omega0) const {
 
 const std::complex<double>* MorletCwt::spectrum() const {
   return has_signal_ ? reinterpret_cast<const std::complex<double>*>(fftw_->spec) : nullptr;
+}
+
+// ------------------------------------------------------------------------------------------
+// MorletScalogram
+
+bool MorletScalogram::configure(long n, double sample_rate,
+                                const std::vector<double>& frequencies_hz, double omega0,
+                                FftPlanning planning, int threads, std::string* error) {
+  n_ = 0;
+  frequencies_.clear();
+  group_rows_.clear();
+  workers_.clear();
+  if (threads < 1 || threads > 256) {
+    return setError(error, "MorletScalogram: threads = " + std::to_string(threads) +
+                               " must be in [1, 256]"),
+           false;
+  }
+  // Each row's own FFT length: its 8-scale padding; rows whose band reaches the Nyquist
+  // frequency (a band-limited wavelet, whose cut rings far beyond 8 scales) keep the padding of
+  // the lowest row, as in one MorletCwt over all rows. Rows by descending length.
+  const size_t m = frequencies_hz.size();
+  std::vector<long> own(m, -1);
+  double s_max = 0.0;
+  for (double f : frequencies_hz) s_max = std::max(s_max, f > 0.0 ? morletScale(f, omega0) : 0.0);
+  for (size_t i = 0; i < m; ++i) {
+    const double f = frequencies_hz[i];
+    if (!(f > 0.0 && f < 0.5 * sample_rate)) continue;  // configure() below names it
+    const double s = morletScale(f, omega0);
+    const bool at_nyquist = s * kPi * sample_rate - omega0 < kBandHalfWidth;
+    const double pad = std::ceil(kPadScales * (at_nyquist ? s_max : s) * sample_rate);
+    own[i] = pad < 4e15 ? fastFftLength(n + static_cast<long>(pad)) : -1;
+  }
+  std::vector<int> order(m);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return own[size_t(a)] > own[size_t(b)]; });
+  std::vector<std::vector<int>> groups;
+  long group_length = 0;
+  for (int i : order) {
+    if (groups.empty() || static_cast<double>(group_length) > kGroupLengthRatio * own[size_t(i)]) {
+      groups.emplace_back();
+      group_length = own[size_t(i)];
+    }
+    groups.back().push_back(i);
+  }
+  std::vector<std::vector<MorletCwt>> workers(static_cast<size_t>(threads));
+  for (auto& w : workers) {
+    for (const auto& g : groups) {
+      std::vector<double> f;
+      for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
+      MorletCwt cwt;
+      if (!cwt.configure(n, sample_rate, f, omega0, planning, error)) return false;
+      w.push_back(std::move(cwt));
+    }
+  }
+  n_ = n;
+  frequencies_ = frequencies_hz;
+  group_rows_ = std::move(groups);
+  workers_ = std::move(workers);
+  return true;
+}
+
+long MorletScalogram::groupLength(int g) const {
+  if (workers_.empty() || g < 0 || g >= groups()) return -1;
+  return workers_[0][size_t(g)].paddedSize();
+}
+
+// Every row of signal y on the worker threads: each row's |W| is written to dest(t, row) (a
+// T* of n values) on thread t, then done(t, row, that pointer) is called on the same thread.
+template <typename T, typename Dest, typename Done>
+bool MorletScalogram::runRows(const double* y, Dest dest, Done done, std::string* error) {
+  if (workers_.empty()) return setError(error, "MorletScalogram: not configured"), false;
+  // Work items (group, local row), dealt round-robin over the threads; each thread transforms
+  // the signal once per group it has rows in.
+  std::vector<std::pair<int, int>> items;
+  for (int g = 0; g < groups(); ++g) {
+    for (int k = 0; k < static_cast<int>(group_rows_[size_t(g)].size()); ++k) {
+      items.push_back({g, k});
+    }
+  }
+  const int nt = threads();
+  std::vector<std::string> errors(static_cast<size_t>(nt));
+  auto work = [&](int t) {
+    std::vector<MorletCwt>& cwts = workers_[size_t(t)];
+    std::vector<bool> loaded(cwts.size(), false);
+    for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
+      const int g = items[it].first, k = items[it].second;
+      if (!loaded[size_t(g)]) {
+        if (!cwts[size_t(g)].setSignal(y, &errors[size_t(t)])) return;
+        loaded[size_t(g)] = true;
+      }
+      const int row = group_rows_[size_t(g)][size_t(k)];
+      T* d = dest(t, row);
+      if (!cwts[size_t(g)].rowModulus(k, d)) {
+        errors[size_t(t)] = "MorletScalogram: FFTW could not plan the inverse FFT";
+        return;
+      }
+      done(t, row, d);
+    }
+  };
+  if (nt == 1) {
+    work(0);
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 0; t < nt; ++t) pool.emplace_back(work, t);
+    for (auto& th : pool) th.join();
+  }
+  for (const std::string& e : errors) {
+    if (!e.empty()) return setError(error, e), false;
+  }
+  return true;
+}
+
+template <typename T>
+bool MorletScalogram::modulusImpl(const double* y, T* out, std::string* error) {
+  if (!out) return setError(error, "MorletScalogram: null output"), false;
+  const size_t n = static_cast<size_t>(n_);
+  return runRows<T>(
+      y, [&](int, int row) { return out + static_cast<size_t>(row) * n; },
+      [](int, int, const T*) {}, error);
+}
+
+bool MorletScalogram::forEachRow(const double* y,
+                                 const std::function<void(int, const double*)>& sink,
+                                 std::string* error) {
+  std::vector<std::vector<double>> buffers(static_cast<size_t>(std::max(1, threads())),
+                                           std::vector<double>(static_cast<size_t>(n_)));
+  return runRows<double>(
+      y, [&](int t, int) { return buffers[size_t(t)].data(); },
+      [&](int, int row, const double* d) { sink(row, d); }, error);
+}
+
+bool MorletScalogram::modulus(const double* y, double* out, std::string* error) {
+  return modulusImpl(y, out, error);
+}
+
+bool MorletScalogram::modulus(const double* y, float* out, std::string* error) {
+  return modulusImpl(y, out, error);
 }
 
 }  // namespace gear_damping_id

@@ -372,8 +372,8 @@ bool frequencyGrid(Analysis* a) {
 // noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
 // the time-averaged scalogram.
 bool spectraAndNoise(Analysis* a) {
-  const FftPlanning planning = a->opt.full_scalogram ? a->opt.fft_planning : FftPlanning::kEstimate;
-  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, planning, a->error) ||
+  // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
+  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::kEstimate, a->error) ||
       !a->scal.setSignal(a->y, a->error)) {
     return false;
   }
@@ -409,19 +409,22 @@ bool fullScalogram(Analysis* a) {
     const long e = std::min(n, (c + 1) * d);
     res.scalogram_times[static_cast<size_t>(c)] = 0.5 * static_cast<double>(c * d + e - 1) / a->fs;
   }
-  std::vector<double> row(static_cast<size_t>(n));
-  for (int i = 0; i < a->scal.rows(); ++i) {
-    if (!a->scal.rowModulus(i, row.data())) {
-      return setError(a->error, "analyzeWavelet: FFTW could not plan the inverse FFT"), false;
-    }
-    for (long c = 0; c < cols; ++c) {
-      const long b = c * d, e = std::min(n, b + d);
-      double sum = 0.0;
-      for (long j = b; j < e; ++j) sum += row[static_cast<size_t>(j)];
-      res.modulus(i, c) = static_cast<float>(sum / static_cast<double>(e - b));
-    }
+  MorletScalogram rows;
+  if (!rows.configure(n, a->fs, a->grid, a->opt.omega0, a->opt.fft_planning, a->opt.threads,
+                      a->error)) {
+    return false;
   }
-  return true;
+  return rows.forEachRow(
+      a->y,
+      [&](int i, const double* row) {
+        for (long c = 0; c < cols; ++c) {
+          const long b = c * d, e = std::min(n, b + d);
+          double sum = 0.0;
+          for (long j = b; j < e; ++j) sum += row[j];
+          res.modulus(i, c) = static_cast<float>(sum / static_cast<double>(e - b));
+        }
+      },
+      a->error);
 }
 
 // Peak-picking spectrum: time-averaged scalogram at peak_omega0 on a log grid fine enough
@@ -859,6 +862,7 @@ WaveletStatus WaveletOptions::checkModesAndRules() const {
   if (!(min_decay_nepers > 0.0) || !std::isfinite(min_decay_nepers)) {
     return violated("min_decay_nepers", min_decay_nepers, "must be finite and > 0");
   }
+  if (threads < 1 || threads > 256) return violated("threads", threads, "must be in [1, 256]");
   if (max_scalogram_columns < 0) {
     return violated("max_scalogram_columns", static_cast<double>(max_scalogram_columns),
                     "must be >= 0 (0 = every sample)");
