@@ -1,7 +1,9 @@
 // Google Benchmark suite of the Morlet CWT (DESIGN.md §7): throughput in (samples x scales)/s
 // of gear_damping_id::MorletCwt, and the FFTW lower bound it is measured against (one inverse
-// complex FFT of the same padded length per scale, same planner flags). Nothing is asserted;
-// bench/compare_cwt.py runs this binary beside PyWavelets and prints the ratios.
+// complex FFT of the same padded length per scale, same planner flags), of the grouped and
+// threaded MorletScalogram (BM_Scalogram/n/threads) and of the per-mode damping without a
+// scalogram (BM_ModeDamping). Nothing is asserted; bench/compare_peers runs this binary beside
+// fCWT and PyWavelets and prints the ratios.
 //
 // Set-up (outside the timed region): the signal, MorletCwt::configure (FFTW plans, aligned
 // buffers, first touch of every buffer) and one warm-up transform. The timed region of BM_Cwt
@@ -129,7 +131,64 @@ void BM_FftBound(benchmark::State& state) {
   fftw_free(out);
 }
 
+// The full scalogram as analyzeWavelet computes it: MorletScalogram (padding per group of rows,
+// rows on state.range(1) threads), |W| of each row into a per-thread buffer.
+void BM_Scalogram(benchmark::State& state) {
+  const long n = state.range(0);
+  const int threads = static_cast<int>(state.range(1));
+  const std::vector<double> y = signalOf(n);
+  gear_damping_id::MorletScalogram scal;
+  std::string error;
+  if (!scal.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, threads, &error)) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  auto once = [&]() {
+    return scal.forEachRow(
+        y.data(), [](int, const double*) {}, &error);
+  };
+  if (!once()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  for (auto _ : state) {
+    once();
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n) * kScales);
+  state.counters["groups"] = scal.groups();
+  state.counters["threads"] = threads;
+  state.SetLabel(g_planning == FftPlanning::kMeasure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
+}
+
+// Per-mode damping without a scalogram (full_scalogram = false: only the rows the fits need):
+// analyzeWavelet on 1e6 samples of three decaying modes, default options otherwise.
+void BM_ModeDamping(benchmark::State& state) {
+  const long n = state.range(0);
+  const std::vector<double> y = signalOf(n);
+  gear_damping_id::WaveletOptions o;
+  o.full_scalogram = false;
+  gear_damping_id::WaveletResult r;
+  std::string error;
+  for (auto _ : state) {
+    if (!gear_damping_id::analyzeWavelet(y.data(), n, kSampleRate, o, &r, &error)) {
+      state.SkipWithError(error.c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(r.modes.data());
+  }
+  state.counters["modes"] = static_cast<double>(r.modes.size());
+}
+
 BENCHMARK(BM_Cwt)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Scalogram)
+    ->Args({100000, 1})
+    ->Args({100000, 2})
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(BM_ModeDamping)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_FftBound)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

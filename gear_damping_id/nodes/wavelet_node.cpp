@@ -60,6 +60,8 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.getDouble("min_separation_hz", &w.min_separation_hz, "Hz") ||
       !p.get("max_modes", &max_modes) || !p.getDouble("coi_factor", &w.coi_factor) ||
       !p.getDouble("floor_factor", &w.floor_factor) ||
+      !p.getDouble("min_r2", &w.min_r2) || !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
+      !p.get("order_frequencies", &w.order_frequencies, "Hz") ||
       !p.get("mode_frequencies", &w.mode_frequencies, "Hz") ||
       !nodes::readIntakeParams(p, &o->intake)) {
     return false;

@@ -88,7 +88,14 @@ gear_damping::WaveletModes toMsg(const gd::WaveletResult& r, double t_start, dou
     w.decay_t_start = m.t_start;
     w.decay_t_end = m.t_end;
     w.xi_integral = m.integral_xi;
-    w.warning = m.warning;
+    w.warning = gd::warningText(m.warnings);
+    w.free_decay = m.free_decay;
+    for (const auto& q : m.warnings) {
+      gear_damping::QualityWarning qm;
+      qm.code = q.code;
+      qm.text = q.text;
+      w.warnings.push_back(qm);
+    }
     msg.modes.push_back(w);
   }
   return msg;

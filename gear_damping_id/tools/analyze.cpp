@@ -398,7 +398,8 @@ int main(int argc, char** argv) {
                  "modes, or once per --mode-freq)")
       ->take_all();
   app.add_option("--prominence", wopt.peak_prominence,
-                 "wavelet: minimum peak prominence, fraction of the highest peak (default 0.05)");
+                 "wavelet: minimum peak prominence, fraction of the highest peak (default 0: "
+                 "adapts to the noise floor)");
   std::string wavelet_input;
   app.add_option("--wavelet-input", wavelet_input,
                  "wavelet: analyse the dte of this record (CSV or bag, e.g. a free decay from "
@@ -657,6 +658,17 @@ int main(int argc, char** argv) {
     if (wavelet_on_record && wavelet_n < static_cast<size_t>(analysed.back().second - first))
       warn("wavelet validation on the first " + std::to_string(wavelet_n) +
            " samples of the analysed record (--wavelet-max-samples)");
+    // Forced lines: mesh frequency from the record's mesh_phase, else the gear parameters.
+    double f_mesh = 0.0;
+    if (wavelet_on_record && !streaming && table.mesh_phase.size() > 0 && wavelet_n > 1)
+      f_mesh = (table.mesh_phase[first + static_cast<Eigen::Index>(wavelet_n) - 1] -
+                table.mesh_phase[first]) * wavelet_rate / static_cast<double>(wavelet_n - 1);
+    else if (identification && model.speed.profile == gear_sim::SpeedProfile::Constant)
+      f_mesh = model.speed.pinion_rpm / 60.0 * model.gears.pinion.teeth;
+    if (wopt.order_frequencies.empty())
+      wopt.order_frequencies = gd::gearOrderFrequencies(
+          f_mesh, identification ? model.gears.pinion.teeth : 0,
+          identification ? model.gears.gear.teeth : 0);
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");

@@ -101,8 +101,8 @@ double median(std::vector<double> v) {
 const WaveletMode* modeNear(const WaveletResult& r, double f) {
   const WaveletMode* best = nullptr;
   for (const WaveletMode& m : r.modes) {
-    if (relErr(m.frequency_hz, f) < 0.05 && (!best || relErr(m.frequency_hz, f) <
-                                                          relErr(best->frequency_hz, f))) {
+    if (relErr(m.frequency_hz, f) < 0.05 &&
+        (!best || relErr(m.frequency_hz, f) < relErr(best->frequency_hz, f))) {
       best = &m;
     }
   }
@@ -397,7 +397,7 @@ class SingleDampedSinusoid : public ::testing::TestWithParam<SingleCase> {};
 TEST_P(SingleDampedSinusoid, GivesTheDampingRatioWithinOnePercent) {
   const SingleCase c = GetParam();
   const Mode m{c.f, c.xi, 1.0, 0.3};
-  const double fs = 250000.0;  // 25..250 samples per period
+  const double fs = 250000.0;                         // 25..250 samples per period
   const long n = std::lround(8.0 / sigmaOf(m) * fs);  // eight envelope time constants
   WaveletOptions options;
   options.full_scalogram = false;
@@ -406,11 +406,11 @@ TEST_P(SingleDampedSinusoid, GivesTheDampingRatioWithinOnePercent) {
   ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, n), fs, options, &r, &error)) << error;
   ASSERT_EQ(r.modes.size(), 1u);
   const WaveletMode& w = r.modes[0];
-  EXPECT_LT(relErr(w.damping_ratio, c.xi), kSingleModeXiTol) << w.warning;
+  EXPECT_LT(relErr(w.damping_ratio, c.xi), kSingleModeXiTol) << warningText(w.warnings);
   EXPECT_LT(relErr(w.frequency_hz, c.f), kModeFrequencyTol);
   EXPECT_LT(relErr(w.sigma, sigmaOf(m)), kSingleModeXiTol);
   EXPECT_GT(w.r2, 0.999);
-  EXPECT_TRUE(w.warning.empty()) << w.warning;
+  EXPECT_TRUE(w.warnings.empty()) << warningText(w.warnings);
   std::printf("[ measured ] f %6.0f Hz xi %.3f: xi error %.2e, f error %.2e (omega0 %.2f)\n", c.f,
               c.xi, relErr(w.damping_ratio, c.xi), relErr(w.frequency_hz, c.f), w.omega0);
 }
@@ -431,17 +431,18 @@ constexpr long kPaperN = 12000;        // 60 ms: the 1731 Hz mode decays to exp(
 TEST(AnalyzeWavelet, FindsAndSeparatesThePapersThreeModesWithinTwoPercent) {
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN), kPaperFs,
-                             WaveletOptions{}, &r, &error))
+  ASSERT_TRUE(analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN), kPaperFs, WaveletOptions{},
+                             &r, &error))
       << error;
   ASSERT_EQ(r.modes.size(), 3u) << "peak picking must find exactly the three modes";
   for (const Mode& m : kPaperModes) {
     const WaveletMode* w = modeNear(r, m.f);
     ASSERT_NE(w, nullptr) << m.f;
-    EXPECT_LT(relErr(w->damping_ratio, m.xi), kMultiModeXiTol) << m.f << " Hz: " << w->warning;
+    EXPECT_LT(relErr(w->damping_ratio, m.xi), kMultiModeXiTol)
+        << m.f << " Hz: " << warningText(w->warnings);
     EXPECT_LT(relErr(w->frequency_hz, m.f), kModeFrequencyTol) << m.f;
     EXPECT_LT(relErr(w->spectrum_frequency_hz, m.f), kModeFrequencyTol) << m.f;
-    EXPECT_TRUE(w->warning.empty()) << w->warning;
+    EXPECT_TRUE(w->warnings.empty()) << warningText(w->warnings);
     EXPECT_TRUE(std::isnan(w->integral_xi));
     EXPECT_LT(w->t_start, w->t_end);
     std::printf("[ measured ] clean %5.0f Hz: xi error %.2e, f error %.2e, omega0 %.2f, R2 %.6f\n",
@@ -511,8 +512,8 @@ TEST(AnalyzeWavelet, HandlesADecayStartingInsideTheRecord) {
   const Mode m{2000.0, 0.01, 1.0, 0.3};
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, 5000, INFINITY, 1, 0.02), fs, WaveletOptions{},
-                             &r, &error));
+  ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, 5000, INFINITY, 1, 0.02), fs, WaveletOptions{}, &r,
+                             &error));
   ASSERT_EQ(r.modes.size(), 1u);
   EXPECT_GT(r.modes[0].t_start, 0.02) << "the region must start after the impulse";
   EXPECT_LT(relErr(r.modes[0].damping_ratio, m.xi), kSingleModeXiTol);
@@ -533,14 +534,15 @@ TEST(AnalyzeWavelet, SeparatesModesTwentyPercentApartWithAnAutomaticOmega0) {
     ASSERT_NE(w, nullptr);
     EXPECT_LT(relErr(w->damping_ratio, m.xi), kMultiModeXiTol);
     EXPECT_GT(w->omega0, 12.0) << "separating modes 20 % apart needs omega0 > 3.7/0.2/...";
-    EXPECT_TRUE(w->warning.empty()) << w->warning;
+    EXPECT_TRUE(w->warnings.empty()) << warningText(w->warnings);
   }
   // Forcing omega0 = 6 on the same data: the modes leak into each other, and each mode says so.
   options.fit_omega0 = 6.0;
   ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
   ASSERT_EQ(r.modes.size(), 2u);
   for (const WaveletMode& w : r.modes) {
-    EXPECT_NE(w.warning.find("closer than the wavelet"), std::string::npos) << w.warning;
+    EXPECT_NE(warningText(w.warnings).find("closer than the wavelet"), std::string::npos)
+        << warningText(w.warnings);
   }
 }
 
@@ -605,7 +607,11 @@ TEST(AnalyzeWavelet, ReportsAModeWithoutAUsableDecayRegionAsNaNWithAWarning) {
   ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
   ASSERT_EQ(r.modes.size(), 1u);
   EXPECT_TRUE(std::isnan(r.modes[0].damping_ratio));
-  EXPECT_NE(r.modes[0].warning.find("cone of influence"), std::string::npos) << r.modes[0].warning;
+  EXPECT_NE(warningText(r.modes[0].warnings).find("cone of influence"), std::string::npos)
+      << warningText(r.modes[0].warnings);
+  ASSERT_EQ(r.modes[0].warnings.size(), 1u);
+  EXPECT_EQ(r.modes[0].warnings[0].code, "fit_failed");
+  EXPECT_FALSE(r.modes[0].free_decay);
 }
 
 // --- Invalid input ------------------------------------------------------------------------
@@ -639,10 +645,21 @@ TEST(AnalyzeWavelet, RejectsInvalidInputWithAnErrorNamingTheProblem) {
       {[](WaveletOptions* o) { o->f_min = 9000.0; }, "f_min"},  // >= auto f_max = 8 kHz
       {[](WaveletOptions* o) { o->n_scales = 0; }, "n_scales"},
       {[](WaveletOptions* o) { o->omega0 = 0.0; }, "omega0"},
-      {[](WaveletOptions* o) { o->frequencies = {100.0, 300.0, 200.0}; }, "frequencies[2]"},
-      {[](WaveletOptions* o) { o->frequencies = {100.0, 200.0, 12000.0}; }, "Nyquist"},
-      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0, 11000.0}; }, "mode_frequencies[1]"},
-      {[](WaveletOptions* o) { o->mode_frequencies = {1000.0}, o->decay_regions = {{0.02, 0.01}}; },
+      {[](WaveletOptions* o) {
+         o->frequencies = {100.0, 300.0, 200.0};
+       },
+       "frequencies[2]"},
+      {[](WaveletOptions* o) {
+         o->frequencies = {100.0, 200.0, 12000.0};
+       },
+       "Nyquist"},
+      {[](WaveletOptions* o) {
+         o->mode_frequencies = {1000.0, 11000.0};
+       },
+       "mode_frequencies[1]"},
+      {[](WaveletOptions* o) {
+         o->mode_frequencies = {1000.0}, o->decay_regions = {{0.02, 0.01}};
+       },
        "decay_regions[0]"},
       {[](WaveletOptions* o) { o->peak_prominence = 1.5; }, "peak_prominence"},
       {[](WaveletOptions* o) { o->fit_omega0 = 2.0; }, "fit_omega0"},
@@ -730,14 +747,15 @@ TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
   EXPECT_TRUE(std::isnan(integralDampingRatio(NAN, w0)));
   attachIntegralDampingRatio(&r, 0.02);
   attachIntegralDampingRatio(nullptr, 0.02);  // no-op, no crash
-  r.modes[1].warning = "a \"quoted\" remark";
+  r.modes[1].warnings = {{"close_modes", "a \"quoted\" remark"}};
   std::ostringstream out;
   ASSERT_EQ(writeModesCsv(r, out), "");
   std::istringstream in(out.str());
   std::string line;
   std::getline(in, line);
-  EXPECT_EQ(line.rfind("frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,", 0),
-            0u);
+  EXPECT_EQ(
+      line.rfind("frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,", 0),
+      0u);
   std::vector<std::string> rows;
   while (std::getline(in, line)) rows.push_back(line);
   ASSERT_EQ(rows.size(), kPaperModes.size());
@@ -746,7 +764,9 @@ TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
     EXPECT_NEAR(f, r.modes[i].frequency_hz, 1e-6 * f);
     EXPECT_NE(rows[i].find(",0.02,"), std::string::npos) << rows[i];
   }
-  EXPECT_NE(rows[1].find("\"a \"\"quoted\"\" remark\""), std::string::npos) << rows[1];
+  EXPECT_NE(rows[1].find(",true,close_modes,\"close_modes: a \"\"quoted\"\" remark\""),
+            std::string::npos)
+      << rows[1];
   EXPECT_NE(writeModesCsv(r, "/nonexistent_dir/m.csv").find("/nonexistent_dir/m.csv"),
             std::string::npos);
   std::ostringstream scal, spec;
@@ -765,7 +785,7 @@ TEST(ValidateWavelet, ReturnsTheModesOfACleanFreeDecay) {
   ASSERT_EQ(r.modes.size(), kPaperModes.size());
   for (size_t i = 0; i < r.modes.size(); ++i) {
     EXPECT_NEAR(r.modes[i].damping_ratio, kPaperModes[i].xi, kMultiModeXiTol * kPaperModes[i].xi);
-    EXPECT_TRUE(r.modes[i].warning.empty()) << r.modes[i].warning;
+    EXPECT_TRUE(r.modes[i].warnings.empty()) << warningText(r.modes[i].warnings);
   }
   EXPECT_EQ(r.modulus.rows(), 200);
 }
@@ -798,7 +818,7 @@ TEST(ValidateWavelet, InvalidInputGivesAnErrorStringAndAnEmptyResultNeverNaNs) {
   const WaveletResult flat = validateWavelet(std::vector<double>(4000, 1.5), 20000.0);
   EXPECT_TRUE(flat.ok()) << flat.error;
   for (const WaveletMode& m : flat.modes) {
-    EXPECT_TRUE(std::isfinite(m.damping_ratio) || !m.warning.empty());
+    EXPECT_TRUE(std::isfinite(m.damping_ratio) || !m.warnings.empty());
   }
 }
 

@@ -202,6 +202,14 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
   }
 }
 
+namespace {
+json waveletWarningsJson(const QualityWarnings& warnings) {
+  json a = json::array();
+  for (const auto& q : warnings) a.push_back({{"code", q.code}, {"text", q.text}});
+  return a;
+}
+}  // namespace
+
 json waveletJson(const WaveletResult& w) {
   json j;
   j["omega0"] = num(w.omega0);
@@ -220,7 +228,8 @@ json waveletJson(const WaveletResult& w) {
                           {"peak_amplitude", num(m.peak_amplitude)},
                           {"noise_floor", num(m.noise_floor)},
                           {"integral_damping_ratio", num(m.integral_xi)},
-                          {"warning", m.warning}});
+                          {"free_decay", m.free_decay},
+                          {"warnings", waveletWarningsJson(m.warnings)}});
   }
   return j;
 }
@@ -233,16 +242,27 @@ void shiftWaveletTimes(WaveletResult* w, double t0) {
 void printWaveletTable(std::ostream& os, const WaveletResult& w) {
   os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): "
      << w.modes.size() << " mode(s)\n"
-     << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]\n";
-  int i = 0;
+     << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]  free decay\n";
+  int i = 0, clean = 0;
   for (const auto& m : w.modes) {
     os << "  " << std::setw(4) << i++ << "  " << std::setw(11) << fmt(m.frequency_hz, 6) << "  "
        << std::setw(10) << fmt(m.damping_ratio, 4) << "  " << std::setw(11) << fmt(m.integral_xi, 4)
-       << "  " << std::setw(8) << fmt(m.r2, 4) << "  " << fmt(m.t_start * 1e3, 4) << " - "
-       << fmt(m.t_end * 1e3, 4) << "\n";
-    if (!m.warning.empty()) os << "        warning: " << m.warning << "\n";
+       << "  " << std::setw(8) << fmt(m.r2, 4) << "  " << std::setw(8) << fmt(m.t_start * 1e3, 4)
+       << " - " << std::setw(8) << fmt(m.t_end * 1e3, 4) << "  "
+       << (m.free_decay ? "yes" : "NO (forced line)") << "\n";
+    for (const auto& q : m.warnings) os << "        warning [" << q.code << "]: " << q.text << "\n";
+    clean += m.warnings.empty() ? 1 : 0;
   }
   for (const auto& s : w.warnings) os << "  warning: " << s << "\n";
+  os << "  " << clean << " of " << w.modes.size() << " modes clean";
+  if (clean < static_cast<int>(w.modes.size())) {
+    std::string codes;
+    for (const auto& m : w.modes)
+      for (const auto& q : m.warnings)
+        if (codes.find(q.code) == std::string::npos) codes += (codes.empty() ? "" : ", ") + q.code;
+    os << ", " << w.modes.size() - static_cast<size_t>(clean) << " flagged (" << codes << ")";
+  }
+  os << "\n";
 }
 
 bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,

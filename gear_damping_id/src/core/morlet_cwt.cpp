@@ -1,0 +1,704 @@
+// Morlet CWT engine: see morlet_cwt.hpp for the conventions and contracts.
+#include "gear_damping_id/morlet_cwt.hpp"
+
+#include <fftw3.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <numeric>
+#include <thread>
+
+#include "wavelet_detail.hpp"
+
+namespace gear_damping_id {
+namespace {
+
+using wavelet_detail::kNaN;
+using wavelet_detail::kPi;
+using wavelet_detail::modulusOf;
+using wavelet_detail::num;
+using wavelet_detail::setError;
+
+// Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
+// (exp(-8.6^2/2) = 8.7e-17): those bins are set to zero, not multiplied.
+constexpr double kBandHalfWidth = 8.6;
+// Zero padding of 8 scales after the record: the wavelet's Gaussian exp(-u^2/2) is exp(-32) =
+// 1.3e-14 where it would wrap around the circular convolution.
+constexpr double kPadScales = 8.0;
+// The Gaussian multiplier is advanced by a two-multiplication recurrence and recomputed with
+// exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
+constexpr long kRecurrenceBlock = 64;
+constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
+// The pruned |W| of a row (MorletCwt::prunedModulus) is used when its band fits in M <= N/16
+// bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
+// inverse FFT, whose size-M transforms then no longer fit in cache); they take the full path.
+constexpr long kMinPrunedBatches = 16;
+constexpr long kPrunedChunk = 8192;         // complex values per chunk of batches (128 KiB, in L2)
+constexpr double kMeasureTimeLimitS = 5.0;  // FFTW_MEASURE planning cap per plan [s]
+
+std::mutex& plannerMutex() {
+  static std::mutex m;
+  return m;
+}
+
+// FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
+// so call it with plannerMutex() held: kMeasure planning is capped at kMeasureTimeLimitS
+// (an unlimited FFTW_MEASURE search for N = 1764000 = 2^5 3^2 5^3 7^2 takes > 5 minutes on the
+// reference machine; capped at 5 s its plan is within 7 % of the estimate's speed or better).
+unsigned fftwFlags(FftPlanning planning) {
+  fftw_set_timelimit(planning == FftPlanning::kMeasure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
+  return planning == FftPlanning::kMeasure ? FFTW_MEASURE : FFTW_ESTIMATE;
+}
+
+// out[i] = sqrt(sq[i]) for n non-negative values, two per SSE2 instruction (see modulusOf).
+template <typename T>
+void sqrtOf(const double* sq, long n, T* out) {
+  long i = 0;
+#if defined(__SSE2__)
+  for (; i + 1 < n; i += 2) {
+    alignas(16) double tmp[2];
+    _mm_store_pd(tmp, _mm_sqrt_pd(_mm_loadu_pd(sq + i)));
+    out[i] = static_cast<T>(tmp[0]);
+    out[i + 1] = static_cast<T>(tmp[1]);
+  }
+#endif
+  for (; i < n; ++i) out[i] = static_cast<T>(std::sqrt(sq[i]));
+}
+
+// Bins [lo, hi] of the band where Psi(s*w_k) > 1e-16 of its peak, with a = s * 2*pi*fs/N
+// (so s*w_k = a*k), clipped to the positive frequencies 1..N/2. lo > hi when empty.
+void bandOf(double a, double omega0, long n_fft, long* lo, long* hi) {
+  const double k_lo = std::ceil((omega0 - kBandHalfWidth) / a);
+  const double k_hi = std::floor((omega0 + kBandHalfWidth) / a);
+  *lo = static_cast<long>(std::max(1.0, k_lo));
+  *hi = static_cast<long>(std::min(static_cast<double>(n_fft / 2), k_hi));
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------
+// Free helpers
+
+long fastFftLength(long min_length) {
+  if (min_length < 1) return -1;
+  if (min_length > (1L << 52)) return -1;
+  long best = -1;
+  // Enumerate 2^a 3^b 5^c 7^d >= min_length, keep the smallest.
+  for (long p7 = 1;; p7 *= 7) {
+    for (long p5 = p7;; p5 *= 5) {
+      for (long p3 = p5;; p3 *= 3) {
+        long v = p3;
+        while (v < min_length) v *= 2;
+        if (best < 0 || v < best) best = v;
+        if (p3 >= min_length) break;
+      }
+      if (p5 >= min_length) break;
+    }
+    if (p7 >= min_length) break;
+  }
+  return best;
+}
+
+double morletScale(double frequency_hz, double omega0) {
+  return omega0 / (2.0 * kPi * frequency_hz);
+}
+
+double morletConeOfInfluence(double frequency_hz, double omega0) {
+  return std::sqrt(2.0) * morletScale(frequency_hz, omega0);
+}
+
+double morletLeakage(double f_signal_hz, double f_row_hz, double omega0) {
+  const double x = omega0 * (f_signal_hz / f_row_hz - 1.0);
+  return std::exp(-0.5 * x * x);
+}
+
+std::vector<double> logSpacedFrequencies(double f_min_hz, double f_max_hz, int n) {
+  std::vector<double> f;
+  if (n < 1 || !(f_min_hz > 0.0) || !(f_max_hz >= f_min_hz) || !std::isfinite(f_max_hz)) return f;
+  f.resize(static_cast<size_t>(n));
+  const double l0 = std::log(f_min_hz), l1 = std::log(f_max_hz);
+  for (int i = 0; i < n; ++i) {
+    f[static_cast<size_t>(i)] = n == 1 ? f_min_hz : std::exp(l0 + (l1 - l0) * i / (n - 1));
+  }
+  if (n > 1) f.back() = f_max_hz;
+  return f;
+}
+
+double ridgeFrequency(const double* frequencies_hz, const double* values, int count) {
+  if (count < 3 || !frequencies_hz || !values) return kNaN;
+  int m = 0;
+  for (int i = 0; i < count; ++i) {
+    if (!(values[i] > 0.0) || !std::isfinite(values[i]) || !(frequencies_hz[i] > 0.0)) return kNaN;
+    if (values[i] > values[m]) m = i;
+  }
+  if (m == 0 || m == count - 1) return kNaN;
+  const double x0 = std::log(frequencies_hz[m - 1]), x1 = std::log(frequencies_hz[m]),
+               x2 = std::log(frequencies_hz[m + 1]);
+  const double y0 = std::log(values[m - 1]), y1 = std::log(values[m]), y2 = std::log(values[m + 1]);
+  // Vertex of the parabola through three (possibly unevenly spaced) points.
+  const double d01 = (y1 - y0) / (x1 - x0), d12 = (y2 - y1) / (x2 - x1);
+  const double curv = (d12 - d01) / (x2 - x0);
+  if (!(curv < 0.0)) return frequencies_hz[m];
+  const double xv = 0.5 * (x0 + x1) - d01 / (2.0 * curv);
+  return std::exp(std::min(std::max(xv, x0), x2));
+}
+
+// ------------------------------------------------------------------------------------------
+// MorletCwt
+
+struct MorletCwt::Fftw {
+  // spec: r2c output, N/2+1 bins, kept for all rows. in: the band-limited product (zero outside
+  // [band_lo, band_hi]). out: c2c output; its first N doubles also hold the r2c input.
+  fftw_complex* spec = nullptr;
+  fftw_complex* in = nullptr;
+  fftw_complex* out = nullptr;
+  fftw_plan r2c = nullptr;
+  fftw_plan c2c = nullptr;
+  long band_lo = 1, band_hi = 0;
+  // Pruned |W| of narrow-band rows (see prunedModulus): divisors of N (ascending), the batch
+  // buffer of N values (allocated on first use) and one batched size-M plan per M used.
+  std::vector<long> divisors;
+  fftw_complex* batch = nullptr;  // one chunk of batches
+  std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
+  std::map<long, fftw_plan> batch_plans;
+  ~Fftw() {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    if (r2c) fftw_destroy_plan(r2c);
+    if (c2c) fftw_destroy_plan(c2c);
+    for (auto& p : batch_plans) fftw_destroy_plan(p.second);
+    fftw_free(spec);
+    fftw_free(in);
+    fftw_free(out);
+    fftw_free(batch);
+  }
+};
+
+MorletCwt::MorletCwt() = default;
+MorletCwt::~MorletCwt() = default;
+MorletCwt::MorletCwt(MorletCwt&&) noexcept = default;
+MorletCwt& MorletCwt::operator=(MorletCwt&&) noexcept = default;
+
+void MorletCwt::release() {
+  fftw_.reset();
+  n_ = n_fft_ = 0;
+  fs_ = mean_ = 0.0;
+  has_signal_ = false;
+  frequencies_.clear();
+  omega0s_.clear();
+}
+
+bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                          const std::vector<double>& omega0s, FftPlanning planning,
+                          std::string* error) {
+  release();
+  if (n < 2) return setError(error, "MorletCwt: n = " + std::to_string(n) + " must be >= 2"), false;
+  if (!(sample_rate > 0.0) || !std::isfinite(sample_rate)) {
+    return setError(error,
+                    "MorletCwt: sample_rate = " + num(sample_rate) + " Hz must be finite and > 0"),
+           false;
+  }
+  if (omega0s.size() != 1 && omega0s.size() != frequencies_hz.size()) {
+    return setError(error, "MorletCwt: omega0s has " + std::to_string(omega0s.size()) +
+                               " values; it must have 1 or one per frequency (" +
+                               std::to_string(frequencies_hz.size()) + ")"),
+           false;
+  }
+  for (double w : omega0s) {
+    if (!(w >= kMinOmega0 && w <= kMaxOmega0)) {
+      return setError(error, "MorletCwt: omega0 = " + num(w) + " must be in [1, 1000]"), false;
+    }
+  }
+  const double nyquist = 0.5 * sample_rate;
+  double s_max = 0.0;  // [samples]
+  for (size_t i = 0; i < frequencies_hz.size(); ++i) {
+    const double f = frequencies_hz[i];
+    if (!(f > 0.0 && f < nyquist)) {
+      return setError(error, "MorletCwt: frequencies[" + std::to_string(i) + "] = " + num(f) +
+                                 " Hz must be in (0, sample_rate/2 = " + num(nyquist) + " Hz)"),
+             false;
+    }
+    const double w = omega0s.size() == 1 ? omega0s[0] : omega0s[i];
+    s_max = std::max(s_max, morletScale(f, w) * sample_rate);
+  }
+  const double padded = static_cast<double>(n) + std::ceil(kPadScales * s_max);
+  const long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+  if (n_fft < 0 || n_fft > (1L << 40)) {
+    return setError(error, "MorletCwt: padded length for n = " + std::to_string(n) +
+                               " and the lowest frequency is too large"),
+           false;
+  }
+  auto f = std::make_unique<Fftw>();
+  const size_t nc = static_cast<size_t>(n_fft);
+  f->spec = fftw_alloc_complex(nc / 2 + 1);
+  f->in = fftw_alloc_complex(nc);
+  f->out = fftw_alloc_complex(nc);
+  if (!f->spec || !f->in || !f->out) {
+    return setError(error, "MorletCwt: out of memory for N = " + std::to_string(n_fft)), false;
+  }
+  {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    const unsigned flags = fftwFlags(planning);
+    f->r2c = fftw_plan_dft_r2c_1d(static_cast<int>(n_fft), reinterpret_cast<double*>(f->out),
+                                  f->spec, flags);
+  }
+  if (!f->r2c) return setError(error, "MorletCwt: FFTW could not plan the forward FFT"), false;
+  // First touch of every buffer here, not in the first transform (FFTW_MEASURE scribbles on
+  // them, so zero them after planning).
+  std::memset(f->spec, 0, sizeof(fftw_complex) * (nc / 2 + 1));
+  std::memset(f->in, 0, sizeof(fftw_complex) * nc);
+  std::memset(f->out, 0, sizeof(fftw_complex) * nc);
+  for (long d = 1; d * d <= n_fft; ++d) {
+    if (n_fft % d == 0) {
+      f->divisors.push_back(d);
+      if (d * d != n_fft) f->divisors.push_back(n_fft / d);
+    }
+  }
+  std::sort(f->divisors.begin(), f->divisors.end());
+  fftw_ = std::move(f);
+  n_ = n;
+  n_fft_ = n_fft;
+  fs_ = sample_rate;
+  planning_ = planning;
+  frequencies_ = frequencies_hz;
+  omega0s_.assign(frequencies_hz.size(), omega0s.empty() ? 6.0 : omega0s[0]);
+  if (omega0s.size() == frequencies_hz.size()) omega0s_ = omega0s;
+  return true;
+}
+
+bool MorletCwt::setSignal(const double* y, std::string* error) {
+  has_signal_ = false;
+  if (!configured()) return setError(error, "MorletCwt: not configured"), false;
+  if (!y) return setError(error, "MorletCwt: null signal"), false;
+  double sum = 0.0;
+  for (long j = 0; j < n_; ++j) {
+    if (!std::isfinite(y[j])) {
+      return setError(error, "MorletCwt: sample " + std::to_string(j) + " is not finite (" +
+                                 num(y[j]) + ")"),
+             false;
+    }
+    sum += y[j];
+  }
+  mean_ = sum / static_cast<double>(n_);
+  double* r = reinterpret_cast<double*>(fftw_->out);
+  for (long j = 0; j < n_; ++j) r[j] = y[j] - mean_;
+  std::memset(r + n_, 0, sizeof(double) * static_cast<size_t>(n_fft_ - n_));
+  fftw_execute(fftw_->r2c);
+  has_signal_ = true;
+  return true;
+}
+
+bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
+  return kPadScales * morletScale(frequency_hz, omega0) * fs_ <=
+         static_cast<double>(n_fft_ - n_) + 1e-9;
+}
+
+const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double omega0) {
+  if (!fillRow(frequency_hz, omega0)) return nullptr;
+  fftw_execute(fftw_->c2c);
+  return reinterpret_cast<const std::complex<double>*>(fftw_->out);
+}
+
+bool MorletCwt::fillRow(double frequency_hz, double omega0) {
+  Fftw& f = *fftw_;
+  if (!f.c2c) {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    const unsigned flags = fftwFlags(planning_);
+    // Out-of-place, input preserved (FFTW's default for c2c): only the band changes per row.
+    // FFTW_MEASURE overwrites both arrays while planning: zero `in` again afterwards; `out`
+    // (which holds the r2c input) is not needed once the spectrum is computed.
+    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD, flags);
+    if (!f.c2c) return false;
+    std::memset(f.in, 0, sizeof(fftw_complex) * static_cast<size_t>(n_fft_));
+    f.band_lo = 1;
+    f.band_hi = 0;
+  }
+  const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));  // s*w_k = a*k
+  long lo = 0, hi = 0;
+  bandOf(a, omega0, n_fft_, &lo, &hi);
+  // Zero what the previous row left outside the new band.
+  if (f.band_lo <= f.band_hi) {
+    if (lo > hi) {
+      std::memset(f.in + f.band_lo, 0, sizeof(fftw_complex) * size_t(f.band_hi - f.band_lo + 1));
+    } else {
+      if (f.band_lo < lo) {
+        const long e = std::min(f.band_hi, lo - 1);
+        std::memset(f.in + f.band_lo, 0, sizeof(fftw_complex) * size_t(e - f.band_lo + 1));
+      }
+      if (f.band_hi > hi) {
+        const long b = std::max(f.band_lo, hi + 1);
+        std::memset(f.in + b, 0, sizeof(fftw_complex) * size_t(f.band_hi - b + 1));
+      }
+    }
+  }
+  f.band_lo = lo;
+  f.band_hi = hi;
+  // in_k = Y_k * Psi(a*k) / N (the 1/N normalises FFTW's unnormalised backward transform).
+  const double scale = 2.0 / static_cast<double>(n_fft_);
+  const double q = std::exp(-a * a);
+  const double* y = reinterpret_cast<const double*>(f.spec);
+  double* p = reinterpret_cast<double*>(f.in);
+  for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
+    const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
+    const double x = a * static_cast<double>(k0) - omega0;
+    double g = scale * std::exp(-0.5 * x * x);  // Psi(a*k)/N at k
+    double r = std::exp(-a * x - 0.5 * a * a);  // g(k+1)/g(k)
+    for (long k = k0; k < k1; ++k) {
+      p[2 * k] = y[2 * k] * g;
+      p[2 * k + 1] = y[2 * k + 1] * g;
+      g *= r;
+      r *= q;
+    }
+  }
+  return true;
+}
+
+// |W| of the row whose band fillRow left in in[lo..hi], without the full inverse FFT.
+// With B = hi - lo + 1 nonzero bins, M a divisor of N with M >= B and P = N/M, sample
+// j = q*P + p (0 <= p < P, 0 <= q < M) of the inverse DFT is
+//   W_j = e^{2 pi i lo j/N} * sum_{k<M} (in_{lo+k} e^{2 pi i k p/N}) e^{2 pi i k q/M},
+// i.e. P inverse FFTs of size M of twiddled copies of the band, and |W_j| drops the leading
+// phase. Cost ~ N log M + N twiddles instead of N log N. The P batches are processed in
+// chunks of C (C*M <= kPrunedChunk values) so twiddling, the FFTs and the transposition into
+// time order all stay in cache. Returns false when no divisor makes it worthwhile
+// (M > N/kMinPrunedBatches): the caller then uses the full inverse FFT.
+template <typename T>
+bool MorletCwt::prunedModulus(T* out) {
+  Fftw& f = *fftw_;
+  const long lo = f.band_lo, hi = f.band_hi;
+  if (lo > hi) {
+    std::fill(out, out + n_, T(0));
+    return true;
+  }
+  const long B = hi - lo + 1;
+  const auto it = std::lower_bound(f.divisors.begin(), f.divisors.end(), B);
+  if (it == f.divisors.end() || *it * kMinPrunedBatches > n_fft_) return false;
+  const long M = *it, P = n_fft_ / M;
+  long C = std::max(1L, std::min(P, kPrunedChunk / M));
+  while (P % C != 0) --C;  // chunks of equal size: one plan
+  fftw_plan plan = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    if (!f.batch) {
+      // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches.
+      f.batch = fftw_alloc_complex(
+          static_cast<size_t>(std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches)));
+      if (!f.batch) return false;
+      f.tw.resize(static_cast<size_t>(4 * (n_fft_ / kMinPrunedBatches + 1) + n_fft_));
+    }
+    auto found = f.batch_plans.find(M);
+    if (found == f.batch_plans.end()) {
+      // FFTW_ESTIMATE always: up to one plan per row size, each planned in ~1 ms.
+      fftw_set_timelimit(FFTW_NO_TIMELIMIT);
+      const int m = static_cast<int>(M);
+      fftw_plan pl = fftw_plan_many_dft(1, &m, static_cast<int>(C), f.batch, nullptr, 1, m, f.batch,
+                                        nullptr, 1, m, FFTW_BACKWARD, FFTW_ESTIMATE);
+      if (!pl) return false;
+      found = f.batch_plans.emplace(M, pl).first;
+    }
+    plan = found->second;
+  }
+  // Twiddles e^{2 pi i k p/N} for k < B, kept per k (structure of arrays: tr, ti) and advanced
+  // along p by the per-k step e^{2 pi i k/N} (sr, si): independent per k, so the loop
+  // vectorises; re-seeded exactly (integer phase k*p mod N) every kRecurrenceBlock batches.
+  double* tr = f.tw.data();
+  double* ti = tr + B;
+  double* sr = ti + B;
+  double* si = sr + B;
+  double* sq = si + B;  // C squared moduli
+  const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
+  for (long k = 0; k < B; ++k) {
+    sr[k] = std::cos(two_pi_over_n * static_cast<double>(k));
+    si[k] = std::sin(two_pi_over_n * static_cast<double>(k));
+  }
+  const double* x = reinterpret_cast<const double*>(f.in + lo);
+  double* b = reinterpret_cast<double*>(f.batch);
+  const long q_end = (n_ + P - 1) / P;  // q with some q*P + p < n
+  for (long p0 = 0; p0 < P; p0 += C) {
+    for (long c = 0; c < C; ++c) {
+      const long p = p0 + c;
+      if (p % kRecurrenceBlock == 0) {
+        for (long k = 0; k < B; ++k) {
+          const double ph = two_pi_over_n * static_cast<double>((k * p) % n_fft_);
+          tr[k] = std::cos(ph);
+          ti[k] = std::sin(ph);
+        }
+      }
+      double* bc = b + 2 * c * M;
+      for (long k = 0; k < B; ++k) {
+        const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
+        bc[2 * k] = xr * ar - xi * ai;
+        bc[2 * k + 1] = xr * ai + xi * ar;
+        tr[k] = ar * sr[k] - ai * si[k];
+        ti[k] = ar * si[k] + ai * sr[k];
+      }
+      std::memset(bc + 2 * B, 0, sizeof(fftw_complex) * static_cast<size_t>(M - B));
+    }
+    fftw_execute(plan);
+    // out[q*P + p] = |chunk[(p - p0)*M + q]| (squares gathered, then vector square roots).
+    for (long q = 0; q < q_end; ++q) {
+      const long j0 = q * P + p0;
+      const long ce = std::min(C, n_ - j0);
+      for (long c = 0; c < ce; ++c) {
+        const double re = b[2 * (c * M + q)], im = b[2 * (c * M + q) + 1];
+        sq[c] = re * re + im * im;
+      }
+      if (ce > 0) sqrtOf(sq, ce, out + j0);
+    }
+  }
+  return true;
+}
+
+const std::complex<double>* MorletCwt::row(int i) {
+  if (!has_signal_ || i < 0 || i >= rows()) return nullptr;
+  return computeRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)]);
+}
+
+const std::complex<double>* MorletCwt::rowAt(double frequency_hz, double omega0) {
+  if (!has_signal_ || !(frequency_hz > 0.0 && frequency_hz < 0.5 * fs_)) return nullptr;
+  if (!(omega0 >= kMinOmega0 && omega0 <= kMaxOmega0) || !fitsPadding(frequency_hz, omega0)) {
+    return nullptr;
+  }
+  return computeRow(frequency_hz, omega0);
+}
+
+template <typename T>
+bool MorletCwt::rowModulusImpl(int i, T* out) {
+  if (!has_signal_ || i < 0 || i >= rows() || !out) return false;
+  if (!fillRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)])) {
+    return false;
+  }
+  if (pruned_ && prunedModulus(out)) return true;
+  fftw_execute(fftw_->c2c);
+  modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
+  return true;
+}
+
+bool MorletCwt::rowModulus(int i, double* out) { return rowModulusImpl(i, out); }
+bool MorletCwt::rowModulus(int i, float* out) { return rowModulusImpl(i, out); }
+
+bool MorletCwt::transform(const double* y, std::complex<double>* out, std::string* error) {
+  if (!out) return setError(error, "MorletCwt: null output"), false;
+  if (!setSignal(y, error)) return false;
+  for (int i = 0; i < rows(); ++i) {
+    const std::complex<double>* w = row(i);
+    if (!w) return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
+    std::memcpy(out + static_cast<size_t>(i) * static_cast<size_t>(n_), w,
+                sizeof(std::complex<double>) * static_cast<size_t>(n_));
+  }
+  return true;
+}
+
+namespace {
+// Both transformModulus overloads: setSignal, then |W| of every row into out (row-major).
+template <typename T>
+bool transformModulusInto(MorletCwt* cwt, const double* y, T* out, std::string* error) {
+  if (!out) return setError(error, "MorletCwt: null output"), false;
+  if (!cwt->setSignal(y, error)) return false;
+  for (int i = 0; i < cwt->rows(); ++i) {
+    if (!cwt->rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(cwt->size()))) {
+      return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
+    }
+  }
+  return true;
+}
+}  // namespace
+
+bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
+  return transformModulusInto(this, y, out, error);
+}
+
+bool MorletCwt::transformModulus(const double* y, float* out, std::string* error) {
+  return transformModulusInto(this, y, out, error);
+}
+
+namespace {
+// sum_k weight_k * Psi(a*k)^2 over the band, Psi(x)^2 = 4 exp(-(x - omega0)^2), advanced by the
+// same blocked recurrence as the row multiplier. weight(k) is |Y_k|^2 or 1.
+template <typename Weight>
+double bandSumPsi2(double a, double omega0, long n_fft, Weight weight) {
+  long lo = 0, hi = 0;
+  bandOf(a, omega0, n_fft, &lo, &hi);
+  const double q = std::exp(-2.0 * a * a);
+  double sum = 0.0;
+  for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
+    const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
+    const double x = a * static_cast<double>(k0) - omega0;
+    double g = 4.0 * std::exp(-x * x);
+    double r = std::exp(-2.0 * a * x - a * a);
+    for (long k = k0; k < k1; ++k) {
+      sum += weight(k) * g;
+      g *= r;
+      r *= q;
+    }
+  }
+  return sum;
+}
+}  // namespace
+
+double MorletCwt::meanPowerAt(double frequency_hz, double omega0) const {
+  if (!has_signal_ || !(frequency_hz > 0.0) || !(omega0 > 0.0)) return kNaN;
+  const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));
+  const double* y = reinterpret_cast<const double*>(fftw_->spec);
+  const double sum = bandSumPsi2(
+      a, omega0, n_fft_, [y](long k) { return y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1]; });
+  return sum / (static_cast<double>(n_) * static_cast<double>(n_fft_));
+}
+
+double MorletCwt::meanPower(int i) const {
+  if (i < 0 || i >= rows()) return kNaN;
+  return meanPowerAt(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)]);
+}
+
+double MorletCwt::noiseGainAt(double frequency_hz, double omega0) const {
+  if (!configured() || !(frequency_hz > 0.0) || !(omega0 > 0.0)) return kNaN;
+  const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));
+  return bandSumPsi2(a, omega0, n_fft_, [](long) { return 1.0; }) / static_cast<double>(n_fft_);
+}
+
+const std::complex<double>* MorletCwt::spectrum() const {
+  return has_signal_ ? reinterpret_cast<const std::complex<double>*>(fftw_->spec) : nullptr;
+}
+
+// ------------------------------------------------------------------------------------------
+// MorletScalogram
+
+bool MorletScalogram::configure(long n, double sample_rate,
+                                const std::vector<double>& frequencies_hz, double omega0,
+                                FftPlanning planning, int threads, std::string* error) {
+  n_ = 0;
+  frequencies_.clear();
+  group_rows_.clear();
+  workers_.clear();
+  if (threads < 1 || threads > 256) {
+    return setError(error, "MorletScalogram: threads = " + std::to_string(threads) +
+                               " must be in [1, 256]"),
+           false;
+  }
+  // Each row's own FFT length: its 8-scale padding; rows whose band reaches the Nyquist
+  // frequency (a band-limited wavelet, whose cut rings far beyond 8 scales) keep the padding of
+  // the lowest row, as in one MorletCwt over all rows. Rows by descending length.
+  const size_t m = frequencies_hz.size();
+  std::vector<long> own(m, -1);
+  double s_max = 0.0;
+  for (double f : frequencies_hz) s_max = std::max(s_max, f > 0.0 ? morletScale(f, omega0) : 0.0);
+  for (size_t i = 0; i < m; ++i) {
+    const double f = frequencies_hz[i];
+    if (!(f > 0.0 && f < 0.5 * sample_rate)) continue;  // configure() below names it
+    const double s = morletScale(f, omega0);
+    const bool at_nyquist = s * kPi * sample_rate - omega0 < kBandHalfWidth;
+    const double pad = std::ceil(kPadScales * (at_nyquist ? s_max : s) * sample_rate);
+    own[i] = pad < 4e15 ? fastFftLength(n + static_cast<long>(pad)) : -1;
+  }
+  std::vector<int> order(m);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return own[size_t(a)] > own[size_t(b)]; });
+  std::vector<std::vector<int>> groups;
+  long group_length = 0;
+  for (int i : order) {
+    if (groups.empty() || static_cast<double>(group_length) > kGroupLengthRatio * own[size_t(i)]) {
+      groups.emplace_back();
+      group_length = own[size_t(i)];
+    }
+    groups.back().push_back(i);
+  }
+  std::vector<std::vector<MorletCwt>> workers(static_cast<size_t>(threads));
+  for (auto& w : workers) {
+    for (const auto& g : groups) {
+      std::vector<double> f;
+      for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
+      MorletCwt cwt;
+      if (!cwt.configure(n, sample_rate, f, omega0, planning, error)) return false;
+      w.push_back(std::move(cwt));
+    }
+  }
+  n_ = n;
+  frequencies_ = frequencies_hz;
+  group_rows_ = std::move(groups);
+  workers_ = std::move(workers);
+  return true;
+}
+
+long MorletScalogram::groupLength(int g) const {
+  if (workers_.empty() || g < 0 || g >= groups()) return -1;
+  return workers_[0][size_t(g)].paddedSize();
+}
+
+// Every row of signal y on the worker threads: each row's |W| is written to dest(t, row) (a
+// T* of n values) on thread t, then done(t, row, that pointer) is called on the same thread.
+template <typename T, typename Dest, typename Done>
+bool MorletScalogram::runRows(const double* y, Dest dest, Done done, std::string* error) {
+  if (workers_.empty()) return setError(error, "MorletScalogram: not configured"), false;
+  // Work items (group, local row), dealt round-robin over the threads; each thread transforms
+  // the signal once per group it has rows in.
+  std::vector<std::pair<int, int>> items;
+  for (int g = 0; g < groups(); ++g) {
+    for (int k = 0; k < static_cast<int>(group_rows_[size_t(g)].size()); ++k) {
+      items.push_back({g, k});
+    }
+  }
+  const int nt = threads();
+  std::vector<std::string> errors(static_cast<size_t>(nt));
+  auto work = [&](int t) {
+    std::vector<MorletCwt>& cwts = workers_[size_t(t)];
+    std::vector<bool> loaded(cwts.size(), false);
+    for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
+      const int g = items[it].first, k = items[it].second;
+      if (!loaded[size_t(g)]) {
+        if (!cwts[size_t(g)].setSignal(y, &errors[size_t(t)])) return;
+        loaded[size_t(g)] = true;
+      }
+      const int row = group_rows_[size_t(g)][size_t(k)];
+      T* d = dest(t, row);
+      if (!cwts[size_t(g)].rowModulus(k, d)) {
+        errors[size_t(t)] = "MorletScalogram: FFTW could not plan the inverse FFT";
+        return;
+      }
+      done(t, row, d);
+    }
+  };
+  if (nt == 1) {
+    work(0);
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 0; t < nt; ++t) pool.emplace_back(work, t);
+    for (auto& th : pool) th.join();
+  }
+  for (const std::string& e : errors) {
+    if (!e.empty()) return setError(error, e), false;
+  }
+  return true;
+}
+
+template <typename T>
+bool MorletScalogram::modulusImpl(const double* y, T* out, std::string* error) {
+  if (!out) return setError(error, "MorletScalogram: null output"), false;
+  const size_t n = static_cast<size_t>(n_);
+  return runRows<T>(
+      y, [&](int, int row) { return out + static_cast<size_t>(row) * n; },
+      [](int, int, const T*) {}, error);
+}
+
+bool MorletScalogram::forEachRow(const double* y,
+                                 const std::function<void(int, const double*)>& sink,
+                                 std::string* error) {
+  std::vector<std::vector<double>> buffers(static_cast<size_t>(std::max(1, threads())),
+                                           std::vector<double>(static_cast<size_t>(n_)));
+  return runRows<double>(
+      y, [&](int t, int) { return buffers[size_t(t)].data(); },
+      [&](int, int row, const double* d) { sink(row, d); }, error);
+}
+
+bool MorletScalogram::modulus(const double* y, double* out, std::string* error) {
+  return modulusImpl(y, out, error);
+}
+
+bool MorletScalogram::modulus(const double* y, float* out, std::string* error) {
+  return modulusImpl(y, out, error);
+}
+
+}  // namespace gear_damping_id

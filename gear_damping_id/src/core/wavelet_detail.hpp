@@ -1,0 +1,61 @@
+// Internal helpers shared by morlet_cwt.cpp and wavelet_analysis.cpp (not installed).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+namespace gear_damping_id {
+namespace wavelet_detail {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+inline void setError(std::string* error, const std::string& message) {
+  if (error) *error = message;
+}
+
+inline std::string num(double v) {
+  std::ostringstream s;
+  s.precision(10);
+  s << v;
+  return s.str();
+}
+
+// |w| of n complex values (interleaved re, im) into out. sqrt(re^2 + im^2): exact to 1 ulp for
+// |w| in [1e-150, 1e150]. SSE2 (x86-64 baseline) computes two square roots per instruction;
+// plain std::sqrt does not vectorise without -fno-math-errno.
+template <typename T>
+inline void modulusOf(const double* w, long n, T* out) {
+  long i = 0;
+#if defined(__SSE2__)
+  for (; i + 1 < n; i += 2) {
+    const __m128d a = _mm_loadu_pd(w + 2 * i);
+    const __m128d b = _mm_loadu_pd(w + 2 * i + 2);
+    const __m128d sa = _mm_mul_pd(a, a), sb = _mm_mul_pd(b, b);
+    const __m128d r = _mm_sqrt_pd(_mm_add_pd(_mm_unpacklo_pd(sa, sb), _mm_unpackhi_pd(sa, sb)));
+    alignas(16) double tmp[2];
+    _mm_store_pd(tmp, r);
+    out[i] = static_cast<T>(tmp[0]);
+    out[i + 1] = static_cast<T>(tmp[1]);
+  }
+#endif
+  for (; i < n; ++i)
+    out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
+}
+
+template <typename T>
+inline double median(std::vector<T> v) {
+  if (v.empty()) return kNaN;
+  const auto mid = v.begin() + static_cast<long>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return static_cast<double>(*mid);
+}
+}  // namespace wavelet_detail
+}  // namespace gear_damping_id
