@@ -101,7 +101,7 @@ def segment_flags(s):
         flags.append(("not_identifiable", s.get("reason") or "not identifiable"))
     c, xi = s.get("C"), s.get("xi")
     if c is not None and c <= 0:
-        flags.append(("non_positive_damping", f"C = {c:.4g} 1/s <= 0"))
+        flags.append(("nonpositive_damping", f"C = {c:.4g} 1/s <= 0"))
     if xi is not None and xi >= 1:
         flags.append(("overdamped", f"xi = {xi:.4g} >= 1"))
     return flags + warnings_of(s)
@@ -474,7 +474,7 @@ class Report:
             for i in shown:
                 s = segs[i]
                 flags = segment_flags(s)
-                cf = [x for x in flags if x[0] in ("not_identifiable", "non_positive_damping")]
+                cf = [x for x in flags if x[0] in ("not_identifiable", "nonpositive_damping")]
                 xf = [x for x in flags if x[0] in ("not_identifiable", "overdamped")]
                 out.append(f"<tr{' class=flagged' if flags else ''}><td>{i}</td>"
                            f"<td>{fval(s.get('t_start')) * 1e3:.3f}</td><td>{fval(s.get('t_end')) * 1e3:.3f}</td>"

@@ -208,7 +208,7 @@ TEST(ReportFlags, HighlightsEveryKindOfDoubtfulValue) {
   auto has = [&](const std::string& s) { return html.find(s) != std::string::npos; };
   EXPECT_TRUE(has("1 of 4 segments clean, 3 flagged")) << html;
   EXPECT_TRUE(has("not_identifiable: no motion"));
-  EXPECT_TRUE(has("non_positive_damping: C = -42 1/s &lt;= 0"));
+  EXPECT_TRUE(has("nonpositive_damping: C = -42 1/s &lt;= 0"));
   EXPECT_TRUE(has("overdamped: xi = 1.04 &gt;= 1"));
   EXPECT_TRUE(has("refine_disagrees: by 9 SE"));
   EXPECT_TRUE(has("negative_fit: fit -425812.0 %"));

@@ -17,7 +17,12 @@
 //                        standard deviation, or kMismatchSignalFraction of it with a possible
 //                        bias of C (sqrt(N) C_std) above kMismatchBias of C
 //   refine_disagrees     the refined and integral estimates differ by more than
-//                        kDisagreeSE combined standard errors
+//                        kDisagreeSE combined standard errors and by more than
+//                        kDisagreeRelative of C
+//   residuals_not_white  the refinement's residual, after prewhitening with its fitted AR noise
+//                        model, still has a lag-1 autocorrelation beyond kWhitenessZ/sqrt(N):
+//                        the model leaves structure in the data (wrong stiffness shape, forcing
+//                        or damping law), so C_std understates the error
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
 // Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
@@ -36,6 +41,7 @@ inline constexpr const char* kNonpositiveDamping = "nonpositive_damping";
 inline constexpr const char* kOverdamped = "overdamped";
 inline constexpr const char* kModelMismatch = "model_mismatch";
 inline constexpr const char* kRefineDisagrees = "refine_disagrees";
+inline constexpr const char* kResidualsNotWhite = "residuals_not_white";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -63,6 +69,19 @@ struct QualityLimits {
   static constexpr double kMismatchSignalFraction = 1e-3;
   /// Refined vs integral estimate: combined standard errors allowed between them.
   static constexpr double kDisagreeSE = 5.0;
+  /// ... and by more than this fraction of C: below it the difference is the integral method's
+  /// own quadrature error, not a model problem (noise-free, its C is within 2.5e-5 of the truth
+  /// on the square wave and 8e-4 on a trapezoid, whose kinks its cubic runs across; the refined
+  /// estimate is within 1e-6 on both), and noise-free standard errors are too small to judge it.
+  static constexpr double kDisagreeRelative = 2e-3;
+  /// Whiteness of the refinement's prewhitened residual: its lag-1 autocorrelation is about
+  /// N(0, 1/N) when the model and the noise model fit (N samples); beyond this many 1/sqrt(N)
+  /// (false alarm 6e-5 per segment) the model leaves structure in the residual.
+  static constexpr double kWhitenessZ = 4.0;
+  /// ... judged only where the residual RMS exceeds this fraction of the DTE's standard
+  /// deviation: below it the residual is integration round-off (noise-free data), whose
+  /// correlation says nothing about the model.
+  static constexpr double kWhitenessFloor = 1e-6;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "gear_damping_id/identification_types.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/result_io.hpp"
 
 namespace gear_damping_id {
@@ -22,8 +23,9 @@ constexpr std::size_t kSummaryAboveSegments = 50;
 /// Codes counted beside the segments' own warning codes: not identifiable (it has a `reason`),
 /// C <= 0 and xi >= 1 (physically impossible for a damped mesh; the report flags the same).
 inline constexpr const char* kNotIdentifiableCode = "not_identifiable";
-inline constexpr const char* kNonPositiveDampingCode = "non_positive_damping";
-inline constexpr const char* kOverdampedCode = "overdamped";
+/// The same codes as the quality flags (quality_flags.hpp), so a segment is counted once.
+inline constexpr const char* kNonPositiveDampingCode = quality_code::kNonpositiveDamping;
+inline constexpr const char* kOverdampedCode = quality_code::kOverdamped;
 
 /// Order statistics of one quantity over the identifiable segments (NaN when there are none).
 struct ValueStats {

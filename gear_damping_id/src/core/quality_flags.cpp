@@ -13,7 +13,8 @@ using L = QualityLimits;
 
 bool ownedCode(const std::string& c) {
   return c == quality_code::kNonpositiveDamping || c == quality_code::kOverdamped ||
-         c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees;
+         c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
+         c == quality_code::kResidualsNotWhite;
 }
 
 std::string num(double v) {
@@ -69,15 +70,27 @@ void flagEstimate(SegmentEstimate* e) {
                      num(100.0 * bias_bound / std::abs(e->C)) +
                      " % (wrong stiffness shape, forcing or damping model?)"});
   }
+  if (e->refined && std::isfinite(e->residuals.whitened_lag1) && e->samples > 0 &&
+      e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
+      std::abs(e->residuals.whitened_lag1) >
+          L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) {
+    w.push_back({quality_code::kResidualsNotWhite,
+                 "the refinement's prewhitened residual has lag-1 autocorrelation " +
+                     num(e->residuals.whitened_lag1) + " (white: within +-" +
+                     num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
+                     "): the model leaves structure in the data, C_std understates the error"});
+  }
   if (e->refined && std::isfinite(e->C_integral)) {
     const double se =
         std::hypot(e->C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
     const double d = std::abs(e->C - e->C_integral);
-    if (!(d <= L::kDisagreeSE * se)) {
+    if (!(d <= L::kDisagreeSE * se) && !(d <= L::kDisagreeRelative * std::abs(e->C_integral))) {
       w.push_back({quality_code::kRefineDisagrees,
                    "refined C = " + num(e->C) + " 1/s and integral C = " + num(e->C_integral) +
                        " 1/s differ by " + num(se > 0.0 ? d / se : INFINITY) +
-                       " combined standard errors (> " + num(L::kDisagreeSE) + ")"});
+                       " combined standard errors (> " + num(L::kDisagreeSE) + ") and " +
+                       num(100.0 * d / std::abs(e->C_integral)) + " % (> " +
+                       num(100.0 * L::kDisagreeRelative) + " %)"});
     }
   }
 }
