@@ -17,6 +17,7 @@ constexpr std::uint64_t kNoEnd = std::numeric_limits<std::uint64_t>::max();
 // years at 1 MHz). Segments must hold at least kMinSegmentSamples samples at the stream's rate.
 constexpr std::uint64_t kMaxIndex = std::uint64_t{1} << 52;
 constexpr double kMinSegmentSamples = 4.0;
+constexpr size_t kScaleChunks = 16;  // accepted chunks whose largest |value| form the scale
 
 enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
 
@@ -38,6 +39,10 @@ const char* toString(ChunkStatus s) {
       return "rejected: sample rate changed";
     case ChunkStatus::kRejectedMalformed:
       return "rejected: malformed";
+    case ChunkStatus::kRejectedValue:
+      return "rejected: implausible value";
+    case ChunkStatus::kSuspect:
+      return "implausible index jump (held until the next chunk)";
   }
   return "?";
 }
@@ -52,6 +57,13 @@ std::string StreamOptions::validate() const {
     e << "reorder_chunks = " << reorder_chunks << ": must be in [0, 100000]";
   } else if (context < 0 || context > 1000) {
     e << "context = " << context << ": must be in [0, 1000] [samples]";
+  } else if (!(max_jump > 0.0)) {
+    e << "max_jump = " << max_jump << ": must be > 0 [s] (.inf: no jump rule)";
+  } else if (!(magnitude_factor == 0.0 ||
+               (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor)))) {
+    e << "magnitude_factor = " << magnitude_factor << ": must be 0 (off) or finite >= 10";
+  } else if (!(max_abs_dte > 0.0)) {
+    e << "max_abs_dte = " << max_abs_dte << ": must be > 0 [m]";
   }
   return e.str();
 }
@@ -93,6 +105,10 @@ void StreamAssembler::reset() {
   held_.clear();
   recent_gaps_.clear();
   ready_.clear();
+  recent_rejected_.clear();
+  for (auto& r : recent_max_) r.clear();
+  have_suspect_ = false;
+  suspect_ = Held();
 }
 
 unsigned StreamAssembler::channelMask(const ChunkData& c) {
@@ -154,6 +170,122 @@ bool StreamAssembler::inRecentGap(std::uint64_t a, std::uint64_t b) const {
   return false;
 }
 
+ChunkStatus StreamAssembler::reject(ChunkStatus status, const ChunkData& c,
+                                    unsigned long* counter) {
+  ++*counter;
+  counters_.samples_rejected += c.n;
+  // Remembered so that a gap over these indices is attributed to the rejection.
+  recent_rejected_.emplace_back(c.first_index, c.first_index + c.n);
+  if (recent_rejected_.size() > kRecentGaps) recent_rejected_.pop_front();
+  return status;
+}
+
+bool StreamAssembler::implausibleValue(const ChunkData& c, std::string* why) const {
+  std::ostringstream m;
+  if (c.mesh_state) {
+    for (size_t i = 0; i < c.n; ++i) {
+      if (c.mesh_state[i] != 0.0 && c.mesh_state[i] != 1.0) {
+        m << "chunk at index " << c.first_index << ": mesh_state[" << i << "] = " << c.mesh_state[i]
+          << " (must be 0 or 1)";
+        *why = m.str();
+        return true;
+      }
+    }
+  }
+  const std::array<std::pair<const double*, const char*>, 3> channels = {
+      {{c.dte, "dte"}, {c.stiffness, "stiffness"}, {c.torque, "torque"}}};
+  for (size_t k = 0; k < channels.size(); ++k) {
+    const double* p = channels[k].first;
+    if (p == nullptr) continue;
+    double peak = 0.0;
+    for (size_t i = 0; i < c.n; ++i) peak = std::max(peak, std::abs(p[i]));
+    if (k == 0 && peak > options_.max_abs_dte) {
+      m << "chunk at index " << c.first_index << ": |dte| up to " << peak
+        << " m (above max_abs_dte " << options_.max_abs_dte << " m)";
+      *why = m.str();
+      return true;
+    }
+    if (options_.magnitude_factor > 0.0 && !recent_max_[k].empty()) {
+      std::vector<double> r(recent_max_[k].begin(), recent_max_[k].end());
+      std::nth_element(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2), r.end());
+      const double scale = r[r.size() / 2];
+      if (scale > 0.0 && peak > options_.magnitude_factor * scale) {
+        m << "chunk at index " << c.first_index << ": |" << channels[k].second << "| up to " << peak
+          << ", " << peak / scale << " times the stream's running scale " << scale
+          << " (magnitude_factor " << options_.magnitude_factor << ")";
+        *why = m.str();
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+void StreamAssembler::updateScales(const ChunkData& c) {
+  const double* channels[] = {c.dte, c.stiffness, c.torque};
+  for (size_t k = 0; k < 3; ++k) {
+    if (channels[k] == nullptr) continue;
+    double peak = 0.0;
+    for (size_t i = 0; i < c.n; ++i) peak = std::max(peak, std::abs(channels[k][i]));
+    recent_max_[k].push_back(peak);
+    if (recent_max_[k].size() > kScaleChunks) recent_max_[k].pop_front();
+  }
+}
+
+bool StreamAssembler::isJump(const ChunkData& c) const {
+  if (!seen_any_ || !std::isfinite(options_.max_jump)) return false;
+  const double by_time = options_.max_jump * rate_;
+  const double by_reorder =
+      static_cast<double>(options_.reorder_chunks + 1) * static_cast<double>(c.n);
+  const double j = std::max(by_time, by_reorder);
+  const double first = static_cast<double>(c.first_index);
+  const double next = static_cast<double>(next_index_);
+  return first - next > j || next - (first + static_cast<double>(c.n)) > j;
+}
+
+void StreamAssembler::dropSuspect() {
+  if (!have_suspect_) return;
+  have_suspect_ = false;
+  ChunkData c;
+  c.first_index = suspect_first_;
+  c.n = suspect_.dte.size();
+  reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_jump);
+  counters_.samples_suspect_dropped += c.n;
+  suspect_ = Held();
+}
+
+void StreamAssembler::decideSuspect(const ChunkData& c) {
+  if (!have_suspect_) return;
+  const std::uint64_t end = suspect_first_ + suspect_.dte.size();
+  if (c.first_index != end || channelMask(c) != suspect_.mask ||
+      std::abs(c.sample_rate - suspect_.sample_rate) > kRateTolerance * suspect_.sample_rate) {
+    dropSuspect();
+    return;
+  }
+  // Confirmed: the stream jumped. Finish the old record; a new one starts at the suspect.
+  have_suspect_ = false;
+  releaseHeld(true);
+  closeRun();
+  ++counters_.jump_records;
+  ++epoch_;
+  recent_gaps_.clear();
+  next_index_ = suspect_first_;
+  Held h = std::move(suspect_);
+  suspect_ = Held();
+  ChunkData s;
+  s.first_index = suspect_first_;
+  s.sample_rate = h.sample_rate;
+  s.n = h.dte.size();
+  auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
+  s.dte = ptr(h.dte);
+  s.stiffness = ptr(h.stiffness);
+  s.torque = ptr(h.torque);
+  s.mesh_state = ptr(h.mesh_state);
+  s.mesh_phase = ptr(h.mesh_phase);
+  updateScales(s);
+  append(s, 0);
+}
+
 ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   std::string scratch;
   std::string& why = detail ? *detail : scratch;
@@ -164,6 +296,10 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
       c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
     ++counters_.rejected_malformed;
+    if (c.dte != nullptr && c.n <= kMaxIndex) {
+      counters_.samples_received += c.n;
+      counters_.samples_rejected += c.n;
+    }
     std::ostringstream m;
     m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
       << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
@@ -172,6 +308,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     why = m.str();
     return ChunkStatus::kRejectedMalformed;
   }
+  counters_.samples_received += c.n;
   const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
                                                             {c.stiffness, "stiffness"},
                                                             {c.torque, "torque"},
@@ -181,15 +318,18 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     if (ch.first == nullptr) continue;
     for (size_t i = 0; i < c.n; ++i) {
       if (!std::isfinite(ch.first[i])) {
-        ++counters_.rejected_nonfinite;
         std::ostringstream m;
         m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
           << "] = " << ch.first[i];
         why = m.str();
-        return ChunkStatus::kRejectedNonFinite;
+        return reject(ChunkStatus::kRejectedNonFinite, c, &counters_.rejected_nonfinite);
       }
     }
   }
+  if (implausibleValue(c, &why)) {
+    return reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_value);
+  }
+  decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
   if (seen_any_ && c.first_index == 0 && next_index_ > 0) {
     // The publisher started over: finish the old record, start a new epoch.
     releaseHeld(true);
@@ -204,25 +344,49 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     recent_gaps_.clear();
   }
   if (seen_any_ && std::abs(c.sample_rate - rate_) > kRateTolerance * rate_) {
-    ++counters_.rejected_rate;
     std::ostringstream m;
     m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
       << " Hz, stream at " << rate_ << " Hz";
     why = m.str();
-    return ChunkStatus::kRejectedRate;
+    return reject(ChunkStatus::kRejectedRate, c, &counters_.rejected_rate);
+  }
+  if (isJump(c)) {
+    ++counters_.jumps;
+    std::ostringstream m;
+    m << "implausible index jump: chunk at index " << c.first_index << ", expected " << next_index_
+      << " (" << (static_cast<double>(c.first_index) - static_cast<double>(next_index_)) / rate_
+      << " s): held until the next chunk shows a new record (it continues this one) or a glitch";
+    why = m.str();
+    have_suspect_ = true;
+    suspect_first_ = c.first_index;
+    suspect_ = Held();
+    suspect_.sample_rate = c.sample_rate;
+    suspect_.mask = channelMask(c);
+    auto copy = [&](const double* p, std::vector<double>* v) {
+      if (p) v->assign(p, p + c.n);
+    };
+    copy(c.dte, &suspect_.dte);
+    copy(c.stiffness, &suspect_.stiffness);
+    copy(c.torque, &suspect_.torque);
+    copy(c.mesh_state, &suspect_.mesh_state);
+    copy(c.mesh_phase, &suspect_.mesh_phase);
+    return ChunkStatus::kSuspect;
   }
   if (!seen_any_) {
     seen_any_ = true;
     rate_ = c.sample_rate;
     next_index_ = c.first_index;
   }
+  updateScales(c);
   const std::uint64_t end = c.first_index + c.n;
   if (end <= next_index_) {
     if (inRecentGap(c.first_index, end)) {
       ++counters_.late;
+      counters_.samples_late += c.n;
       return ChunkStatus::kLate;
     }
     ++counters_.duplicates;
+    counters_.samples_duplicate += c.n;
     return ChunkStatus::kDuplicate;
   }
   if (c.first_index <= next_index_) {
@@ -235,6 +399,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   // Ahead of the expected index: hold it, waiting for the missing samples.
   if (held_.count(c.first_index) != 0) {
     ++counters_.duplicates;
+    counters_.samples_duplicate += c.n;
     return ChunkStatus::kDuplicate;
   }
   Held& h = held_[c.first_index];
@@ -267,6 +432,7 @@ void StreamAssembler::releaseHeld(bool force) {
     if (first + n <= next_index_) {  // became a duplicate meanwhile
       held_.erase(it);
       ++counters_.duplicates;
+      counters_.samples_duplicate += n;
       continue;
     }
     if (first > next_index_) {
@@ -274,6 +440,12 @@ void StreamAssembler::releaseHeld(bool force) {
       // The missing samples are not coming: a gap. Never integrate across it.
       ++counters_.gaps;
       counters_.samples_missing += first - next_index_;
+      std::uint64_t rejected = 0;  // the rejected indices in the gap
+      for (const auto& r : recent_rejected_) {
+        const std::uint64_t lo = std::max(r.first, next_index_), hi = std::min(r.second, first);
+        if (hi > lo) rejected += hi - lo;
+      }
+      counters_.samples_missing_rejected += std::min(rejected, first - next_index_);
       recent_gaps_.emplace_back(next_index_, first);
       if (recent_gaps_.size() > kRecentGaps) recent_gaps_.pop_front();
       closeRun();
@@ -319,6 +491,7 @@ void StreamAssembler::append(const ChunkData& c, size_t skip) {
   next_index_ += c.n - skip;
   ++counters_.chunks_accepted;
   counters_.samples_accepted += c.n - skip;
+  counters_.samples_duplicate += skip;
   emitReady(false);
 }
 
@@ -330,6 +503,7 @@ void StreamAssembler::closeRun() {
 }
 
 void StreamAssembler::endOfStream() {
+  dropSuspect();
   releaseHeld(true);
   closeRun();
 }
