@@ -20,6 +20,7 @@ GEAR_APT_PACKAGES=(
   build-essential cmake pkg-config
   catkin ros-core-dev ros-message-generation ros-message-runtime
   librosbag-dev librostest-dev libstd-msgs-dev libstd-srvs-dev libdiagnostic-updater-dev
+  libdiagnostic-aggregator-dev libdiagnostic-aggregator-tools
   rosbash python3-rostest python3-rosbag python3-catkin-pkg python3-std-srvs
   libgtest-dev googletest libbenchmark-dev
   libeigen3-dev libfftw3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
