@@ -256,6 +256,7 @@ class DampingIdNode {
 
   void identify(const gd::StreamSegment& s) {
     const ros::WallTime t0 = ros::WallTime::now();
+    const double cpu0 = nodes::threadCpuSeconds();
     const gd::SignalView v = s.view();
     // Refinement only while it keeps up with real time (see LoadGovernor); else the integral
     // estimate is published at once and the skip is counted and flagged.
@@ -301,7 +302,8 @@ class DampingIdNode {
       }
     }
     const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
-    refine_.record(ms * 1e-3, static_cast<double>(s.end - s.begin) / s.sample_rate,
+    refine_.record(nodes::threadCpuSeconds() - cpu0,
+                   static_cast<double>(s.end - s.begin) / s.sample_rate,
                    est.refined || !out.warning.empty());
     last_ms_ = ms;
     max_ms_ = std::max(max_ms_, ms);
@@ -369,7 +371,8 @@ class DampingIdNode {
                      "refinement cannot keep up: refining 1 segment in " +
                          std::to_string(refine_.stride()) + ", integral estimates published");
     }
-    s.add("refinement degraded", refine_.degraded());
+    s.add("refinement degraded", refine_.degraded() ? 1 : 0);
+    s.add("refinement stride [segments]", refine_.stride());
     s.add("refinement load [core fraction]", refine_.load());
     s.add("refinement budget [core fraction]", refine_.budget());
     s.add("segments with refinement skipped", refine_skipped_);

@@ -12,6 +12,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <limits>
 #include <set>
 #include <sstream>
@@ -168,7 +169,15 @@ inline double residentMiB() {
   return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
 }
 
-/// Processing load relative to real time (seconds of work per second of stream), smoothed,
+/// CPU time of the calling thread [s] (CLOCK_THREAD_CPUTIME_ID): the cost of work on one core,
+/// whatever else the machine runs.
+inline double threadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+/// Processing load relative to real time (CPU seconds per second of stream), smoothed,
 /// and the duty cycle of an optional stage (refinement, wavelet windows) that is skipped while
 /// the load exceeds a budget: the stage runs on every `stride`-th item, stride =
 /// ceil(load / budget) (1 = every item), re-evaluated on every run of the stage.

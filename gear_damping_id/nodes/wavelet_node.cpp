@@ -171,10 +171,11 @@ class WaveletNode {
       return;
     }
     const ros::WallTime t0 = ros::WallTime::now();
+    const double cpu0 = nodes::threadCpuSeconds();
     gd::WaveletResult r = gd::validateWavelet(s.dte.data() + s.begin, static_cast<size_t>(n),
                                               s.sample_rate, o_.wavelet);
     last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
-    load_.record(last_ms_ * 1e-3, static_cast<double>(n) / s.sample_rate, true);
+    load_.record(nodes::threadCpuSeconds() - cpu0, static_cast<double>(n) / s.sample_rate, true);
     if (!r.ok()) {
       ++windows_failed_;
       last_problem_ = r.error;
@@ -213,6 +214,7 @@ class WaveletNode {
           "analysis cannot keep up: analysing 1 window in " + std::to_string(load_.stride()));
     }
     s.add("analysis load [core fraction]", load_.load());
+    s.add("analysis stride [windows]", load_.stride());
     s.add("analysis budget [core fraction]", load_.budget());
     s.add("windows skipped (load)", windows_shed_);
     s.add("windows analysed", windows_analysed_);
