@@ -53,7 +53,7 @@ struct NodeOptions {
   bool publish_modeled_response = true;
   double cumulative_period = 0.1;  // [s] wall: most frequent /gear/damping update
   int cumulative_segments = 1000;  // last segments in /gear/damping
-  int history_segments = 100000;   // segments kept for ~get_damping (bounded store)
+  int history_segments = 20000;    // segments kept for ~get_damping (bounded store)
   int shared_segments = 1000;      // constant/load_law: span of the sliding problem
   double refine_budget = 0.5;      // refinement while it costs at most this fraction of a core
   std::string gear_config;         // YAML path; empty: /gear/params

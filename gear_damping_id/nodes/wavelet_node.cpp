@@ -36,7 +36,7 @@ struct NodeOptions {
   gd::WaveletOptions wavelet;
   gd::StreamOptions stream;
   double window = 0.1;           // [s] > 0
-  double analysis_budget = 0.5;  // [fraction of one core] above it, windows are skipped
+  double analysis_budget = 0.8;  // [fraction of one core] above it, windows are skipped
   int min_window_samples = 256;  // [samples]
   nodes::IntakeOptions intake;
 };
