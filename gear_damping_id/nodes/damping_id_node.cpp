@@ -302,9 +302,7 @@ class DampingIdNode {
       }
     }
     const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
-    refine_.record(nodes::threadCpuSeconds() - cpu0,
-                   static_cast<double>(s.end - s.begin) / s.sample_rate,
-                   est.refined || !out.warning.empty());
+    refine_.record(nodes::threadCpuSeconds() - cpu0, out.refinement_skipped);
     last_ms_ = ms;
     max_ms_ = std::max(max_ms_, ms);
     sum_ms_ += ms;
@@ -373,7 +371,7 @@ class DampingIdNode {
     }
     s.add("refinement degraded", refine_.degraded() ? 1 : 0);
     s.add("refinement stride [segments]", refine_.stride());
-    s.add("refinement load [core fraction]", refine_.load());
+    s.add("refinement load [core fraction]", refine_.load());  // if every segment were refined
     s.add("refinement budget [core fraction]", refine_.budget());
     s.add("segments with refinement skipped", refine_skipped_);
     s.add("segments since start/reset/restart", live_ ? live_->segmentsAdded() : 0);

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -177,37 +178,46 @@ inline double threadCpuSeconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
-/// Processing load relative to real time (CPU seconds per second of stream), smoothed,
-/// and the duty cycle of an optional stage (refinement, wavelet windows) that is skipped while
-/// the load exceeds a budget: the stage runs on every `stride`-th item, stride =
-/// ceil(load / budget) (1 = every item), re-evaluated on every run of the stage.
+/// Keeps an optional, costly stage (refinement of a segment, analysis of a wavelet window)
+/// within `budget` of one core. Load = (CPU cost of an item processed in full, smoothed over
+/// about 20 items) x (items arriving per second of wall time, decayed over kTau = 10 s). While
+/// the load exceeds the budget the stage runs on every stride-th item only, stride =
+/// ceil(load / budget). Short bursts (a test, a few windows) never reach the budget; a sustained
+/// stream that needs more than the budget is thinned at once, before the subscriber queue
+/// grows.
 class LoadGovernor {
  public:
   explicit LoadGovernor(double budget) : budget_(budget) {}
-  /// Whether the next item gets the optional stage.
+  /// Whether the next item gets the stage.
   bool allow() {
     ++count_;
     return stride_ <= 1 || count_ % stride_ == 0;
   }
-  /// `work` [s] spent on an item holding `stream` [s] of data, `staged` if the stage ran.
-  void record(double work, double stream, bool staged) {
-    if (!(stream > 0.0) || !(work >= 0.0)) return;
-    const double load = work / stream;
-    if (!staged) return;  // only items with the stage measure its cost
-    ema_ = have_ ? kAlpha * load + (1.0 - kAlpha) * ema_ : load;
-    have_ = true;
-    const double k = std::ceil(ema_ / budget_);
+  /// One item arrived: `cpu` [s] spent on it; `skipped`: allow() was false (cost not measured).
+  void record(double cpu, bool skipped) {
+    const double now =
+        std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+    arrivals_ = (last_ > 0.0 ? arrivals_ * std::exp(-(now - last_) / kTau) : 0.0) + 1.0;
+    last_ = now;
+    if (!skipped && cpu >= 0.0) {
+      cost_ = have_ ? kAlpha * cpu + (1.0 - kAlpha) * cost_ : cpu;
+      have_ = true;
+    }
+    load_ = cost_ * arrivals_ / kTau;
+    const double k = std::ceil(load_ / budget_);
     stride_ = k > 1.0 ? static_cast<unsigned long>(std::min(k, 1e6)) : 1;
   }
   bool degraded() const { return stride_ > 1; }
   unsigned long stride() const { return stride_; }
-  double load() const { return have_ ? ema_ : 0.0; }
+  /// CPU seconds per wall second the stage would need on every item.
+  double load() const { return load_; }
   double budget() const { return budget_; }
 
  private:
-  static constexpr double kAlpha = 0.05;  // smoothing over about 20 staged items
+  static constexpr double kAlpha = 0.05;  // cost smoothing (about 20 items)
+  static constexpr double kTau = 10.0;    // [s] arrival-rate memory
   double budget_;
-  double ema_ = 0.0;
+  double cost_ = 0.0, arrivals_ = 0.0, last_ = 0.0, load_ = 0.0;
   bool have_ = false;
   unsigned long stride_ = 1, count_ = 0;
 };

@@ -13,7 +13,8 @@
 // or ~analyze closes the window early, and it is analysed if long enough). Only the current
 // window is buffered (memory bounded by ~window). Windows shorter than ~min_window_samples are
 // skipped and counted. While the analysis costs more than ~analysis_budget of one core (per
-// second of stream), only every k-th window is analysed (k = ceil(load / budget)), the others
+// second of wall time, see LoadGovernor), only every k-th window is analysed (k = ceil(load /
+// budget)), the others
 // are counted as skipped and the status is WARN.
 // Threading: one thread; the analysis (only the rows the fits need, no full scalogram) runs in
 // the callback that completes a window, the subscriber queue absorbs chunks meanwhile.
@@ -168,6 +169,7 @@ class WaveletNode {
     }
     if (!load_.allow()) {
       ++windows_shed_;
+      load_.record(0.0, true);
       return;
     }
     const ros::WallTime t0 = ros::WallTime::now();
@@ -175,7 +177,7 @@ class WaveletNode {
     gd::WaveletResult r = gd::validateWavelet(s.dte.data() + s.begin, static_cast<size_t>(n),
                                               s.sample_rate, o_.wavelet);
     last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
-    load_.record(nodes::threadCpuSeconds() - cpu0, static_cast<double>(n) / s.sample_rate, true);
+    load_.record(nodes::threadCpuSeconds() - cpu0, false);
     if (!r.ok()) {
       ++windows_failed_;
       last_problem_ = r.error;
