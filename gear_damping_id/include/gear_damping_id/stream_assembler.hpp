@@ -211,10 +211,12 @@ class StreamAssembler {
     std::uint64_t first = 0;
     std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
   };
-  struct Held {
+  struct Held {  // a chunk's own copy (reorder buffer, suspect)
     double sample_rate = 0.0;
     unsigned mask = 0;
     std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
+    static Held copyOf(const ChunkData& c);
+    ChunkData chunk(std::uint64_t first_index) const;  // pointing into this copy
   };
 
   static unsigned channelMask(const ChunkData& c);

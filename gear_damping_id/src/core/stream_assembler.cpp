@@ -94,6 +94,35 @@ SignalView StreamSegment::view() const {
 
 StreamAssembler::StreamAssembler(const StreamOptions& options) : options_(options) {}
 
+StreamAssembler::Held StreamAssembler::Held::copyOf(const ChunkData& c) {
+  Held h;
+  h.sample_rate = c.sample_rate;
+  h.mask = channelMask(c);
+  auto copy = [&](const double* p, std::vector<double>* v) {
+    if (p) v->assign(p, p + c.n);
+  };
+  copy(c.dte, &h.dte);
+  copy(c.stiffness, &h.stiffness);
+  copy(c.torque, &h.torque);
+  copy(c.mesh_state, &h.mesh_state);
+  copy(c.mesh_phase, &h.mesh_phase);
+  return h;
+}
+
+ChunkData StreamAssembler::Held::chunk(std::uint64_t first_index) const {
+  ChunkData c;
+  c.first_index = first_index;
+  c.sample_rate = sample_rate;
+  c.n = dte.size();
+  auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
+  c.dte = ptr(dte);
+  c.stiffness = ptr(stiffness);
+  c.torque = ptr(torque);
+  c.mesh_state = ptr(mesh_state);
+  c.mesh_phase = ptr(mesh_phase);
+  return c;
+}
+
 void StreamAssembler::reset() {
   counters_ = StreamCounters();
   rate_ = 0.0;
@@ -270,18 +299,9 @@ void StreamAssembler::decideSuspect(const ChunkData& c) {
   ++epoch_;
   recent_gaps_.clear();
   next_index_ = suspect_first_;
-  Held h = std::move(suspect_);
+  const Held h = std::move(suspect_);
   suspect_ = Held();
-  ChunkData s;
-  s.first_index = suspect_first_;
-  s.sample_rate = h.sample_rate;
-  s.n = h.dte.size();
-  auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
-  s.dte = ptr(h.dte);
-  s.stiffness = ptr(h.stiffness);
-  s.torque = ptr(h.torque);
-  s.mesh_state = ptr(h.mesh_state);
-  s.mesh_phase = ptr(h.mesh_phase);
+  const ChunkData s = h.chunk(suspect_first_);
   updateScales(s);
   append(s, 0);
 }
@@ -359,17 +379,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     why = m.str();
     have_suspect_ = true;
     suspect_first_ = c.first_index;
-    suspect_ = Held();
-    suspect_.sample_rate = c.sample_rate;
-    suspect_.mask = channelMask(c);
-    auto copy = [&](const double* p, std::vector<double>* v) {
-      if (p) v->assign(p, p + c.n);
-    };
-    copy(c.dte, &suspect_.dte);
-    copy(c.stiffness, &suspect_.stiffness);
-    copy(c.torque, &suspect_.torque);
-    copy(c.mesh_state, &suspect_.mesh_state);
-    copy(c.mesh_phase, &suspect_.mesh_phase);
+    suspect_ = Held::copyOf(c);
     return ChunkStatus::kSuspect;
   }
   if (!seen_any_) {
@@ -402,17 +412,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     counters_.samples_duplicate += c.n;
     return ChunkStatus::kDuplicate;
   }
-  Held& h = held_[c.first_index];
-  h.sample_rate = c.sample_rate;
-  h.mask = channelMask(c);
-  auto copy = [&](const double* p, std::vector<double>* v) {
-    if (p) v->assign(p, p + c.n);
-  };
-  copy(c.dte, &h.dte);
-  copy(c.stiffness, &h.stiffness);
-  copy(c.torque, &h.torque);
-  copy(c.mesh_state, &h.mesh_state);
-  copy(c.mesh_phase, &h.mesh_phase);
+  held_[c.first_index] = Held::copyOf(c);
   const unsigned long gaps_before = counters_.gaps;
   releaseHeld(false);
   if (counters_.gaps != gaps_before) {
@@ -451,19 +451,9 @@ void StreamAssembler::releaseHeld(bool force) {
       closeRun();
       next_index_ = first;
     }
-    Held h = std::move(it->second);
+    const Held h = std::move(it->second);
     held_.erase(it);
-    ChunkData c;
-    c.first_index = first;
-    c.sample_rate = h.sample_rate;
-    c.n = n;
-    auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
-    c.dte = ptr(h.dte);
-    c.stiffness = ptr(h.stiffness);
-    c.torque = ptr(h.torque);
-    c.mesh_state = ptr(h.mesh_state);
-    c.mesh_phase = ptr(h.mesh_phase);
-    append(c, static_cast<size_t>(next_index_ - first));
+    append(h.chunk(first), static_cast<size_t>(next_index_ - first));
   }
 }
 
