@@ -21,6 +21,17 @@ constexpr size_t kScaleChunks = 16;  // accepted chunks whose largest |value| fo
 
 enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
 
+// The five channels of a sample copy as pointers (null when absent), into any view type.
+template <class View, class Copy>
+void pointChannels(const Copy& c, View* v) {
+  auto ptr = [](const std::vector<double>& x) { return x.empty() ? nullptr : x.data(); };
+  v->dte = ptr(c.dte);
+  v->stiffness = ptr(c.stiffness);
+  v->torque = ptr(c.torque);
+  v->mesh_state = ptr(c.mesh_state);
+  v->mesh_phase = ptr(c.mesh_phase);
+}
+
 }  // namespace
 
 const char* toString(ChunkStatus s) {
@@ -83,12 +94,7 @@ SignalView StreamSegment::view() const {
   v.t0 = static_cast<double>(first_index) / sample_rate;
   v.dt = 1.0 / sample_rate;
   v.n = static_cast<Eigen::Index>(dte.size());
-  auto ptr = [](const std::vector<double>& c) { return c.empty() ? nullptr : c.data(); };
-  v.dte = ptr(dte);
-  v.stiffness = ptr(stiffness);
-  v.torque = ptr(torque);
-  v.mesh_state = ptr(mesh_state);
-  v.mesh_phase = ptr(mesh_phase);
+  pointChannels(*this, &v);
   return v;
 }
 
@@ -114,12 +120,7 @@ ChunkData StreamAssembler::Held::chunk(std::uint64_t first_index) const {
   c.first_index = first_index;
   c.sample_rate = sample_rate;
   c.n = dte.size();
-  auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
-  c.dte = ptr(dte);
-  c.stiffness = ptr(stiffness);
-  c.torque = ptr(torque);
-  c.mesh_state = ptr(mesh_state);
-  c.mesh_phase = ptr(mesh_phase);
+  pointChannels(*this, &c);
   return c;
 }
 
