@@ -275,11 +275,8 @@ class ChunkIntake {
             assembler_.hasSuspect());
   }
 
-  /// Input statistics, sequencing events and losses. Status: WARN while samples were lost
-  /// (gap, rejected, late, dropped jump) within the last kLossHold seconds, ERROR when every
-  /// report of the last kSustained reports saw a loss (sustained loss), WARN from the first
-  /// implausible index jump on (persistent, until ~reset), WARN for one report after a
-  /// duplicate or a restart.
+  /// Input statistics, sequencing events and losses; the status from LossMonitor (WARN after a
+  /// loss, ERROR on sustained loss, persistent WARN after an implausible index jump).
   void report(diagnostic_updater::DiagnosticStatusWrapper& s) {
     const auto& k = assembler_.counters();
     const ros::WallTime now = ros::WallTime::now();
@@ -297,67 +294,20 @@ class ChunkIntake {
     s.add("samples received", k.samples_accepted);
     s.add("samples in chunks received", k.samples_received);
     s.add("sample rate [Hz]", assembler_.sampleRate());
-    // Changes whenever a sample is lost, rejected or late (a change detector, not a count).
-    const unsigned long lost = k.samplesLost() + k.samples_late + k.samples_rejected;
-    s.add("samples lost", k.samplesLost());
-    s.add("samples lost: never arrived (queue overflow, transport)", k.samplesNeverArrived());
-    s.add("samples lost: rejected", k.samples_missing_rejected + k.samples_suspect_dropped);
-    s.add("samples lost: late", k.samples_late);
-    s.add("samples rejected", k.samples_rejected);
-    s.add("samples duplicate", k.samples_duplicate);
-    s.add("gaps", k.gaps);
-    s.add("samples missing", k.samples_missing);
-    s.add("duplicate chunks", k.duplicates);
-    s.add("late chunks", k.late);
-    s.add("overlapping chunks", k.overlaps);
-    s.add("out-of-order chunks", k.out_of_order);
-    s.add("rejected chunks (NaN/Inf)", k.rejected_nonfinite);
-    s.add("rejected chunks (implausible value)", k.rejected_value);
-    s.add("rejected chunks (sample rate)", k.rejected_rate);
-    s.add("rejected chunks (malformed)", k.rejected_malformed);
-    s.add("rejected chunks (index jump glitch)", k.rejected_jump);
-    s.add("dropped chunks", k.rejected_nonfinite + k.rejected_value + k.rejected_rate +
-                                k.rejected_malformed + k.rejected_jump);
-    s.add("implausible index jumps", k.jumps);
-    s.add("new records at a jump", k.jump_records);
-    s.add("restarts", k.restarts);
-    s.add("channel changes", k.channel_changes);
-    s.add("held chunks", assembler_.heldChunks());
-    s.add("buffered samples", assembler_.bufferedSamples());
-    s.add("resident memory [MiB]", residentMiB());
-    s.add("process id", static_cast<long>(getpid()));
-    const bool loss = lost != last_lost_;
-    last_lost_ = lost;
-    if (loss) last_loss_ = now;
-    loss_streak_ = loss ? loss_streak_ + 1 : 0;
-    if (loss_streak_ >= kSustained) {
-      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR,
-                     "sustained loss: samples lost in each of the last " +
-                         std::to_string(kSustained) + " reports");
-    } else if (!last_loss_.isZero() && (now - last_loss_).toSec() < kLossHold) {
-      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "samples lost (gap, rejected or late) in the last " +
-                         std::to_string(static_cast<int>(kLossHold)) + " s");
+    const auto health = monitor_.update(k, now.toSec(), last_jump_);
+    if (health.level != gear_damping_id::LossMonitor::Level::kOk) {
+      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::kError
+                         ? diagnostic_msgs::DiagnosticStatus::ERROR
+                         : diagnostic_msgs::DiagnosticStatus::WARN,
+                     health.message);
     }
-    if (k.jumps > 0) {
-      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "implausible index jumps since start/reset: " + std::to_string(k.jumps) +
-                         " (last: " + last_jump_ + ")");
-    }
-    const unsigned long events = k.duplicates + k.restarts + k.channel_changes;
-    if (events != last_events_) {
-      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "stream events (duplicates/restarts/channel changes) since last report");
-    }
-    last_events_ = events;
   }
 
   /// Forgets the assembler's state and the reported history (~reset).
   void reset() {
     assembler_.reset();
-    last_samples_ = last_chunks_ = last_events_ = last_lost_ = 0;
-    loss_streak_ = 0;
-    last_loss_ = ros::WallTime();
+    last_samples_ = last_chunks_ = 0;
+    monitor_.reset();
     last_jump_.clear();
   }
 
@@ -366,12 +316,9 @@ class ChunkIntake {
   std::vector<double> state_;
   unsigned long messages_ = 0;
   ros::WallTime last_chunk_, last_report_;
-  unsigned long last_samples_ = 0, last_chunks_ = 0, last_events_ = 0, last_lost_ = 0;
-  int loss_streak_ = 0;
-  ros::WallTime last_loss_;
+  unsigned long last_samples_ = 0, last_chunks_ = 0;
+  gear_damping_id::LossMonitor monitor_;
   std::string last_jump_;
-  static constexpr double kLossHold = 10.0;  // [s] a loss keeps the status WARN this long
-  static constexpr int kSustained = 3;       // reports in a row with a loss: ERROR
 };
 
 /// A core options error ("field = value: rule", possibly "Struct.field = ...") in the node's

@@ -424,6 +424,39 @@ TEST(StreamAssembler, QueueOverflowShowsAsSamplesThatNeverArrived) {
   EXPECT_EQ(k.samples_received, 8000u);
 }
 
+// The diagnostics' health: one loss is WARN for LossMonitor::kHold seconds, a loss in each of
+// kSustained reports in a row is ERROR, an implausible jump keeps WARN until reset(), a clean
+// stream is OK.
+TEST(LossMonitor, OneLossWarnsSustainedLossIsAnErrorAJumpWarnsUntilReset) {
+  using L = gd::LossMonitor::Level;
+  gd::LossMonitor m;
+  gd::StreamCounters k;
+  k.samples_accepted = 1000;
+  EXPECT_EQ(m.update(k, 0.0).level, L::kOk);
+  k.samples_missing = 1000;  // a gap
+  EXPECT_EQ(m.update(k, 1.0).level, L::kWarn);
+  EXPECT_EQ(m.update(k, 2.0).level, L::kWarn);  // held
+  EXPECT_EQ(m.update(k, 1.0 + gd::LossMonitor::kHold + 0.1).level, L::kOk);
+  double t = 20.0;
+  for (int i = 0; i < gd::LossMonitor::kSustained; ++i) {
+    k.samples_late += 10;
+    const auto r = m.update(k, t += 1.0);
+    EXPECT_EQ(r.level, i + 1 < gd::LossMonitor::kSustained ? L::kWarn : L::kError) << i;
+    if (r.level == L::kError) {
+      EXPECT_NE(r.message.find("sustained"), std::string::npos);
+    }
+  }
+  EXPECT_EQ(m.update(k, t += 1.0).level, L::kWarn);  // the loss stopped: WARN while held
+  k.jumps = 1;
+  const auto jump = m.update(k, t += 100.0, "chunk at index 1000000000000000");
+  EXPECT_EQ(jump.level, L::kWarn);
+  EXPECT_NE(jump.message.find("1000000000000000"), std::string::npos) << jump.message;
+  EXPECT_EQ(m.update(k, t += 1000.0).level, L::kWarn);  // persistent
+  m.reset();
+  gd::StreamCounters clean;
+  EXPECT_EQ(m.update(clean, t += 1.0).level, L::kOk);
+}
+
 TEST(StreamAssembler, InvalidOptionsNameTheField) {
   gd::StreamOptions o;
   o.segment_length = -1.0;

@@ -153,6 +153,34 @@ struct StreamCounters {
   unsigned long partial_segments = 0;  ///< emitted shorter than dT (closed by a gap/restart/end)
 };
 
+/// The health of a stream for periodic reports (the nodes' diagnostics), from the counters:
+/// - ERROR "sustained loss" when each of the last kSustained reports saw a loss;
+/// - else WARN for kHold seconds after any loss (a sample lost, rejected or late);
+/// - WARN from the first implausible index jump on (persistent until reset());
+/// - WARN for one report after a duplicate, a restart or a channel change;
+/// - OK otherwise. The message names every condition that holds.
+class LossMonitor {
+ public:
+  enum class Level { kOk = 0, kWarn = 1, kError = 2 };
+  struct Report {
+    Level level = Level::kOk;
+    std::string message;  ///< "" when OK
+  };
+  static constexpr double kHold = 10.0;  ///< [s] a loss keeps the status WARN this long
+  static constexpr int kSustained = 3;   ///< reports in a row with a loss: ERROR
+
+  /// Called once per report with the counters and the time of the report [s] (any monotonic
+  /// clock); `last_jump` describes the last implausible jump (may be empty).
+  Report update(const StreamCounters& k, double now, const std::string& last_jump = "");
+  void reset() { *this = LossMonitor(); }
+
+ private:
+  unsigned long last_lost_ = 0, last_events_ = 0;
+  int streak_ = 0;
+  bool have_loss_ = false;
+  double last_loss_ = 0.0;
+};
+
 /// A segment ready for identification, with its own copy of the samples: samples [begin, end)
 /// of view() are the segment, the rest (up to `context` on each side) stencil context.
 struct StreamSegment {

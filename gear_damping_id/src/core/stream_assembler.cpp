@@ -560,6 +560,38 @@ void StreamAssembler::emitReady(bool closing) {
   }
 }
 
+LossMonitor::Report LossMonitor::update(const StreamCounters& k, double now,
+                                        const std::string& last_jump) {
+  Report r;
+  auto raise = [&](Level level, const std::string& text) {
+    r.level = std::max(r.level, level);
+    r.message += (r.message.empty() ? "" : "; ") + text;
+  };
+  // Changes whenever a sample is lost, rejected or late (a change detector, not a count).
+  const unsigned long lost = k.samplesLost() + k.samples_late + k.samples_rejected;
+  const bool loss = lost != last_lost_;
+  last_lost_ = lost;
+  if (loss) have_loss_ = true, last_loss_ = now;
+  streak_ = loss ? streak_ + 1 : 0;
+  if (streak_ >= kSustained) {
+    raise(Level::kError, "sustained loss: samples lost in each of the last " +
+                             std::to_string(kSustained) + " reports");
+  } else if (have_loss_ && now - last_loss_ < kHold) {
+    raise(Level::kWarn, "samples lost (gap, rejected or late) in the last " +
+                            std::to_string(static_cast<int>(kHold)) + " s");
+  }
+  if (k.jumps > 0) {
+    raise(Level::kWarn, "implausible index jumps since start/reset: " + std::to_string(k.jumps) +
+                            (last_jump.empty() ? "" : " (last: " + last_jump + ")"));
+  }
+  const unsigned long events = k.duplicates + k.restarts + k.channel_changes;
+  if (events != last_events_) {
+    raise(Level::kWarn, "stream events (duplicates/restarts/channel changes) since last report");
+  }
+  last_events_ = events;
+  return r;
+}
+
 bool StreamAssembler::nextSegment(StreamSegment* out) {
   if (ready_.empty()) return false;
   *out = std::move(ready_.front());
