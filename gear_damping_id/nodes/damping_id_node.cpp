@@ -256,7 +256,7 @@ class DampingIdNode {
 
   void identify(const gd::StreamSegment& s) {
     const ros::WallTime t0 = ros::WallTime::now();
-    const double cpu0 = nodes::threadCpuSeconds();
+    const double cpu0 = nodes::busySeconds();
     const gd::SignalView v = s.view();
     // Refinement only while it keeps up with real time (see LoadGovernor); else the integral
     // estimate is published at once and the skip is counted and flagged.
@@ -302,7 +302,7 @@ class DampingIdNode {
       }
     }
     const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
-    refine_.record(nodes::threadCpuSeconds() - cpu0, out.refinement_skipped);
+    refine_.record(nodes::busySeconds() - cpu0, out.refinement_skipped);
     last_ms_ = ms;
     max_ms_ = std::max(max_ms_, ms);
     sum_ms_ += ms;

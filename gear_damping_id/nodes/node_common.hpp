@@ -5,6 +5,7 @@
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <malloc.h>
 #include <ros/ros.h>
 #include <unistd.h>
 
@@ -13,7 +14,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <ctime>
 #include <limits>
 #include <set>
 #include <sstream>
@@ -170,16 +170,16 @@ inline double residentMiB() {
   return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
 }
 
-/// CPU time of the calling thread [s] (CLOCK_THREAD_CPUTIME_ID): the cost of work on one core,
-/// whatever else the machine runs.
-inline double threadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+/// Monotonic wall-clock time [s]: what a stage costs the node's (single) callback thread,
+/// including the time the machine did not give it a core, which is what decides whether the
+/// node keeps up.
+inline double busySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 /// Keeps an optional, costly stage (refinement of a segment, analysis of a wavelet window)
-/// within `budget` of one core. Load = (CPU cost of an item processed in full, smoothed over
+/// within `budget` of the node's thread. Load = (wall time an item processed in full took
+/// (busySeconds), smoothed over
 /// about 20 items) x (items arriving per second of wall time, decayed over kTau = 10 s). While
 /// the load exceeds the budget the stage runs on every stride-th item only, stride =
 /// ceil(load / budget). Short bursts (a test, a few windows) never reach the budget; a sustained
@@ -294,6 +294,36 @@ class ChunkIntake {
     s.add("samples received", k.samples_accepted);
     s.add("samples in chunks received", k.samples_received);
     s.add("sample rate [Hz]", assembler_.sampleRate());
+    s.add("samples lost", k.samplesLost());
+    s.add("samples lost: never arrived (queue overflow, transport)", k.samplesNeverArrived());
+    s.add("samples lost: rejected", k.samples_missing_rejected + k.samples_suspect_dropped);
+    s.add("samples lost: late", k.samples_late);
+    s.add("samples rejected", k.samples_rejected);
+    s.add("samples duplicate", k.samples_duplicate);
+    s.add("gaps", k.gaps);
+    s.add("samples missing", k.samples_missing);
+    s.add("duplicate chunks", k.duplicates);
+    s.add("late chunks", k.late);
+    s.add("overlapping chunks", k.overlaps);
+    s.add("out-of-order chunks", k.out_of_order);
+    s.add("rejected chunks (NaN/Inf)", k.rejected_nonfinite);
+    s.add("rejected chunks (implausible value)", k.rejected_value);
+    s.add("rejected chunks (sample rate)", k.rejected_rate);
+    s.add("rejected chunks (malformed)", k.rejected_malformed);
+    s.add("rejected chunks (index jump glitch)", k.rejected_jump);
+    s.add("dropped chunks", k.rejected_nonfinite + k.rejected_value + k.rejected_rate +
+                                k.rejected_malformed + k.rejected_jump);
+    s.add("implausible index jumps", k.jumps);
+    s.add("new records at a jump", k.jump_records);
+    s.add("restarts", k.restarts);
+    s.add("channel changes", k.channel_changes);
+    s.add("held chunks", assembler_.heldChunks());
+    s.add("buffered samples", assembler_.bufferedSamples());
+    // Freed memory (a drained subscriber queue, a finished window) back to the system, so that
+    // the resident size reports what is in use rather than the high-water mark.
+    malloc_trim(0);
+    s.add("resident memory [MiB]", residentMiB());
+    s.add("process id", static_cast<long>(getpid()));
     const auto health = monitor_.update(k, now.toSec(), last_jump_);
     if (health.level != gear_damping_id::LossMonitor::Level::kOk) {
       s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::kError

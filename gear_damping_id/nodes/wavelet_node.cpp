@@ -173,11 +173,11 @@ class WaveletNode {
       return;
     }
     const ros::WallTime t0 = ros::WallTime::now();
-    const double cpu0 = nodes::threadCpuSeconds();
+    const double cpu0 = nodes::busySeconds();
     gd::WaveletResult r = gd::validateWavelet(s.dte.data() + s.begin, static_cast<size_t>(n),
                                               s.sample_rate, o_.wavelet);
     last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
-    load_.record(nodes::threadCpuSeconds() - cpu0, false);
+    load_.record(nodes::busySeconds() - cpu0, false);
     if (!r.ok()) {
       ++windows_failed_;
       last_problem_ = r.error;
