@@ -73,6 +73,10 @@ struct NodeOptions {
   nodes::IntakeOptions intake;
   bool publish_modeled_response = true;
   double cumulative_period = 0.1;  // [s] wall: most frequent /gear/damping update
+  int cumulative_segments = 1000;  // last segments in /gear/damping
+  int history_segments = 20000;    // segments kept for ~get_damping (bounded store)
+  int shared_segments = 1000;      // constant/load_law: span of the sliding problem
+  double refine_budget = 0.5;      // refinement while it costs at most this fraction of a core
   std::string gear_config;         // YAML path; empty: /gear/params
 };
 
@@ -92,6 +96,10 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !nodes::readIntakeParams(p, &o->intake) ||
       !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
       !p.get("publish_modeled_response", &o->publish_modeled_response) ||
+      !p.get("cumulative_segments", &o->cumulative_segments, "segments") ||
+      !p.get("history_segments", &o->history_segments, "segments") ||
+      !p.get("shared_segments", &o->shared_segments, "segments") ||
+      !p.getDouble("refine_budget", &o->refine_budget, "of one core") ||
       !p.get("gear_config", &o->gear_config)) {
     return false;
   }
@@ -127,11 +135,24 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     o->stream.segment_length = o->id.segment_length;
     o->stream.t_start = o->id.t_start;
     o->stream.t_end = o->id.t_end;
-    o->stream.reorder_chunks = o->intake.reorder_chunks;
+    nodes::applyIntake(o->intake, &o->stream);
     e = o->stream.validate();
   }
   if (!e.empty()) {
     ROS_FATAL("%s", nodes::paramError(e).c_str());
+    return false;
+  }
+  for (const auto& [name, v] :
+       {std::pair<const char*, int>{"cumulative_segments", o->cumulative_segments},
+        {"history_segments", o->history_segments},
+        {"shared_segments", o->shared_segments}}) {
+    if (v < 1 || v > 10000000) {
+      ROS_FATAL("~%s = %d: must be in [1, 1e7] [segments]", name, v);
+      return false;
+    }
+  }
+  if (!(o->refine_budget > 0.0 && o->refine_budget <= 1.0)) {
+    ROS_FATAL("~refine_budget = %g: must be in (0, 1] [fraction of one core]", o->refine_budget);
     return false;
   }
   if (!(o->cumulative_period >= 0.0)) {
@@ -145,7 +166,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
 class DampingIdNode {
  public:
   DampingIdNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
-      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
+      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh), refine_(o_.refine_budget) {
     damping_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingTopic, 1, true);
     segment_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingSegmentTopic, 100);
     series_pub_ = nh.advertise<gear_damping::DampingSample>(topics::kDampingSeriesTopic, 1000);
@@ -158,8 +179,8 @@ class DampingIdNode {
     updater_.add("stream", this, &DampingIdNode::diagnoseStream);
     updater_.add("identification", this, &DampingIdNode::diagnoseIdentification);
     // Relative names, remappable (e.g. gear/signal:=/rig/chunks).
-    signal_sub_ = nh.subscribe(topics::kSignalTopic, static_cast<uint32_t>(o_.intake.queue_size),
-                               &DampingIdNode::onChunk, this, ros::TransportHints().tcpNoDelay());
+    signal_sub_ =
+        nodes::subscribeChunks(nh, topics::kSignalTopic, o_.intake, &DampingIdNode::onChunk, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &DampingIdNode::onTimer, this);
     if (o_.gear_config.empty()) {
       params_sub_ = nh.subscribe(topics::kParamsTopic, 1, &DampingIdNode::onParams, this);
@@ -203,7 +224,10 @@ class DampingIdNode {
     }
     if (gear_) ROS_WARN("gear parameters changed: estimates reset");
     gear_ = std::make_unique<gd::GearConstants>(g);
-    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_);
+    gd::LiveLimits limits;
+    limits.history_segments = static_cast<size_t>(o_.history_segments);
+    limits.shared_segments = static_cast<size_t>(o_.shared_segments);
+    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_, limits);
     clearEstimates();
     ROS_INFO("gear constants: Me = %.6g kg, mean stiffness %.6g N/m", g.equivalent_mass,
              g.mean_stiffness);
@@ -366,8 +390,13 @@ class DampingIdNode {
 
   void identify(const gd::StreamSegment& s) {
     const ros::WallTime t0 = ros::WallTime::now();
+    const double cpu0 = nodes::busySeconds();
     const gd::SignalView v = s.view();
-    const gd::LiveIdentification::SegmentOutput out = live_->add(v, s.begin, s.end);
+    // Refinement only while it keeps up with real time (see LoadGovernor); else the integral
+    // estimate is published at once and the skip is counted and flagged.
+    const gd::LiveIdentification::SegmentOutput out =
+        live_->add(v, s.begin, s.end, refine_.allow());
+    if (out.refinement_skipped) ++refine_skipped_;
     const gd::SegmentEstimate& est = out.estimate;
     const gd::IdentificationResult& seg = out.result;
     if (!out.warning.empty()) ROS_WARN_THROTTLE(5.0, "%s", out.warning.c_str());
@@ -410,14 +439,20 @@ class DampingIdNode {
     }
     publishSample(est, fit);
     const double ms = (ros::WallTime::now() - t0).toSec() * 1e3;
+    refine_.record(nodes::busySeconds() - cpu0, out.refinement_skipped);
     last_ms_ = ms;
     max_ms_ = std::max(max_ms_, ms);
     sum_ms_ += ms;
   }
 
+  // /gear/damping: the last ~cumulative_segments segments.
   gear_damping::DampingArray cumulative() const {
+    return cumulative(static_cast<size_t>(o_.cumulative_segments));
+  }
+  // The last `last` segments (at most ~history_segments).
+  gear_damping::DampingArray cumulative(size_t last) const {
     gear_damping::DampingArray a =
-        live_ ? gear_damping_ros::toMsg(live_->cumulative()) : gear_damping::DampingArray();
+        live_ ? gear_damping_ros::toMsg(live_->cumulative(last)) : gear_damping::DampingArray();
     a.header.stamp = ros::Time::now();
     return a;
   }
@@ -436,7 +471,7 @@ class DampingIdNode {
   }
 
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-    intake_.assembler().reset();
+    intake_.reset();
     have_record_start_ = false;
     epoch_ = 0;
     clearEstimates();
@@ -448,7 +483,7 @@ class DampingIdNode {
   }
 
   bool onGet(gear_damping::GetDamping::Request&, gear_damping::GetDamping::Response& res) {
-    res.damping = cumulative();
+    res.damping = cumulative(static_cast<size_t>(o_.history_segments));
     return true;
   }
 
@@ -467,6 +502,17 @@ class DampingIdNode {
                 "segments not identifiable: " + last_reason_);
     }
     reported_not_identifiable_ = not_identifiable_;
+    if (refine_.degraded()) {
+      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                     "refinement cannot keep up: refining 1 segment in " +
+                         std::to_string(refine_.stride()) + ", integral estimates published");
+    }
+    s.add("refinement degraded", refine_.degraded() ? 1 : 0);
+    s.add("refinement stride [segments]", refine_.stride());
+    s.add("refinement load [core fraction]", refine_.load());  // if every segment were refined
+    s.add("refinement budget [core fraction]", refine_.budget());
+    s.add("segments with refinement skipped", refine_skipped_);
+    s.add("segments since start/reset/restart", live_ ? live_->segmentsAdded() : 0);
     s.add("formulation", gd::toString(o_.id.formulation));
     s.add("model", gd::toString(o_.id.model));
     s.add("segments identified", identified_);
@@ -502,6 +548,8 @@ class DampingIdNode {
   std::unique_ptr<gd::GearConstants> gear_;
   std::unique_ptr<gd::LiveIdentification> live_;
   std::deque<gear_damping::SignalChunk::ConstPtr> early_;
+  nodes::LoadGovernor refine_;
+  unsigned long refine_skipped_ = 0;
   gd::SegmentEstimate latest_;
   unsigned long epoch_ = 0, identified_ = 0, not_identifiable_ = 0, partial_ = 0;
   unsigned long reported_not_identifiable_ = 0, dropped_early_ = 0;

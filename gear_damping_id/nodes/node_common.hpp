@@ -5,10 +5,15 @@
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <malloc.h>
 #include <ros/ros.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <set>
 #include <sstream>
@@ -102,17 +107,26 @@ class ParamReader {
 
 /// Parameters of the chunk intake shared by both nodes.
 struct IntakeOptions {
-  int reorder_chunks = 8;              // [chunks] held while waiting for a missing chunk
-  int queue_size = 10000;              // [chunks] subscriber queue (10 s of the default stream)
+  int reorder_chunks = 8;  // [chunks] held while waiting for a missing chunk
+  // [chunks] subscriber queue: 5 s of a 2 MHz stream in 1000-sample chunks (10 s at 1 MHz).
+  // roscpp drops the oldest message when it is full; the drop shows as a gap in the indices.
+  int queue_size = 10000;
+  bool tcp_nodelay = true;             // TCPROS transport hint (no Nagle batching)
   double end_of_stream_timeout = 0.5;  // [s] wall time without chunks that ends the stream
+  double max_jump = 0.5;               // [s] implausible index jump (StreamOptions::max_jump)
+  double magnitude_factor = 1e6;       // absurd magnitude vs the running scale (0: off)
+  double max_abs_dte = 1.0;            // [m] absurd |dte|
 };
 
-/// Reads and validates ~reorder_chunks, ~queue_size, ~end_of_stream_timeout (ROS_FATAL + false
-/// when invalid).
+/// Reads and validates ~reorder_chunks, ~queue_size, ~tcp_nodelay, ~end_of_stream_timeout,
+/// ~max_jump, ~magnitude_factor, ~max_abs_dte (ROS_FATAL + false when invalid).
 inline bool readIntakeParams(ParamReader& p, IntakeOptions* o) {
   if (!p.get("reorder_chunks", &o->reorder_chunks, "chunks") ||
-      !p.get("queue_size", &o->queue_size, "chunks") ||
-      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s")) {
+      !p.get("queue_size", &o->queue_size, "chunks") || !p.get("tcp_nodelay", &o->tcp_nodelay) ||
+      !p.getDouble("end_of_stream_timeout", &o->end_of_stream_timeout, "s") ||
+      !p.getDouble("max_jump", &o->max_jump, "s") ||
+      !p.getDouble("magnitude_factor", &o->magnitude_factor) ||
+      !p.getDouble("max_abs_dte", &o->max_abs_dte, "m")) {
     return false;
   }
   if (o->queue_size < 1) {
@@ -123,8 +137,90 @@ inline bool readIntakeParams(ParamReader& p, IntakeOptions* o) {
     ROS_FATAL("~end_of_stream_timeout = %g: must be > 0 [s]", o->end_of_stream_timeout);
     return false;
   }
-  return true;  // reorder_chunks is checked by StreamOptions::validate
+  return true;  // reorder_chunks, max_jump, magnitude_factor: StreamOptions::validate
 }
+
+/// Copies the intake's sequencing parameters into the assembler's options.
+inline void applyIntake(const IntakeOptions& i, gear_damping_id::StreamOptions* o) {
+  o->reorder_chunks = i.reorder_chunks;
+  o->max_jump = i.max_jump;
+  o->magnitude_factor = i.magnitude_factor;
+  o->max_abs_dte = i.max_abs_dte;
+}
+
+/// Subscribes to the chunk topic with the intake's queue size and transport hints.
+template <class T>
+ros::Subscriber subscribeChunks(ros::NodeHandle& nh, const std::string& topic,
+                                const IntakeOptions& o,
+                                void (T::*callback)(const gear_damping::SignalChunk::ConstPtr&),
+                                T* obj) {
+  ros::TransportHints hints;
+  if (o.tcp_nodelay) hints = hints.tcpNoDelay();
+  return nh.subscribe(topic, static_cast<uint32_t>(o.queue_size), callback, obj, hints);
+}
+
+/// Resident set size of this process [MiB] (/proc/self/statm), NaN if unreadable.
+inline double residentMiB() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (f == nullptr) return std::numeric_limits<double>::quiet_NaN();
+  unsigned long size = 0, resident = 0;
+  const int n = std::fscanf(f, "%lu %lu", &size, &resident);
+  std::fclose(f);
+  if (n != 2) return std::numeric_limits<double>::quiet_NaN();
+  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
+}
+
+/// Monotonic wall-clock time [s]: what a stage costs the node's (single) callback thread,
+/// including the time the machine did not give it a core, which is what decides whether the
+/// node keeps up.
+inline double busySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+/// Keeps an optional, costly stage (refinement of a segment, analysis of a wavelet window)
+/// within `budget` of the node's thread. Load = (wall time an item processed in full took
+/// (busySeconds), smoothed over
+/// about 20 items) x (items arriving per second of wall time, decayed over kTau = 10 s). While
+/// the load exceeds the budget the stage runs on every stride-th item only, stride =
+/// ceil(load / budget). Short bursts (a test, a few windows) never reach the budget; a sustained
+/// stream that needs more than the budget is thinned at once, before the subscriber queue
+/// grows.
+class LoadGovernor {
+ public:
+  explicit LoadGovernor(double budget) : budget_(budget) {}
+  /// Whether the next item gets the stage.
+  bool allow() {
+    ++count_;
+    return stride_ <= 1 || count_ % stride_ == 0;
+  }
+  /// One item arrived: `cpu` [s] spent on it; `skipped`: allow() was false (cost not measured).
+  void record(double cpu, bool skipped) {
+    const double now =
+        std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+    arrivals_ = (last_ > 0.0 ? arrivals_ * std::exp(-(now - last_) / kTau) : 0.0) + 1.0;
+    last_ = now;
+    if (!skipped && cpu >= 0.0) {
+      cost_ = have_ ? kAlpha * cpu + (1.0 - kAlpha) * cost_ : cpu;
+      have_ = true;
+    }
+    load_ = cost_ * arrivals_ / kTau;
+    const double k = std::ceil(load_ / budget_);
+    stride_ = k > 1.0 ? static_cast<unsigned long>(std::min(k, 1e6)) : 1;
+  }
+  bool degraded() const { return stride_ > 1; }
+  unsigned long stride() const { return stride_; }
+  /// CPU seconds per wall second the stage would need on every item.
+  double load() const { return load_; }
+  double budget() const { return budget_; }
+
+ private:
+  static constexpr double kAlpha = 0.05;  // cost smoothing (about 20 items)
+  static constexpr double kTau = 10.0;    // [s] arrival-rate memory
+  double budget_;
+  double cost_ = 0.0, arrivals_ = 0.0, last_ = 0.0, load_ = 0.0;
+  bool have_ = false;
+  unsigned long stride_ = 1, count_ = 0;
+};
 
 /// Chunk intake: converts messages, feeds the assembler, warns (throttled) about rejections,
 /// gaps and restarts, measures the input rate, and reports everything to diagnostics.
@@ -152,7 +248,12 @@ class ChunkIntake {
     }
     const auto status = assembler_.push(c, &why);
     switch (status) {
+      case gear_damping_id::ChunkStatus::kSuspect:
+        last_jump_ = why;
+        ROS_WARN_THROTTLE(2.0, "%s", why.c_str());
+        break;
       case gear_damping_id::ChunkStatus::kRejectedNonFinite:
+      case gear_damping_id::ChunkStatus::kRejectedValue:
       case gear_damping_id::ChunkStatus::kRejectedRate:
       case gear_damping_id::ChunkStatus::kRejectedMalformed:
         ROS_WARN_THROTTLE(2.0, "%s: %s", toString(status), why.c_str());
@@ -170,10 +271,12 @@ class ChunkIntake {
   /// True once no chunk arrived for `timeout` [s] while samples are buffered or held.
   bool idle(double timeout) const {
     return messages_ > 0 && (ros::WallTime::now() - last_chunk_).toSec() >= timeout &&
-           (assembler_.bufferedSamples() > 0 || assembler_.heldChunks() > 0);
+           (assembler_.bufferedSamples() > 0 || assembler_.heldChunks() > 0 ||
+            assembler_.hasSuspect());
   }
 
-  /// Input statistics and sequencing events.
+  /// Input statistics, sequencing events and losses; the status from LossMonitor (WARN after a
+  /// loss, ERROR on sustained loss, persistent WARN after an implausible index jump).
   void report(diagnostic_updater::DiagnosticStatusWrapper& s) {
     const auto& k = assembler_.counters();
     const ros::WallTime now = ros::WallTime::now();
@@ -189,7 +292,14 @@ class ChunkIntake {
     s.add("input rate [chunks/s]", chunk_rate);
     s.add("chunks received", k.chunks_received);
     s.add("samples received", k.samples_accepted);
+    s.add("samples in chunks received", k.samples_received);
     s.add("sample rate [Hz]", assembler_.sampleRate());
+    s.add("samples lost", k.samplesLost());
+    s.add("samples lost: never arrived (queue overflow, transport)", k.samplesNeverArrived());
+    s.add("samples lost: rejected", k.samples_missing_rejected + k.samples_suspect_dropped);
+    s.add("samples lost: late", k.samples_late);
+    s.add("samples rejected", k.samples_rejected);
+    s.add("samples duplicate", k.samples_duplicate);
     s.add("gaps", k.gaps);
     s.add("samples missing", k.samples_missing);
     s.add("duplicate chunks", k.duplicates);
@@ -197,20 +307,38 @@ class ChunkIntake {
     s.add("overlapping chunks", k.overlaps);
     s.add("out-of-order chunks", k.out_of_order);
     s.add("rejected chunks (NaN/Inf)", k.rejected_nonfinite);
+    s.add("rejected chunks (implausible value)", k.rejected_value);
     s.add("rejected chunks (sample rate)", k.rejected_rate);
     s.add("rejected chunks (malformed)", k.rejected_malformed);
-    s.add("dropped chunks", k.rejected_nonfinite + k.rejected_rate + k.rejected_malformed);
+    s.add("rejected chunks (index jump glitch)", k.rejected_jump);
+    s.add("dropped chunks", k.rejected_nonfinite + k.rejected_value + k.rejected_rate +
+                                k.rejected_malformed + k.rejected_jump);
+    s.add("implausible index jumps", k.jumps);
+    s.add("new records at a jump", k.jump_records);
     s.add("restarts", k.restarts);
     s.add("channel changes", k.channel_changes);
     s.add("held chunks", assembler_.heldChunks());
     s.add("buffered samples", assembler_.bufferedSamples());
-    const unsigned long events = k.gaps + k.duplicates + k.late + k.rejected_nonfinite +
-                                 k.rejected_rate + k.rejected_malformed + k.restarts;
-    if (events != last_events_) {
-      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "stream events (gaps/duplicates/rejections/restarts) since last report");
+    // Freed memory (a drained subscriber queue, a finished window) back to the system, so that
+    // the resident size reports what is in use rather than the high-water mark.
+    malloc_trim(0);
+    s.add("resident memory [MiB]", residentMiB());
+    s.add("process id", static_cast<long>(getpid()));
+    const auto health = monitor_.update(k, now.toSec(), last_jump_);
+    if (health.level != gear_damping_id::LossMonitor::Level::kOk) {
+      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::kError
+                         ? diagnostic_msgs::DiagnosticStatus::ERROR
+                         : diagnostic_msgs::DiagnosticStatus::WARN,
+                     health.message);
     }
-    last_events_ = events;
+  }
+
+  /// Forgets the assembler's state and the reported history (~reset).
+  void reset() {
+    assembler_.reset();
+    last_samples_ = last_chunks_ = 0;
+    monitor_.reset();
+    last_jump_.clear();
   }
 
  private:
@@ -218,7 +346,9 @@ class ChunkIntake {
   std::vector<double> state_;
   unsigned long messages_ = 0;
   ros::WallTime last_chunk_, last_report_;
-  unsigned long last_samples_ = 0, last_chunks_ = 0, last_events_ = 0;
+  unsigned long last_samples_ = 0, last_chunks_ = 0;
+  gear_damping_id::LossMonitor monitor_;
+  std::string last_jump_;
 };
 
 /// A core options error ("field = value: rule", possibly "Struct.field = ...") in the node's

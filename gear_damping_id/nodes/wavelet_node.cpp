@@ -10,11 +10,15 @@
 // logged; a new window length closes the window being filled early (analysed if long enough).
 // Services:    ~analyze (std_srvs/Trigger): analyse what is buffered now (closes the window)
 //              ~reset (std_srvs/Empty)
-// Windows: ~window [s] > 0: consecutive windows of that length from sample 0 (the stream
-// assembler's segments, so gaps, duplicates, restarts are handled as in damping_id_node: a gap
-// or restart closes the window early and it is analysed if long enough); ~window 0 (default):
-// the whole run, analysed at the end of the stream (no chunk for ~end_of_stream_timeout [s] of
-// wall time) or on ~analyze. Windows shorter than ~min_window_samples are skipped and counted.
+// Windows: ~window [s] > 0 (default 0.1): consecutive windows of that length from sample 0 (the
+// stream assembler's segments, so gaps, duplicates, restarts are handled as in damping_id_node:
+// a gap, a restart, the end of the stream (no chunk for ~end_of_stream_timeout [s] of wall time)
+// or ~analyze closes the window early, and it is analysed if long enough). Only the current
+// window is buffered (memory bounded by ~window). Windows shorter than ~min_window_samples are
+// skipped and counted. While the analysis costs more than ~analysis_budget of one core (per
+// second of wall time, see LoadGovernor), only every k-th window is analysed (k = ceil(load /
+// budget)), the others
+// are counted as skipped and the status is WARN.
 // Threading: one thread; the analysis (only the rows the fits need, no full scalogram) runs in
 // the callback that completes a window, the subscriber queue absorbs chunks meanwhile.
 #include <dynamic_reconfigure/server.h>
@@ -41,7 +45,8 @@ namespace {
 struct NodeOptions {
   gd::WaveletOptions wavelet;
   gd::StreamOptions stream;
-  double window = 0.0;           // [s] 0 = whole run
+  double window = 0.1;           // [s] > 0
+  double analysis_budget = 0.8;  // [fraction of one core] above it, windows are skipped
   int min_window_samples = 256;  // [samples]
   nodes::IntakeOptions intake;
 };
@@ -52,6 +57,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
   int n_scales = w.n_scales, max_modes = w.max_modes;
   if (!p.getDouble("window", &o->window, "s") ||
       !p.get("min_window_samples", &o->min_window_samples, "samples") ||
+      !p.getDouble("analysis_budget", &o->analysis_budget, "of one core") ||
       !p.getDouble("f_min", &w.f_min, "Hz") || !p.getDouble("f_max", &w.f_max, "Hz") ||
       !p.get("n_scales", &n_scales) || !p.getDouble("omega0", &w.omega0) ||
       !p.getDouble("peak_omega0", &w.peak_omega0) || !p.getDouble("fit_omega0", &w.fit_omega0) ||
@@ -71,8 +77,13 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
   w.n_scales = n_scales;
   w.max_modes = max_modes;
   w.full_scalogram = false;  // no figure here: only the rows the fits need
-  if (!(o->window >= 0.0)) {
-    ROS_FATAL("~window = %g: must be >= 0 [s] (0 = whole run)", o->window);
+  if (!(o->window > 0.0) || !std::isfinite(o->window)) {
+    ROS_FATAL("~window = %g: must be > 0 and finite [s] (the node buffers one window)", o->window);
+    return false;
+  }
+  if (!(o->analysis_budget > 0.0 && o->analysis_budget <= 1.0)) {
+    ROS_FATAL("~analysis_budget = %g: must be in (0, 1] [fraction of one core]",
+              o->analysis_budget);
     return false;
   }
   if (o->min_window_samples < 64) {
@@ -80,7 +91,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
     return false;
   }
   o->stream.segment_length = o->window;
-  o->stream.reorder_chunks = o->intake.reorder_chunks;
+  nodes::applyIntake(o->intake, &o->stream);
   o->stream.context = 0;
   std::string e = w.validate();
   if (e.empty()) e = o->stream.validate();
@@ -95,7 +106,7 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
 class WaveletNode {
  public:
   WaveletNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
-      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh) {
+      : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh), load_(o_.analysis_budget) {
     modes_pub_ =
         nh.advertise<gear_damping::WaveletModes>(gear_sim_ros::kWaveletModesTopic, 10, true);
     analyze_srv_ = pnh.advertiseService("analyze", &WaveletNode::onAnalyze, this);
@@ -104,8 +115,7 @@ class WaveletNode {
     updater_.add("stream", this, &WaveletNode::diagnoseStream);
     updater_.add("wavelet", this, &WaveletNode::diagnoseWavelet);
     signal_sub_ =
-        nh.subscribe(gear_sim_ros::kSignalTopic, static_cast<uint32_t>(o_.intake.queue_size),
-                     &WaveletNode::onChunk, this, ros::TransportHints().tcpNoDelay());
+        nodes::subscribeChunks(nh, gear_sim_ros::kSignalTopic, o_.intake, &WaveletNode::onChunk, this);
     damping_sub_ = nh.subscribe(gear_sim_ros::kDampingTopic, 1, &WaveletNode::onDamping, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::WaveletConfig>>(
@@ -159,7 +169,7 @@ class WaveletNode {
   }
 
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-    intake_.assembler().reset();
+    intake_.reset();
     ROS_INFO("wavelet_node: reset");
     return true;
   }
@@ -233,10 +243,17 @@ class WaveletNode {
       ROS_WARN_THROTTLE(2.0, "%s", last_problem_.c_str());
       return;
     }
+    if (!load_.allow()) {
+      ++windows_shed_;
+      load_.record(0.0, true);
+      return;
+    }
     const ros::WallTime t0 = ros::WallTime::now();
+    const double cpu0 = nodes::busySeconds();
     gd::WaveletResult r = gd::validateWavelet(s.dte.data() + s.begin, static_cast<size_t>(n),
                                               s.sample_rate, o_.wavelet);
     last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
+    load_.record(nodes::busySeconds() - cpu0, false);
     if (!r.ok()) {
       ++windows_failed_;
       last_problem_ = r.error;
@@ -269,6 +286,15 @@ class WaveletNode {
       s.summary(diagnostic_msgs::DiagnosticStatus::WARN, "window not analysable: " + last_problem_);
     }
     reported_problems_ = windows_failed_ + windows_skipped_;
+    if (load_.degraded()) {
+      s.mergeSummary(
+          diagnostic_msgs::DiagnosticStatus::WARN,
+          "analysis cannot keep up: analysing 1 window in " + std::to_string(load_.stride()));
+    }
+    s.add("analysis load [core fraction]", load_.load());
+    s.add("analysis stride [windows]", load_.stride());
+    s.add("analysis budget [core fraction]", load_.budget());
+    s.add("windows skipped (load)", windows_shed_);
     s.add("windows analysed", windows_analysed_);
     s.add("windows failed", windows_failed_);
     s.add("windows skipped (too short)", windows_skipped_);
@@ -295,7 +321,8 @@ class WaveletNode {
   ros::WallTimer timer_;
   double xi_integral_ = gd::kNaN, last_ms_ = 0, last_frequency_ = gd::kNaN, last_xi_ = gd::kNaN;
   unsigned long windows_analysed_ = 0, windows_failed_ = 0, windows_skipped_ = 0;
-  unsigned long reported_problems_ = 0;
+  unsigned long reported_problems_ = 0, windows_shed_ = 0;
+  nodes::LoadGovernor load_;
   size_t last_modes_ = 0;
   std::string last_problem_;
 };

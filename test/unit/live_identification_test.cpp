@@ -159,3 +159,73 @@ TEST(LiveIdentification, ResetForgetsEverySegment) {
 }
 
 }  // namespace
+
+// Bounded memory: only the last history_segments estimates are kept (equal to the offline ones;
+// xi still uses omega0 of every segment so far), and the shared models solve over a sliding span
+// of shared_segments to 2 * shared_segments - 1 segments: with 3 and 10 segments, the last solve
+// covers segments 7..10 (after the swaps at 3, 6 and 9), i.e. identify() from t_start = 6 dT.
+TEST(LiveIdentification, HistoryAndSharedProblemsAreBounded) {
+  const Case k;
+  const gd::SignalView view = gd::SignalView::of(k.table);
+  gd::IdentificationOptions o;
+  o.refine = Refine::Never;
+  o.window_length = gd::defaultWindowLength(view, k.gear);
+  gd::LiveLimits limits;
+  limits.history_segments = 4;
+  limits.shared_segments = 3;
+  {
+    gd::LiveIdentification li(o, k.gear, limits);
+    for (const auto& r : gd::segmentRanges(view, o)) li.add(view, r.first, r.second);
+    EXPECT_EQ(li.segmentsAdded(), 10u);
+    EXPECT_EQ(li.segmentCount(), 4u);
+    const auto live = li.cumulative();
+    const auto last2 = li.cumulative(2);
+    const auto off = k.offline(o);
+    ASSERT_EQ(live.segments.size(), 4u);
+    ASSERT_EQ(last2.segments.size(), 2u);
+    EXPECT_NEAR(live.omega0, off.omega0, kSameComputationRelTol * off.omega0);
+    for (size_t i = 0; i < 4; ++i) {
+      const auto& b = off.segments[6 + i];
+      EXPECT_NEAR(live.segments[i].C, b.C, kSameComputationRelTol * b.C) << i;
+      EXPECT_NEAR(live.segments[i].xi, b.xi, kSameComputationRelTol * b.xi) << i;
+    }
+    EXPECT_EQ(last2.segments[1].t_start, live.segments[3].t_start);
+  }
+  o.model = gd::DampingModel::Constant;
+  gd::LiveIdentification li(o, k.gear, limits);
+  for (const auto& r : gd::segmentRanges(view, o)) li.add(view, r.first, r.second);
+  const auto live = li.cumulative();
+  gd::IdentificationOptions tail = o;
+  tail.t_start = 6.0 * o.segment_length;
+  const auto off = k.offline(tail);
+  ASSERT_TRUE(live.constant && off.constant);
+  ASSERT_EQ(off.segments.size(), 4u);
+  EXPECT_NEAR(live.constant->C, off.constant->C, kSameComputationRelTol * off.constant->C);
+  ASSERT_EQ(live.segments.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    EXPECT_NEAR(live.segments[i].t_start, off.segments[i].t_start, 1e-12) << i;
+  }
+}
+
+// A caller that cannot keep up disallows refinement: the integral estimate comes back at once,
+// flagged, equal to the Refine::Never estimate.
+TEST(LiveIdentification, DisallowedRefinementReturnsTheIntegralEstimateFlagged) {
+  const Case k(40.0);
+  const gd::SignalView view = gd::SignalView::of(k.table);
+  gd::IdentificationOptions o;
+  o.refine = Refine::Always;
+  o.window_length = gd::defaultWindowLength(view, k.gear);
+  gd::IdentificationOptions never = o;
+  never.refine = Refine::Never;
+  gd::LiveIdentification li(o, k.gear), ref(never, k.gear);
+  const auto r = gd::segmentRanges(view, o).front();
+  const auto skipped = li.add(view, r.first, r.second, false);
+  const auto integral = ref.add(view, r.first, r.second);
+  EXPECT_TRUE(skipped.refinement_skipped);
+  EXPECT_FALSE(skipped.estimate.refined);
+  EXPECT_EQ(skipped.estimate.C, integral.estimate.C);
+  const auto refined = li.add(view, r.first, r.second, true);
+  EXPECT_FALSE(refined.refinement_skipped);
+  EXPECT_TRUE(refined.estimate.refined);
+  EXPECT_NE(refined.estimate.C, integral.estimate.C);
+}

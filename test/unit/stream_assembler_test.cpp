@@ -279,10 +279,182 @@ TEST(StreamAssembler, RandomAbuseNeverMixesSamplesAcrossGapsOrSegments) {
       }
     }
     const auto& k = a.counters();
+    // Every sample given to push() is accounted for exactly once (or still pending).
+    size_t pending = a.hasSuspect() ? 1 : 0;  // suspects cannot occur here: jumps < 2000
+    EXPECT_EQ(pending, 0u);
+    a.endOfStream();
+    EXPECT_EQ(k.samples_received,
+              k.samples_accepted + k.samples_duplicate + k.samples_late + k.samples_rejected)
+        << "trial " << trial;
+    EXPECT_LE(k.samples_missing_rejected, k.samples_missing);
     EXPECT_EQ(k.chunks_received, 300u);
     EXPECT_GE(k.chunks_received, k.duplicates + k.late + k.rejected_nonfinite + k.rejected_rate +
                                      k.rejected_malformed);
   }
+}
+
+// The glitch: one chunk with a far-future first_index (1e6 and 1e15 samples ahead),
+// then a pause (endOfStream): the stream continues where it was, and every later segment gets
+// through. The glitch is counted (jumps, rejected_jump) and never moves the expected index.
+TEST(StreamAssembler, AFarFutureGlitchChunkIsDroppedAndTheStreamContinues) {
+  const Record rec(20000);
+  for (const std::uint64_t jump : {std::uint64_t{1000000}, std::uint64_t{1000000000000000}}) {
+    for (const bool pause : {true, false}) {
+      gd::StreamAssembler a{gd::StreamOptions()};
+      for (size_t b = 0; b < 5000; b += 1000) a.push(rec.chunk(b, 1000));
+      gd::ChunkData glitch = rec.chunk(5000, 1000);
+      glitch.first_index += jump;
+      std::string why;
+      EXPECT_EQ(a.push(glitch, &why), gd::ChunkStatus::kSuspect);
+      EXPECT_NE(why.find("implausible index jump"), std::string::npos) << why;
+      if (pause) a.endOfStream();
+      for (size_t b = 5000; b < 20000; b += 1000) {
+        EXPECT_EQ(a.push(rec.chunk(b, 1000)), gd::ChunkStatus::kAccepted) << b;
+      }
+      a.endOfStream();
+      const auto segs = drain(&a);
+      // A pause closes the run after segment 4; the stream continues at 5000 in a new run.
+      ASSERT_EQ(segs.size(), 20u) << jump;
+      for (size_t i = 0; i < segs.size(); ++i) {
+        EXPECT_EQ(range(segs[i]), Range(1000 * i, 1000 * (i + 1))) << i;
+        EXPECT_EQ(segs[i].epoch, 0u);
+      }
+      const auto& k = a.counters();
+      EXPECT_EQ(k.jumps, 1u);
+      EXPECT_EQ(k.rejected_jump, 1u);
+      EXPECT_EQ(k.jump_records, 0u);
+      EXPECT_EQ(k.gaps, 0u);
+      EXPECT_EQ(k.late, 0u);
+      EXPECT_EQ(k.samples_accepted, 20000u);
+      EXPECT_EQ(k.samplesLost(), 1000u);  // the glitch chunk's own samples
+    }
+  }
+}
+
+// A stream that really jumped (a DAQ restarted at a non-zero count, a backwards counter reset):
+// the chunk after the suspect continues it, so a new record starts there and nothing is lost.
+TEST(StreamAssembler, AConfirmedJumpStartsANewRecord) {
+  const Record rec(20000);
+  for (const bool forward : {true, false}) {
+    gd::StreamAssembler a{gd::StreamOptions()};
+    const std::uint64_t first = forward ? 0 : 10000000;
+    const std::uint64_t then = forward ? 10000000 : 3000000;
+    std::vector<std::pair<std::uint64_t, size_t>> sent;  // stream index -> record index
+    for (size_t b = 0; b < 5000; b += 1000) {
+      gd::ChunkData c = rec.chunk(b, 1000);
+      c.first_index = first + b;
+      a.push(c);
+    }
+    for (size_t b = 5000; b < 10000; b += 1000) {
+      gd::ChunkData c = rec.chunk(b, 1000);
+      c.first_index = then + b;
+      EXPECT_EQ(a.push(c), b == 5000 ? gd::ChunkStatus::kSuspect : gd::ChunkStatus::kAccepted);
+    }
+    a.endOfStream();
+    const auto segs = drain(&a);
+    const auto& k = a.counters();
+    EXPECT_EQ(k.jumps, 1u);
+    EXPECT_EQ(k.jump_records, 1u);
+    EXPECT_EQ(k.rejected_jump, 0u);
+    EXPECT_EQ(k.samples_accepted, 10000u);
+    EXPECT_EQ(k.samplesLost(), 0u);
+    EXPECT_EQ(a.epoch(), 1u);
+    ASSERT_FALSE(segs.empty());
+    EXPECT_EQ(segs.back().epoch, 1u);
+    EXPECT_EQ(segs.back().first_index + static_cast<std::uint64_t>(segs.back().end), then + 10000);
+    for (const auto& s : segs) {  // samples stay with their record
+      for (size_t j = 0; j < s.dte.size(); ++j) {
+        const std::uint64_t g = s.first_index + j;
+        const size_t src = static_cast<size_t>(s.epoch == 0 ? g - first : g - then);
+        ASSERT_EQ(s.dte[j], rec.dte[src]);
+      }
+    }
+  }
+}
+
+// Values no gear signal can hold are rejected and counted: mesh_state other than 0/1, a DTE of
+// 1e308 m (above max_abs_dte) or a torque a million times the stream's running scale. Their
+// indices become a gap attributed to the rejection, not to the transport.
+TEST(StreamAssembler, ImplausibleValuesAreRejectedAndTheirGapAttributed) {
+  Record rec(8000);
+  std::vector<double> state(8000, 1.0);
+  gd::StreamAssembler a{gd::StreamOptions()};
+  auto chunk = [&](size_t b) {
+    gd::ChunkData c = rec.chunk(b, 1000);
+    c.mesh_state = state.data() + b;
+    return c;
+  };
+  EXPECT_EQ(a.push(chunk(0)), gd::ChunkStatus::kAccepted);
+  std::string why;
+  state[1500] = 7.0;
+  EXPECT_EQ(a.push(chunk(1000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_NE(why.find("mesh_state[500] = 7"), std::string::npos) << why;
+  rec.dte[2100] = 1e308;
+  EXPECT_EQ(a.push(chunk(2000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_NE(why.find("max_abs_dte"), std::string::npos) << why;
+  rec.torque[3999] = 100.0 * 2e6;  // the running scale is 100 N*m; the factor 1e6
+  EXPECT_EQ(a.push(chunk(3000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_NE(why.find("torque"), std::string::npos) << why;
+  rec.torque[4999] = 100.0 * 0.5e6;  // within the factor: a plausible (if large) value
+  for (size_t b = 4000; b < 8000; b += 1000)
+    EXPECT_NE(a.push(chunk(b)), gd::ChunkStatus::kRejectedValue);
+  a.endOfStream();
+  const auto& k = a.counters();
+  EXPECT_EQ(k.rejected_value, 3u);
+  EXPECT_EQ(k.samples_rejected, 3000u);
+  EXPECT_EQ(k.gaps, 1u);
+  EXPECT_EQ(k.samples_missing, 3000u);
+  EXPECT_EQ(k.samples_missing_rejected, 3000u);
+  EXPECT_EQ(k.samplesNeverArrived(), 0u);
+}
+
+// A dropped chunk that never arrives (a subscriber-queue overflow) is inferred from the indices:
+// a gap whose samples no chunk brought.
+TEST(StreamAssembler, QueueOverflowShowsAsSamplesThatNeverArrived) {
+  const Record rec(10000);
+  gd::StreamAssembler a{gd::StreamOptions()};
+  for (size_t b = 0; b < 10000; b += 1000) {
+    if (b != 3000 && b != 4000) a.push(rec.chunk(b, 1000));
+  }
+  a.endOfStream();
+  const auto& k = a.counters();
+  EXPECT_EQ(k.samples_missing, 2000u);
+  EXPECT_EQ(k.samplesNeverArrived(), 2000u);
+  EXPECT_EQ(k.samplesLost(), 2000u);
+  EXPECT_EQ(k.samples_received, 8000u);
+}
+
+// The diagnostics' health: one loss is WARN for LossMonitor::kHold seconds, a loss in each of
+// kSustained reports in a row is ERROR, an implausible jump keeps WARN until reset(), a clean
+// stream is OK.
+TEST(LossMonitor, OneLossWarnsSustainedLossIsAnErrorAJumpWarnsUntilReset) {
+  using L = gd::LossMonitor::Level;
+  gd::LossMonitor m;
+  gd::StreamCounters k;
+  k.samples_accepted = 1000;
+  EXPECT_EQ(m.update(k, 0.0).level, L::kOk);
+  k.samples_missing = 1000;  // a gap
+  EXPECT_EQ(m.update(k, 1.0).level, L::kWarn);
+  EXPECT_EQ(m.update(k, 2.0).level, L::kWarn);  // held
+  EXPECT_EQ(m.update(k, 1.0 + gd::LossMonitor::kHold + 0.1).level, L::kOk);
+  double t = 20.0;
+  for (int i = 0; i < gd::LossMonitor::kSustained; ++i) {
+    k.samples_late += 10;
+    const auto r = m.update(k, t += 1.0);
+    EXPECT_EQ(r.level, i + 1 < gd::LossMonitor::kSustained ? L::kWarn : L::kError) << i;
+    if (r.level == L::kError) {
+      EXPECT_NE(r.message.find("sustained"), std::string::npos);
+    }
+  }
+  EXPECT_EQ(m.update(k, t += 1.0).level, L::kWarn);  // the loss stopped: WARN while held
+  k.jumps = 1;
+  const auto jump = m.update(k, t += 100.0, "chunk at index 1000000000000000");
+  EXPECT_EQ(jump.level, L::kWarn);
+  EXPECT_NE(jump.message.find("1000000000000000"), std::string::npos) << jump.message;
+  EXPECT_EQ(m.update(k, t += 1000.0).level, L::kWarn);  // persistent
+  m.reset();
+  gd::StreamCounters clean;
+  EXPECT_EQ(m.update(clean, t += 1.0).level, L::kOk);
 }
 
 TEST(StreamAssembler, InvalidOptionsNameTheField) {
@@ -292,6 +464,15 @@ TEST(StreamAssembler, InvalidOptionsNameTheField) {
   o = gd::StreamOptions();
   o.reorder_chunks = -3;
   EXPECT_NE(o.validate().find("reorder_chunks"), std::string::npos);
+  o = gd::StreamOptions();
+  o.max_jump = 0.0;
+  EXPECT_NE(o.validate().find("max_jump = 0"), std::string::npos);
+  o = gd::StreamOptions();
+  o.magnitude_factor = 2.0;
+  EXPECT_NE(o.validate().find("magnitude_factor = 2"), std::string::npos);
+  o = gd::StreamOptions();
+  o.max_abs_dte = -1.0;
+  EXPECT_NE(o.validate().find("max_abs_dte"), std::string::npos);
   EXPECT_EQ(gd::StreamOptions().validate(), "");
 }
 

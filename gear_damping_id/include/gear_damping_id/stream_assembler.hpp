@@ -24,14 +24,35 @@
 //   which also starts a new epoch: the consumer resets its estimates when the epoch changes;
 // - endOfStream() (end of a bag, an idle publisher, or a trigger).
 // Rejected (never enter a run, counted): chunks with a non-finite value in any channel present,
-// a sample rate different from the run's (relative tolerance 1e-9), malformed chunks (no
-// samples, sample rate not finite and > 0, an index beyond 2^52, fewer than 4 samples per
-// segment at the chunk's rate). Ignored (counted): exact duplicates, chunks that
-// arrive after their indices were declared a gap ("late"); a chunk overlapping accepted samples
-// contributes only its new samples.
+// implausible values (mesh_state other than 0 or 1; |dte| above options.max_abs_dte; a dte,
+// stiffness or torque magnitude above options.magnitude_factor times the channel's running scale,
+// the median of the largest |value| of the last 16 accepted chunks), a sample rate different
+// from the run's (relative tolerance 1e-9), malformed chunks (no samples, sample rate not finite
+// and > 0, an index beyond 2^52, fewer than 4 samples per segment at the chunk's rate). Ignored
+// (counted): exact duplicates, chunks that arrive after their indices were declared a gap
+// ("late"); a chunk overlapping accepted samples contributes only its new samples.
+//
+// Implausible index jumps (a DAQ counter glitch, a publisher restarted at a non-zero index): a
+// chunk starting more than J = max(options.max_jump * sample_rate, (reorder_chunks + 1) * its
+// size) samples after the expected index, or ending more than J before it (index 0 is a restart,
+// above), is held aside as a suspect, not in the reorder buffer. The next chunk decides:
+// - it continues the suspect (starts at the suspect's end): the stream really jumped. The old
+//   record is finished and a new record (epoch) starts at the suspect, as for a restart;
+// - anything else: the suspect was a glitch and is dropped (rejected, its samples counted);
+// - endOfStream() drops a pending suspect (counted the same way).
+// So one bad chunk never moves the expected index, and a stream that really jumped resumes after
+// one chunk. Both outcomes are counted (jumps, jump_records, rejected_jump).
+//
+// Sample accounting (StreamCounters): every sample of every chunk given to push() ends up in
+// exactly one of samples_accepted, samples_duplicate (already accepted: duplicate chunks and the
+// overlapping part of trimmed chunks), samples_late, samples_rejected; a suspect counts once
+// decided. Samples that never arrived show as missing indices: samples_missing (gaps), of which
+// samples_missing_rejected were indices of rejected chunks. A subscriber-queue overflow or a
+// transport loss therefore appears as samples_missing - samples_missing_rejected.
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <deque>
 #include <limits>
@@ -68,6 +89,14 @@ struct StreamOptions {
   /// Samples kept on either side of a segment for the quadrature stencils (2 = what the
   /// integral method reads).
   int context = 2;
+  /// [s] index jumps larger than this (and than the reorder window) are implausible: see the
+  /// header comment. > 0; .inf disables the rule.
+  double max_jump = 0.5;
+  /// A chunk whose largest |dte|, |stiffness| or |torque| exceeds this multiple of the channel's
+  /// running scale is rejected as physically absurd. 0 disables the relative check; else >= 10.
+  double magnitude_factor = 1e6;
+  /// [m] |dte| above this is rejected whatever the running scale (a DTE is micrometres). > 0.
+  double max_abs_dte = 1.0;
   /// Empty when valid; else names the field, the value and the rule broken.
   std::string validate() const;
 };
@@ -80,7 +109,9 @@ enum class ChunkStatus {
   kLate,               ///< its samples were already declared missing (a gap): ignored
   kRejectedNonFinite,  ///< NaN/Inf in a channel: rejected
   kRejectedRate,       ///< sample rate differs from the stream's: rejected
-  kRejectedMalformed   ///< no samples, no dte, bad sample rate or index: rejected
+  kRejectedMalformed,  ///< no samples, no dte, bad sample rate or index: rejected
+  kRejectedValue,      ///< mesh_state not 0/1, or an absurd magnitude: rejected
+  kSuspect             ///< implausible index jump: held aside until the next chunk decides
 };
 const char* toString(ChunkStatus s);
 
@@ -98,10 +129,56 @@ struct StreamCounters {
   unsigned long rejected_nonfinite = 0;
   unsigned long rejected_rate = 0;
   unsigned long rejected_malformed = 0;
+  unsigned long rejected_value = 0;  ///< mesh_state not 0/1 or absurd magnitude
+  unsigned long rejected_jump = 0;   ///< suspects (implausible jumps) dropped as glitches
+  unsigned long jumps = 0;           ///< implausible index jumps seen (suspects)
+  unsigned long jump_records = 0;    ///< suspects confirmed: new record (epoch) at the jump
   unsigned long restarts = 0;
   unsigned long channel_changes = 0;
+  // Per-sample accounting (see the header comment).
+  unsigned long samples_received = 0;          ///< samples in all chunks given to push()
+  unsigned long samples_duplicate = 0;         ///< already accepted (duplicates, trimmed overlaps)
+  unsigned long samples_late = 0;              ///< in late chunks
+  unsigned long samples_rejected = 0;          ///< in rejected chunks (incl. dropped suspects)
+  unsigned long samples_missing_rejected = 0;  ///< of samples_missing: indices of rejected chunks
+  /// Samples lost to the estimator: indices never accepted (gaps) + dropped suspects' samples.
+  unsigned long samplesLost() const { return samples_missing + samples_suspect_dropped; }
+  /// Gap samples that no chunk brought, rejected or not (queue overflow, transport loss).
+  unsigned long samplesNeverArrived() const {
+    const unsigned long known = samples_missing_rejected + samples_late;
+    return samples_missing > known ? samples_missing - known : 0;
+  }
+  unsigned long samples_suspect_dropped = 0;  ///< of samples_rejected: in dropped suspects
   unsigned long segments_emitted = 0;
   unsigned long partial_segments = 0;  ///< emitted shorter than dT (closed by a gap/restart/end)
+};
+
+/// The health of a stream for periodic reports (the nodes' diagnostics), from the counters:
+/// - ERROR "sustained loss" when each of the last kSustained reports saw a loss;
+/// - else WARN for kHold seconds after any loss (a sample lost, rejected or late);
+/// - WARN from the first implausible index jump on (persistent until reset());
+/// - WARN for one report after a duplicate, a restart or a channel change;
+/// - OK otherwise. The message names every condition that holds.
+class LossMonitor {
+ public:
+  enum class Level { kOk = 0, kWarn = 1, kError = 2 };
+  struct Report {
+    Level level = Level::kOk;
+    std::string message;  ///< "" when OK
+  };
+  static constexpr double kHold = 10.0;  ///< [s] a loss keeps the status WARN this long
+  static constexpr int kSustained = 3;   ///< reports in a row with a loss: ERROR
+
+  /// Called once per report with the counters and the time of the report [s] (any monotonic
+  /// clock); `last_jump` describes the last implausible jump (may be empty).
+  Report update(const StreamCounters& k, double now, const std::string& last_jump = "");
+  void reset() { *this = LossMonitor(); }
+
+ private:
+  unsigned long last_lost_ = 0, last_events_ = 0;
+  int streak_ = 0;
+  bool have_loss_ = false;
+  double last_loss_ = 0.0;
 };
 
 /// A segment ready for identification, with its own copy of the samples: samples [begin, end)
@@ -151,6 +228,8 @@ class StreamAssembler {
   /// Samples accepted in the current run and held chunks (for diagnostics).
   size_t bufferedSamples() const { return static_cast<size_t>(run_.dte.size()); }
   size_t heldChunks() const { return held_.size(); }
+  /// An implausible jump waits for the next chunk (see the header comment).
+  bool hasSuspect() const { return have_suspect_; }
   /// Global index expected next (valid once a chunk was accepted).
   std::uint64_t nextIndex() const { return next_index_; }
   double sampleRate() const { return rate_; }
@@ -160,13 +239,21 @@ class StreamAssembler {
     std::uint64_t first = 0;
     std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
   };
-  struct Held {
+  struct Held {  // a chunk's own copy (reorder buffer, suspect)
     double sample_rate = 0.0;
     unsigned mask = 0;
     std::vector<double> dte, stiffness, torque, mesh_state, mesh_phase;
+    static Held copyOf(const ChunkData& c);
+    ChunkData chunk(std::uint64_t first_index) const;  // pointing into this copy
   };
 
   static unsigned channelMask(const ChunkData& c);
+  ChunkStatus reject(ChunkStatus status, const ChunkData& c, unsigned long* counter);
+  bool implausibleValue(const ChunkData& c, std::string* why) const;
+  void updateScales(const ChunkData& c);
+  bool isJump(const ChunkData& c) const;
+  void decideSuspect(const ChunkData& next);
+  void dropSuspect();
   void append(const ChunkData& c, size_t skip);
   void releaseHeld(bool force);
   void closeRun();
@@ -192,6 +279,12 @@ class StreamAssembler {
   std::map<std::uint64_t, Held> held_;
   std::deque<std::pair<std::uint64_t, std::uint64_t>> recent_gaps_;
   std::deque<StreamSegment> ready_;
+  std::deque<std::pair<std::uint64_t, std::uint64_t>> recent_rejected_;  // index ranges
+  // Running magnitude scales of dte, stiffness, torque: max |value| of the last accepted chunks.
+  std::array<std::deque<double>, 3> recent_max_;
+  bool have_suspect_ = false;
+  std::uint64_t suspect_first_ = 0;
+  Held suspect_;
 };
 
 }  // namespace gear_damping_id

@@ -1,6 +1,7 @@
 // Segment-by-segment identification for the live node (see live_identification.hpp).
 #include "gear_damping_id/live_identification.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "gear_damping_id/input_checks.hpp"
@@ -10,18 +11,29 @@
 namespace gear_damping_id {
 
 LiveIdentification::LiveIdentification(const IdentificationOptions& options,
-                                       const GearConstants& gear)
-    : options_(options), gear_(gear), method_(options, gear), single_(options, gear) {}
+                                       const GearConstants& gear, const LiveLimits& limits)
+    : options_(options),
+      gear_(gear),
+      limits_(limits),
+      method_(options, gear),
+      newer_(options, gear),
+      single_(options, gear) {
+  limits_.history_segments = std::max<size_t>(limits_.history_segments, 1);
+  limits_.shared_segments = std::max<size_t>(limits_.shared_segments, 1);
+}
 
 void LiveIdentification::reset() {
   method_.reset();
+  newer_.reset();
   single_.reset();
   segments_.clear();
   shared_ = IdentificationResult();
+  k_time_ = duration_ = 0.0;
+  added_ = 0;
 }
 
 LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, Eigen::Index begin,
-                                                          Eigen::Index end) {
+                                                          Eigen::Index end, bool refine_allowed) {
   SegmentOutput out;
   SegmentEstimate& est = out.estimate;
   IdentificationResult& seg = out.result;
@@ -41,9 +53,19 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     single_.reset();
     single_.addSegment(v, begin, end);
     seg = single_.finish();
+    // omega0 of the segments so far (as IntegralMethod::finish over all of them): the
+    // duration-weighted mean of each segment's mean normalised stiffness omega0_i^2.
+    if (seg.segments.size() == 1 && seg.segments[0].identifiable && std::isfinite(seg.omega0)) {
+      const double t = static_cast<double>(seg.segments[0].samples) * v.dt;
+      k_time_ += seg.omega0 * seg.omega0 * t;
+      duration_ += t;
+    }
     applyQualityFlags(options_, &seg);  // below-noise segments are not refined (as identify())
-    if (seg.segments.size() == 1 && seg.segments[0].identifiable && options_.refinable() &&
-        wantsRefinement(options_, seg)) {
+    const bool wants = seg.segments.size() == 1 && seg.segments[0].identifiable &&
+                       options_.refinable() && wantsRefinement(options_, seg);
+    if (wants && !refine_allowed) {
+      out.refinement_skipped = true;
+    } else if (wants) {
       IdentificationResult refined = seg;
       std::string why;
       if (refineOutputError(v, {{begin, end}}, gear_, options_, &refined, &why)) {
@@ -56,11 +78,17 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     }
     applyQualityFlags(options_, &seg);
     if (!seg.segments.empty()) est = seg.segments.front();
-    method_.addSegment(v, begin, end);  // for the cumulative omega0 (xi), as offline
   } else {
+    // Sliding problem: method_ holds the older segments, newer_ the latest ones (both get every
+    // segment); when newer_ reaches shared_segments it replaces method_ and starts over.
     method_.addSegment(v, begin, end);
+    newer_.addSegment(v, begin, end);
     shared_ = method_.finish();
     applyQualityFlags(options_, &shared_);
+    if (newer_.segmentCount() >= limits_.shared_segments) {
+      std::swap(method_, newer_);
+      newer_.reset();
+    }
     est = shared_.segments.back();
     seg = shared_;
     seg.segments = {est};
@@ -71,31 +99,42 @@ LiveIdentification::SegmentOutput LiveIdentification::add(const SignalView& v, E
     }
   }
   segments_.push_back(est);
+  while (segments_.size() > limits_.history_segments) segments_.pop_front();
+  ++added_;
   return out;
 }
 
-IdentificationResult LiveIdentification::cumulative() const {
+IdentificationResult LiveIdentification::cumulative(size_t last) const {
+  const size_t n = std::min(last, segments_.size());
+  const auto first = segments_.end() - static_cast<std::ptrdiff_t>(n);
   if (options_.model != DampingModel::Piecewise) {
     IdentificationResult r = shared_;
     r.formulation = options_.formulation;
     r.model = options_.model;
-    // Segments that never reached the method (missing channels) are listed too, in order.
-    if (r.segments.size() != segments_.size()) {
-      std::vector<SegmentEstimate> all;
-      size_t k = 0;
-      for (const auto& e : segments_) {
-        const bool in_method =
-            k < r.segments.size() && std::abs(r.segments[k].t_start - e.t_start) < 1e-12;
-        all.push_back(in_method ? r.segments[k++] : e);
-      }
-      r.segments = std::move(all);
+    r.windows.clear();
+    // The kept segments, with the latest shared solve where it covers them (segments that never
+    // reached the method, e.g. a missing channel, are listed as they were reported).
+    std::vector<SegmentEstimate> all;
+    all.reserve(n);
+    size_t k = 0;
+    for (auto it = first; it != segments_.end(); ++it) {
+      while (k < r.segments.size() && r.segments[k].t_start < it->t_start - 1e-12) ++k;
+      const bool in_method =
+          k < r.segments.size() && std::abs(r.segments[k].t_start - it->t_start) < 1e-12;
+      all.push_back(in_method ? r.segments[k++] : *it);
     }
+    r.segments = std::move(all);
     return r;
   }
-  IdentificationResult r = method_.segmentCount() > 0 ? method_.finish() : IdentificationResult();
+  IdentificationResult r;
   r.formulation = options_.formulation;
   r.model = options_.model;
-  r.segments = segments_;
+  r.equivalent_mass = gear_.equivalent_mass;
+  r.window_length = single_.windowLength();
+  r.omega0 = duration_ > 0.0 && k_time_ > 0.0
+                 ? std::sqrt(k_time_ / duration_)
+                 : std::sqrt(gear_.mean_stiffness / gear_.equivalent_mass);
+  r.segments.assign(first, segments_.end());
   if (std::isfinite(r.omega0) && r.omega0 > 0.0) {
     for (auto& e : r.segments) {
       if (e.identifiable) e.xi = e.C / (2.0 * r.omega0);

@@ -17,8 +17,20 @@ constexpr std::uint64_t kNoEnd = std::numeric_limits<std::uint64_t>::max();
 // years at 1 MHz). Segments must hold at least kMinSegmentSamples samples at the stream's rate.
 constexpr std::uint64_t kMaxIndex = std::uint64_t{1} << 52;
 constexpr double kMinSegmentSamples = 4.0;
+constexpr size_t kScaleChunks = 16;  // accepted chunks whose largest |value| form the scale
 
 enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
+
+// The five channels of a sample copy as pointers (null when absent), into any view type.
+template <class View, class Copy>
+void pointChannels(const Copy& c, View* v) {
+  auto ptr = [](const std::vector<double>& x) { return x.empty() ? nullptr : x.data(); };
+  v->dte = ptr(c.dte);
+  v->stiffness = ptr(c.stiffness);
+  v->torque = ptr(c.torque);
+  v->mesh_state = ptr(c.mesh_state);
+  v->mesh_phase = ptr(c.mesh_phase);
+}
 
 }  // namespace
 
@@ -38,6 +50,10 @@ const char* toString(ChunkStatus s) {
       return "rejected: sample rate changed";
     case ChunkStatus::kRejectedMalformed:
       return "rejected: malformed";
+    case ChunkStatus::kRejectedValue:
+      return "rejected: implausible value";
+    case ChunkStatus::kSuspect:
+      return "implausible index jump (held until the next chunk)";
   }
   return "?";
 }
@@ -52,6 +68,13 @@ std::string StreamOptions::validate() const {
     e << "reorder_chunks = " << reorder_chunks << ": must be in [0, 100000]";
   } else if (context < 0 || context > 1000) {
     e << "context = " << context << ": must be in [0, 1000] [samples]";
+  } else if (!(max_jump > 0.0)) {
+    e << "max_jump = " << max_jump << ": must be > 0 [s] (.inf: no jump rule)";
+  } else if (!(magnitude_factor == 0.0 ||
+               (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor)))) {
+    e << "magnitude_factor = " << magnitude_factor << ": must be 0 (off) or finite >= 10";
+  } else if (!(max_abs_dte > 0.0)) {
+    e << "max_abs_dte = " << max_abs_dte << ": must be > 0 [m]";
   }
   return e.str();
 }
@@ -71,16 +94,35 @@ SignalView StreamSegment::view() const {
   v.t0 = static_cast<double>(first_index) / sample_rate;
   v.dt = 1.0 / sample_rate;
   v.n = static_cast<Eigen::Index>(dte.size());
-  auto ptr = [](const std::vector<double>& c) { return c.empty() ? nullptr : c.data(); };
-  v.dte = ptr(dte);
-  v.stiffness = ptr(stiffness);
-  v.torque = ptr(torque);
-  v.mesh_state = ptr(mesh_state);
-  v.mesh_phase = ptr(mesh_phase);
+  pointChannels(*this, &v);
   return v;
 }
 
 StreamAssembler::StreamAssembler(const StreamOptions& options) : options_(options) {}
+
+StreamAssembler::Held StreamAssembler::Held::copyOf(const ChunkData& c) {
+  Held h;
+  h.sample_rate = c.sample_rate;
+  h.mask = channelMask(c);
+  auto copy = [&](const double* p, std::vector<double>* v) {
+    if (p) v->assign(p, p + c.n);
+  };
+  copy(c.dte, &h.dte);
+  copy(c.stiffness, &h.stiffness);
+  copy(c.torque, &h.torque);
+  copy(c.mesh_state, &h.mesh_state);
+  copy(c.mesh_phase, &h.mesh_phase);
+  return h;
+}
+
+ChunkData StreamAssembler::Held::chunk(std::uint64_t first_index) const {
+  ChunkData c;
+  c.first_index = first_index;
+  c.sample_rate = sample_rate;
+  c.n = dte.size();
+  pointChannels(*this, &c);
+  return c;
+}
 
 void StreamAssembler::reset() {
   counters_ = StreamCounters();
@@ -93,6 +135,10 @@ void StreamAssembler::reset() {
   held_.clear();
   recent_gaps_.clear();
   ready_.clear();
+  recent_rejected_.clear();
+  for (auto& r : recent_max_) r.clear();
+  have_suspect_ = false;
+  suspect_ = Held();
 }
 
 unsigned StreamAssembler::channelMask(const ChunkData& c) {
@@ -154,6 +200,113 @@ bool StreamAssembler::inRecentGap(std::uint64_t a, std::uint64_t b) const {
   return false;
 }
 
+ChunkStatus StreamAssembler::reject(ChunkStatus status, const ChunkData& c,
+                                    unsigned long* counter) {
+  ++*counter;
+  counters_.samples_rejected += c.n;
+  // Remembered so that a gap over these indices is attributed to the rejection.
+  recent_rejected_.emplace_back(c.first_index, c.first_index + c.n);
+  if (recent_rejected_.size() > kRecentGaps) recent_rejected_.pop_front();
+  return status;
+}
+
+bool StreamAssembler::implausibleValue(const ChunkData& c, std::string* why) const {
+  std::ostringstream m;
+  if (c.mesh_state) {
+    for (size_t i = 0; i < c.n; ++i) {
+      if (c.mesh_state[i] != 0.0 && c.mesh_state[i] != 1.0) {
+        m << "chunk at index " << c.first_index << ": mesh_state[" << i << "] = " << c.mesh_state[i]
+          << " (must be 0 or 1)";
+        *why = m.str();
+        return true;
+      }
+    }
+  }
+  const std::array<std::pair<const double*, const char*>, 3> channels = {
+      {{c.dte, "dte"}, {c.stiffness, "stiffness"}, {c.torque, "torque"}}};
+  for (size_t k = 0; k < channels.size(); ++k) {
+    const double* p = channels[k].first;
+    if (p == nullptr) continue;
+    double peak = 0.0;
+    for (size_t i = 0; i < c.n; ++i) peak = std::max(peak, std::abs(p[i]));
+    if (k == 0 && peak > options_.max_abs_dte) {
+      m << "chunk at index " << c.first_index << ": |dte| up to " << peak
+        << " m (above max_abs_dte " << options_.max_abs_dte << " m)";
+      *why = m.str();
+      return true;
+    }
+    if (options_.magnitude_factor > 0.0 && !recent_max_[k].empty()) {
+      std::vector<double> r(recent_max_[k].begin(), recent_max_[k].end());
+      std::nth_element(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2), r.end());
+      const double scale = r[r.size() / 2];
+      if (scale > 0.0 && peak > options_.magnitude_factor * scale) {
+        m << "chunk at index " << c.first_index << ": |" << channels[k].second << "| up to " << peak
+          << ", " << peak / scale << " times the stream's running scale " << scale
+          << " (magnitude_factor " << options_.magnitude_factor << ")";
+        *why = m.str();
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+void StreamAssembler::updateScales(const ChunkData& c) {
+  const double* channels[] = {c.dte, c.stiffness, c.torque};
+  for (size_t k = 0; k < 3; ++k) {
+    if (channels[k] == nullptr) continue;
+    double peak = 0.0;
+    for (size_t i = 0; i < c.n; ++i) peak = std::max(peak, std::abs(channels[k][i]));
+    recent_max_[k].push_back(peak);
+    if (recent_max_[k].size() > kScaleChunks) recent_max_[k].pop_front();
+  }
+}
+
+bool StreamAssembler::isJump(const ChunkData& c) const {
+  if (!seen_any_ || !std::isfinite(options_.max_jump)) return false;
+  const double by_time = options_.max_jump * rate_;
+  const double by_reorder =
+      static_cast<double>(options_.reorder_chunks + 1) * static_cast<double>(c.n);
+  const double j = std::max(by_time, by_reorder);
+  const double first = static_cast<double>(c.first_index);
+  const double next = static_cast<double>(next_index_);
+  return first - next > j || next - (first + static_cast<double>(c.n)) > j;
+}
+
+void StreamAssembler::dropSuspect() {
+  if (!have_suspect_) return;
+  have_suspect_ = false;
+  ChunkData c;
+  c.first_index = suspect_first_;
+  c.n = suspect_.dte.size();
+  reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_jump);
+  counters_.samples_suspect_dropped += c.n;
+  suspect_ = Held();
+}
+
+void StreamAssembler::decideSuspect(const ChunkData& c) {
+  if (!have_suspect_) return;
+  const std::uint64_t end = suspect_first_ + suspect_.dte.size();
+  if (c.first_index != end || channelMask(c) != suspect_.mask ||
+      std::abs(c.sample_rate - suspect_.sample_rate) > kRateTolerance * suspect_.sample_rate) {
+    dropSuspect();
+    return;
+  }
+  // Confirmed: the stream jumped. Finish the old record; a new one starts at the suspect.
+  have_suspect_ = false;
+  releaseHeld(true);
+  closeRun();
+  ++counters_.jump_records;
+  ++epoch_;
+  recent_gaps_.clear();
+  next_index_ = suspect_first_;
+  const Held h = std::move(suspect_);
+  suspect_ = Held();
+  const ChunkData s = h.chunk(suspect_first_);
+  updateScales(s);
+  append(s, 0);
+}
+
 ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   std::string scratch;
   std::string& why = detail ? *detail : scratch;
@@ -164,6 +317,10 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
       c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
     ++counters_.rejected_malformed;
+    if (c.dte != nullptr && c.n <= kMaxIndex) {
+      counters_.samples_received += c.n;
+      counters_.samples_rejected += c.n;
+    }
     std::ostringstream m;
     m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
       << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
@@ -172,6 +329,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     why = m.str();
     return ChunkStatus::kRejectedMalformed;
   }
+  counters_.samples_received += c.n;
   const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
                                                             {c.stiffness, "stiffness"},
                                                             {c.torque, "torque"},
@@ -181,15 +339,18 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     if (ch.first == nullptr) continue;
     for (size_t i = 0; i < c.n; ++i) {
       if (!std::isfinite(ch.first[i])) {
-        ++counters_.rejected_nonfinite;
         std::ostringstream m;
         m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
           << "] = " << ch.first[i];
         why = m.str();
-        return ChunkStatus::kRejectedNonFinite;
+        return reject(ChunkStatus::kRejectedNonFinite, c, &counters_.rejected_nonfinite);
       }
     }
   }
+  if (implausibleValue(c, &why)) {
+    return reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_value);
+  }
+  decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
   if (seen_any_ && c.first_index == 0 && next_index_ > 0) {
     // The publisher started over: finish the old record, start a new epoch.
     releaseHeld(true);
@@ -204,25 +365,39 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     recent_gaps_.clear();
   }
   if (seen_any_ && std::abs(c.sample_rate - rate_) > kRateTolerance * rate_) {
-    ++counters_.rejected_rate;
     std::ostringstream m;
     m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
       << " Hz, stream at " << rate_ << " Hz";
     why = m.str();
-    return ChunkStatus::kRejectedRate;
+    return reject(ChunkStatus::kRejectedRate, c, &counters_.rejected_rate);
+  }
+  if (isJump(c)) {
+    ++counters_.jumps;
+    std::ostringstream m;
+    m << "implausible index jump: chunk at index " << c.first_index << ", expected " << next_index_
+      << " (" << (static_cast<double>(c.first_index) - static_cast<double>(next_index_)) / rate_
+      << " s): held until the next chunk shows a new record (it continues this one) or a glitch";
+    why = m.str();
+    have_suspect_ = true;
+    suspect_first_ = c.first_index;
+    suspect_ = Held::copyOf(c);
+    return ChunkStatus::kSuspect;
   }
   if (!seen_any_) {
     seen_any_ = true;
     rate_ = c.sample_rate;
     next_index_ = c.first_index;
   }
+  updateScales(c);
   const std::uint64_t end = c.first_index + c.n;
   if (end <= next_index_) {
     if (inRecentGap(c.first_index, end)) {
       ++counters_.late;
+      counters_.samples_late += c.n;
       return ChunkStatus::kLate;
     }
     ++counters_.duplicates;
+    counters_.samples_duplicate += c.n;
     return ChunkStatus::kDuplicate;
   }
   if (c.first_index <= next_index_) {
@@ -235,19 +410,10 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   // Ahead of the expected index: hold it, waiting for the missing samples.
   if (held_.count(c.first_index) != 0) {
     ++counters_.duplicates;
+    counters_.samples_duplicate += c.n;
     return ChunkStatus::kDuplicate;
   }
-  Held& h = held_[c.first_index];
-  h.sample_rate = c.sample_rate;
-  h.mask = channelMask(c);
-  auto copy = [&](const double* p, std::vector<double>* v) {
-    if (p) v->assign(p, p + c.n);
-  };
-  copy(c.dte, &h.dte);
-  copy(c.stiffness, &h.stiffness);
-  copy(c.torque, &h.torque);
-  copy(c.mesh_state, &h.mesh_state);
-  copy(c.mesh_phase, &h.mesh_phase);
+  held_[c.first_index] = Held::copyOf(c);
   const unsigned long gaps_before = counters_.gaps;
   releaseHeld(false);
   if (counters_.gaps != gaps_before) {
@@ -267,6 +433,7 @@ void StreamAssembler::releaseHeld(bool force) {
     if (first + n <= next_index_) {  // became a duplicate meanwhile
       held_.erase(it);
       ++counters_.duplicates;
+      counters_.samples_duplicate += n;
       continue;
     }
     if (first > next_index_) {
@@ -274,24 +441,20 @@ void StreamAssembler::releaseHeld(bool force) {
       // The missing samples are not coming: a gap. Never integrate across it.
       ++counters_.gaps;
       counters_.samples_missing += first - next_index_;
+      std::uint64_t rejected = 0;  // the rejected indices in the gap
+      for (const auto& r : recent_rejected_) {
+        const std::uint64_t lo = std::max(r.first, next_index_), hi = std::min(r.second, first);
+        if (hi > lo) rejected += hi - lo;
+      }
+      counters_.samples_missing_rejected += std::min(rejected, first - next_index_);
       recent_gaps_.emplace_back(next_index_, first);
       if (recent_gaps_.size() > kRecentGaps) recent_gaps_.pop_front();
       closeRun();
       next_index_ = first;
     }
-    Held h = std::move(it->second);
+    const Held h = std::move(it->second);
     held_.erase(it);
-    ChunkData c;
-    c.first_index = first;
-    c.sample_rate = h.sample_rate;
-    c.n = n;
-    auto ptr = [](const std::vector<double>& v) { return v.empty() ? nullptr : v.data(); };
-    c.dte = ptr(h.dte);
-    c.stiffness = ptr(h.stiffness);
-    c.torque = ptr(h.torque);
-    c.mesh_state = ptr(h.mesh_state);
-    c.mesh_phase = ptr(h.mesh_phase);
-    append(c, static_cast<size_t>(next_index_ - first));
+    append(h.chunk(first), static_cast<size_t>(next_index_ - first));
   }
 }
 
@@ -319,6 +482,7 @@ void StreamAssembler::append(const ChunkData& c, size_t skip) {
   next_index_ += c.n - skip;
   ++counters_.chunks_accepted;
   counters_.samples_accepted += c.n - skip;
+  counters_.samples_duplicate += skip;
   emitReady(false);
 }
 
@@ -330,6 +494,7 @@ void StreamAssembler::closeRun() {
 }
 
 void StreamAssembler::endOfStream() {
+  dropSuspect();
   releaseHeld(true);
   closeRun();
 }
@@ -393,6 +558,38 @@ void StreamAssembler::emitReady(bool closing) {
     erase(&run_.mesh_phase);
     run_.first += drop;
   }
+}
+
+LossMonitor::Report LossMonitor::update(const StreamCounters& k, double now,
+                                        const std::string& last_jump) {
+  Report r;
+  auto raise = [&](Level level, const std::string& text) {
+    r.level = std::max(r.level, level);
+    r.message += (r.message.empty() ? "" : "; ") + text;
+  };
+  // Changes whenever a sample is lost, rejected or late (a change detector, not a count).
+  const unsigned long lost = k.samplesLost() + k.samples_late + k.samples_rejected;
+  const bool loss = lost != last_lost_;
+  last_lost_ = lost;
+  if (loss) have_loss_ = true, last_loss_ = now;
+  streak_ = loss ? streak_ + 1 : 0;
+  if (streak_ >= kSustained) {
+    raise(Level::kError, "sustained loss: samples lost in each of the last " +
+                             std::to_string(kSustained) + " reports");
+  } else if (have_loss_ && now - last_loss_ < kHold) {
+    raise(Level::kWarn, "samples lost (gap, rejected or late) in the last " +
+                            std::to_string(static_cast<int>(kHold)) + " s");
+  }
+  if (k.jumps > 0) {
+    raise(Level::kWarn, "implausible index jumps since start/reset: " + std::to_string(k.jumps) +
+                            (last_jump.empty() ? "" : " (last: " + last_jump + ")"));
+  }
+  const unsigned long events = k.duplicates + k.restarts + k.channel_changes;
+  if (events != last_events_) {
+    raise(Level::kWarn, "stream events (duplicates/restarts/channel changes) since last report");
+  }
+  last_events_ = events;
+  return r;
 }
 
 bool StreamAssembler::nextSegment(StreamSegment* out) {
