@@ -2,9 +2,12 @@
 //     [--noise-snr DB] [--seed N] [--chunk-size N] --output OUT.csv|OUT.bag
 //
 // Simulates the gear pair described by FILE.yaml (README "Simulator configuration") and writes
-// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag with gear_damping/SignalChunk messages on /gear/signal and the
-// gear parameters (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid
-// input (message on stderr naming the key/option), 2 output could not be written.
+// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag
+// with gear_damping/SignalChunk messages on /gear/signal and the gear parameters
+// (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid input (message on
+// stderr naming the key/option; also a bad command line and a run beyond the size limits of README
+// "Limits"), 2 output could not be written, 3 internal error (an exception, out of memory included;
+// message on stderr).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
@@ -13,6 +16,7 @@
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/bag_io.hpp"
@@ -26,7 +30,7 @@ bool endsWith(const std::string& s, const std::string& suffix) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"Simulate a spur gear pair (Yousfi et al. 2022) and write its DTE and signals."};
   std::string config_path, output;
   std::optional<double> duration, sample_rate, snr;
@@ -48,10 +52,15 @@ int main(int argc, char** argv) {
                "the difference of two runs, from the static deflection under the mean load and "
                "from the configured initial state (the start-up transient without the forced "
                "part; what the wavelet validation needs, docs/wavelet.md)");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 1;  // --help is 0; every CLI11 error is invalid input
+  }
 
   if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
-    std::cerr << "simulate: --output " << output << ": must end in .csv or .bag\n";
+    std::cerr << "simulate: --output " << gear_sim::quoteForMessage(output)
+              << ": must end in .csv or .bag\n";
     return 1;
   }
   gear_sim::SimConfig c;
@@ -88,19 +97,34 @@ int main(int argc, char** argv) {
     t.dte_velocity = b.dte_velocity - a.dte_velocity;
     t.torque.setZero();  // no forcing in the free response
   }
-  // Write next to the target and rename on success: no partial file that looks complete.
-  const std::string tmp = output + ".partial";
+  // Written next to the target and renamed on success: no partial file that looks complete
+  // (writeSignalBag does so itself).
   const gear_sim::GearModel model = c.gearModel();
-  const bool ok = endsWith(output, ".csv")
-                      ? gear_sim::writeSignalCsv(tmp, t, &error)
-                      : gear_sim_ros::writeSignalBag(tmp, t, c.simulation.sample_rate, &model,
-                                                     chunk_size, &error);
-  if (!ok || std::rename(tmp.c_str(), output.c_str()) != 0) {
-    std::remove(tmp.c_str());
+  bool ok;
+  if (endsWith(output, ".csv")) {
+    const std::string tmp = output + ".partial";
+    ok = gear_sim::writeSignalCsv(tmp, t, &error) && gear_sim::commitFile(tmp, output, &error);
+    if (!ok) std::remove(tmp.c_str());
+  } else {
+    ok = gear_sim_ros::writeSignalBag(output, t, c.simulation.sample_rate, &model, chunk_size,
+                                      &error);
+  }
+  if (!ok) {
     std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";
     return 2;
   }
   std::cerr << "simulate: " << t.size() << " samples (" << c.simulation.duration << " s at "
             << c.simulation.sample_rate << " Hz) -> " << output << "\n";
   return 0;
+}
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::bad_alloc&) {
+    std::cerr << "simulate: out of memory (README \"Limits\" gives the sizes a run may take)\n";
+  } catch (const std::exception& e) {
+    std::cerr << "simulate: internal error: " << gear_sim::quoteForMessage(e.what()) << "\n";
+  }
+  return 3;
 }

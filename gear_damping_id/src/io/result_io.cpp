@@ -1,7 +1,5 @@
 #include "gear_damping_id/result_io.hpp"
 
-#include "gear_sim/signal_csv.hpp"
-
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -9,6 +7,8 @@
 #include <iomanip>
 #include <limits>
 #include <sstream>
+
+#include "gear_sim/signal_csv.hpp"
 
 namespace gear_damping_id {
 namespace {
@@ -53,9 +53,9 @@ std::string AnalysisRun::name() const {
 }
 
 json segmentJson(const SegmentEstimate& s, Formulation f) {
-  json j = {{"t_start", num(s.t_start)}, {"t_end", num(s.t_end)},    {"C", num(s.C)},
-            {"C_std", num(s.C_std)},     {"c", num(s.c)},            {"xi", num(s.xi)},
-            {"identifiable", s.identifiable}, {"samples", s.samples}, {"windows", s.windows},
+  json j = {{"t_start", num(s.t_start)},      {"t_end", num(s.t_end)}, {"C", num(s.C)},
+            {"C_std", num(s.C_std)},          {"c", num(s.c)},         {"xi", num(s.xi)},
+            {"identifiable", s.identifiable}, {"samples", s.samples},  {"windows", s.windows},
             {"condition", num(s.condition)},  {"refined", s.refined}};
   if (!s.identifiable) j["reason"] = s.reason;
   if (hasStiffnessLevels(f)) {
@@ -86,8 +86,10 @@ json runJson(const AnalysisRun& run) {
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
   if (r.load_law) {
     const LoadLawEstimate& l = *r.load_law;
-    j["load_law"] = {{"c0", num(l.c0)},         {"c0_std", num(l.c0_std)},
-                     {"c1", num(l.c1)},         {"c1_std", num(l.c1_std)},
+    j["load_law"] = {{"c0", num(l.c0)},
+                     {"c0_std", num(l.c0_std)},
+                     {"c1", num(l.c1)},
+                     {"c1_std", num(l.c1_std)},
                      {"identifiable", l.identifiable}};
     if (!l.identifiable) j["load_law"]["reason"] = l.reason;
   }
@@ -126,10 +128,9 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
   for (const auto& run : runs) {
     const IdentificationResult& r = run.result;
     const bool levels = hasStiffnessLevels(r.formulation);
-    os << "== " << toString(r.formulation) << " formulation, " << toString(r.model)
-       << " model (" << r.estimator << ", window " << fmt(r.window_length * 1e3, 4)
-       << " ms, omega0 " << fmt(r.omega0, 6) << " rad/s, Me " << fmt(r.equivalent_mass, 6)
-       << " kg)\n";
+    os << "== " << toString(r.formulation) << " formulation, " << toString(r.model) << " model ("
+       << r.estimator << ", window " << fmt(r.window_length * 1e3, 4) << " ms, omega0 "
+       << fmt(r.omega0, 6) << " rad/s, Me " << fmt(r.equivalent_mass, 6) << " kg)\n";
     if (r.model == DampingModel::Piecewise) {
       os << "  seg   t_start[ms]  t_end[ms]      C[1/s]   C_std[1/s]     c[N*s/m]       xi[-]";
       if (levels) os << "   k_min[N/m]   k_max[N/m]";
@@ -144,14 +145,15 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
         }
         os << "  " << std::setw(10) << fmt(s.C, 6) << "  " << std::setw(11) << fmt(s.C_std, 3)
            << "  " << std::setw(11) << fmt(s.c, 6) << "  " << std::setw(10) << fmt(s.xi, 5);
-        if (levels) os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
-                       << fmt(s.k_max, 6);
+        if (levels)
+          os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
+             << fmt(s.k_max, 6);
         os << "\n";
       }
     }
     if (const SegmentEstimate* c = sharedEstimate(r)) {
-      os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3) << " 1/s, c = "
-         << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
+      os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3)
+         << " 1/s, c = " << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
       if (!c->identifiable) os << " (not identifiable: " << c->reason << ")";
       os << "\n";
     }
@@ -201,8 +203,8 @@ void shiftWaveletTimes(WaveletResult* w, double t0) {
 }
 
 void printWaveletTable(std::ostream& os, const WaveletResult& w) {
-  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): "
-     << w.modes.size() << " mode(s)\n"
+  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): " << w.modes.size()
+     << " mode(s)\n"
      << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]\n";
   int i = 0;
   for (const auto& m : w.modes) {
@@ -216,7 +218,8 @@ void printWaveletTable(std::ostream& os, const WaveletResult& w) {
 }
 
 bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
-                     double sample_rate, double t0, long max_points, std::string* error) {
+                     double sample_rate, double t0, long max_points, std::string* error,
+                     OutputStage* stage) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -229,12 +232,12 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
   };
   std::ostringstream modes, spectrum, scalogram;
   if (!check(writeModesCsv(w, modes)) || !check(writeSpectrumCsv(w, spectrum))) return false;
-  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error) ||
-      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error))
+  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error, stage) ||
+      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error, stage))
     return false;
   if (w.modulus.size() > 0) {
     if (!check(writeScalogramCsv(w, scalogram)) ||
-        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error))
+        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error, stage))
       return false;
   }
   // Envelopes of the fitted modes, each at the omega0 of its fit.
@@ -267,10 +270,32 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
             << csvNum(row[static_cast<size_t>(j)]) << "\n";
     }
   }
-  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error);
+  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error, stage);
 }
 
-bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error) {
+OutputStage::~OutputStage() {
+  for (const auto& f : files_) std::remove(f.first.c_str());
+}
+
+void OutputStage::add(const std::string& tmp, const std::string& path) {
+  files_.emplace_back(tmp, path);
+}
+
+bool OutputStage::commit(std::string* error) {
+  bool ok = true;
+  for (const auto& [tmp, path] : files_) {
+    if (!ok) {
+      std::remove(tmp.c_str());
+    } else if (!gear_sim::commitFile(tmp, path, error)) {
+      ok = false;
+    }
+  }
+  files_.clear();
+  return ok;
+}
+
+bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
+                         OutputStage* stage) {
   const std::string tmp = path + ".partial";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
@@ -280,10 +305,15 @@ bool writeFileAtomically(const std::string& path, const std::string& text, std::
       return false;
     }
   }
+  if (stage) {
+    stage->add(tmp, path);
+    return true;
+  }
   return gear_sim::commitFile(tmp, path, error);
 }
 
-bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error) {
+bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
+                 OutputStage* stage) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -298,10 +328,10 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
     const std::string head = toString(r.formulation) + "," + toString(r.model) + ",";
     int i = 0;
     for (const auto& s : r.segments) {
-      seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << ","
-          << csvNum(s.C) << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi)
-          << "," << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0)
-          << "," << (s.identifiable ? std::string() : csvText(s.reason)) << "\n";
+      seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << "," << csvNum(s.C)
+          << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi) << ","
+          << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0) << ","
+          << (s.identifiable ? std::string() : csvText(s.reason)) << "\n";
     }
     const SegmentEstimate* c = sharedEstimate(r);
     const LoadLawEstimate* l = r.load_law ? &*r.load_law : nullptr;
@@ -319,12 +349,12 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
         resp << csvNum(t) << "," << csvNum(run.response.observed[k]) << ","
              << csvNum(run.response.modeled[k]) << "\n";
       }
-      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error))
+      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error, stage))
         return false;
     }
   }
-  return writeFileAtomically(dir + "/segments.csv", seg.str(), error) &&
-         writeFileAtomically(dir + "/summary.csv", sum.str(), error);
+  return writeFileAtomically(dir + "/segments.csv", seg.str(), error, stage) &&
+         writeFileAtomically(dir + "/summary.csv", sum.str(), error, stage);
 }
 
 }  // namespace gear_damping_id
