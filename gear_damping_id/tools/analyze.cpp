@@ -542,7 +542,17 @@ int run(int argc, char** argv) {
     }
   }
   const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
-  if (analysed.empty()) return fail(kExitInput, input + ": no samples in the analysed time range");
+  if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
+    using gear_sim::formatNumber;
+    const auto& o = runs_options.front();
+    return fail(kExitInput,
+                input + ": no samples in the analysed time range (record " +
+                    formatNumber(whole.t0) + " to " +
+                    formatNumber(whole.t0 + static_cast<double>(whole.n - 1) * whole.dt) +
+                    " s, sample step " + formatNumber(whole.dt) + " s, --segment " +
+                    formatNumber(o.segment_length) +
+                    " s = " + formatNumber(o.segment_length * sample_rate) + " samples)");
+  }
   const double duration =
       static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
   if (identification) {

@@ -44,7 +44,7 @@ int run(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
   app.add_option("--chunk-size", chunk_size, "CSV -> bag: samples per chunk (default 1000)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1L, gear_sim_ros::kMaxChunkSize));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -45,7 +45,7 @@ int run(int argc, char** argv) {
   app.add_option("--noise-snr", snr, "override simulation.noise_snr_db [dB] (inf = no noise)");
   app.add_option("--seed", seed, "override simulation.seed");
   app.add_option("--chunk-size", chunk_size, "samples per SignalChunk in a bag (default 1000)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1L, gear_sim_ros::kMaxChunkSize));
   bool free_response = false;
   app.add_flag("--free-response", free_response,
                "write the free (homogeneous) response y'' + C y' + K y = 0 of the case instead: "

@@ -181,9 +181,9 @@ std::string SimulationOptions::validate() const {
     return bad("simulation.sample_rate", sample_rate, "must be finite and > 0 [Hz]");
   if (!(duration * sample_rate <= kMaxSimulationSamples))
     return bad("simulation.duration", duration,
-               "x simulation.sample_rate " + formatNumber(sample_rate) +
-                   " Hz = " + formatNumber(duration * sample_rate) +
-                   " samples, more than the limit of " + formatNumber(kMaxSimulationSamples));
+               "gives " + formatNumber(duration * sample_rate) +
+                   " samples at simulation.sample_rate = " + formatNumber(sample_rate) +
+                   " Hz, more than the limit of " + formatNumber(kMaxSimulationSamples));
   if (std::llround(duration * sample_rate) < 2)
     return bad("simulation.duration", duration,
                "must span at least two samples at simulation.sample_rate");

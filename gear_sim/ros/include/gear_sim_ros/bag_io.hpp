@@ -15,6 +15,9 @@
 
 namespace gear_sim_ros {
 
+/// Largest --chunk-size of the tools writing bags (samples per SignalChunk message).
+constexpr long kMaxChunkSize = 10000000;
+
 /// Largest sample index a bag may hold (2^53: sample times index / rate stay exact and no
 /// index arithmetic can wrap). A chunk beyond it is refused naming it.
 constexpr std::uint64_t kMaxSampleIndex = std::uint64_t{1} << 53;
