@@ -43,6 +43,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace gd = gear_damping_id;
@@ -710,12 +711,5 @@ int run(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::bad_alloc&) {
-    return fail(kExitInternal, "out of memory (README \"Limits\" gives the sizes accepted)");
-  } catch (const std::exception& e) {
-    return fail(kExitInternal,
-                std::string("internal error: ") + gear_sim::quoteForMessage(e.what()));
-  }
+  return gear_sim::runToolMain("analyze", kExitInternal, [&] { return run(argc, argv); });
 }

@@ -19,6 +19,7 @@
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace {
@@ -119,12 +120,5 @@ int run(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::bad_alloc&) {
-    std::cerr << "simulate: out of memory (README \"Limits\" gives the sizes a run may take)\n";
-  } catch (const std::exception& e) {
-    std::cerr << "simulate: internal error: " << gear_sim::quoteForMessage(e.what()) << "\n";
-  }
-  return 3;
+  return gear_sim::runToolMain("simulate", 3, [&] { return run(argc, argv); });
 }

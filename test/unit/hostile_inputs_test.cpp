@@ -19,6 +19,7 @@
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "tool_runner.hpp"
@@ -356,6 +357,12 @@ TEST_F(Hostile, OutputsAreCommittedTogetherOrNotAtAll) {
   }  // destroyed without commit: an error path
   EXPECT_FALSE(fs::exists(path("b.txt")));
   EXPECT_FALSE(fs::exists(path("b.txt.partial")));
+}
+
+TEST(ToolMain, EscapingExceptionsBecomeTheInternalErrorCode) {
+  EXPECT_EQ(gear_sim::runToolMain("t", 5, [] { return 2; }), 2);
+  EXPECT_EQ(gear_sim::runToolMain("t", 5, []() -> int { throw std::bad_alloc(); }), 5);
+  EXPECT_EQ(gear_sim::runToolMain("t", 4, []() -> int { throw std::runtime_error("\x01"); }), 4);
 }
 
 TEST(MessageText, QuotingAndNumbers) {
