@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A longer libFuzzer campaign on one target of fuzz/ (csv, yaml, bag, stream), single process,
-# in the sanitizer workspace of scripts/sanitize.sh (built first if needed). New inputs
+# in the sanitizer workspace of scripts/sanitize.sh (configured and built first if needed). New inputs
 # accumulate in <asan workspace>/fuzz_corpus/TARGET across campaigns; a crash is written there
 # as crash-* and the exit status is non-zero. Prints the number of executions.
 #
@@ -19,7 +19,13 @@ repo=$(dirname "$here")
 ws_default=${GEAR_DAMPING_WS:-$(dirname "$repo")/gear_damping_ws}
 asan_ws=${GEAR_DAMPING_ASAN_WS:-${ws_default}_asan}
 bin="$asan_ws/devel/lib/gear_damping/fuzz_$target"
-bash "$here/sanitize.sh" --build-only || exit 1
+# The sanitizer workspace configured by scripts/sanitize.sh: rebuild just this target there.
+if [ -f "$asan_ws/build/CMakeCache.txt" ]; then
+  (cd "$asan_ws" && PATH=/usr/bin:/bin:$PATH catkin_make -j"${GEAR_DAMPING_JOBS:-$(nproc)}" \
+    "fuzz_$target" >/dev/null) || exit 1
+else
+  bash "$here/sanitize.sh" --build-only || exit 1
+fi
 corpus="$asan_ws/fuzz_corpus/$target"
 mkdir -p "$corpus"
 export ASAN_OPTIONS=${ASAN_OPTIONS:-allocator_may_return_null=1:detect_leaks=1}

@@ -201,6 +201,9 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
         SignalTable t;
         std::string e;
         if (!readTorqueCsv(path, &t, &e)) {
+          // The path comes from the file: quoted in the message (the reader's starts with it).
+          if (e.compare(0, path.size(), path) == 0)
+            e = quoteForMessage(path) + e.substr(path.size());
           l.fail("load.file", e);
         } else {
           c.load.profile = LoadProfile::Table;
