@@ -20,7 +20,9 @@ ws_default=${GEAR_DAMPING_WS:-$(dirname "$repo")/gear_damping_ws}
 asan_ws=${GEAR_DAMPING_ASAN_WS:-${ws_default}_asan}
 bin="$asan_ws/devel/lib/gear_damping/fuzz_$target"
 # The sanitizer workspace configured by scripts/sanitize.sh: rebuild just this target there.
-if [ -f "$asan_ws/build/CMakeCache.txt" ]; then
+if [ -n "${GEAR_FUZZ_NO_BUILD:-}" ] && [ -x "$bin" ]; then
+  :  # GEAR_FUZZ_NO_BUILD=1: run the binary as built (e.g. while the workspace builds tests)
+elif [ -f "$asan_ws/build/CMakeCache.txt" ]; then
   (cd "$asan_ws" && PATH=/usr/bin:/bin:$PATH catkin_make -j"${GEAR_DAMPING_JOBS:-$(nproc)}" \
     "fuzz_$target" >/dev/null) || exit 1
 else
