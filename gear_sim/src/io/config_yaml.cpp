@@ -1,5 +1,7 @@
 #include "gear_sim/config_yaml.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -16,6 +18,16 @@ std::string quoted(const YAML::Node& n) {
   std::ostringstream os;
   os << n;
   return quoteForMessage(os.str());
+}
+
+// A key as a message names it: as is when it is a plain name (letters, digits, '_', at most
+// kMaxQuotedChars), else quoted escaped and truncated.
+std::string keyForMessage(const std::string& key) {
+  const bool plain = !key.empty() && key.size() <= kMaxQuotedChars &&
+                     std::all_of(key.begin(), key.end(), [](char c) {
+                       return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+                     });
+  return plain ? key : quoteForMessage(key);
 }
 
 // A mapping key for a message and a lookup: its name when it is a scalar; a sequence or a
@@ -52,7 +64,7 @@ class Section {
       if (!k.count(key)) {
         std::string list;
         for (const char* s : known) list += std::string(list.empty() ? "" : ", ") + s;
-        fail(name_ + "." + quoteForMessage(key), "unknown key (known: " + list + ")");
+        fail(name_ + "." + keyForMessage(key), "unknown key (known: " + list + ")");
         return;
       }
     }
@@ -171,7 +183,7 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
       std::string key;
       if (!keyName(kv.first, "", &key, &err)) break;
       if (!sections.count(key)) {
-        err = quoteForMessage(key) +
+        err = keyForMessage(key) +
               ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation)";
         break;
       }
