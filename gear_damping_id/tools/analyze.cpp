@@ -20,7 +20,9 @@
 // it is a terminal and the job takes more than a second (--quiet: never).
 // Exit codes (README "analyze"): 0 success, 1 invalid command line or option value, 2 invalid
 // input (file, columns, numbers, time axis, chunks, gear parameters, sample rate, length),
-// 3 an output could not be written, 4 nothing identifiable in the record. Messages on stderr.
+// 3 an output could not be written, 4 nothing identifiable in the record, 5 internal error (an
+// exception, out of memory included). Messages on stderr. All outputs (--output, --csv-out,
+// --bag-out) are staged and renamed together once every one has been written.
 #include <gear_damping/DampingArray.h>
 #include <gear_damping/ModeledResponse.h>
 #include <gear_damping/WaveletModes.h>
@@ -47,7 +49,9 @@
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/progress.hpp"
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace gd = gear_damping_id;
@@ -55,7 +59,9 @@ using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
 
 namespace {
 
-constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitNothing = 4;
+constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitNothing = 4, kExitInternal = 5;
+// Largest --scales (README "Limits"): each scale is one inverse FFT of the analysed samples.
+constexpr int kMaxScales = 2000;
 
 int fail(int code, const std::string& message) {
   std::cerr << "analyze: " << message << "\n";
@@ -118,7 +124,8 @@ class ResultBag {
     msg.header.stamp = stamp;
     bag_->write(topic, stamp, msg);
   }
-  bool close(std::string* error) {
+  // Closes the bag and stages it (renamed by stage->commit() with the other outputs).
+  bool close(std::string* error, gd::OutputStage* stage) {
     if (!bag_) return true;
     try {
       bag_->close();
@@ -127,10 +134,7 @@ class ResultBag {
       return false;
     }
     bag_.reset();
-    if (std::rename((path_ + ".partial").c_str(), path_.c_str()) != 0) {
-      *error = path_ + ": cannot write";
-      return false;
-    }
+    stage->add(path_ + ".partial", path_);
     return true;
   }
   ~ResultBag() {
@@ -179,13 +183,14 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   if (legacy && info.torque) {
     double sum = 0.0;
     long long cnt = 0;
-    if (!gear_sim_ros::streamSignalBag(info, ranges,
-                                       [&](const gear_sim::SignalTable& t, size_t) {
-                                         sum += t.torque.sum();
-                                         cnt += t.torque.size();
-                                         return true;
-                                       },
-                                       error))
+    if (!gear_sim_ros::streamSignalBag(
+            info, ranges,
+            [&](const gear_sim::SignalTable& t, size_t) {
+              sum += t.torque.sum();
+              cnt += t.torque.size();
+              return true;
+            },
+            error))
       return false;
     fbar = gear.force_factor * sum / static_cast<double>(cnt);
   }
@@ -205,11 +210,12 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   }
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
   const bool ok = gear_sim_ros::streamSignalBag(
-      info, ranges, [&](const gear_sim::SignalTable& block, size_t r) {
+      info, ranges,
+      [&](const gear_sim::SignalTable& block, size_t r) {
         const gd::SignalView view = gd::SignalView::of(block);
         if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
-          const size_t take = std::min(wavelet_max - wavelet_dte->size(),
-                                       static_cast<size_t>(block.dte.size()));
+          const size_t take =
+              std::min(wavelet_max - wavelet_dte->size(), static_cast<size_t>(block.dte.size()));
           wavelet_dte->insert(wavelet_dte->end(), block.dte.data(), block.dte.data() + take);
         }
         for (size_t k = 0; k < runs->size(); ++k) {
@@ -236,8 +242,10 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
             *error = e;
             return false;
           }
-          if (run.result.segments.empty()) run.result = seg;  // formulation, Me, omega0, ...
-          else run.result.segments.push_back(seg.segments.front());
+          if (run.result.segments.empty())
+            run.result = seg;  // formulation, Me, omega0, ...
+          else
+            run.result.segments.push_back(seg.segments.front());
           for (const auto& w : seg.warnings) run.result.warnings.push_back(w);
           gd::ModeledResponse resp;
           std::string why;
@@ -245,9 +253,9 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
               gd::modeledResponse(view, gear, seg, &resp, &why)) {
             st.fit.add(resp);
             bag->write(topicOf(run, k == 0, "modeled_response"), block.time[0],
-                       gear_damping_ros::toMsg(resp, info.sample_rate,
-                                               info.first_index +
-                                                   static_cast<std::uint64_t>(ranges[r].first)));
+                       gear_damping_ros::toMsg(
+                           resp, info.sample_rate,
+                           info.first_index + static_cast<std::uint64_t>(ranges[r].first)));
           }
         }
         progress->set(static_cast<double>(ranges[r].second - ranges.front().first),
@@ -316,7 +324,7 @@ bool parseRegion(const std::string& text, std::pair<double, double>* out) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{
       "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
       "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
@@ -383,9 +391,12 @@ int main(int argc, char** argv) {
                  "write the results as gear_damping messages (DampingArray, ModeledResponse, "
                  "WaveletModes) to this bag");
   app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (DESIGN §5)");
-  app.add_option("--f-min", wopt.f_min, "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
+  app.add_option("--f-min", wopt.f_min,
+                 "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
   app.add_option("--f-max", wopt.f_max, "wavelet: highest frequency [Hz] (default 0.4 fs)");
-  app.add_option("--scales", wopt.n_scales, "wavelet: number of log-spaced frequencies (default 200)");
+  app.add_option("--scales", wopt.n_scales,
+                 "wavelet: number of log-spaced frequencies (default 200)")
+      ->check(CLI::Range(3, kMaxScales));
   app.add_option("--omega0", wopt.omega0,
                  "wavelet: Morlet centre frequency of the scalogram (default 6; 3..100)");
   app.add_option("--fit-omega0", wopt.fit_omega0,
@@ -493,19 +504,19 @@ int main(int argc, char** argv) {
                                    : (table.stiffness.size() > 0 || table.torque.size() > 0 ||
                                       table.mesh_state.size() > 0);
     if (id_columns && !wavelet && wavelet_input.empty())
-      return fail(kExitUsage,
-                  "--params GEAR.yaml is required for the identification" +
-                      std::string(is_bag ? (bag_info.params_error.empty()
-                                                ? " (the bag has no GearParams message)"
-                                                : " (" + bag_info.params_error + ")")
-                                         : "") +
-                      "; --wavelet runs the wavelet validation alone");
+      return fail(kExitUsage, "--params GEAR.yaml is required for the identification" +
+                                  std::string(is_bag ? (bag_info.params_error.empty()
+                                                            ? " (the bag has no GearParams message)"
+                                                            : " (" + bag_info.params_error + ")")
+                                                     : "") +
+                                  "; --wavelet runs the wavelet validation alone");
     identification = false;
     wavelet = true;
     warn("no gear parameters (--params" +
-         std::string(is_bag ? (bag_info.params_error.empty() ? ", or a GearParams message in the bag"
-                                                             : "; " + bag_info.params_error)
-                            : "") +
+         std::string(is_bag
+                         ? (bag_info.params_error.empty() ? ", or a GearParams message in the bag"
+                                                          : "; " + bag_info.params_error)
+                         : "") +
          "): running the wavelet validation only");
   }
   const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
@@ -515,9 +526,9 @@ int main(int argc, char** argv) {
   }
 
   // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
-  const double sample_rate =
-      streaming ? bag_info.sample_rate
-                : static_cast<double>(table.size() - 1) / (table.time[table.size() - 1] - table.time[0]);
+  const double sample_rate = streaming ? bag_info.sample_rate
+                                       : static_cast<double>(table.size() - 1) /
+                                             (table.time[table.size() - 1] - table.time[0]);
   gd::SignalView whole;
   whole.dt = 1.0 / sample_rate;
   whole.t0 = streaming ? static_cast<double>(bag_info.first_index) * whole.dt : table.time[0];
@@ -543,7 +554,17 @@ int main(int argc, char** argv) {
     }
   }
   const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
-  if (analysed.empty()) return fail(kExitInput, input + ": no samples in the analysed time range");
+  if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
+    using gear_sim::formatNumber;
+    const auto& o = runs_options.front();
+    return fail(kExitInput,
+                input + ": no samples in the analysed time range (record " +
+                    formatNumber(whole.t0) + " to " +
+                    formatNumber(whole.t0 + static_cast<double>(whole.n - 1) * whole.dt) +
+                    " s, sample step " + formatNumber(whole.dt) + " s, --segment " +
+                    formatNumber(o.segment_length) +
+                    " s = " + formatNumber(o.segment_length * sample_rate) + " samples)");
+  }
   const double duration =
       static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
   if (identification) {
@@ -563,8 +584,8 @@ int main(int argc, char** argv) {
   std::vector<gd::AnalysisRun> runs;
   std::vector<double> wavelet_dte;
   const Eigen::Index first = analysed.front().first;
-  const size_t wavelet_n_record = static_cast<size_t>(
-      std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
+  const size_t wavelet_n_record =
+      static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
   const bool wavelet_on_record = wavelet && wavelet_input.empty();
   if (identification) {
     for (const auto& o : runs_options) {
@@ -601,9 +622,10 @@ int main(int argc, char** argv) {
         run.response = gd::ModeledResponse{};
       } else {
         const double tr = table.time[run.response.begin];
-        bag.write(topicOf(run, k == 0, "modeled_response"), tr,
-                  gear_damping_ros::toMsg(run.response, sample_rate,
-                                          static_cast<std::uint64_t>(std::llround(tr * sample_rate))));
+        bag.write(
+            topicOf(run, k == 0, "modeled_response"), tr,
+            gear_damping_ros::toMsg(run.response, sample_rate,
+                                    static_cast<std::uint64_t>(std::llround(tr * sample_rate))));
       }
     }
     if (wavelet_on_record)
@@ -644,9 +666,9 @@ int main(int argc, char** argv) {
     } else if (!gear_sim::readSignalCsv(wavelet_input, &w, &error, {"time", "dte"}, true)) {
       return fail(kExitInput, "--wavelet-input: " + error);
     }
-    if (const std::string e = gd::checkSignalTable(w, gd::Formulation::Paper,
-                                                   gd::DampingModel::Piecewise, 1e-6,
-                                                   endsWith(wavelet_input, ".bag") ? -1 : 2);
+    if (const std::string e =
+            gd::checkSignalTable(w, gd::Formulation::Paper, gd::DampingModel::Piecewise, 1e-6,
+                                 endsWith(wavelet_input, ".bag") ? -1 : 2);
         !e.empty())
       return fail(kExitInput, wavelet_input + ": " + e);
     wavelet_n = static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, w.size()));
@@ -710,17 +732,23 @@ int main(int argc, char** argv) {
       doc["wavelet"]["input"] = wavelet_input.empty() ? input : wavelet_input;
     }
   }
-  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error))
+  gd::OutputStage stage;  // every output renamed only once all are written
+  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error, &stage))
     return fail(kExitOutput, error);
   if (!csv_out.empty()) {
-    if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error)) return fail(kExitOutput, error);
+    if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error, &stage))
+      return fail(kExitOutput, error);
     if (wavelet && wres.ok() &&
         !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
-                             wavelet_rate, t_first, 4000, &error))
+                             wavelet_rate, t_first, 4000, &error, &stage))
       return fail(kExitOutput, error);
   }
-  if (!bag.close(&error)) return fail(kExitOutput, error);
+  if (!bag.close(&error, &stage) || !stage.commit(&error)) return fail(kExitOutput, error);
   if (identification && !identifiable)
     return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return gear_sim::runToolMain("analyze", kExitInternal, [&] { return run(argc, argv); });
 }

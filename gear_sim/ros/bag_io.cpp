@@ -6,15 +6,18 @@
 #include <rosbag/view.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
 
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
 namespace gear_sim_ros {
+using gear_sim::formatNumber;
 namespace {
 
 constexpr const char* kChunkType = "gear_damping/SignalChunk";
@@ -22,7 +25,7 @@ constexpr const char* kParamsType = "gear_damping/GearParams";
 constexpr int kMaxGapWarnings = 5;
 
 std::string openError(const std::string& path, const std::exception& e) {
-  return path + ": cannot read as a bag (" + e.what() +
+  return path + ": cannot read as a bag (" + gear_sim::quoteForMessage(e.what()) +
          "); if it is truncated, `rosbag reindex` may recover it";
 }
 
@@ -44,6 +47,63 @@ std::string channelLengthError(const gear_damping::SignalChunk& c) {
   if (bad(c.mesh_phase.size())) return "mesh_phase";
   if (bad(c.damping.size())) return "damping";
   return {};
+}
+
+// Counts the outlier chunks and turns the plausibility counts into warnings.
+void addPlausibilityWarnings(std::vector<double> chunk_max, BagSignalInfo* info) {
+  if (!chunk_max.empty()) {
+    std::vector<double> sorted = chunk_max;
+    std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2),
+                     sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    if (median > 0.0)
+      for (double m : chunk_max)
+        if (m > kOutlierChunkFactor * median) ++info->outlier_chunks;
+  }
+  auto warn = [&](std::int64_t n, const std::string& what) {
+    if (n > 0) info->warnings.push_back(std::to_string(n) + " " + what);
+  };
+  warn(info->non_finite_values, "NaN/Inf values in the chunks (those samples are not usable)");
+  warn(info->out_of_range_values,
+       "values outside their channel's plausible range (|dte| <= 1 m, |dte_velocity| <= 1e4 "
+       "m/s, stiffness in [0, 1e13] N/m, |torque| <= 1e9 N*m, |damping| <= 1e9 N*s/m): read "
+       "as NaN");
+  warn(info->bad_mesh_states, "mesh_state values other than 0 or 1: read as NaN");
+  warn(info->outlier_chunks, "chunks whose largest |dte| exceeds " +
+                                 gear_sim::formatNumber(kOutlierChunkFactor) +
+                                 "x the record's median chunk maximum: corrupt payloads?");
+}
+
+// The channels of a chunk that plausibility is checked on, in kPlausibleRanges' order.
+std::array<const std::vector<double>*, 6> rangedChannels(const gear_damping::SignalChunk& c) {
+  return {&c.dte, &c.dte_velocity, &c.stiffness, &c.torque, &c.mesh_phase, &c.damping};
+}
+
+bool inRange(const PlausibleRange& r, double x) { return x >= r.low && x <= r.high; }
+
+bool plausibleMeshState(double x) { return x == 0.0 || x == 1.0; }
+
+// Counts the implausible values of a chunk into `info`; returns the chunk's max |dte|
+// (finite values only, 0 when none).
+double countImplausible(const gear_damping::SignalChunk& c, BagSignalInfo* info) {
+  const auto channels = rangedChannels(c);
+  for (size_t k = 0; k < channels.size(); ++k)
+    for (double x : *channels[k]) {
+      if (!std::isfinite(x))
+        ++info->non_finite_values;
+      else if (!inRange(kPlausibleRanges[k], x))
+        ++info->out_of_range_values;
+    }
+  for (double x : c.mesh_state) {
+    if (!std::isfinite(x))
+      ++info->non_finite_values;
+    else if (!plausibleMeshState(x))
+      ++info->bad_mesh_states;
+  }
+  double m = 0.0;
+  for (double x : c.dte)
+    if (std::isfinite(x)) m = std::max(m, std::abs(x));
+  return m;
 }
 
 }  // namespace
@@ -69,11 +129,12 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
     }
     if (!topic.empty()) {
       if (topic_type.empty()) {
-        *error = path + ": no topic '" + topic + "' in the bag";
+        *error = path + ": no topic " + gear_sim::quoteForMessage(topic) + " in the bag";
         return false;
       }
       if (topic_type != kChunkType) {
-        *error = path + ": topic '" + topic + "' has type " + topic_type + ", not " + kChunkType;
+        *error = path + ": topic " + gear_sim::quoteForMessage(topic) + " has type " +
+                 gear_sim::quoteForMessage(topic_type) + ", not " + kChunkType;
         return false;
       }
       out.topic = topic;
@@ -84,7 +145,8 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
       return false;
     } else {
       std::string list;
-      for (const auto& t : chunk_topics) list += (list.empty() ? "" : ", ") + t;
+      for (const auto& t : chunk_topics)
+        list += (list.empty() ? "" : ", ") + gear_sim::quoteForMessage(t);
       *error = path + ": several topics of type " + std::string(kChunkType) + " (" + list +
                "): choose one with --topic";
       return false;
@@ -98,7 +160,8 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
       if (last && fromMsg(*last, &out.params, &e)) {
         out.has_params = true;
       } else {
-        out.params_error = out.params_topic + ": " + (last ? e : "no readable message");
+        out.params_error =
+            gear_sim::quoteForMessage(out.params_topic) + ": " + (last ? e : "no readable message");
       }
     }
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
@@ -106,9 +169,12 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
     unsigned channels = 0;
     double k_sum = 0.0;
     long long k_count = 0;
+    std::uint64_t largest_gap = 0;
+    std::string largest_gap_at;
+    std::vector<double> chunk_max;  // max |dte| per chunk, for the outlier check
     for (const rosbag::MessageInstance& m : view) {
       const auto c = m.instantiate<gear_damping::SignalChunk>();
-      const std::string where = path + ": " + out.topic + " message " +
+      const std::string where = path + ": " + gear_sim::quoteForMessage(out.topic) + " message " +
                                 std::to_string(out.chunks + 1) + " (first_index " +
                                 (c ? std::to_string(c->first_index) : std::string("?")) + ")";
       if (!c) {
@@ -116,8 +182,8 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
         return false;
       }
       if (!(c->sample_rate > 0.0) || !std::isfinite(c->sample_rate)) {
-        *error = where + ": sample_rate " + std::to_string(c->sample_rate) +
-                 " is not a positive number";
+        *error =
+            where + ": sample_rate " + formatNumber(c->sample_rate) + " is not a positive number";
         return false;
       }
       if (c->dte.empty()) {
@@ -129,14 +195,19 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
                  std::to_string(c->dte.size()) + ")";
         return false;
       }
+      if (c->first_index >= kMaxSampleIndex || c->dte.size() > kMaxSampleIndex - c->first_index) {
+        *error = where + ": sample indices beyond 2^53 (" + std::to_string(kMaxSampleIndex) +
+                 "): corrupt or wrapped-around first_index";
+        return false;
+      }
       if (out.chunks == 0) {
         out.sample_rate = c->sample_rate;
         out.first_index = c->first_index;
         channels = channelSet(*c);
       } else {
         if (c->sample_rate != out.sample_rate) {
-          *error = where + ": sample_rate changed from " + std::to_string(out.sample_rate) +
-                   " to " + std::to_string(c->sample_rate) + " Hz";
+          *error = where + ": sample_rate changed from " + formatNumber(out.sample_rate) + " to " +
+                   formatNumber(c->sample_rate) + " Hz";
           return false;
         }
         if (channelSet(*c) != channels) {
@@ -151,28 +222,44 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
         if (c->first_index > next) {
           const std::uint64_t missing = c->first_index - next;
           ++out.gaps;
+          if (missing > largest_gap) {
+            largest_gap = missing;
+            largest_gap_at = where;
+          }
           out.gap_samples += static_cast<std::int64_t>(missing);
           if (out.gaps <= kMaxGapWarnings)
-            out.warnings.push_back("gap of " + std::to_string(missing) + " samples before " +
-                                   out.topic + " message " + std::to_string(out.chunks + 1) +
-                                   " (indices " + std::to_string(next) + " to " +
-                                   std::to_string(c->first_index - 1) +
-                                   "): the segments there are not identifiable");
+            out.warnings.push_back(
+                "gap of " + std::to_string(missing) + " samples before " +
+                gear_sim::quoteForMessage(out.topic) + " message " +
+                std::to_string(out.chunks + 1) + " (indices " + std::to_string(next) + " to " +
+                std::to_string(c->first_index - 1) + "): the segments there are not identifiable");
         }
       }
       next = c->first_index + c->dte.size();
+      out.real_samples += static_cast<std::int64_t>(c->dte.size());
+      chunk_max.push_back(countImplausible(*c, &out));
       for (double k : c->stiffness)
         if (std::isfinite(k)) k_sum += k, ++k_count;
       ++out.chunks;
     }
     if (out.chunks == 0) {
-      *error = path + ": topic '" + out.topic + "' has no messages";
+      *error = path + ": topic " + gear_sim::quoteForMessage(out.topic) + " has no messages";
       return false;
     }
     if (out.gaps > kMaxGapWarnings)
       out.warnings.push_back(std::to_string(out.gaps) + " gaps in all, " +
                              std::to_string(out.gap_samples) + " samples missing");
     out.samples = static_cast<std::int64_t>(next - out.first_index);
+    if (static_cast<double>(out.gap_samples) >
+        kMaxGapRatio * static_cast<double>(out.real_samples)) {
+      *error = largest_gap_at + ": gaps hold " + std::to_string(out.gap_samples) +
+               " missing samples, more than the " + std::to_string(out.real_samples) +
+               " present (at most " + formatNumber(kMaxGapRatio) +
+               "x): a corrupt first_index? The largest gap, of " + std::to_string(largest_gap) +
+               " samples, ends before this message";
+      return false;
+    }
+    addPlausibilityWarnings(chunk_max, &out);
     if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
     out.dte_velocity = channels & 1u;
     out.stiffness = channels & 2u;
@@ -193,19 +280,35 @@ bool streamSignalBag(const BagSignalInfo& info,
                      const std::function<bool(const gear_sim::SignalTable&, size_t)>& sink,
                      std::string* error) {
   if (ranges.empty()) return true;
+  for (size_t k = 0; k < ranges.size(); ++k)
+    if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
+        ranges[k].second > info.samples) {
+      *error = info.path + ": sample range " + std::to_string(k) + " [" +
+               std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
+               ") is not ascending within the record's " + std::to_string(info.samples) +
+               " samples";
+      return false;
+    }
   const double nan = std::numeric_limits<double>::quiet_NaN();
   gear_sim::SignalTable block;
-  size_t r = 0;             // current range
+  size_t r = 0;  // current range
+  // A value outside channel k's plausible range reads as NaN (counted by scanSignalBag).
+  auto plausible = [nan](size_t k, double x) {
+    return std::isfinite(x) && !inRange(kPlausibleRanges[k], x) ? nan : x;
+  };
   auto startRange = [&]() {
     const Eigen::Index n = ranges[r].second - ranges[r].first;
     auto make = [&](bool present, Eigen::VectorXd& v) {
-      if (present) v.setConstant(n, nan); else v.resize(0);
+      if (present)
+        v.setConstant(n, nan);
+      else
+        v.resize(0);
     };
     block.time.resize(n);
     for (Eigen::Index i = 0; i < n; ++i)
-      block.time[i] = static_cast<double>(info.first_index + static_cast<std::uint64_t>(
-                                                                 ranges[r].first + i)) /
-                      info.sample_rate;
+      block.time[i] =
+          static_cast<double>(info.first_index + static_cast<std::uint64_t>(ranges[r].first + i)) /
+          info.sample_rate;
     make(true, block.dte);
     make(info.dte_velocity, block.dte_velocity);
     make(info.stiffness, block.stiffness);
@@ -229,7 +332,10 @@ bool streamSignalBag(const BagSignalInfo& info,
     rosbag::View view(bag, rosbag::TopicQuery(info.topic));
     for (const rosbag::MessageInstance& m : view) {
       const auto c = m.instantiate<gear_damping::SignalChunk>();
-      if (!c) continue;  // validated by scanSignalBag
+      // Validated by scanSignalBag; a bag changed since is not read out of bounds.
+      if (!c || c->first_index < info.first_index ||
+          c->first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
+        continue;
       const Eigen::Index b = static_cast<Eigen::Index>(c->first_index - info.first_index);
       const Eigen::Index e = b + static_cast<Eigen::Index>(c->dte.size());
       if (!flushUpTo(b)) return false;
@@ -238,13 +344,14 @@ bool streamSignalBag(const BagSignalInfo& info,
         for (Eigen::Index g = lo; g < hi; ++g) {
           const size_t j = static_cast<size_t>(g - b);
           const Eigen::Index i = g - ranges[r].first;
-          block.dte[i] = c->dte[j];
-          if (info.dte_velocity) block.dte_velocity[i] = c->dte_velocity[j];
-          if (info.stiffness) block.stiffness[i] = c->stiffness[j];
-          if (info.torque) block.torque[i] = c->torque[j];
-          if (info.mesh_state) block.mesh_state[i] = c->mesh_state[j];
-          if (info.mesh_phase) block.mesh_phase[i] = c->mesh_phase[j];
-          if (info.damping) block.damping[i] = c->damping[j];
+          block.dte[i] = plausible(0, c->dte[j]);
+          if (info.dte_velocity) block.dte_velocity[i] = plausible(1, c->dte_velocity[j]);
+          if (info.stiffness) block.stiffness[i] = plausible(2, c->stiffness[j]);
+          if (info.torque) block.torque[i] = plausible(3, c->torque[j]);
+          if (info.mesh_state)
+            block.mesh_state[i] = plausibleMeshState(c->mesh_state[j]) ? c->mesh_state[j] : nan;
+          if (info.mesh_phase) block.mesh_phase[i] = plausible(4, c->mesh_phase[j]);
+          if (info.damping) block.damping[i] = plausible(5, c->damping[j]);
         }
         if (hi < ranges[r].second) break;  // the range continues in the next chunk
         if (!sink(block, r)) return false;
@@ -260,12 +367,25 @@ bool streamSignalBag(const BagSignalInfo& info,
 }
 
 bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error) {
-  return streamSignalBag(info, {{0, static_cast<Eigen::Index>(info.samples)}},
-                         [&](const gear_sim::SignalTable& t, size_t) {
-                           *out = t;
-                           return true;
-                         },
-                         error);
+  return streamSignalBag(
+      info, {{0, static_cast<Eigen::Index>(info.samples)}},
+      [&](const gear_sim::SignalTable& t, size_t) {
+        *out = t;
+        return true;
+      },
+      error);
+}
+
+std::string bagTimeError(const gear_sim::SignalTable& t, double sample_rate) {
+  if (t.size() == 0) return "no samples";
+  const double first = t.time[0], last = t.time[t.size() - 1];
+  if (!(first >= 0.0) || !(last <= kMaxBagTime))
+    return "time " + formatNumber(first < 0.0 || !std::isfinite(first) ? first : last) +
+           " s outside [0, " + formatNumber(kMaxBagTime) +
+           "] s, the range a bag's time stamps (ros::Time) can hold";
+  if (!(first * sample_rate + static_cast<double>(t.size()) < static_cast<double>(kMaxSampleIndex)))
+    return "sample indices (time x sample_rate " + formatNumber(sample_rate) + " Hz) beyond 2^53";
+  return {};
 }
 
 bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, double sample_rate,
@@ -273,6 +393,10 @@ bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, dou
                     const std::string& topic, const std::string& params_topic) {
   if (!(chunk_size > 0) || t.size() == 0 || !(sample_rate > 0.0)) {
     *error = path + ": nothing to write (empty record, chunk size or sample rate not positive)";
+    return false;
+  }
+  if (const std::string e = bagTimeError(t, sample_rate); !e.empty()) {
+    *error = path + ": " + e;
     return false;
   }
   const std::string tmp = path + ".partial";

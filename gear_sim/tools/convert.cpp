@@ -5,19 +5,23 @@
 // messages (rig data from a DAQ becomes a bag and back). CSV -> bag: the sample rate comes from
 // the time column (uniform within 1e-6 relative), the gear parameters (--params) are written as
 // a GearParams message when given. Bag -> CSV: gaps are written as NaN rows (a warning counts
-// them). Exit codes: 0 success, 1 invalid command line, 2 invalid input, 3 output not written.
+// them). Exit codes: 0 success, 1 invalid command line, 2 invalid input (also beyond the limits
+// of README "Limits", or times a bag cannot stamp), 3 output not written, 4 internal error (an
+// exception, out of memory included; message on stderr).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 
 #include "gear_sim/config_yaml.hpp"
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace {
 
-constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3;
+constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitInternal = 4;
 
 bool endsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
@@ -31,7 +35,7 @@ int fail(int code, const std::string& message) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"Convert a gear signal record between CSV (DESIGN §6 columns) and a bag."};
   std::string input, output, params, topic;
   long chunk_size = 1000;
@@ -41,7 +45,7 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
   app.add_option("--chunk-size", chunk_size, "CSV -> bag: samples per chunk (default 1000)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1L, gear_sim_ros::kMaxChunkSize));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -51,8 +55,9 @@ int main(int argc, char** argv) {
   const bool to_bag = endsWith(input, ".csv") && endsWith(output, ".bag");
   const bool to_csv = endsWith(input, ".bag") && endsWith(output, ".csv");
   if (!to_bag && !to_csv)
-    return fail(kExitUsage, "convert .csv to .bag or .bag to .csv (got " + input + " -> " +
-                                output + ")");
+    return fail(kExitUsage, "convert .csv to .bag or .bag to .csv (got " +
+                                gear_sim::quoteForMessage(input) + " -> " +
+                                gear_sim::quoteForMessage(output) + ")");
   std::string error;
   gear_sim::SignalTable table;
   if (to_bag) {
@@ -67,10 +72,12 @@ int main(int argc, char** argv) {
       const double d = table.time[i] - table.time[i - 1];
       if (std::abs(d - dt) > 1e-6 * dt)
         return fail(kExitInput, input + ": time is not uniformly sampled at line " +
-                                    std::to_string(i + 2) + " (step " + std::to_string(d) +
-                                    " s, mean step " + std::to_string(dt) +
+                                    std::to_string(i + 2) + " (step " + gear_sim::formatNumber(d) +
+                                    " s, mean step " + gear_sim::formatNumber(dt) +
                                     " s): a bag needs a uniform sample rate");
     }
+    if (const std::string e = gear_sim_ros::bagTimeError(table, 1.0 / dt); !e.empty())
+      return fail(kExitInput, input + ": " + e);
     if (!gear_sim_ros::writeSignalBag(output, table, 1.0 / dt, params.empty() ? nullptr : &model,
                                       chunk_size, &error))
       return fail(kExitOutput, error);
@@ -81,11 +88,15 @@ int main(int argc, char** argv) {
     if (!gear_sim_ros::readSignalBag(info, &table, &error)) return fail(kExitInput, error);
     const std::string tmp = output + ".partial";
     if (!gear_sim::writeSignalCsv(tmp, table, &error) ||
-        std::rename(tmp.c_str(), output.c_str()) != 0) {
+        !gear_sim::commitFile(tmp, output, &error)) {
       std::remove(tmp.c_str());
       return fail(kExitOutput, error.empty() ? output + ": cannot write" : error);
     }
   }
   std::cerr << "convert: " << table.size() << " samples " << input << " -> " << output << "\n";
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return gear_sim::runToolMain("convert", kExitInternal, [&] { return run(argc, argv); });
 }

@@ -2,9 +2,12 @@
 //     [--noise-snr DB] [--seed N] [--chunk-size N] --output OUT.csv|OUT.bag
 //
 // Simulates the gear pair described by FILE.yaml (README "Simulator configuration") and writes
-// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag with gear_damping/SignalChunk messages on /gear/signal and the
-// gear parameters (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid
-// input (message on stderr naming the key/option), 2 output could not be written.
+// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag
+// with gear_damping/SignalChunk messages on /gear/signal and the gear parameters
+// (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid input (message on
+// stderr naming the key/option; also a bad command line and a run beyond the size limits of README
+// "Limits"), 2 output could not be written, 3 internal error (an exception, out of memory included;
+// message on stderr).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
@@ -14,8 +17,10 @@
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/progress.hpp"
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace {
@@ -27,7 +32,7 @@ bool endsWith(const std::string& s, const std::string& suffix) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"Simulate a spur gear pair (Yousfi et al. 2022) and write its DTE and signals."};
   std::string config_path, output;
   std::optional<double> duration, sample_rate, snr;
@@ -42,7 +47,7 @@ int main(int argc, char** argv) {
   app.add_option("--noise-snr", snr, "override simulation.noise_snr_db [dB] (inf = no noise)");
   app.add_option("--seed", seed, "override simulation.seed");
   app.add_option("--chunk-size", chunk_size, "samples per SignalChunk in a bag (default 1000)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1L, gear_sim_ros::kMaxChunkSize));
   bool free_response = false;
   app.add_flag("--free-response", free_response,
                "write the free (homogeneous) response y'' + C y' + K y = 0 of the case instead: "
@@ -51,10 +56,15 @@ int main(int argc, char** argv) {
                "part; what the wavelet validation needs, docs/wavelet.md)");
   bool no_output = false;
   app.add_flag("--quiet,-q", no_output, "no progress line and no closing note on stderr");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 1;  // --help is 0; every CLI11 error is invalid input
+  }
 
   if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
-    std::cerr << "simulate: --output " << output << ": must end in .csv or .bag\n";
+    std::cerr << "simulate: --output " << gear_sim::quoteForMessage(output)
+              << ": must end in .csv or .bag\n";
     return 1;
   }
   gear_sim::SimConfig c;
@@ -97,16 +107,20 @@ int main(int argc, char** argv) {
     t.torque.setZero();  // no forcing in the free response
   }
   progress.set(steps - 1.0, "writing " + output);
-  // Write next to the target and rename on success: no partial file that looks complete.
-  const std::string tmp = output + ".partial";
+  // Written next to the target and renamed on success: no partial file that looks complete
+  // (writeSignalBag does so itself).
   const gear_sim::GearModel model = c.gearModel();
-  const bool ok = endsWith(output, ".csv")
-                      ? gear_sim::writeSignalCsv(tmp, t, &error)
-                      : gear_sim_ros::writeSignalBag(tmp, t, c.simulation.sample_rate, &model,
-                                                     chunk_size, &error);
+  bool ok;
+  if (endsWith(output, ".csv")) {
+    const std::string tmp = output + ".partial";
+    ok = gear_sim::writeSignalCsv(tmp, t, &error) && gear_sim::commitFile(tmp, output, &error);
+    if (!ok) std::remove(tmp.c_str());
+  } else {
+    ok = gear_sim_ros::writeSignalBag(output, t, c.simulation.sample_rate, &model, chunk_size,
+                                      &error);
+  }
   progress.finish();
-  if (!ok || std::rename(tmp.c_str(), output.c_str()) != 0) {
-    std::remove(tmp.c_str());
+  if (!ok) {
     std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";
     return 2;
   }
@@ -114,4 +128,8 @@ int main(int argc, char** argv) {
     std::cerr << "simulate: " << t.size() << " samples (" << c.simulation.duration << " s at "
               << c.simulation.sample_rate << " Hz) -> " << output << "\n";
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return gear_sim::runToolMain("simulate", 3, [&] { return run(argc, argv); });
 }

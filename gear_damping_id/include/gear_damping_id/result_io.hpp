@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "gear_damping_id/identification_types.hpp"
@@ -21,6 +22,26 @@ struct AnalysisRun {
   std::string response_error;  ///< why no modeled response could be computed
   double t0 = 0.0, dt = 0.0;   ///< [s] time of sample 0 and sample step (for response times)
   std::string name() const;    ///< "<formulation>_<model>", e.g. "known_piecewise"
+};
+
+/// Outputs committed together: each output is written complete to a temporary file first, and
+/// only once every one has been written are they all renamed over their targets, so a run that
+/// fails writing its third output leaves the previous results of all three in place. Destroyed
+/// without commit() (an error path), it removes the temporary files.
+class OutputStage {
+ public:
+  OutputStage() = default;
+  OutputStage(const OutputStage&) = delete;
+  OutputStage& operator=(const OutputStage&) = delete;
+  ~OutputStage();
+  /// Registers the complete temporary file `tmp`, to be renamed over `path` by commit().
+  void add(const std::string& tmp, const std::string& path);
+  /// Renames every registered file over its target. False with `*error` naming the first that
+  /// failed (the temporaries not renamed yet are removed).
+  bool commit(std::string* error);
+
+ private:
+  std::vector<std::pair<std::string, std::string>> files_;  // (tmp, target)
 };
 
 /// JSON of one segment estimate (DESIGN §6 keys: t_start, t_end, C, C_std, c, xi, k_min, k_max,
@@ -42,7 +63,9 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs);
 
 /// Writes `dir`/segments.csv (all runs, long format), `dir`/summary.csv (one row per run) and
 /// `dir`/response_<run>.csv (time, observed, modeled). Creates `dir`. False with `*error`.
-bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error);
+/// With `stage`, the files are only staged (renamed by stage->commit()).
+bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
+                 OutputStage* stage = nullptr);
 
 /// JSON of a wavelet validation (DESIGN §6 `wavelet`): modes[] with frequency_hz,
 /// damping_ratio, r2, t_start, t_end, sigma, spectrum_frequency_hz, omega0,
@@ -64,10 +87,13 @@ void printWaveletTable(std::ostream& os, const WaveletResult& w);
 /// t0 + j/fs, so `w`'s times should be shifted by t0 too: see shiftWaveletTimes), every d-th
 /// sample so that at most `max_points` rows per mode remain. False with `*error`.
 bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
-                     double sample_rate, double t0, long max_points, std::string* error);
+                     double sample_rate, double t0, long max_points, std::string* error,
+                     OutputStage* stage = nullptr);
 
 /// Writes `text` to `path` atomically (a temporary file renamed on success), so a failed run
-/// never leaves a partial file that looks complete. False with `*error`.
-bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error);
+/// never leaves a partial file that looks complete. False with `*error`. With `stage`, the
+/// complete temporary file is registered there instead of renamed.
+bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
+                         OutputStage* stage = nullptr);
 
 }  // namespace gear_damping_id

@@ -11,6 +11,8 @@
 #include <limits>
 #include <sstream>
 
+#include "gear_sim/signal_csv.hpp"
+
 namespace gear_damping_id {
 namespace {
 
@@ -61,9 +63,9 @@ std::string AnalysisRun::name() const {
 }
 
 json segmentJson(const SegmentEstimate& s, Formulation f) {
-  json j = {{"t_start", num(s.t_start)}, {"t_end", num(s.t_end)},    {"C", num(s.C)},
-            {"C_std", num(s.C_std)},     {"c", num(s.c)},            {"xi", num(s.xi)},
-            {"identifiable", s.identifiable}, {"samples", s.samples}, {"windows", s.windows},
+  json j = {{"t_start", num(s.t_start)},      {"t_end", num(s.t_end)}, {"C", num(s.C)},
+            {"C_std", num(s.C_std)},          {"c", num(s.c)},         {"xi", num(s.xi)},
+            {"identifiable", s.identifiable}, {"samples", s.samples},  {"windows", s.windows},
             {"condition", num(s.condition)},  {"refined", s.refined}};
   if (!s.identifiable) j["reason"] = s.reason;
   if (hasStiffnessLevels(f)) {
@@ -114,8 +116,10 @@ json runJson(const AnalysisRun& run) {
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
   if (r.load_law) {
     const LoadLawEstimate& l = *r.load_law;
-    j["load_law"] = {{"c0", num(l.c0)},         {"c0_std", num(l.c0_std)},
-                     {"c1", num(l.c1)},         {"c1_std", num(l.c1_std)},
+    j["load_law"] = {{"c0", num(l.c0)},
+                     {"c0_std", num(l.c0_std)},
+                     {"c1", num(l.c1)},
+                     {"c1_std", num(l.c1_std)},
                      {"identifiable", l.identifiable}};
     if (!l.identifiable) j["load_law"]["reason"] = l.reason;
   }
@@ -154,10 +158,9 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
   for (const auto& run : runs) {
     const IdentificationResult& r = run.result;
     const bool levels = hasStiffnessLevels(r.formulation);
-    os << "== " << toString(r.formulation) << " formulation, " << toString(r.model)
-       << " model (" << r.estimator << ", window " << fmt(r.window_length * 1e3, 4)
-       << " ms, omega0 " << fmt(r.omega0, 6) << " rad/s, Me " << fmt(r.equivalent_mass, 6)
-       << " kg)\n";
+    os << "== " << toString(r.formulation) << " formulation, " << toString(r.model) << " model ("
+       << r.estimator << ", window " << fmt(r.window_length * 1e3, 4) << " ms, omega0 "
+       << fmt(r.omega0, 6) << " rad/s, Me " << fmt(r.equivalent_mass, 6) << " kg)\n";
     if (r.model == DampingModel::Piecewise) {
       os << "  seg   t_start[ms]  t_end[ms]      C[1/s]   C_std[1/s]     c[N*s/m]       xi[-]";
       if (levels) os << "   k_min[N/m]   k_max[N/m]";
@@ -179,8 +182,8 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
       }
     }
     if (const SegmentEstimate* c = sharedEstimate(r)) {
-      os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3) << " 1/s, c = "
-         << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
+      os << "  constant: C = " << fmt(c->C, 6) << " +- " << fmt(c->C_std, 3)
+         << " 1/s, c = " << fmt(c->c, 6) << " N*s/m, xi = " << fmt(c->xi, 5);
       if (!c->identifiable) os << " (not identifiable: " << c->reason << ")";
       if (!c->warnings.empty()) os << "  flagged: " << joinCodes(c->warnings, ",");
       os << "\n";
@@ -266,7 +269,8 @@ void printWaveletTable(std::ostream& os, const WaveletResult& w) {
 }
 
 bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
-                     double sample_rate, double t0, long max_points, std::string* error) {
+                     double sample_rate, double t0, long max_points, std::string* error,
+                     OutputStage* stage) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -279,12 +283,12 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
   };
   std::ostringstream modes, spectrum, scalogram;
   if (!check(writeModesCsv(w, modes)) || !check(writeSpectrumCsv(w, spectrum))) return false;
-  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error) ||
-      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error))
+  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error, stage) ||
+      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error, stage))
     return false;
   if (w.modulus.size() > 0) {
     if (!check(writeScalogramCsv(w, scalogram)) ||
-        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error))
+        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error, stage))
       return false;
   }
   // Envelopes of the fitted modes, each at the omega0 of its fit.
@@ -317,10 +321,32 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
             << csvNum(row[static_cast<size_t>(j)]) << "\n";
     }
   }
-  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error);
+  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error, stage);
 }
 
-bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error) {
+OutputStage::~OutputStage() {
+  for (const auto& f : files_) std::remove(f.first.c_str());
+}
+
+void OutputStage::add(const std::string& tmp, const std::string& path) {
+  files_.emplace_back(tmp, path);
+}
+
+bool OutputStage::commit(std::string* error) {
+  bool ok = true;
+  for (const auto& [tmp, path] : files_) {
+    if (!ok) {
+      std::remove(tmp.c_str());
+    } else if (!gear_sim::commitFile(tmp, path, error)) {
+      ok = false;
+    }
+  }
+  files_.clear();
+  return ok;
+}
+
+bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
+                         OutputStage* stage) {
   const std::string tmp = path + ".partial";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
@@ -330,10 +356,15 @@ bool writeFileAtomically(const std::string& path, const std::string& text, std::
       return false;
     }
   }
+  if (stage) {
+    stage->add(tmp, path);
+    return true;
+  }
   return gear_sim::commitFile(tmp, path, error);
 }
 
-bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error) {
+bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
+                 OutputStage* stage) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -376,12 +407,12 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
         resp << csvNum(t) << "," << csvNum(run.response.observed[k]) << ","
              << csvNum(run.response.modeled[k]) << "\n";
       }
-      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error))
+      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error, stage))
         return false;
     }
   }
-  return writeFileAtomically(dir + "/segments.csv", seg.str(), error) &&
-         writeFileAtomically(dir + "/summary.csv", sum.str(), error);
+  return writeFileAtomically(dir + "/segments.csv", seg.str(), error, stage) &&
+         writeFileAtomically(dir + "/summary.csv", sum.str(), error, stage);
 }
 
 }  // namespace gear_damping_id

@@ -18,12 +18,17 @@ const std::vector<std::string>& signalColumnNames();
 /// is bit-exact. False with `*error` if the file cannot be written or columns differ in length.
 bool writeSignalCsv(const std::string& path, const SignalTable& table, std::string* error);
 
+/// Longest line readSignalCsv accepts [bytes] (a row of ten numbers needs about 250).
+constexpr size_t kMaxCsvLineBytes = 65536;
+
 /// Reads a CSV into `out`. Accepts any order/subset of the known columns; `required` columns
 /// must be present (default time and dte). Errors name the line and column: cannot open, empty
 /// file, missing header, unknown or duplicate column, wrong field count, malformed number,
 /// NaN/Inf (unless `allow_non_finite`: then NaN/Inf are kept in every column but time, for
 /// analysers that report the affected segments as not identifiable), time not strictly
-/// increasing, fewer than two rows. (Uniformity of the time step is the analysers' check.)
+/// increasing, fewer than two rows, a line longer than kMaxCsvLineBytes. A UTF-8 byte-order
+/// mark before the header is skipped. Messages quote file text escaped and truncated. (Uniformity
+/// of the time step is the analysers' check.)
 bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
                    const std::vector<std::string>& required = {"time", "dte"},
                    bool allow_non_finite = false);

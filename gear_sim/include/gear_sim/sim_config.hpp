@@ -105,6 +105,15 @@ enum class DynamicsModel {
   Torsional  ///< eq. (1): two rotational DOF; also outputs theta1, theta2
 };
 
+/// Size limits of a simulation, checked before anything is allocated (README "Limits"):
+/// samples round(duration * sample_rate) (the 8 signal columns take 64 bytes per sample, so
+/// 2e7 samples are 1.3 GB), integration substeps per sample, and mesh cycles per sample (a
+/// mesh frequency above the sample rate only aliases, and each cycle costs two breakpoints).
+constexpr double kMaxSimulationSamples = 2e7;
+constexpr int kMaxSubsteps = 1000;
+/// Largest damping ratio accepted (xi > 1 is already overdamped; gears have 0.01 to 0.2).
+constexpr double kMaxDampingRatio = 10.0;
+
 struct SimulationOptions {
   double duration = 0.01;      ///< [s] > 0; samples n = 0..round(duration*fs)-1 at t = n/fs
   double sample_rate = 1.0e6;  ///< [Hz] output rate, >= 20x the natural frequency
@@ -136,7 +145,8 @@ struct SimConfig {
 
   GearModel gearModel() const { return {gears, mesh, speed}; }
   /// Empty when valid; else names the YAML key (e.g. "mesh.contact_ratio"), value and rule,
-  /// including cross-section rules (sample rate >= 20x the natural frequency).
+  /// including cross-section rules (sample rate >= 20x the natural frequency, mesh frequency
+  /// <= sample rate, load period >= sample step) and the size limits above.
   std::string validate() const;
 };
 

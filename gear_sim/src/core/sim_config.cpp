@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <sstream>
+#include <type_traits>
 
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/simulator.hpp"
 
 namespace gear_sim {
@@ -12,7 +14,10 @@ namespace {
 template <class T>
 std::string bad(const std::string& key, const T& value, const std::string& rule) {
   std::ostringstream os;
-  os << key << " = " << value << ": " << rule;
+  if constexpr (std::is_floating_point_v<T>)
+    os << key << " = " << formatNumber(value) << ": " << rule;
+  else
+    os << key << " = " << value << ": " << rule;
   return os.str();
 }
 
@@ -134,9 +139,12 @@ std::string LoadOptions::validate() const {
 
 std::string DampingOptions::validate() const {
   auto nonneg = [](double x) { return std::isfinite(x) && x >= 0.0; };
+  const std::string ratio_rule =
+      "must be finite and in [0, " + formatNumber(kMaxDampingRatio) + "]";
+  auto ratioOk = [](double x) { return std::isfinite(x) && x >= 0.0 && x <= kMaxDampingRatio; };
   switch (model) {
     case DampingModel::ConstantRatio:
-      if (!nonneg(ratio)) return bad("damping.ratio", ratio, "must be finite and >= 0");
+      if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       break;
     case DampingModel::ConstantCoefficient:
       if (!nonneg(coefficient))
@@ -150,12 +158,11 @@ std::string DampingOptions::validate() const {
         return bad("damping.times[0]", times[0], "must be 0 (first segment starts at t = 0)");
       if (auto e = checkIncreasing(times, "damping.times"); !e.empty()) return e;
       for (size_t i = 0; i < ratios.size(); ++i)
-        if (!nonneg(ratios[i]))
-          return bad("damping.ratios[" + std::to_string(i) + "]", ratios[i],
-                     "must be finite and >= 0");
+        if (!ratioOk(ratios[i]))
+          return bad("damping.ratios[" + std::to_string(i) + "]", ratios[i], ratio_rule);
       break;
     case DampingModel::LoadDependent:
-      if (!nonneg(ratio)) return bad("damping.ratio", ratio, "must be finite and >= 0");
+      if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       if (!std::isfinite(load_sensitivity))
         return bad("damping.load_sensitivity", load_sensitivity, "must be finite");
       break;
@@ -172,10 +179,17 @@ std::string SimulationOptions::validate() const {
     return bad("simulation.duration", duration, "must be finite and > 0 [s]");
   if (!positive(sample_rate))
     return bad("simulation.sample_rate", sample_rate, "must be finite and > 0 [Hz]");
+  if (!(duration * sample_rate <= kMaxSimulationSamples))
+    return bad("simulation.duration", duration,
+               "gives " + formatNumber(duration * sample_rate) +
+                   " samples at simulation.sample_rate = " + formatNumber(sample_rate) +
+                   " Hz, more than the limit of " + formatNumber(kMaxSimulationSamples));
   if (std::llround(duration * sample_rate) < 2)
     return bad("simulation.duration", duration,
                "must span at least two samples at simulation.sample_rate");
-  if (substeps < 1) return bad("simulation.substeps", substeps, "must be >= 1");
+  if (substeps < 1 || substeps > kMaxSubsteps)
+    return bad("simulation.substeps", substeps,
+               "must be in [1, " + std::to_string(kMaxSubsteps) + "]");
   if (!std::isfinite(initial_dte))
     return bad("simulation.initial_dte", initial_dte, "must be finite [m]");
   if (!std::isfinite(initial_velocity))
@@ -196,6 +210,21 @@ std::string SimConfig::validate() const {
   if (auto e = load.validate(); !e.empty()) return e;
   if (auto e = damping.validate(); !e.empty()) return e;
   if (auto e = simulation.validate(); !e.empty()) return e;
+  const double max_rpm = speed.profile == SpeedProfile::Ramp
+                             ? std::max(speed.pinion_rpm, speed.end_rpm)
+                             : speed.pinion_rpm;
+  const double mesh_hz = max_rpm / 60.0 * gears.pinion.teeth;
+  if (!(mesh_hz <= simulation.sample_rate))
+    return bad(speed.profile == SpeedProfile::Ramp && speed.end_rpm > speed.pinion_rpm
+                   ? "speed.end_rpm"
+                   : "speed.pinion_rpm",
+               max_rpm,
+               "gives a mesh frequency of " + formatNumber(mesh_hz) +
+                   " Hz, above simulation.sample_rate (" + formatNumber(simulation.sample_rate) +
+                   " Hz)");
+  if (load.profile == LoadProfile::Trapezoid && !(load.period * simulation.sample_rate >= 1.0))
+    return bad("load.period", load.period,
+               "must be at least one sample step (1 / simulation.sample_rate)");
   const double fn = naturalFrequencyHz(gears, mesh);
   if (simulation.sample_rate < 20.0 * fn) {
     std::ostringstream os;

@@ -5,6 +5,7 @@
 #include <random>
 #include <vector>
 
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/models.hpp"
 
 namespace gear_sim {
@@ -29,6 +30,8 @@ namespace {
 // A sampled value "holds from that sample's instant on": look it up just after the instant, so
 // a switch that falls on a sample (to rounding) is seen there. 1e-9 mesh cycles is ~1 ps.
 constexpr double kPhaseNudge = 1e-9;  // [mesh cycles]
+// [m] A DTE beyond a metre is a diverged integration, not a gear (they deflect micrometres).
+constexpr double kMaxFiniteDte = 1.0;
 
 void resize(Eigen::VectorXd& v, Eigen::Index n) {
   if (v.size() != n) v.resize(n);
@@ -351,6 +354,18 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
     sampleColumns(n_samples - 1);
   }
 
+  // An unstable integration (a damping or stiffness far beyond the step's stability region)
+  // ends in Inf/NaN: refused, never written as a record.
+  for (Eigen::Index n = 0; n < n_samples; ++n)
+    if (!std::isfinite(o.dte[n]) || !std::isfinite(o.dte_velocity[n]) ||
+        !(std::abs(o.dte[n]) <= kMaxFiniteDte)) {
+      if (error)
+        *error = "the integration diverged at t = " + formatNumber(o.time[n]) +
+                 " s (|dte| beyond 1 m or not finite): the time step 1/(simulation.sample_rate "
+                 "x simulation.substeps) is too long for this damping and stiffness; raise "
+                 "simulation.substeps or simulation.sample_rate";
+      return false;
+    }
   if (std::isfinite(so.noise_snr_db)) addNoise(&o.dte, so.noise_snr_db, so.seed);
   return true;
 }

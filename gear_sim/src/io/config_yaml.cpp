@@ -1,14 +1,47 @@
 #include "gear_sim/config_yaml.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <set>
 #include <sstream>
 
+#include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 
 namespace gear_sim {
 namespace {
+
+// A YAML node as the text the file had (escaped and truncated for a message).
+std::string quoted(const YAML::Node& n) {
+  std::ostringstream os;
+  os << n;
+  return quoteForMessage(os.str());
+}
+
+// A key as a message names it: as is when it is a plain name (letters, digits, '_', at most
+// kMaxQuotedChars), else quoted escaped and truncated.
+std::string keyForMessage(const std::string& key) {
+  const bool plain = !key.empty() && key.size() <= kMaxQuotedChars &&
+                     std::all_of(key.begin(), key.end(), [](char c) {
+                       return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+                     });
+  return plain ? key : quoteForMessage(key);
+}
+
+// A mapping key for a message and a lookup: its name when it is a scalar; a sequence or a
+// mapping used as a key (`? [a, b]`) is an error naming it, not an exception.
+bool keyName(const YAML::Node& key, const std::string& where, std::string* name,
+             std::string* error) {
+  if (key.IsScalar()) {
+    *name = key.Scalar();
+    return true;
+  }
+  if (error->empty())
+    *error = where + quoted(key) + ": a key must be a plain name, not a sequence or mapping";
+  return false;
+}
 
 // Reads one section: checks its keys against the known list and converts values, recording
 // the first error with the full key name.
@@ -26,11 +59,12 @@ class Section {
     if (!present() || !ok()) return;
     std::set<std::string> k(known.begin(), known.end());
     for (const auto& kv : node_) {
-      const std::string key = kv.first.as<std::string>();
+      std::string key;
+      if (!keyName(kv.first, name_ + ".", &key, error_)) return;
       if (!k.count(key)) {
         std::string list;
         for (const char* s : known) list += std::string(list.empty() ? "" : ", ") + s;
-        fail(name_ + "." + key, "unknown key (known: " + list + ")");
+        fail(name_ + "." + keyForMessage(key), "unknown key (known: " + list + ")");
         return;
       }
     }
@@ -43,7 +77,7 @@ class Section {
       *out = node_[key].as<T>();
     } catch (const YAML::Exception&) {
       fail(name_ + "." + key,
-           std::string("expected ") + typeName<T>() + ", got '" + text(node_[key]) + "'");
+           std::string("expected ") + typeName<T>() + ", got " + quoted(node_[key]));
     }
   }
 
@@ -54,7 +88,7 @@ class Section {
     if (!present() || !ok() || !node_[key]) return;
     get(key, &s);
     if (ok() && !parse(s, out))
-      fail(name_ + "." + key, "unknown name '" + s + "' (one of: " + names + ")");
+      fail(name_ + "." + key, "unknown name " + quoteForMessage(s) + " (one of: " + names + ")");
   }
 
   bool has(const char* key) const { return present() && node_[key]; }
@@ -70,11 +104,6 @@ class Section {
     if constexpr (std::is_integral_v<T>) return "an integer";
     if constexpr (std::is_same_v<T, std::string>) return "a string";
     return "a list of numbers";
-  }
-  static std::string text(const YAML::Node& n) {
-    std::ostringstream os;
-    os << n;
-    return os.str();
   }
   std::string name_;
   std::string* error_;
@@ -118,7 +147,7 @@ std::string dirOf(const std::string& path) {
 
 }  // namespace
 
-bool loadGearModel(const YAML::Node& root, GearModel* out, std::string* error) {
+static bool loadGearModelImpl(const YAML::Node& root, GearModel* out, std::string* error) {
   std::string err;
   if (!root || !root.IsMap()) err = "the parameter file must be a YAML mapping of sections";
   for (const char* sec : {"pinion", "gear", "mesh", "speed"})
@@ -142,8 +171,8 @@ bool loadGearModel(const YAML::Node& root, GearModel* out, std::string* error) {
   return true;
 }
 
-bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
-                   const std::string& base_dir) {
+static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::string* error,
+                              const std::string& base_dir) {
   std::string err;
   SimConfig c;
   if (!root || !root.IsMap()) err = "the configuration must be a YAML mapping of sections";
@@ -151,10 +180,11 @@ bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
     const std::set<std::string> sections{"pinion", "gear",    "mesh",      "speed",
                                          "load",   "damping", "simulation"};
     for (const auto& kv : root) {
-      const std::string key = kv.first.as<std::string>();
+      std::string key;
+      if (!keyName(kv.first, "", &key, &err)) break;
       if (!sections.count(key)) {
-        err =
-            key + ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation)";
+        err = keyForMessage(key) +
+              ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation)";
         break;
       }
     }
@@ -183,6 +213,9 @@ bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
         SignalTable t;
         std::string e;
         if (!readTorqueCsv(path, &t, &e)) {
+          // The path comes from the file: quoted in the message (the reader's starts with it).
+          if (e.compare(0, path.size(), path) == 0)
+            e = quoteForMessage(path) + e.substr(path.size());
           l.fail("load.file", e);
         } else {
           c.load.profile = LoadProfile::Table;
@@ -191,8 +224,8 @@ bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
         }
       }
     } else if (err.empty() && !parse(profile, &c.load.profile)) {
-      l.fail("load.profile", "unknown name '" + profile +
-                                 "' (one of: constant, sine, step, ramp, trapezoid, table, csv)");
+      l.fail("load.profile", "unknown name " + quoteForMessage(profile) +
+                                 " (one of: constant, sine, step, ramp, trapezoid, table, csv)");
     }
     l.get("mean", &c.load.mean);
     l.get("amplitude", &c.load.amplitude);
@@ -230,8 +263,8 @@ bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
     } else if (model == "load_linear") {
       c.damping.model = DampingModel::LoadLinear;
     } else {
-      d.fail("damping.model", "unknown name '" + model +
-                                  "' (one of: constant, piecewise, load_dependent, load_linear)");
+      d.fail("damping.model", "unknown name " + quoteForMessage(model) +
+                                  " (one of: constant, piecewise, load_dependent, load_linear)");
     }
     d.get("ratio", &c.damping.ratio);
     d.get("coefficient", &c.damping.coefficient);
@@ -263,6 +296,27 @@ bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
   return true;
 }
 
+// yaml-cpp throws on some malformed documents the checks above do not foresee (a conversion of
+// an unusual node): every such exception becomes an error, never an abort.
+bool loadGearModel(const YAML::Node& root, GearModel* out, std::string* error) {
+  try {
+    return loadGearModelImpl(root, out, error);
+  } catch (const YAML::Exception& e) {
+    if (error) *error = "malformed YAML: " + quoteForMessage(e.what());
+    return false;
+  }
+}
+
+bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
+                   const std::string& base_dir) {
+  try {
+    return loadSimConfigImpl(root, out, error, base_dir);
+  } catch (const YAML::Exception& e) {
+    if (error) *error = "malformed YAML: " + quoteForMessage(e.what());
+    return false;
+  }
+}
+
 namespace {
 bool loadFile(const std::string& path, YAML::Node* root, std::string* error) {
   std::ifstream f(path);
@@ -274,8 +328,8 @@ bool loadFile(const std::string& path, YAML::Node* root, std::string* error) {
     *root = YAML::Load(f);
   } catch (const YAML::Exception& e) {
     if (error)
-      *error =
-          path + ": YAML syntax error at line " + std::to_string(e.mark.line + 1) + ": " + e.msg;
+      *error = path + ": YAML syntax error at line " + std::to_string(e.mark.line + 1) + ": " +
+               quoteForMessage(e.msg);
     return false;
   }
   return true;

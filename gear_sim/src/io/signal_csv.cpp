@@ -7,6 +7,8 @@
 #include <memory>
 #include <sstream>
 
+#include "gear_sim/message_text.hpp"
+
 namespace gear_sim {
 
 const std::vector<std::string>& signalColumnNames() {
@@ -29,6 +31,20 @@ std::string trim(const std::string& s) {
   if (a == std::string::npos) return "";
   const size_t b = s.find_last_not_of(" \t\r");
   return s.substr(a, b - a + 1);
+}
+
+enum class LineRead { kOk, kEnd, kTooLong };
+
+// std::getline with a length limit: a file without newlines (/dev/zero, binary garbage) is
+// refused after kMaxCsvLineBytes instead of being read into memory whole.
+LineRead readLine(std::istream& f, std::vector<char>& buf, std::string* line) {
+  f.getline(buf.data(), static_cast<std::streamsize>(buf.size()));
+  const std::streamsize n = f.gcount();
+  if (f.fail() && !f.eof() && !f.bad() && n + 1 >= static_cast<std::streamsize>(buf.size()))
+    return LineRead::kTooLong;
+  if (f.bad() || (n == 0 && f.eof())) return LineRead::kEnd;
+  line->assign(buf.data(), static_cast<size_t>(f.eof() ? n : n - 1));
+  return LineRead::kOk;
 }
 
 }  // namespace
@@ -92,11 +108,19 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
   if (!f) return fail("cannot open");
   std::string line;
   long line_no = 0;
-  // Header: the first non-empty line.
-  while (std::getline(f, line)) {
+  std::vector<char> buf(kMaxCsvLineBytes + 1);
+  LineRead got = LineRead::kEnd;
+  auto tooLong = [&]() {
+    return fail("line " + std::to_string(line_no + 1) + ": longer than " +
+                std::to_string(kMaxCsvLineBytes) + " bytes (not a signal CSV?)");
+  };
+  // Header: the first non-empty line (a UTF-8 byte-order mark before it is skipped).
+  while ((got = readLine(f, buf, &line)) == LineRead::kOk) {
     ++line_no;
+    if (line_no == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
     if (!trim(line).empty()) break;
   }
+  if (got == LineRead::kTooLong) return tooLong();
   if (trim(line).empty()) return fail("empty file (no header row)");
   const auto& names = signalColumnNames();
   std::vector<int> map;  // field -> canonical column
@@ -114,22 +138,24 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
         std::string list;
         for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
         return fail("line " + std::to_string(line_no) + ", column " + std::to_string(field) +
-                    ": unknown column '" + name + "' (known: " + list + ")");
+                    ": unknown column " + quoteForMessage(name) + " (known: " + list + ")");
       }
       if (seen[c])
-        return fail("line " + std::to_string(line_no) + ": duplicate column '" + name + "'");
+        return fail("line " + std::to_string(line_no) + ": duplicate column " +
+                    quoteForMessage(name));
       seen[c] = true;
       map.push_back(static_cast<int>(c));
     }
     for (const auto& r : required) {
       size_t c = 0;
       while (c < names.size() && names[c] != r) ++c;
-      if (c == names.size() || !seen[c]) return fail("missing required column '" + r + "'");
+      if (c == names.size() || !seen[c])
+        return fail("missing required column " + quoteForMessage(r));
     }
   }
   std::vector<std::vector<double>> data(names.size());
   std::vector<long> row_line;  // file line of each data row, for messages
-  while (std::getline(f, line)) {
+  while ((got = readLine(f, buf, &line)) == LineRead::kOk) {
     ++line_no;
     if (trim(line).empty()) continue;
     row_line.push_back(line_no);
@@ -145,10 +171,10 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
       if (r.ec != std::errc() || (r.ptr < end && *r.ptr != ',' && *r.ptr != ' ')) {
         const char* q = p;
         while (q < end && *q != ',') ++q;
-        return fail(where + ": malformed number '" + std::string(p, q) + "'");
+        return fail(where + ": malformed number " + quoteForMessage(std::string_view(p, q - p)));
       }
       if (!std::isfinite(v) && (!allow_non_finite || map[field] == 0))
-        return fail(where + ": value is not finite (" + std::string(p, r.ptr) + ")");
+        return fail(where + ": value is not finite (" + formatNumber(v) + ")");
       data[map[field]].push_back(v);
       p = r.ptr;
       while (p < end && *p == ' ') ++p;
@@ -163,12 +189,13 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
       }
     }
   }
+  if (got == LineRead::kTooLong) return tooLong();
   const std::vector<double>& time = data[0];
   if (time.size() < 2) return fail("fewer than two data rows");
   for (size_t i = 1; i < time.size(); ++i)
     if (!(time[i] > time[i - 1]))
-      return fail("line " + std::to_string(row_line[i]) + ": time " + std::to_string(time[i]) +
-                  " is not greater than the previous " + std::to_string(time[i - 1]) +
+      return fail("line " + std::to_string(row_line[i]) + ": time " + formatNumber(time[i]) +
+                  " is not greater than the previous " + formatNumber(time[i - 1]) +
                   " (time must be strictly increasing)");
   SignalTable t;
   const auto cols = columns(t);

@@ -15,22 +15,56 @@
 
 namespace gear_sim_ros {
 
+/// Largest --chunk-size of the tools writing bags (samples per SignalChunk message).
+constexpr long kMaxChunkSize = 10000000;
+
+/// Largest sample index a bag may hold (2^53: sample times index / rate stay exact and no
+/// index arithmetic can wrap). A chunk beyond it is refused naming it.
+constexpr std::uint64_t kMaxSampleIndex = std::uint64_t{1} << 53;
+/// Gaps may hold at most this many missing samples per sample present: readers allocate the
+/// record's span (gaps read as NaN), so a forward jump of the index is refused before any
+/// allocation, naming the largest gap.
+constexpr double kMaxGapRatio = 1.0;
+/// Physical plausibility ranges of bag data (magnitudes, SI units): a DTE of a metre, a
+/// stiffness of 1e13 N/m or a torque of 1e9 N*m is a corrupt payload, not a gear.
+struct PlausibleRange {
+  const char* channel;
+  double low, high;
+};
+constexpr PlausibleRange kPlausibleRanges[] = {
+    {"dte", -1.0, 1.0},
+    {"dte_velocity", -1e4, 1e4},
+    {"stiffness", 0.0, 1e13},
+    {"torque", -1e9, 1e9},
+    {"mesh_phase", -9.007199254740992e15, 9.007199254740992e15},
+    {"damping", -1e9, 1e9}};
+/// A chunk whose max |dte| is this many times the record's median chunk maximum is an outlier.
+constexpr double kOutlierChunkFactor = 1e6;
+
 /// What scanSignalBag found out about a bag's signal record.
 struct BagSignalInfo {
   std::string path;
-  std::string topic;            ///< the SignalChunk topic read
-  std::string params_topic;     ///< the GearParams topic, empty when none
-  bool has_params = false;      ///< `params` is valid (from the latest GearParams message)
-  std::string params_error;     ///< why a present GearParams message could not be used
+  std::string topic;         ///< the SignalChunk topic read
+  std::string params_topic;  ///< the GearParams topic, empty when none
+  bool has_params = false;   ///< `params` is valid (from the latest GearParams message)
+  std::string params_error;  ///< why a present GearParams message could not be used
   gear_sim::GearModel params;
-  double sample_rate = 0.0;     ///< [Hz] of every chunk
+  double sample_rate = 0.0;       ///< [Hz] of every chunk
   std::uint64_t first_index = 0;  ///< global index of the first sample
   long chunks = 0;
-  std::int64_t samples = 0;     ///< samples from the first to the last, gaps included
-  std::int64_t gap_samples = 0; ///< samples missing in gaps (read as NaN)
+  std::int64_t samples = 0;      ///< samples from the first to the last, gaps included
+  std::int64_t gap_samples = 0;  ///< samples missing in gaps (read as NaN)
   long gaps = 0;
+  std::int64_t real_samples = 0;  ///< samples the chunks carry (samples - gap_samples)
+  /// Plausibility of the chunk data (see kPlausibleRanges): samples of any channel that are
+  /// NaN/Inf, finite but outside their channel's range, and mesh_state values other than 0 or
+  /// 1. Out-of-range values and bad mesh states read as NaN; each count gives one warning.
+  std::int64_t non_finite_values = 0, out_of_range_values = 0, bad_mesh_states = 0;
+  /// Chunks whose largest |dte| exceeds kOutlierChunkFactor x the median over the chunks of
+  /// that maximum (the record's scale): likely corrupt payloads, counted and warned about.
+  long outlier_chunks = 0;
   std::vector<std::string> warnings;  ///< one line per gap (the first few) and similar remarks
-  double stiffness_mean = 0.0;  ///< [N/m] mean of the finite stiffness samples (0: none)
+  double stiffness_mean = 0.0;        ///< [N/m] mean of the finite stiffness samples (0: none)
   /// Optional channels present (every chunk must carry the same set).
   bool dte_velocity = false, stiffness = false, torque = false, mesh_state = false,
        mesh_phase = false, damping = false;
@@ -42,6 +76,8 @@ struct BagSignalInfo {
 /// channels with the length of dte, and a first_index beyond the previous chunk's last sample
 /// (a duplicated, overlapping or out-of-order chunk is an error naming it; a gap is a warning:
 /// its samples read as NaN, so the analysers report the segments there as not identifiable).
+/// Limits: indices below kMaxSampleIndex, gaps at most kMaxGapRatio x the samples present;
+/// the plausibility counts of BagSignalInfo are filled and warned about.
 /// The gear parameters come from the latest GearParams message on any topic.
 /// False with a one-line `*error`: cannot open / not a bag / corrupt or truncated, no such
 /// topic, wrong message type, no chunks, inconsistent chunks.
@@ -61,13 +97,21 @@ bool streamSignalBag(const BagSignalInfo& info,
 /// The whole record as one table (gaps as NaN).
 bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error);
 
+/// Latest sample time a bag can stamp [s]: ros::Time holds 32-bit seconds and the stamps are
+/// 1 s + the sample time.
+constexpr double kMaxBagTime = 4294967294.0;
+
+/// Why `table` cannot be written as a bag at `sample_rate` (empty when it can): times outside
+/// [0, kMaxBagTime] s or sample indices beyond kMaxSampleIndex. Checked by writeSignalBag too.
+std::string bagTimeError(const gear_sim::SignalTable& table, double sample_rate);
+
 /// Writes `table` (uniform time) as SignalChunk messages of `chunk_size` samples on
 /// `topic` (first_index = round(time[0] * sample_rate) + i) and, when `params` is not null, the
 /// gear parameters on `params_topic` first. Bag time stamps are 1 s + the sample time. Writes a
 /// temporary file renamed on success. False with `*error`.
-bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& table,
-                    double sample_rate, const gear_sim::GearModel* params, long chunk_size,
-                    std::string* error, const std::string& topic = "/gear/signal",
+bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& table, double sample_rate,
+                    const gear_sim::GearModel* params, long chunk_size, std::string* error,
+                    const std::string& topic = "/gear/signal",
                     const std::string& params_topic = "/gear/params");
 
 }  // namespace gear_sim_ros

@@ -1,0 +1,395 @@
+// Hostile inputs (issue 16): every defect found by malformed inputs and fuzzing, rebuilt here
+// from scratch (bags written with the rosbag API, YAML and CSV strings) and checked for its
+// refusal: no crash, no runaway allocation, no silent truncation, a documented exit code and a
+// message naming the key, option or index. The tools' exit codes: simulate 0-3, convert 0-4,
+// analyze 0-5 (README "Exit codes").
+#include <gear_damping/SignalChunk.h>
+#include <gtest/gtest.h>
+#include <rosbag/bag.h>
+
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <limits>
+#include <string>
+
+#include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/stream_assembler.hpp"
+#include "gear_sim/config_yaml.hpp"
+#include "gear_sim/message_text.hpp"
+#include "gear_sim/signal_csv.hpp"
+#include "gear_sim/simulator.hpp"
+#include "gear_sim/tool_main.hpp"
+#include "gear_sim_ros/bag_io.hpp"
+#include "gear_sim_ros/conversions.hpp"
+#include "tool_runner.hpp"
+
+namespace fs = std::filesystem;
+using gear_test::readText;
+using gear_test::ToolRun;
+using gear_test::writeText;
+
+namespace {
+
+const std::string kParams = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
+// A message quotes at most kMaxQuotedChars of user data; with its own words it stays short.
+constexpr size_t kMaxMessageLength = 600;
+
+class Hostile : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new gear_test::ScratchDir("hostile_inputs_test");
+    std::string e;
+    ASSERT_TRUE(gear_sim::loadSimConfigFile(kParams, &config_, &e)) << e;
+    config_.simulation.duration = 2e-3;  // two 1 ms segments, 2000 samples
+    ASSERT_TRUE(gear_sim::simulate(config_, &table_, &e)) << e;
+    ASSERT_TRUE(gear_sim::writeSignalCsv((dir() / "good.csv").string(), table_, &e)) << e;
+  }
+  static void TearDownTestSuite() { delete scratch_; }
+  static fs::path dir() { return scratch_->path(); }
+  static std::string path(const std::string& name) { return (dir() / name).string(); }
+
+  // The simulated record as a bag of 500-sample chunks; `index(k)` gives chunk k's
+  // first_index and `edit` may change the chunk.
+  static std::string writeBag(
+      const std::string& name, const std::function<std::uint64_t(size_t)>& index,
+      const std::function<void(size_t, gear_damping::SignalChunk*)>& edit = nullptr) {
+    const std::string p = path(name);
+    rosbag::Bag bag(p, rosbag::bagmode::Write);
+    const ros::Time base(1.0);
+    bag.write("/gear/params", base, gear_sim_ros::toMsg(config_.gearModel()));
+    gear_damping::SignalChunk c;
+    const Eigen::Index chunk = 500;
+    for (Eigen::Index b = 0, k = 0; b < table_.size(); b += chunk, ++k) {
+      gear_sim_ros::toChunk(table_, b, std::min(chunk, table_.size() - b),
+                            config_.simulation.sample_rate, index(static_cast<size_t>(k)), &c);
+      if (edit) edit(static_cast<size_t>(k), &c);
+      bag.write("/gear/signal", base + ros::Duration(1e-3 * static_cast<double>(k + 1)), c);
+    }
+    bag.close();
+    return p;
+  }
+  static ToolRun run(const std::string& tool, const std::string& args) {
+    return gear_test::runTool(tool, args, dir());
+  }
+  static std::string scanError(const std::string& bag) {
+    gear_sim_ros::BagSignalInfo info;
+    std::string e;
+    EXPECT_FALSE(gear_sim_ros::scanSignalBag(bag, "", &info, &e));
+    return e;
+  }
+  static std::string simConfigError(const std::string& yaml) {
+    gear_sim::SimConfig c;
+    std::string e;
+    EXPECT_FALSE(gear_sim::loadSimConfig(YAML::Load(yaml), &c, &e, dir().string()));
+    return e;
+  }
+  static std::string csvError(const std::string& name, const std::string& text) {
+    writeText(dir() / name, text);
+    gear_sim::SignalTable t;
+    std::string e;
+    EXPECT_FALSE(gear_sim::readSignalCsv(path(name), &t, &e));
+    return e;
+  }
+
+  static gear_test::ScratchDir* scratch_;
+  static gear_sim::SimConfig config_;
+  static gear_sim::SignalTable table_;
+};
+gear_test::ScratchDir* Hostile::scratch_ = nullptr;
+gear_sim::SimConfig Hostile::config_;
+gear_sim::SignalTable Hostile::table_;
+
+bool has(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// A message of printable ASCII (and newlines) only, of bounded length.
+void expectPrintableAndShort(const std::string& message) {
+  EXPECT_LE(message.size(), kMaxMessageLength) << message.substr(0, 200);
+  for (unsigned char ch : message) EXPECT_TRUE(ch == '\n' || (ch >= 0x20 && ch < 0x7F)) << int(ch);
+}
+
+// ---- Bags ----
+
+TEST_F(Hostile, FirstIndexBeyond2To63IsRefusedNotACrash) {
+  const std::uint64_t huge = (std::uint64_t{1} << 63) + 100;
+  const std::string bag = writeBag("huge_index.bag", [&](size_t k) { return huge + 500 * k; });
+  EXPECT_TRUE(has(scanError(bag), "beyond 2^53")) << scanError(bag);
+  EXPECT_TRUE(has(scanError(bag), "message 1")) << scanError(bag);
+  EXPECT_EQ(run("analyze", "--input " + bag).code, 2);
+  EXPECT_EQ(run("convert", "--input " + bag + " --output " + path("huge.csv")).code, 2);
+  EXPECT_FALSE(fs::exists(path("huge.csv")));
+}
+
+TEST_F(Hostile, IndexWrapAroundIsRefusedNotTruncated) {
+  // 2^64 - 10 + 500 wraps to 490: the second chunk at 490 would look contiguous.
+  const std::uint64_t start = std::numeric_limits<std::uint64_t>::max() - 9;
+  const std::string bag = writeBag("wrap.bag", [&](size_t k) { return start + 500 * k; });
+  EXPECT_TRUE(has(scanError(bag), "beyond 2^53")) << scanError(bag);
+  const ToolRun r = run("convert", "--input " + bag + " --output " + path("wrap.csv"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_FALSE(fs::exists(path("wrap.csv")));
+}
+
+TEST_F(Hostile, ForwardIndexJumpIsRefusedBeforeAllocating) {
+  // Chunk 2 jumps 1e12 samples ahead: the span would need 8 TB per column.
+  const std::string bag =
+      writeBag("jump.bag", [](size_t k) { return 500 * k + (k >= 2 ? 1000000000000ull : 0); });
+  const std::string e = scanError(bag);
+  EXPECT_TRUE(has(e, "gaps hold 1000000000000 missing samples")) << e;
+  EXPECT_TRUE(has(e, "message 3")) << e;  // the largest gap ends before message 3
+  for (const std::string extra : {"", " --max-in-memory 1000"}) {
+    const ToolRun r = run("analyze", "--input " + bag + extra);
+    EXPECT_EQ(r.code, 2) << r.err;
+  }
+  EXPECT_EQ(run("convert", "--input " + bag + " --output " + path("jump.csv")).code, 2);
+}
+
+TEST_F(Hostile, AGapAsLongAsTheSamplesPresentIsStillAccepted) {
+  // 2000 samples present, a 2000-sample gap: exactly kMaxGapRatio = 1.
+  const std::string bag =
+      writeBag("gap_ok.bag", [](size_t k) { return 500 * k + (k >= 2 ? 2000 : 0); });
+  gear_sim_ros::BagSignalInfo info;
+  std::string e;
+  ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+  EXPECT_EQ(info.gap_samples, 2000);
+  EXPECT_EQ(info.real_samples, 2000);
+}
+
+TEST_F(Hostile, ImplausibleChunkValuesAreCountedReportedAndReadAsNan) {
+  // Bit flips in chunk 1: a mesh_state of 7, a DTE of 1e308 and a stiffness of -5.
+  const std::string bag = writeBag(
+      "flips.bag", [](size_t k) { return 500 * k; },
+      [](size_t k, gear_damping::SignalChunk* c) {
+        if (k != 1) return;
+        c->mesh_state[10] = 7.0;
+        c->dte[20] = 1e308;
+        c->stiffness[30] = -5.0;
+      });
+  gear_sim_ros::BagSignalInfo info;
+  std::string e;
+  ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+  EXPECT_EQ(info.bad_mesh_states, 1);
+  EXPECT_EQ(info.out_of_range_values, 2);
+  EXPECT_EQ(info.outlier_chunks, 1);  // 1e308 dwarfs every other chunk's DTE
+  gear_sim::SignalTable t;
+  ASSERT_TRUE(gear_sim_ros::readSignalBag(info, &t, &e)) << e;
+  EXPECT_TRUE(std::isnan(t.mesh_state[510]));
+  EXPECT_TRUE(std::isnan(t.dte[520]));
+  EXPECT_TRUE(std::isnan(t.stiffness[530]));
+  EXPECT_EQ(t.dte[521], table_.dte[521]);  // the rest untouched
+  const ToolRun r = run("convert", "--input " + bag + " --output " + path("flips.csv"));
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(has(r.err, "1 mesh_state values other than 0 or 1")) << r.err;
+  EXPECT_TRUE(has(r.err, "2 values outside their channel's plausible range")) << r.err;
+}
+
+// ---- YAML ----
+
+TEST_F(Hostile, NonScalarYamlKeysAreNamedNotAnAbort) {
+  for (const std::string yaml :
+       {"? [a, b]\n: 1\n", "pinion:\n  ? {x: 1}\n  : 3\n", "damping:\n  ? [ratio]\n  : 0.1\n"}) {
+    const std::string e = simConfigError(yaml);
+    EXPECT_TRUE(has(e, "a key must be a plain name")) << yaml << " -> " << e;
+  }
+  EXPECT_TRUE(has(simConfigError("pinion:\n  ? {x: 1}\n  : 3\n"), "pinion.'{x: 1}'"))
+      << simConfigError("pinion:\n  ? {x: 1}\n  : 3\n");
+  gear_sim::GearModel m;
+  std::string e;
+  EXPECT_FALSE(gear_sim::loadGearModel(YAML::Load("? [a, b]\n: 1\n"), &m, &e));
+  EXPECT_FALSE(gear_sim::loadGearModel(
+      YAML::Load("pinion: {? [a] : 1}\ngear: {}\nmesh: {}\nspeed: {}\n"), &m, &e));
+  EXPECT_TRUE(has(e, "a key must be a plain name")) << e;
+  // The tools: exit codes, not 134.
+  writeText(dir() / "key.yaml", "? [a, b]\n: 1\n");
+  EXPECT_EQ(run("simulate", "--config " + path("key.yaml") + " --output " + path("k.csv")).code, 1);
+  EXPECT_EQ(run("analyze", "--input " + path("good.csv") + " --params " + path("key.yaml")).code,
+            2);
+  EXPECT_EQ(run("convert", "--input " + path("good.csv") + " --output " + path("k.bag") +
+                               " --params " + path("key.yaml"))
+                .code,
+            2);
+}
+
+// ---- Simulator limits and divergence ----
+
+TEST_F(Hostile, SimulationSizesBeyondTheLimitsAreRefusedNamingTheKey) {
+  struct Case {
+    std::string section, key_value, named;
+  };
+  const Case cases[] = {
+      {"simulation", "duration: 1.0e300", "more than the limit of 2e+07"},
+      {"simulation", "sample_rate: 1.0e15", "more than the limit of 2e+07"},
+      {"simulation", "substeps: 1000000", "simulation.substeps = 1000000: must be in [1, 1000]"},
+      {"speed", "pinion_rpm: 1.0e12", "speed.pinion_rpm = 1e+12: gives a mesh frequency"},
+      {"damping", "ratio: 1.0e300", "damping.ratio = 1e+300: must be finite and in [0, 10]"},
+  };
+  for (const Case& c : cases) {
+    const std::string e = simConfigError(c.section + ":\n  " + c.key_value + "\n");
+    EXPECT_TRUE(has(e, c.named)) << c.key_value << " -> " << e;
+    EXPECT_FALSE(has(e, "at least two samples")) << e;
+  }
+  // load.file: /dev/zero (no newline ever) is refused after one line's limit.
+  const std::string e = simConfigError("load:\n  profile: csv\n  file: /dev/zero\n");
+  EXPECT_TRUE(has(e, "load.file")) << e;
+  EXPECT_TRUE(has(e, "longer than 65536 bytes")) << e;
+  // A load.file name with control bytes (found by fuzz_yaml) is quoted escaped.
+  const std::string e2 = simConfigError("load:\n  profile: csv\n  file: \"x\\x01\\x7f.csv\"\n");
+  EXPECT_TRUE(has(e2, "x\\x01\\x7f.csv': cannot open")) << e2;
+}
+
+TEST_F(Hostile, AnUnstableIntegrationIsRefusedNotWrittenAsNan) {
+  gear_sim::SimConfig c = config_;
+  c.damping.model = gear_sim::DampingModel::ConstantCoefficient;
+  c.damping.coefficient = 1e12;  // [N*s/m] xi of order 1e6: RK4 at 1 MHz cannot follow
+  gear_sim::SignalTable t;
+  std::string e;
+  EXPECT_FALSE(gear_sim::simulate(c, &t, &e));
+  EXPECT_TRUE(has(e, "the integration diverged")) << e;
+  EXPECT_TRUE(has(e, "simulation.substeps")) << e;
+}
+
+// ---- CSV ----
+
+TEST_F(Hostile, Utf8ByteOrderMarkIsAccepted) {
+  writeText(dir() / "bom.csv", "\xEF\xBB\xBFtime,dte\n0,1e-6\n1e-6,2e-6\n");
+  gear_sim::SignalTable t;
+  std::string e;
+  ASSERT_TRUE(gear_sim::readSignalCsv(path("bom.csv"), &t, &e)) << e;
+  EXPECT_EQ(t.size(), 2);
+  // Elsewhere than the start a BOM is named as one.
+  const std::string e2 = csvError("bom2.csv",
+                                  "time,\xEF\xBB\xBF"
+                                  "dte\n0,1\n1,2\n");
+  EXPECT_TRUE(has(e2, "unknown column '<BOM>dte'")) << e2;
+}
+
+TEST_F(Hostile, UserTextInMessagesIsEscapedAndTruncated) {
+  std::string garbage = "time,";
+  for (int i = 0; i < 4000; ++i)
+    garbage += static_cast<char>((i * 37) % 256 == '\n' ? 1 : (i * 37) % 256);
+  const std::string e = csvError("garbage.csv", garbage + "\n0,1\n");
+  expectPrintableAndShort(e);
+  EXPECT_TRUE(has(e, "... (")) << e;  // cut, with the full length
+  const std::string e2 =
+      csvError("long_number.csv", "time,dte\n0," + std::string(100000, '7') + "x\n");
+  EXPECT_TRUE(has(e2, "longer than 65536 bytes")) << e2;
+  expectPrintableAndShort(e2);
+  const std::string e3 = csvError("bad_number.csv", "time,dte\n0,1\n1,\x1b[31mred\n");
+  EXPECT_TRUE(has(e3, "'\\x1b[31mred'")) << e3;
+}
+
+TEST_F(Hostile, TimesInMessagesHaveEnoughDigitsToDiffer) {
+  const std::string e = csvError("times.csv", "time,dte\n6e-06,1\n6.0000001e-06,1\n6e-06,1\n");
+  EXPECT_TRUE(has(e, "time 6e-06 is not greater than the previous 6.0000001e-06")) << e;
+}
+
+TEST_F(Hostile, CsvTimesABagCannotStampAreInvalidInput) {
+  writeText(dir() / "negative.csv", "time,dte\n-2,1e-6\n-1,2e-6\n0,1e-6\n");
+  ToolRun r = run("convert", "--input " + path("negative.csv") + " --output " + path("neg.bag"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "the range a bag's time stamps")) << r.err;
+  writeText(dir() / "late.csv", "time,dte\n5e9,1e-6\n5.000000001e9,2e-6\n");
+  r = run("convert", "--input " + path("late.csv") + " --output " + path("late.bag"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_FALSE(fs::exists(path("late.bag")));
+}
+
+// ---- Command lines, exit codes, outputs ----
+
+TEST_F(Hostile, EveryToolExitsWithADocumentedCodeOnBadInput) {
+  writeText(dir() / "empty.yaml", "");
+  writeText(dir() / "zero_dt.csv", "time,dte\n0,1\n0,1\n");
+  writeText(dir() / "notabag.bag", "#ROSBAG V2.0\ngarbage");
+  struct Case {
+    std::string tool, args;
+    int code;
+  };
+  const std::string sim = "--config " + kParams + " --output " + path("s.csv");
+  const Case cases[] = {
+      {"simulate", sim + " --chunk-size 0", 1},
+      {"simulate", sim + " --duration 1e300", 1},
+      {"simulate", sim + " --sample-rate nan", 1},
+      {"simulate", sim + " --no-such-flag", 1},
+      {"simulate", "--config " + path("empty.yaml") + " --output " + path("s.csv"), 1},
+      {"simulate", "--config " + kParams + " --output " + path("no_dir/x.bag"), 2},
+      {"convert", "--input " + path("good.csv") + " --output " + path("c.bag") + " --chunk-size 0",
+       1},
+      {"convert", "--input " + path("zero_dt.csv") + " --output " + path("c.bag"), 2},
+      {"convert", "--input " + path("notabag.bag") + " --output " + path("c.csv"), 2},
+      {"analyze", "--input " + path("good.csv") + " --wavelet --scales 100000000", 1},
+      {"analyze", "--input " + path("good.csv") + " --params " + path("empty.yaml"), 2},
+      {"analyze", "--input " + path("notabag.bag"), 2},
+  };
+  for (const Case& c : cases) {
+    const ToolRun r = run(c.tool, c.args);
+    EXPECT_EQ(r.code, c.code) << c.tool << " " << c.args << "\n" << r.err;
+    expectPrintableAndShort(r.err.substr(0, std::min<size_t>(r.err.size(), 2000)));
+  }
+}
+
+TEST_F(Hostile, AFailedBagWriteNamesTheTargetNotAPartialOfAPartial) {
+  const ToolRun r = run("simulate", "--config " + kParams + " --output " + path("no_dir/x.bag"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_FALSE(has(r.err, ".partial.partial")) << r.err;
+}
+
+TEST_F(Hostile, OutputsAreCommittedTogetherOrNotAtAll) {
+  const std::string json = path("result.json"), blocker = path("blocker");
+  writeText(json, "previous\n");
+  writeText(blocker, "a file where --csv-out wants a directory\n");
+  const ToolRun r = run("analyze", "--input " + path("good.csv") + " --params " + kParams +
+                                       " --output " + json + " --csv-out " + blocker);
+  EXPECT_EQ(r.code, 3) << r.err;
+  EXPECT_EQ(readText(json), "previous\n");  // not replaced: the CSV tables failed
+  EXPECT_FALSE(fs::exists(json + ".partial"));
+  // And the stage alone: a failed commit of the second file leaves no temporary behind.
+  {
+    gear_damping_id::OutputStage stage;
+    std::string e;
+    ASSERT_TRUE(gear_damping_id::writeFileAtomically(path("a.txt"), "a", &e, &stage)) << e;
+    EXPECT_FALSE(fs::exists(path("a.txt")));  // staged, not renamed yet
+    ASSERT_TRUE(stage.commit(&e)) << e;
+    EXPECT_EQ(readText(path("a.txt")), "a");
+  }
+  {
+    gear_damping_id::OutputStage stage;
+    std::string e;
+    ASSERT_TRUE(gear_damping_id::writeFileAtomically(path("b.txt"), "b", &e, &stage)) << e;
+  }  // destroyed without commit: an error path
+  EXPECT_FALSE(fs::exists(path("b.txt")));
+  EXPECT_FALSE(fs::exists(path("b.txt.partial")));
+}
+
+// Found by fuzz_stream (UndefinedBehaviorSanitizer: "2e+296 is outside the range of
+// representable values of type 'unsigned long'" in StreamAssembler::firstAnalysed). Disabled
+// until StreamAssembler refuses a rate whose analysed range overflows the index; it fails (a
+// sanitizer report) in the sanitizer build once enabled without that fix.
+TEST(StreamAssemblerHostile, DISABLED_HugeRateWithAnAnalysedRangeIsRejectedNotUndefined) {
+  gear_damping_id::StreamOptions o;
+  o.t_start = 2e-4;
+  gear_damping_id::StreamAssembler a(o);
+  std::vector<double> dte(10, 1e-6);
+  gear_damping_id::ChunkData c;
+  c.sample_rate = 1e300;
+  c.n = dte.size();
+  c.dte = dte.data();
+  EXPECT_EQ(a.push(c), gear_damping_id::ChunkStatus::kRejectedMalformed);
+}
+
+TEST(ToolMain, EscapingExceptionsBecomeTheInternalErrorCode) {
+  EXPECT_EQ(gear_sim::runToolMain("t", 5, [] { return 2; }), 2);
+  EXPECT_EQ(gear_sim::runToolMain("t", 5, []() -> int { throw std::bad_alloc(); }), 5);
+  EXPECT_EQ(gear_sim::runToolMain("t", 4, []() -> int { throw std::runtime_error("\x01"); }), 4);
+}
+
+TEST(MessageText, QuotingAndNumbers) {
+  EXPECT_EQ(gear_sim::quoteForMessage("a'b\n\x01"), "'a\\'b\\n\\x01'");
+  EXPECT_EQ(gear_sim::quoteForMessage(std::string(100, 'x'), 5), "'xxxxx'... (100 bytes)");
+  EXPECT_EQ(gear_sim::formatNumber(6e-6), "6e-06");
+  EXPECT_NE(gear_sim::formatNumber(6e-6), gear_sim::formatNumber(std::nextafter(6e-6, 1.0)));
+}
+
+}  // namespace
