@@ -49,6 +49,7 @@ ROS_PACKAGES = {
     "std_srvs": ["libstd-srvs-dev", "python3-std-srvs"],
     "diagnostic_msgs": ["python3-diagnostic-msgs"],
     "diagnostic_updater": ["libdiagnostic-updater-dev"],
+    "diagnostic_aggregator": ["libdiagnostic-aggregator-tools", "libdiagnostic-aggregator-dev"],
     "dynamic_reconfigure": ["libdynamic-reconfigure-config-init-mutex-dev",
                             "python3-dynamic-reconfigure"],
     "roslaunch": ["python3-roslaunch"],
