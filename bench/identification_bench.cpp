@@ -1,10 +1,10 @@
 // Identification throughput (issue 4 bar: >= 100 M samples/s single-threaded for the `known`
 // piecewise integral method without refinement; reported here, not asserted).
 //
-// Data: the DESIGN §3 default case (Table 1, sine load, load-dependent damping, 1 MHz) simulated
-// once for N samples with white noise at 40 dB SNR (the integral method's cost does not depend on
-// the noise; the refinement's iteration count does, and noisy data is what it is for), 1 ms
-// segments, automatic window. Simulation is outside the timed region.
+// Data: the docs/method.md §3 default case (Table 1, sine load, load-dependent damping, 1 MHz)
+// simulated once for N samples with white noise at 40 dB SNR (the integral method's cost does not
+// depend on the noise; the refinement's iteration count does, and noisy data is what it is for), 1
+// ms segments, automatic window. Simulation is outside the timed region.
 //
 // Allocation: the `identify()` benchmarks time the whole convenience call, so the allocation of
 // the IntegralMethod's scratch rows, its per-segment records and the result are INSIDE the timed

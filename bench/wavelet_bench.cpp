@@ -1,4 +1,4 @@
-// Google Benchmark suite of the Morlet CWT (DESIGN.md §7): throughput in (samples x scales)/s
+// Google Benchmark suite of the Morlet CWT (docs/method.md §7): throughput in (samples x scales)/s
 // of gear_damping_id::MorletCwt, and the FFTW lower bound it is measured against (one inverse
 // complex FFT of the same padded length per scale, same planner flags), of the grouped and
 // threaded MorletScalogram (BM_Scalogram/n/threads) and of the per-mode damping without a

@@ -31,7 +31,7 @@ GEAR_APT_PACKAGES=(
   libgtest-dev googletest libbenchmark-dev
   libeigen3-dev libfftw3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   python3-numpy python3-matplotlib python3-pywt python3-yaml
-  chromium clang libclang-rt-14-dev
+  chromium clang libclang-rt-14-dev clang-format
 )
 
 gear_install_deps() {

@@ -6,7 +6,7 @@
 #                            damping (config/table1.yaml), 1 MHz, 10 ms
 #   free_response.csv        the free decay of the same case (for the wavelet validation)
 #   result.json, tables/     analyze: legacy vs known formulation; piecewise, constant and
-#                            load-law damping models; wavelet validation (DESIGN §6 keys)
+#                            load-law damping models; wavelet validation (docs/method.md §6 keys)
 #   results.bag              the results as gear_damping messages (rqt_bag, rqt_plot)
 #   analysis.txt             the analysis tables as printed
 #   report/index.html        figures and tables (rosrun gear_damping report)

@@ -1,4 +1,4 @@
-// damping_id_node: live mesh-damping identification (DESIGN.md §4) on a stream of
+// damping_id_node: live mesh-damping identification (docs/method.md §4) on a stream of
 // gear_damping/SignalChunk messages.
 //
 // Topic names are relative (under the node's namespace; gear_sim_ros/topics.hpp):

@@ -1,4 +1,4 @@
-// wavelet_node: Morlet-wavelet damping validation (DESIGN.md §5) on a stream of
+// wavelet_node: Morlet-wavelet damping validation (docs/method.md §5) on a stream of
 // gear_damping/SignalChunk messages.
 //
 // Topic names are relative (under the node's namespace; gear_sim_ros/topics.hpp):
@@ -65,8 +65,8 @@ bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
       !p.getDouble("peak_prominence", &w.peak_prominence) ||
       !p.getDouble("min_separation_hz", &w.min_separation_hz, "Hz") ||
       !p.get("max_modes", &max_modes) || !p.getDouble("coi_factor", &w.coi_factor) ||
-      !p.getDouble("floor_factor", &w.floor_factor) ||
-      !p.getDouble("min_r2", &w.min_r2) || !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
+      !p.getDouble("floor_factor", &w.floor_factor) || !p.getDouble("min_r2", &w.min_r2) ||
+      !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
       !p.get("order_frequencies", &w.order_frequencies, "Hz") ||
       !p.get("mode_frequencies", &w.mode_frequencies, "Hz") ||
       !nodes::readIntakeParams(p, &o->intake)) {
@@ -114,8 +114,8 @@ class WaveletNode {
     updater_.setHardwareID("wavelet");
     updater_.add("stream", this, &WaveletNode::diagnoseStream);
     updater_.add("wavelet", this, &WaveletNode::diagnoseWavelet);
-    signal_sub_ =
-        nodes::subscribeChunks(nh, gear_sim_ros::kSignalTopic, o_.intake, &WaveletNode::onChunk, this);
+    signal_sub_ = nodes::subscribeChunks(nh, gear_sim_ros::kSignalTopic, o_.intake,
+                                         &WaveletNode::onChunk, this);
     damping_sub_ = nh.subscribe(gear_sim_ros::kDampingTopic, 1, &WaveletNode::onDamping, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::WaveletConfig>>(

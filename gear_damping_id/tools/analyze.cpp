@@ -7,12 +7,13 @@
 //                [--decay-region T0,T1]...]
 //     [--summary | --table] [--quiet]
 //
-// Identifies the mesh damping of a DTE record (CSV with the DESIGN §6 columns, or a bag of
-// gear_damping/SignalChunk messages) with the integral method (DESIGN §4) for every requested
-// formulation x damping model, re-simulates the modeled response of each, prints a table per
-// run on stdout and writes the DESIGN §6 JSON, CSV tables and a bag of results on request.
-// --wavelet adds the Morlet wavelet validation (DESIGN §5: modes, their damping ratios beside
-// the integral method's); without gear parameters (a `time,dte` record and no --params) the
+// Identifies the mesh damping of a DTE record (CSV with the docs/method.md §6 columns, or a bag of
+// gear_damping/SignalChunk messages) with the integral method (docs/method.md §4) for every
+// requested formulation x damping model, re-simulates the modeled response of each, prints a table
+// per run on stdout and writes the docs/method.md §6 JSON, CSV tables and a bag of results on
+// request.
+// --wavelet adds the Morlet wavelet validation (docs/method.md §5: modes, their damping ratios
+// beside the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
 // Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
 // Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
@@ -48,8 +49,8 @@
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
-#include "gear_sim/progress.hpp"
 #include "gear_sim/message_text.hpp"
+#include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
@@ -339,8 +340,9 @@ int run(int argc, char** argv) {
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
-  app.add_option("--input", input,
-                 "signal record: CSV with the DESIGN §6 columns, or a bag of SignalChunk messages")
+  app.add_option(
+         "--input", input,
+         "signal record: CSV with the docs/method.md §6 columns, or a bag of SignalChunk messages")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--params", params,
@@ -348,7 +350,7 @@ int run(int argc, char** argv) {
                  "default for a bag: its GearParams message; none: wavelet validation only")
       ->check(CLI::ExistingFile);
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
-  app.add_option("--output", output, "write the result JSON (DESIGN §6) to this file");
+  app.add_option("--output", output, "write the result JSON (docs/method.md §6) to this file");
   app.add_option("--formulation", formulations,
                  "known | greybox | paper | legacy (repeat for several; default known)")
       ->check(CLI::IsMember({"known", "greybox", "paper", "legacy"}))
@@ -366,15 +368,17 @@ int run(int argc, char** argv) {
   app.add_option("--refine", refine,
                  "output-error refinement: auto (when the data are noisy) | always | never")
       ->check(CLI::IsMember({"auto", "always", "never"}));
-  app.add_option("--stiffness-shape", stiffness_shape,
-                 "greybox stiffness: square (two levels switched by mesh_state) | fourier:H (mean + "
-                 "H harmonics of mesh_phase) | table:N (periodic piecewise linear over N nodes of "
-                 "mesh_phase); fourier/table are not refined (default square)")
+  app.add_option(
+         "--stiffness-shape", stiffness_shape,
+         "greybox stiffness: square (two levels switched by mesh_state) | fourier:H (mean + "
+         "H harmonics of mesh_phase) | table:N (periodic piecewise linear over N nodes of "
+         "mesh_phase); fourier/table are not refined (default square)")
       ->check([](const std::string& v) {
         gd::StiffnessShape s;
         return gd::parseStiffnessShape(v, &s) ? std::string()
                                               : "expected square, fourier:H (1..16) or table:N "
-                                                "(3..32), got '" + v + "'";
+                                                "(3..32), got '" +
+                                                    v + "'";
       });
   app.add_option("--max-condition", base.max_condition,
                  "largest condition number of an identifiable segment (default 1e6)");
@@ -390,7 +394,7 @@ int run(int argc, char** argv) {
   app.add_option("--bag-out", bag_out,
                  "write the results as gear_damping messages (DampingArray, ModeledResponse, "
                  "WaveletModes) to this bag");
-  app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (DESIGN §5)");
+  app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (docs/method.md §5)");
   app.add_option("--f-min", wopt.f_min,
                  "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
   app.add_option("--f-max", wopt.f_max, "wavelet: highest frequency [Hz] (default 0.4 fs)");
@@ -684,13 +688,14 @@ int run(int argc, char** argv) {
     double f_mesh = 0.0;
     if (wavelet_on_record && !streaming && table.mesh_phase.size() > 0 && wavelet_n > 1)
       f_mesh = (table.mesh_phase[first + static_cast<Eigen::Index>(wavelet_n) - 1] -
-                table.mesh_phase[first]) * wavelet_rate / static_cast<double>(wavelet_n - 1);
+                table.mesh_phase[first]) *
+               wavelet_rate / static_cast<double>(wavelet_n - 1);
     else if (identification && model.speed.profile == gear_sim::SpeedProfile::Constant)
       f_mesh = model.speed.pinion_rpm / 60.0 * model.gears.pinion.teeth;
     if (wopt.order_frequencies.empty())
-      wopt.order_frequencies = gd::gearOrderFrequencies(
-          f_mesh, identification ? model.gears.pinion.teeth : 0,
-          identification ? model.gears.gear.teeth : 0);
+      wopt.order_frequencies =
+          gd::gearOrderFrequencies(f_mesh, identification ? model.gears.pinion.teeth : 0,
+                                   identification ? model.gears.gear.teeth : 0);
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");

@@ -1,13 +1,13 @@
 // rosrun gear_damping convert --input IN.csv|IN.bag --output OUT.bag|OUT.csv
 //     [--params GEAR.yaml] [--topic T] [--chunk-size N]
 //
-// Converts a signal record between the CSV of DESIGN §6 and a bag of gear_damping/SignalChunk
-// messages (rig data from a DAQ becomes a bag and back). CSV -> bag: the sample rate comes from
-// the time column (uniform within 1e-6 relative), the gear parameters (--params) are written as
-// a GearParams message when given. Bag -> CSV: gaps are written as NaN rows (a warning counts
-// them). Exit codes: 0 success, 1 invalid command line, 2 invalid input (also beyond the limits
-// of README "Limits", or times a bag cannot stamp), 3 output not written, 4 internal error (an
-// exception, out of memory included; message on stderr).
+// Converts a signal record between the CSV of docs/method.md §6 and a bag of
+// gear_damping/SignalChunk messages (rig data from a DAQ becomes a bag and back). CSV -> bag: the
+// sample rate comes from the time column (uniform within 1e-6 relative), the gear parameters
+// (--params) are written as a GearParams message when given. Bag -> CSV: gaps are written as NaN
+// rows (a warning counts them). Exit codes: 0 success, 1 invalid command line, 2 invalid input
+// (also beyond the limits of README "Limits", or times a bag cannot stamp), 3 output not written, 4
+// internal error (an exception, out of memory included; message on stderr).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
@@ -36,7 +36,7 @@ int fail(int code, const std::string& message) {
 }  // namespace
 
 int run(int argc, char** argv) {
-  CLI::App app{"Convert a gear signal record between CSV (DESIGN §6 columns) and a bag."};
+  CLI::App app{"Convert a gear signal record between CSV (docs/method.md §6 columns) and a bag."};
   std::string input, output, params, topic;
   long chunk_size = 1000;
   app.add_option("--input", input, "IN.csv or IN.bag")->required()->check(CLI::ExistingFile);

@@ -2,8 +2,8 @@
 //     [--noise-snr DB] [--seed N] [--chunk-size N] --output OUT.csv|OUT.bag
 //
 // Simulates the gear pair described by FILE.yaml (README "Simulator configuration") and writes
-// the DESIGN §6 CSV (with --free-response: the free decay of the same case, see below), or a bag
-// with gear_damping/SignalChunk messages on /gear/signal and the gear parameters
+// the docs/method.md §6 CSV (with --free-response: the free decay of the same case, see below), or
+// a bag with gear_damping/SignalChunk messages on /gear/signal and the gear parameters
 // (gear_damping/GearParams) on /gear/params. Exit codes: 0 success, 1 invalid input (message on
 // stderr naming the key/option; also a bad command line and a run beyond the size limits of README
 // "Limits"), 2 output could not be written, 3 internal error (an exception, out of memory included;
@@ -16,8 +16,8 @@
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
-#include "gear_sim/progress.hpp"
 #include "gear_sim/message_text.hpp"
+#include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim/tool_main.hpp"
@@ -41,7 +41,8 @@ int run(int argc, char** argv) {
   app.add_option("--config", config_path, "YAML configuration (see config/table1.yaml)")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--output", output, "output file: .csv (DESIGN §6 columns) or .bag")->required();
+  app.add_option("--output", output, "output file: .csv (docs/method.md §6 columns) or .bag")
+      ->required();
   app.add_option("--duration", duration, "override simulation.duration [s]");
   app.add_option("--sample-rate", sample_rate, "override simulation.sample_rate [Hz]");
   app.add_option("--noise-snr", snr, "override simulation.noise_snr_db [dB] (inf = no noise)");

@@ -64,7 +64,9 @@ class AnalyzeBag : public ::testing::Test {
   static fs::path intactBag() {
     return writeBag("intact.bag", [](size_t, gear_damping::SignalChunk*) { return true; });
   }
-  static ToolRun analyze(const std::string& args) { return gear_test::runTool("analyze", args, dir()); }
+  static ToolRun analyze(const std::string& args) {
+    return gear_test::runTool("analyze", args, dir());
+  }
 
   static gear_test::ScratchDir* scratch_;
   static gear_sim::SimConfig config_;
@@ -77,17 +79,20 @@ gear_sim::SignalTable AnalyzeBag::table_;
 TEST_F(AnalyzeBag, BagAndCsvInputsGiveIdenticalResults) {
   const fs::path bag = intactBag(), csv = dir() / "roundtrip.csv", back = dir() / "back.bag";
   // The converter both ways: bag -> CSV -> bag.
-  ToolRun r = gear_test::runTool("convert", "--input " + bag.string() + " --output " + csv.string(), dir());
+  ToolRun r =
+      gear_test::runTool("convert", "--input " + bag.string() + " --output " + csv.string(), dir());
   ASSERT_EQ(r.code, 0) << r.err;
-  r = gear_test::runTool("convert", "--input " + csv.string() + " --output " + back.string() +
-                                        " --params " + kParams, dir());
+  r = gear_test::runTool(
+      "convert", "--input " + csv.string() + " --output " + back.string() + " --params " + kParams,
+      dir());
   ASSERT_EQ(r.code, 0) << r.err;
   const std::string models = " --model piecewise --model constant --model load_law";
   const fs::path jb = dir() / "bag.json", jc = dir() / "csv.json", jbb = dir() / "back.json";
   // Parameters from the bag's GearParams message for the bags, from the YAML for the CSV.
   r = analyze("--input " + bag.string() + " --output " + jb.string() + models);
   ASSERT_EQ(r.code, 0) << r.err;
-  r = analyze("--input " + csv.string() + " --params " + kParams + " --output " + jc.string() + models);
+  r = analyze("--input " + csv.string() + " --params " + kParams + " --output " + jc.string() +
+              models);
   ASSERT_EQ(r.code, 0) << r.err;
   r = analyze("--input " + back.string() + " --output " + jbb.string() + models);
   ASSERT_EQ(r.code, 0) << r.err;
@@ -126,7 +131,8 @@ TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
 
 TEST_F(AnalyzeBag, AGapOrANanChunkMakesOnlyItsSegmentNotIdentifiable) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  const fs::path gap = writeBag("gap.bag", [](size_t k, gear_damping::SignalChunk*) { return k != 3; });
+  const fs::path gap =
+      writeBag("gap.bag", [](size_t k, gear_damping::SignalChunk*) { return k != 3; });
   const fs::path bad = writeBag("nan.bag", [&](size_t k, gear_damping::SignalChunk* c) {
     if (k == 5) c->dte[17] = nan;
     return true;
@@ -176,8 +182,10 @@ TEST_F(AnalyzeBag, RejectsBadBagsWithAOneLineMessageAndExitCode) {
     c->sample_rate = 40e3;  // 4 samples per natural period (about 10 kHz)
     return true;
   });
-  const fs::path noparams = writeBag("noparams.bag", [](size_t, gear_damping::SignalChunk*) { return true; }, false);
-  const fs::path shortrec = writeBag("short.bag", [](size_t k, gear_damping::SignalChunk*) { return k == 0; });
+  const fs::path noparams = writeBag(
+      "noparams.bag", [](size_t, gear_damping::SignalChunk*) { return true; }, false);
+  const fs::path shortrec =
+      writeBag("short.bag", [](size_t k, gear_damping::SignalChunk*) { return k == 0; });
   {  // two signal topics
     rosbag::Bag b((dir() / "two.bag").string(), rosbag::bagmode::Write);
     gear_damping::SignalChunk c;

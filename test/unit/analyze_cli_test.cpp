@@ -1,6 +1,6 @@
 // The `analyze` tool end to end: a simulated record through the real executable (exit codes,
-// messages naming the problem, the DESIGN §6 JSON keys, agreement with the core library), and
-// every malformed-input case of issue 4 with its documented exit code.
+// messages naming the problem, the docs/method.md §6 JSON keys, agreement with the core library),
+// and every malformed-input case of issue 4 with its documented exit code.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -34,7 +34,8 @@ ToolRun analyze(const std::string& args, const fs::path& dir) {
 
 // Replaces line `line` (1-based) of `text` with `with` (or deletes it when `with` is empty and
 // `erase` is set).
-std::string editLine(const std::string& text, int line, const std::string& with, bool erase = false) {
+std::string editLine(const std::string& text, int line, const std::string& with,
+                     bool erase = false) {
   std::istringstream in(text);
   std::ostringstream out;
   std::string l;
@@ -75,9 +76,9 @@ gear_sim::SignalTable AnalyzeTool::table_;
 TEST_F(AnalyzeTool, WritesTheDesignJsonAndAgreesWithTheLibrary) {
   const fs::path json_path = dir_ / "result.json", tables = dir_ / "tables";
   const ToolRun r = analyze("--input " + csv_.string() + " --params " + kParams + " --output " +
-                            json_path.string() + " --model piecewise --model constant " +
-                            "--model load_law --csv-out " + tables.string(),
-                        dir_);
+                                json_path.string() + " --model piecewise --model constant " +
+                                "--model load_law --csv-out " + tables.string(),
+                            dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("known formulation, piecewise model"), std::string::npos) << r.out;
   const auto j = nlohmann::json::parse(readText(json_path));
@@ -118,10 +119,10 @@ TEST_F(AnalyzeTool, ReportsANonFiniteSegmentAsNotIdentifiableAndKeepsTheOthers) 
   for (int i = 1; i <= 1502; ++i) std::getline(in, l);
   const auto comma = l.find(',');
   const fs::path bad = dir_ / "nan.csv", json_path = dir_ / "nan.json";
-  writeText(bad, editLine(text_, 1502, l.substr(0, comma) + ",nan" + l.substr(l.find(',', comma + 1))));
-  const ToolRun r = analyze("--input " + bad.string() + " --params " + kParams + " --output " +
-                            json_path.string(),
-                        dir_);
+  writeText(bad,
+            editLine(text_, 1502, l.substr(0, comma) + ",nan" + l.substr(l.find(',', comma + 1))));
+  const ToolRun r = analyze(
+      "--input " + bad.string() + " --params " + kParams + " --output " + json_path.string(), dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   const auto j = nlohmann::json::parse(readText(json_path));
   const auto& segs = j.at("identification").at("segments");
@@ -149,9 +150,10 @@ TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
   const std::vector<Case> cases = {
       {"empty", "", "", 2, "empty"},
       {"header only", header + "\n", "", 2, "row"},
-      {"malformed number", editLine(text_, 5, "4e-06,abc" + row2.substr(row2.find(',', 2))), "",
-       2, "line 5"},
-      {"missing column", [&] {
+      {"malformed number", editLine(text_, 5, "4e-06,abc" + row2.substr(row2.find(',', 2))), "", 2,
+       "line 5"},
+      {"missing column",
+       [&] {
          std::ostringstream o;
          std::istringstream s(text_);
          std::string l;
@@ -160,12 +162,14 @@ TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
        }(),
        "", 2, "stiffness"},
       {"dropped sample", editLine(text_, 100, "", true), "", 2, "line 100"},
-      {"repeated time", editLine(text_, 101, [&] {
-         std::istringstream s(text_);
-         std::string l;
-         for (int i = 1; i <= 100; ++i) std::getline(s, l);
-         return l;
-       }()),
+      {"repeated time",
+       editLine(text_, 101,
+                [&] {
+                  std::istringstream s(text_);
+                  std::string l;
+                  for (int i = 1; i <= 100; ++i) std::getline(s, l);
+                  return l;
+                }()),
        "", 2, "line 101"},
       {"negative segment", text_, " --segment -1", 1, "segment"},
       {"unknown formulation", text_, " --formulation quantum", 1, "formulation"},
@@ -174,8 +178,8 @@ TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
   for (const auto& c : cases) {
     const fs::path f = dir_ / "bad.csv";
     writeText(f, c.file_text);
-    const ToolRun r = analyze("--input " + f.string() + p + c.args + " --output " + out_json.string(),
-                          dir_);
+    const ToolRun r =
+        analyze("--input " + f.string() + p + c.args + " --output " + out_json.string(), dir_);
     EXPECT_EQ(r.code, c.code) << c.name << ": " << r.err;
     EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << ": " << r.err;
     EXPECT_FALSE(fs::exists(out_json)) << c.name << ": an output was written";
@@ -184,9 +188,8 @@ TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
 
 TEST_F(AnalyzeTool, LeavesNoPartialOutputWhenTheOutputCannotBeWritten) {
   const fs::path out_json = dir_ / "no_such_dir" / "result.json";
-  const ToolRun r = analyze("--input " + csv_.string() + " --params " + kParams + " --output " +
-                            out_json.string(),
-                        dir_);
+  const ToolRun r = analyze(
+      "--input " + csv_.string() + " --params " + kParams + " --output " + out_json.string(), dir_);
   EXPECT_EQ(r.code, 3) << r.err;
   EXPECT_NE(r.err.find("cannot write"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out_json));
@@ -196,13 +199,14 @@ TEST_F(AnalyzeTool, LeavesNoPartialOutputWhenTheOutputCannotBeWritten) {
 
 namespace {
 
-// `analyze --wavelet`: wavelet.modes[] with the DESIGN §6 keys, alone on a time,dte record
+// `analyze --wavelet`: wavelet.modes[] with the docs/method.md §6 keys, alone on a time,dte record
 // without gear parameters, and beside the identification on the free decay of the same case.
 TEST(AnalyzeWavelet, RunsAloneOnTimeAndDteAndBesideTheIdentification) {
   gear_test::ScratchDir dir("analyze_wavelet_test");
   const fs::path free_csv = dir.path() / "free.csv", forced = dir.path() / "forced.csv";
-  ToolRun r = gear_test::runTool("simulate", "--config " + kParams + " --free-response --output " +
-                                                 free_csv.string(), dir.path());
+  ToolRun r = gear_test::runTool(
+      "simulate", "--config " + kParams + " --free-response --output " + free_csv.string(),
+      dir.path());
   ASSERT_EQ(r.code, 0) << r.err;
   r = gear_test::runTool("simulate", "--config " + kParams + " --output " + forced.string(),
                          dir.path());
@@ -236,8 +240,8 @@ TEST(AnalyzeWavelet, RunsAloneOnTimeAndDteAndBesideTheIdentification) {
   EXPECT_LT(m.at("damping_ratio").get<double>(), 0.065);
 
   r = analyze("--input " + forced.string() + " --params " + kParams + " --prominence 0.05" +
-                  " --wavelet-input " + free_csv.string() + " --output " + j2.string() + " --csv-out " +
-                  (dir.path() / "tables").string(),
+                  " --wavelet-input " + free_csv.string() + " --output " + j2.string() +
+                  " --csv-out " + (dir.path() / "tables").string(),
               dir.path());
   ASSERT_EQ(r.code, 0) << r.err;
   const auto both = nlohmann::json::parse(readText(j2));

@@ -6,7 +6,7 @@
 
 namespace {
 
-// The paper (and DESIGN.md §3) quote Me ~ 0.0813 kg and a natural frequency ~ 10 kHz for
+// The paper (and docs/method.md §3) quote Me ~ 0.0813 kg and a natural frequency ~ 10 kHz for
 // Table 1; those are rounded figures, so they bound the exact formula to their last digit.
 constexpr double kPaperMeRounding = 0.0001;  // [kg] half a unit in the 4th decimal, with margin
 

@@ -14,7 +14,7 @@ namespace {
 
 using namespace gear_id_test;
 
-// Issue 4 bars (DESIGN §7), noise-free.
+// Issue 4 bars (docs/method.md §7), noise-free.
 constexpr double kKnownCTol = 5e-4;    // known piecewise C within 0.05 %
 constexpr double kGreyboxCTol = 1e-3;  // greybox C within 0.1 %
 constexpr double kGreyboxKTol = 1e-4;  // greybox stiffness levels within 0.01 %
@@ -67,7 +67,7 @@ TEST(IdentificationAccuracy, KnownPiecewiseRecoversAlignedPiecewiseDampingWithin
 }
 
 // Without the output-error refinement: the switch-exact cubic quadrature alone meets the bar
-// (a plain trapezoid across the switches would bias C by 10-50 %, DESIGN §4).
+// (a plain trapezoid across the switches would bias C by 10-50 %, docs/method.md §4).
 TEST(IdentificationAccuracy, IntegralMethodAloneIsWithin005PercentNoiseFree) {
   expectPiecewiseAccuracy(piecewiseDefault(), Formulation::Known,
                           IdentificationOptions::Refine::Never, kKnownCTol,

@@ -13,7 +13,7 @@ namespace {
 
 using namespace gear_id_test;
 
-// Issue 4 / DESIGN §7 bars on the median segment error.
+// Issue 4 / docs/method.md §7 bars on the median segment error.
 constexpr double kMedianTol40dB = 5e-3;  // 0.5 %
 constexpr double kMedianTol20dB = 3e-2;  // 3 %
 constexpr int kSeeds = 10;

@@ -178,7 +178,7 @@ TEST(CubicRules, ConvergeWithOrderFourWhenTheIntervalIsSplitAtTheSwitch) {
 
 // Holding the value over the whole interval that contains the switch makes an error of
 // (fraction of an interval) x (jump) x h: first order, orders of magnitude above the split
-// rule's at the identification's resolution. This is what DESIGN §4 warns about.
+// rule's at the identification's resolution. This is what docs/method.md §4 warns about.
 TEST(CubicRules, SampleAndHoldAcrossTheSwitchIsFirstOrderAndFarWorseThanTheSplit) {
   // A factor 100 is conservative: at n = 64 the split error is ~h^4 ~ 1e-8 of the integral,
   // the held one ~h ~ 1e-2 times the switch's fraction of an interval.

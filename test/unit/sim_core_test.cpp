@@ -113,7 +113,7 @@ TEST(Simulator, FastPathAgreesWithTheGenericIntegrator) {
   EXPECT_LT((y - t.dte).cwiseAbs().maxCoeff() / t.dte.cwiseAbs().maxCoeff(), kRelTol);
 }
 
-// The sampled columns hold "from each sample's instant on" (DESIGN §6), computed here from
+// The sampled columns hold "from each sample's instant on" (docs/method.md §6), computed here from
 // their definitions, independently of the simulator's piece-wise fill: square wave eq. (2)
 // with switches between samples (2950 rpm), and the default load-dependent damping
 // xi = 0.05 (1 + 0.6 (T1/100 - 1)) (the 100 Hz sine over 10 ms has mean exactly 100 N*m).

@@ -1,4 +1,4 @@
-// gear_sim_io: YAML configuration and the DESIGN §6 CSV.
+// gear_sim_io: YAML configuration and the docs/method.md §6 CSV.
 #include <gtest/gtest.h>
 
 #include <cstdio>

@@ -1,5 +1,5 @@
-// The wavelet validation on the simulator's default gear case (config/table1.yaml, DESIGN §3):
-// the Morlet-envelope damping ratio at the natural frequency against the simulator's true
+// The wavelet validation on the simulator's default gear case (config/table1.yaml, docs/method.md
+// §3): the Morlet-envelope damping ratio at the natural frequency against the simulator's true
 // ratio C/(2*omega0), and the table of modes. See docs/wavelet.md ("The default gear case").
 //
 // What the wavelet can see. The DTE of the default case is a forced, parametrically excited

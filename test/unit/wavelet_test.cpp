@@ -35,10 +35,10 @@ constexpr double kRidgeFrequencyTol = 1e-3;
 constexpr double kMeanPowerTol = 1e-2;
 // Damping ratio, clean single mode: the brief's bar (measured: < 1e-4 relative).
 constexpr double kSingleModeXiTol = 0.01;
-// Clean multi-mode free decay: DESIGN §7 / brief bars for xi and frequency.
+// Clean multi-mode free decay: docs/method.md §7 / brief bars for xi and frequency.
 constexpr double kMultiModeXiTol = 0.02;
 constexpr double kModeFrequencyTol = 2e-3;
-// 30 dB SNR, median over nine seeds: DESIGN §7 bar (measured: < 1 %).
+// 30 dB SNR, median over nine seeds: docs/method.md §7 bar (measured: < 1 %).
 constexpr double kNoisyXiTol = 0.05;
 // White-noise estimate from the wavelet row at 0.45 fs: Rayleigh median of ~1e4 correlated
 // samples; 15 % leaves room for the scatter of a single record.

@@ -1,4 +1,4 @@
-// Conversions between the three ways the package reports mesh damping (DESIGN.md §3):
+// Conversions between the three ways the package reports mesh damping (docs/method.md §3):
 //   C  [1/s]     normalised damping of eq. (4):  y'' + C y' + K y = F
 //   c  [N*s/m]   physical mesh damping of eq. (3): c = C * Me
 //   xi [-]       damping ratio xi = C / (2*omega0), omega0 = sqrt(mean K) [rad/s] (eqs. 18-19)

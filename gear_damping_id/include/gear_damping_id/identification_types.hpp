@@ -1,4 +1,4 @@
-// Options and results of the integral-method damping identification (DESIGN.md §4).
+// Options and results of the integral-method damping identification (docs/method.md §4).
 // Shared by the integral method (integral_method.hpp), the modeled response / output-error
 // refinement and the `analyze` tool and nodes. No ROS; SI units.
 #pragma once
@@ -12,9 +12,10 @@
 
 namespace gear_damping_id {
 
-/// What is known about stiffness and forcing (DESIGN §4):
+/// What is known about stiffness and forcing (docs/method.md §4):
 /// - Known:   K(t), F(t) known series; unknowns per window y_T, alpha; per segment C.
-/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per segment.
+/// - Greybox: F known; K = K0 + dK*s(t) with mesh state s in {0,1} known, K0, dK unknown per
+/// segment.
 /// - Paper:   eqs. (11)-(16) as printed: K_i and F_i unknown constants per segment.
 /// - Legacy:  the earlier constant-load formulation (forcing = its mean, one unknown constant
 ///            stiffness), kept to reproduce the paper's §4.1 failure.
@@ -114,28 +115,30 @@ struct SegmentEstimate {
   double C_std = kNaN;    ///< [1/s] standard error
   double c = kNaN;        ///< [N*s/m] = C * Me
   double xi = kNaN;       ///< [-] = C / (2*omega0)
-  double k_min = kNaN;    ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
-  double k_max = kNaN;    ///< [N/m]
+  double k_min =
+      kNaN;  ///< [N/m] greybox (and paper/legacy: the identified constant K*Me in k_min = k_max)
+  double k_max = kNaN;                        ///< [N/m]
   double k_min_std = kNaN, k_max_std = kNaN;  ///< [N/m] standard errors (greybox)
   /// Greybox fourier/table shapes: the identified stiffness unknowns [N/m] in the order of
   /// StiffnessShape (fourier: a0, a1, b1, a2, b2, ...; table: the node values) and their
   /// standard errors; k_min/k_max are then the curve's extremes over a mesh cycle (no std).
   std::vector<double> stiffness_curve, stiffness_curve_std;
-  long samples = 0;       ///< samples used
-  int windows = 0;        ///< integration windows in the segment
+  long samples = 0;  ///< samples used
+  int windows = 0;   ///< integration windows in the segment
   bool identifiable = false;
-  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input", "rank deficient", ...)
-  double forcing = kNaN;      ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
+  std::string reason;     ///< why not identifiable ("no motion", "too few samples", "NaN in input",
+                          ///< "rank deficient", ...)
+  double forcing = kNaN;  ///< [m/s^2] identified constant forcing F_i (paper) / Fbar (legacy)
   double mean_torque = kNaN;  ///< [N*m] time-mean T1 over the segment (when known)
   double condition = kNaN;    ///< 2-norm condition number of the equilibrated problem
   bool refined = false;       ///< C (and k levels) from the output-error refinement
   /// The integral method's own estimate and standard error, kept when `refined` replaces C.
   double C_integral = kNaN, C_integral_std = kNaN;  ///< [1/s]
   /// Quality flags (quality_flags.hpp): what the segment's data and fit look like.
-  double noise_std = kNaN;     ///< [m] model-free noise estimate: RMS third difference / sqrt(20)
-  double signal_std = kNaN;    ///< [m] standard deviation of the DTE about its segment mean
-  double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations at the estimate
-  QualityWarnings warnings;    ///< empty when the estimate is clean (codes: quality_flags.hpp)
+  double noise_std = kNaN;       ///< [m] model-free noise estimate: RMS third difference / sqrt(20)
+  double signal_std = kNaN;      ///< [m] standard deviation of the DTE about its segment mean
+  double residual_rms = kNaN;    ///< [m] RMS residual of the integral equations at the estimate
+  QualityWarnings warnings;      ///< empty when the estimate is clean (codes: quality_flags.hpp)
   ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
 };
 
@@ -170,8 +173,8 @@ struct IdentificationResult {
   std::vector<WindowEstimate> windows;
   /// "integral" or "output_error" (the estimator whose numbers are reported).
   std::string estimator = "integral";
-  int iterations = 0;                 ///< Gauss-Newton iterations of the refinement
-  double noise_std = kNaN;            ///< [m] residual standard deviation of the refinement
+  int iterations = 0;       ///< Gauss-Newton iterations of the refinement
+  double noise_std = kNaN;  ///< [m] residual standard deviation of the refinement
   /// Autoregressive model of the refinement's residual fitted over all refined segments:
   /// e_n = r_n + sum_k noise_ar[k-1] r_{n-k} is white with std noise_innovation_std; empty for
   /// white noise. The model each segment was prewhitened with is in its `residuals.ar`.

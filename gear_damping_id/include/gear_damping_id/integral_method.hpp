@@ -1,4 +1,4 @@
-// The generalised integral method of DESIGN.md §4 (paper §3): least-squares identification of
+// The generalised integral method of docs/method.md §4 (paper §3): least-squares identification of
 // the damping of
 //
 //     y'' + C(t) y' + K(t) y = F(t)                                            (eq. 4)
@@ -40,7 +40,8 @@
 // Quadrature (see quadrature.hpp): the samples are interpolated by local cubics and integrated
 // exactly; where K or s changes between two samples the interval is split at the switch instant
 // (from `mesh_phase` when given; otherwise the new value holds from the sample where it is first
-// seen, DESIGN §6) and each part gets its own K. This keeps the method fourth-order accurate.
+// seen, docs/method.md §6) and each part gets its own K. This keeps the method fourth-order
+// accurate.
 //
 // Solution (numerically sound without forming the full design matrix): within each window the
 // nuisance columns 1 and (t - T) are removed exactly by projecting every data column onto the
@@ -173,7 +174,7 @@ class IntegralMethod {
   struct WindowRecord {
     double t_start = 0, t_end = 0, dt = 0;  // [s]
     Eigen::Index rows = 0;
-    double torque_T = kNaN;           // T1 at the window start (load law)
+    double torque_T = kNaN;                               // T1 at the window start (load law)
     std::array<double, kMaxColumns + 1> mean{}, slope{};  // per column and b: mean, p1 coeff.
   };
   struct SegmentRecord {
@@ -182,9 +183,9 @@ class IntegralMethod {
     long rows = 0;
     int windows = 0;
     double mean_torque = kNaN;
-    double mean_state = kNaN;  // time-mean of the mesh state (greybox)
-    double k_integral = 0.0;   // integral of K over the segment [1/s] (known: for omega0)
-    double duration = 0.0;     // [s]
+    double mean_state = kNaN;        // time-mean of the mesh state (greybox)
+    double k_integral = 0.0;         // integral of K over the segment [1/s] (known: for omega0)
+    double duration = 0.0;           // [s]
     std::vector<double> basis_mean;  // time-means of the shape's basis functions (greybox)
     std::vector<WindowRecord> window_records;
   };
@@ -203,15 +204,15 @@ class IntegralMethod {
   int n_local_ = 0, n_shared_ = 0;
   std::vector<Column> columns_;  // locals first, then shared
   std::vector<SegmentRecord> segments_;
-  Eigen::MatrixXd rows_;             // one window's rows (scratch, reused)
-  Eigen::MatrixXd inc_;              // one window's per-interval increments (scratch)
+  Eigen::MatrixXd rows_;                       // one window's rows (scratch, reused)
+  Eigen::MatrixXd inc_;                        // one window's per-interval increments (scratch)
   std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
   std::vector<double> switch_theta_;           // their split fractions
-  bool shape_ = false;          // greybox fourier/table stiffness shape
-  int n_basis_ = 0;             // its unknowns
-  Eigen::MatrixXd basis_;       // current segment: basis values, one column per sample
-  Eigen::MatrixXd basis_inc_;   // one window's per-interval basis increments (scratch)
-  double legacy_fbar_ = kNaN;        // [m/s^2]
+  bool shape_ = false;                         // greybox fourier/table stiffness shape
+  int n_basis_ = 0;                            // its unknowns
+  Eigen::MatrixXd basis_;                 // current segment: basis values, one column per sample
+  Eigen::MatrixXd basis_inc_;             // one window's per-interval basis increments (scratch)
+  double legacy_fbar_ = kNaN;             // [m/s^2]
   Eigen::Index seg_lo_ = 0, seg_hi_ = 0;  // current segment's samples (quadrature stencils)
   mutable long unlocated_switches_ = 0;
 };

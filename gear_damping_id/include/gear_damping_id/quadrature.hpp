@@ -1,4 +1,4 @@
-// Quadrature of sampled signals for the integral method (DESIGN.md §4): local four-point cubic
+// Quadrature of sampled signals for the integral method (docs/method.md §4): local four-point cubic
 // (Lagrange) interpolation of the samples, integrated exactly over one sample interval or over
 // a part of it. Splitting an interval at a stiffness switch instant and integrating each part
 // with its own stiffness keeps the quadrature fourth-order accurate where a plain trapezoid across

@@ -1,4 +1,4 @@
-// Analysis outputs of the `analyze` tool (DESIGN.md §6): the result JSON, the readable segment
+// Analysis outputs of the `analyze` tool (docs/method.md §6): the result JSON, the readable segment
 // table and the CSV tables. No ROS (nlohmann::json only), so the tests and the tools share it.
 #pragma once
 
@@ -44,15 +44,16 @@ class OutputStage {
   std::vector<std::pair<std::string, std::string>> files_;  // (tmp, target)
 };
 
-/// JSON of one segment estimate (DESIGN §6 keys: t_start, t_end, C, C_std, c, xi, k_min, k_max,
-/// plus identifiable/reason/samples/windows/condition/refined). Non-finite numbers become null.
+/// JSON of one segment estimate (docs/method.md §6 keys: t_start, t_end, C, C_std, c, xi, k_min,
+/// k_max, plus identifiable/reason/samples/windows/condition/refined). Non-finite numbers become
+/// null.
 nlohmann::json segmentJson(const SegmentEstimate& s, Formulation f);
 
 /// JSON of one run: formulation, model, options, segments[], constant, load_law, warnings and
 /// response {nrmse, fit_percent}.
 nlohmann::json runJson(const AnalysisRun& run);
 
-/// The DESIGN §6 document: `identification` and `response` from the primary (first) run,
+/// The docs/method.md §6 document: `identification` and `response` from the primary (first) run,
 /// with the `constant` and `load_law` blocks taken from whichever run computed them, and
 /// `runs[]` with every run in full. `input` describes the analysed record.
 nlohmann::json analysisJson(const std::vector<AnalysisRun>& runs, const nlohmann::json& input);
@@ -67,7 +68,7 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs);
 bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
                  OutputStage* stage = nullptr);
 
-/// JSON of a wavelet validation (DESIGN §6 `wavelet`): modes[] with frequency_hz,
+/// JSON of a wavelet validation (docs/method.md §6 `wavelet`): modes[] with frequency_hz,
 /// damping_ratio, r2, t_start, t_end, sigma, spectrum_frequency_hz, omega0,
 /// integral_damping_ratio, warning; plus warnings, noise_std and the scalogram's omega0.
 nlohmann::json waveletJson(const WaveletResult& w);

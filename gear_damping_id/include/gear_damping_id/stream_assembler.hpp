@@ -1,6 +1,6 @@
-// Assembly of a live stream of sample chunks into damping segments (DESIGN.md §6 "Topics", issue
-// 6). No ROS: the nodes convert gear_damping/SignalChunk messages into ChunkData and feed them
-// here; everything about sequencing lives in this class so it is unit-tested without roscore.
+// Assembly of a live stream of sample chunks into damping segments (docs/method.md §6 "Topics",
+// issue 6). No ROS: the nodes convert gear_damping/SignalChunk messages into ChunkData and feed
+// them here; everything about sequencing lives in this class so it is unit-tested without roscore.
 //
 // Index and time convention: sample g of the stream (g = first_index + i of a chunk) is at
 // t = g / sample_rate [s] (t = 0 at the start of the record), as in SignalChunk.

@@ -239,7 +239,7 @@ WaveletResult validateWavelet(const std::vector<double>& y, double sample_rate,
                               const WaveletOptions& options = WaveletOptions());
 
 /// Integral-method damping ratio xi = C / (2 * omega0) [-] for C = c / Me [1/s] and
-/// omega0 = sqrt(mean(K)) = sqrt(k_mean / Me) [rad/s] (DESIGN.md §4 convention), shown beside
+/// omega0 = sqrt(mean(K)) = sqrt(k_mean / Me) [rad/s] (docs/method.md §4 convention), shown beside
 /// the wavelet's xi. NaN unless C is finite and omega0 finite and > 0.
 double integralDampingRatio(double C_per_s, double omega0_rad_s);
 

@@ -8,19 +8,26 @@ namespace gear_damping_id {
 
 std::string toString(Formulation f) {
   switch (f) {
-    case Formulation::Known: return "known";
-    case Formulation::Greybox: return "greybox";
-    case Formulation::Paper: return "paper";
-    case Formulation::Legacy: return "legacy";
+    case Formulation::Known:
+      return "known";
+    case Formulation::Greybox:
+      return "greybox";
+    case Formulation::Paper:
+      return "paper";
+    case Formulation::Legacy:
+      return "legacy";
   }
   return "?";
 }
 
 std::string toString(DampingModel m) {
   switch (m) {
-    case DampingModel::Piecewise: return "piecewise";
-    case DampingModel::Constant: return "constant";
-    case DampingModel::LoadLaw: return "load_law";
+    case DampingModel::Piecewise:
+      return "piecewise";
+    case DampingModel::Constant:
+      return "constant";
+    case DampingModel::LoadLaw:
+      return "load_law";
   }
   return "?";
 }
@@ -48,9 +55,12 @@ bool parseDampingModel(const std::string& s, DampingModel* out) {
 
 int StiffnessShape::unknowns() const {
   switch (kind) {
-    case Kind::Square: return 2;
-    case Kind::Fourier: return 2 * n + 1;
-    case Kind::Table: return n;
+    case Kind::Square:
+      return 2;
+    case Kind::Fourier:
+      return 2 * n + 1;
+    case Kind::Table:
+      return n;
   }
   return 0;
 }
@@ -77,9 +87,12 @@ void StiffnessShape::basis(double u, double* out) const {
 
 std::string toString(const StiffnessShape& s) {
   switch (s.kind) {
-    case StiffnessShape::Kind::Square: return "square";
-    case StiffnessShape::Kind::Fourier: return "fourier:" + std::to_string(s.n);
-    case StiffnessShape::Kind::Table: return "table:" + std::to_string(s.n);
+    case StiffnessShape::Kind::Square:
+      return "square";
+    case StiffnessShape::Kind::Fourier:
+      return "fourier:" + std::to_string(s.n);
+    case StiffnessShape::Kind::Table:
+      return "table:" + std::to_string(s.n);
   }
   return "?";
 }
@@ -92,8 +105,7 @@ bool parseStiffnessShape(const std::string& s, StiffnessShape* out) {
   const auto colon = s.find(':');
   if (colon == std::string::npos) return false;
   const std::string kind = s.substr(0, colon), num = s.substr(colon + 1);
-  if (num.empty() || num.size() > 3 ||
-      num.find_first_not_of("0123456789") != std::string::npos) {
+  if (num.empty() || num.size() > 3 || num.find_first_not_of("0123456789") != std::string::npos) {
     return false;
   }
   const int n = std::stoi(num);
@@ -127,8 +139,7 @@ std::string IdentificationOptions::validate() const {
     e << "refine_threshold = " << refine_threshold << ": must be >= 0";
   } else if (max_iterations < 1 || max_iterations > 1000) {
     e << "max_iterations = " << max_iterations << ": must be in [1, 1000]";
-  } else if (StiffnessShape parsed;
-             !parseStiffnessShape(toString(stiffness_shape), &parsed)) {
+  } else if (StiffnessShape parsed; !parseStiffnessShape(toString(stiffness_shape), &parsed)) {
     e << "stiffness_shape = " << toString(stiffness_shape)
       << ": must be square, fourier:H (1 <= H <= " << StiffnessShape::kMaxHarmonics
       << ") or table:N (3 <= N <= " << StiffnessShape::kMaxNodes << ")";

@@ -87,9 +87,8 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
   if (needsStiffness(f) && !need(t.stiffness, "stiffness", fw.c_str())) return e.str();
   if (needsState(f) && !need(t.mesh_state, "mesh_state", fw.c_str())) return e.str();
   if (needsTorque(f, m)) {
-    const std::string why = f == Formulation::Known || f == Formulation::Greybox
-                                ? fw
-                                : std::string("model 'load_law'");
+    const std::string why =
+        f == Formulation::Known || f == Formulation::Greybox ? fw : std::string("model 'load_law'");
     if (!need(t.torque, "torque", why.c_str())) return e.str();
   }
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
@@ -116,11 +115,13 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
     const double d = t.time[i] - t.time[i - 1];
     if (!(std::abs(d - ref) <= tol)) {
       e << "time is not uniformly sampled at ";
-      if (first_line >= 0) e << "line " << first_line + i << " (sample " << i << ", ";
-      else e << "sample " << i << " (";
-      e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step "
-        << ref << " s by more than the tolerance " << rel_tolerance
-        << " (relative)" << (d > ref ? ": a gap or a dropped sample" : "");
+      if (first_line >= 0)
+        e << "line " << first_line + i << " (sample " << i << ", ";
+      else
+        e << "sample " << i << " (";
+      e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step " << ref
+        << " s by more than the tolerance " << rel_tolerance << " (relative)"
+        << (d > ref ? ": a gap or a dropped sample" : "");
       return e.str();
     }
   }
@@ -276,15 +277,20 @@ void IntegralMethod::buildColumns() {
   columns_.clear();
   std::vector<Column> local, shared;
   switch (options_.model) {
-    case DampingModel::Piecewise: local.push_back(Column::DampC); break;
-    case DampingModel::Constant: shared.push_back(Column::DampC); break;
+    case DampingModel::Piecewise:
+      local.push_back(Column::DampC);
+      break;
+    case DampingModel::Constant:
+      shared.push_back(Column::DampC);
+      break;
     case DampingModel::LoadLaw:
       shared.push_back(Column::DampC);
       shared.push_back(Column::DampLoad);
       break;
   }
   switch (options_.formulation) {
-    case Formulation::Known: break;
+    case Formulation::Known:
+      break;
     case Formulation::Greybox:
       if (shape_) {
         for (int k = 0; k < n_basis_; ++k) local.push_back(Column::StiffBasis);
@@ -421,8 +427,8 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
     if (split_k) {
       // K held on the interval (a switch inside is fixed up below): the hot path.
       const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
-      heldStiffnessIncrements(yb, k + w0, T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
-                              ag, mg);
+      heldStiffnessIncrements(yb, k + w0, T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my, ag,
+                              mg);
     } else {
       for (Eigen::Index i = i_lo; i < i_hi; ++i) {
         ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
@@ -445,8 +451,7 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
       const double* Tb = T + w0 - 1;
       const double* sb = st + w0;
       for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-        const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2],
-                     F3 = ff * Tb[i + 3];
+        const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
         ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
         mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
         as[i] = sb[i] * ay[i];
@@ -581,8 +586,7 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
     }
     return;
   }
-  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0,
-         Dr = 0.0;
+  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0, Dr = 0.0;
   const int cB = columnIndex(Column::StiffBasis);
   double Gb[kMaxColumns] = {}, Qb[kMaxColumns] = {};  // shape: running single/double integrals
   for (Eigen::Index r = 0; r < L; ++r) {
@@ -691,8 +695,7 @@ void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, dou
   }
   for (int a = 0; a < n; ++a) {
     for (int b = a; b < n; ++b) {
-      const double g =
-          M[a][b] - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
+      const double g = M[a][b] - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
       (*gram)(a, b) += g;
       if (a != b) (*gram)(b, a) += g;
     }
@@ -718,8 +721,8 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     return est;
   };
   if (window_length_ <= 0.0) window_length_ = defaultWindowLength(s, gear_);
-  const Eigen::Index L0 = std::max<Eigen::Index>(
-      4, static_cast<Eigen::Index>(std::llround(window_length_ / s.dt)));
+  const Eigen::Index L0 =
+      std::max<Eigen::Index>(4, static_cast<Eigen::Index>(std::llround(window_length_ / s.dt)));
   const int W = static_cast<int>(
       std::max<Eigen::Index>(1, static_cast<Eigen::Index>(std::llround(double(rows) / L0))));
   if (s.n < 4 || rows < 4L * W || rows - 2L * W - n_local_ < 2) {
@@ -829,8 +832,9 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     }
     rec.mean_state = sum / static_cast<double>(rows);
     if (switches_.empty()) {
-      return fail("mesh state constant over the segment: the stiffness levels are not "
-                  "identifiable (segment shorter than a mesh period?)");
+      return fail(
+          "mesh state constant over the segment: the stiffness levels are not "
+          "identifiable (segment shorter than a mesh period?)");
     }
   }
   const double fbar = legacy_fbar_;
@@ -853,11 +857,21 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     double raw = 0.0;
     const int rc = std::max(cC, 0);
     switch (nc) {
-      case 2: projectedGram<2>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
-      case 3: projectedGram<3>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
-      case 4: projectedGram<4>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
-      case 5: projectedGram<5>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
-      case 6: projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram); break;
+      case 2:
+        projectedGram<2>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        break;
+      case 3:
+        projectedGram<3>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        break;
+      case 4:
+        projectedGram<4>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        break;
+      case 5:
+        projectedGram<5>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        break;
+      case 6:
+        projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        break;
       default:
         projectedGram<0, kMaxColumns + 1>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw,
                                           &rec.gram, nc);
@@ -1007,8 +1021,8 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
     seg_kmean[i - s_begin] = kmean;
     if (std::isfinite(kmean)) k_int += kmean * rec.duration, dur += rec.duration;
   }
-  const double omega0 = dur > 0.0 && k_int > 0.0 ? std::sqrt(k_int / dur)
-                                                  : std::sqrt(gear_.mean_stiffness / me);
+  const double omega0 =
+      dur > 0.0 && k_int > 0.0 ? std::sqrt(k_int / dur) : std::sqrt(gear_.mean_stiffness / me);
   res.omega0 = omega0;
 
   const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
@@ -1159,8 +1173,8 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
               std::string* error) {
   std::string e = options.validate();
   if (e.empty()) e = gear.validate();
-  if (e.empty()) e = checkSignalTable(table, options.formulation, options.model,
-                                      options.time_tolerance);
+  if (e.empty())
+    e = checkSignalTable(table, options.formulation, options.model, options.time_tolerance);
   if (!e.empty()) {
     *error = e;
     return false;
@@ -1198,9 +1212,9 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
       keepIntegralEstimates(*result, &refined);
       *result = std::move(refined);
     } else {
-      result->warnings.push_back({quality_code::kRefineFailed,
-                                  "output-error refinement failed (" + why +
-                                      "): integral-method estimates reported"});
+      result->warnings.push_back(
+          {quality_code::kRefineFailed,
+           "output-error refinement failed (" + why + "): integral-method estimates reported"});
     }
   }
   applyQualityFlags(o, result);

@@ -712,7 +712,8 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   }
   if (res->constant && !piecewise && !load) {
     fillC(&*res->constant, sh[0], sigma2_pooled * Ainv_of[problems[0][0]](0, 0));
-    if (!all_converged) res->constant->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
+    if (!all_converged)
+      res->constant->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
   }
   if (res->load_law && load) {
     const Eigen::MatrixXd& Ainv = Ainv_of[problems[0][0]];

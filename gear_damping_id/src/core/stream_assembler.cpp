@@ -17,7 +17,10 @@ constexpr std::uint64_t kNoEnd = std::numeric_limits<std::uint64_t>::max();
 // years at 1 MHz). Segments must hold at least kMinSegmentSamples samples at the stream's rate.
 constexpr std::uint64_t kMaxIndex = std::uint64_t{1} << 52;
 constexpr double kMinSegmentSamples = 4.0;
-constexpr size_t kScaleChunks = 16;  // accepted chunks whose largest |value| form the scale
+// No acquisition samples faster than 1 THz; the cap also keeps every time-to-index product of
+// an analysed range (t_start, t_end up to years) far inside the 64-bit index range.
+constexpr double kMaxSampleRate = 1e12;  // [Hz]
+constexpr size_t kScaleChunks = 16;      // accepted chunks whose largest |value| form the scale
 
 enum Channel : unsigned { kStiffness = 1, kTorque = 2, kState = 4, kPhase = 8 };
 
@@ -152,7 +155,8 @@ bool StreamAssembler::wholeRun() const {
 
 std::uint64_t StreamAssembler::firstAnalysed() const {
   if (!(options_.t_start > 0.0)) return 0;
-  return static_cast<std::uint64_t>(std::ceil(options_.t_start * rate_ - kIndexEps));
+  const double first = std::ceil(options_.t_start * rate_ - kIndexEps);
+  return first >= 1.8e19 ? kNoEnd : static_cast<std::uint64_t>(first);
 }
 
 std::uint64_t StreamAssembler::endAnalysed() const {
@@ -314,8 +318,9 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   ++counters_.chunks_received;
   const bool short_segments =
       !wholeRun() && !(options_.segment_length * c.sample_rate >= kMinSegmentSamples);
+  const bool rate_too_high = c.sample_rate > kMaxSampleRate;
   if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
-      c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
+      rate_too_high || c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
     ++counters_.rejected_malformed;
     if (c.dte != nullptr && c.n <= kMaxIndex) {
       counters_.samples_received += c.n;
@@ -325,7 +330,8 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
       << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
       << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
-      << (short_segments ? ", fewer than 4 samples per segment" : "");
+      << (short_segments ? ", fewer than 4 samples per segment" : "")
+      << (rate_too_high ? ", sample rate above 1e12 Hz" : "");
     why = m.str();
     return ChunkStatus::kRejectedMalformed;
   }

@@ -1,8 +1,5 @@
 #include "gear_damping_id/result_io.hpp"
 
-#include "gear_damping_id/quality_flags.hpp"
-#include "gear_sim/signal_csv.hpp"
-
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -11,6 +8,7 @@
 #include <limits>
 #include <sstream>
 
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/signal_csv.hpp"
 
 namespace gear_damping_id {
@@ -140,7 +138,7 @@ json analysisJson(const std::vector<AnalysisRun>& runs, const json& input) {
   json primary = runJson(runs.front());
   json id = primary;
   id.erase("response");
-  // The constant / load-law blocks of DESIGN §6 come from the run that computed them.
+  // The constant / load-law blocks of docs/method.md §6 come from the run that computed them.
   for (const auto& run : runs) {
     if (run.options.formulation != runs.front().options.formulation) continue;
     json rj = runJson(run);
@@ -175,8 +173,9 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
         }
         os << "  " << std::setw(10) << fmt(s.C, 6) << "  " << std::setw(11) << fmt(s.C_std, 3)
            << "  " << std::setw(11) << fmt(s.c, 6) << "  " << std::setw(10) << fmt(s.xi, 5);
-        if (levels) os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
-                       << fmt(s.k_max, 6);
+        if (levels)
+          os << "  " << std::setw(11) << fmt(s.k_min, 6) << "  " << std::setw(11)
+             << fmt(s.k_max, 6);
         if (!s.warnings.empty()) os << "  flagged: " << joinCodes(s.warnings, ",");
         os << "\n";
       }
@@ -243,8 +242,8 @@ void shiftWaveletTimes(WaveletResult* w, double t0) {
 }
 
 void printWaveletTable(std::ostream& os, const WaveletResult& w) {
-  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): "
-     << w.modes.size() << " mode(s)\n"
+  os << "== wavelet validation (Morlet, omega0 " << fmt(w.omega0, 3) << "): " << w.modes.size()
+     << " mode(s)\n"
      << "  mode  f[Hz]        xi_wavelet  xi_integral  R^2       decay region [ms]  free decay\n";
   int i = 0, clean = 0;
   for (const auto& m : w.modes) {
@@ -381,10 +380,10 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
     const std::string head = toString(r.formulation) + "," + toString(r.model) + ",";
     int i = 0;
     for (const auto& s : r.segments) {
-      seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << ","
-          << csvNum(s.C) << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi)
-          << "," << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0)
-          << "," << (s.identifiable ? std::string() : csvText(s.reason)) << ","
+      seg << head << i++ << "," << csvNum(s.t_start) << "," << csvNum(s.t_end) << "," << csvNum(s.C)
+          << "," << csvNum(s.C_std) << "," << csvNum(s.c) << "," << csvNum(s.xi) << ","
+          << csvNum(s.k_min) << "," << csvNum(s.k_max) << "," << (s.identifiable ? 1 : 0) << ","
+          << (s.identifiable ? std::string() : csvText(s.reason)) << ","
           << joinCodes(s.warnings, ";") << ",";
       for (size_t k = 0; k < s.stiffness_curve.size(); ++k) {
         seg << (k > 0 ? ";" : "") << csvNum(s.stiffness_curve[k]);

@@ -1,4 +1,4 @@
-// The DESIGN.md §6 CSV: a header row naming the columns (any order, any subset of the known
+// The docs/method.md §6 CSV: a header row naming the columns (any order, any subset of the known
 // names), then one row per sample, SI units. Part of gear_sim_io; no ROS.
 #pragma once
 

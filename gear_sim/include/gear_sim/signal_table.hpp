@@ -1,6 +1,6 @@
-// The signal table of DESIGN.md §6: uniformly sampled gear-pair signals, one column per channel.
-// This is the type the simulator produces, the CSV/bag readers fill and the identification and
-// wavelet cores consume. No ROS; SI units.
+// The signal table of docs/method.md §6: uniformly sampled gear-pair signals, one column per
+// channel. This is the type the simulator produces, the CSV/bag readers fill and the identification
+// and wavelet cores consume. No ROS; SI units.
 #pragma once
 
 #include <Eigen/Core>
@@ -8,8 +8,8 @@
 
 namespace gear_sim {
 
-/// Columns of the DESIGN §6 CSV. `time` and `dte` are required; every other column is either
-/// empty (absent) or exactly as long as `time`.
+/// Columns of the docs/method.md §6 CSV. `time` and `dte` are required; every other column is
+/// either empty (absent) or exactly as long as `time`.
 ///
 /// Sample-and-hold convention: a sampled `stiffness` or `mesh_state` value is the one holding
 /// from that sample's instant on (until the next switch). `mesh_phase` is continuous and locates

@@ -1,5 +1,5 @@
 // Simulation configuration: one struct per YAML section (README "Simulator configuration").
-// Default-constructed = the DESIGN.md §3 default case: Table 1 gears, 3000 rpm pinion (1 kHz
+// Default-constructed = the docs/method.md §3 default case: Table 1 gears, 3000 rpm pinion (1 kHz
 // mesh), T1(t) = 100 N*m * (1 + 0.5 sin(2*pi*100 t)), load-dependent xi(t) =
 // 0.05 * (1 + 0.6 (T1/T1_mean - 1)), RK4 at 1 MHz for 10 ms, no noise. No ROS; SI units
 // (speeds in rpm).

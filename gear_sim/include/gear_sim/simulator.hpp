@@ -1,6 +1,6 @@
-// The spur-gear-pair simulator (DESIGN.md §3): integrates eq. (4) (or the torsional eq. 1)
+// The spur-gear-pair simulator (docs/method.md §3): integrates eq. (4) (or the torsional eq. 1)
 // with RK4/RK2, stepping exactly onto every stiffness switch, load kink and damping change,
-// and fills a SignalTable with every DESIGN §6 column. No ROS.
+// and fills a SignalTable with every docs/method.md §6 column. No ROS.
 #pragma once
 
 #include <string>

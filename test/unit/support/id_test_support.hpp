@@ -27,7 +27,7 @@ using gear_damping_id::IdentificationResult;
 using gear_sim::SignalTable;
 using gear_sim::SimConfig;
 
-/// The DESIGN §3 default case as shipped (sine load, 3000 rpm, 1 MHz, 10 ms, load-dependent
+/// The docs/method.md §3 default case as shipped (sine load, 3000 rpm, 1 MHz, 10 ms, load-dependent
 /// damping xi = 0.05 (1 + 0.6 (T1/Tbar - 1))).
 inline SimConfig table1Config() {
   SimConfig c;
