@@ -27,7 +27,7 @@ def main(out):
           f"vs known load, constant damping: fit {fit(('known', 'constant')):.1f} %")
     pw = runs[("known", "piecewise")]
     print("\n2. Piecewise-constant C(t) on 1 ms segments tracks the load-dependent truth:")
-    print("   segment [ms]      C [1/s]   +-2SE     truth C [1/s]  error")
+    print("   segment [ms]      C [1/s]   +-2SE     truth C [1/s]  error     flags")
     errs = []
     for s in pw["segments"]:
         m = (t >= s["t_start"] - 1e-12) & (t < s["t_end"] - 1e-12)
@@ -37,10 +37,12 @@ def main(out):
             continue
         err = (s["C"] - truth) / truth
         errs.append(abs(err))
+        codes = ",".join(x.get("code", "") for x in s.get("warnings") or [] if isinstance(x, dict))
         print(f"   {s['t_start'] * 1e3:5.2f}-{s['t_end'] * 1e3:5.2f}   {s['C']:9.1f}  {2 * s['C_std']:7.1f}   "
-              f"{truth:9.1f}     {100 * err:+.2f} %")
+              f"{truth:9.1f}     {100 * err:+.2f} %   {codes or 'clean'}")
     print(f"   (truth: time-mean of c(t)/Me over the segment; the damping changes within a segment, "
-          f"so the segment C is a weighted mean: median |error| {100 * np.median(errs):.2f} %)")
+          f"so the segment C is a weighted mean: median |error| {100 * np.median(errs):.2f} %;\n"
+          f"   the flags say so: a piecewise-constant C leaves structure in the residual, see docs/trust.md)")
     print(f"   fit: piecewise {fit(('known', 'piecewise')):.2f} % vs constant {fit(('known', 'constant')):.2f} %"
           f" (constant C = {runs[('known', 'constant')]['constant']['C']:.1f} 1/s)")
     ll = runs[("known", "load_law")]["load_law"]
@@ -53,10 +55,14 @@ def main(out):
     w = res.get("wavelet", {})
     if w.get("modes"):
         print("\n4. Wavelet validation on the free decay (paper Table 2):")
-        print("   f [Hz]     xi wavelet   xi integral   R^2")
+        print("   f [Hz]     xi wavelet   xi integral   R^2      flags")
         for m in w["modes"]:
+            codes = ",".join(x.get("code", "") for x in m.get("warnings") or [] if isinstance(x, dict))
+            if m.get("free_decay") is False:
+                codes = "forced line" + (", " + codes if codes else "")
             print(f"   {m['frequency_hz'] or float('nan'):8.1f}   {m['damping_ratio'] or float('nan'):.5f}      "
-                  f"{m['integral_damping_ratio'] or float('nan'):.5f}       {m['r2'] or float('nan'):.4f}")
+                  f"{m['integral_damping_ratio'] or float('nan'):.5f}       {m['r2'] or float('nan'):.4f}   "
+                  f"{codes or 'clean'}")
     print(f"\nresults: {out}/result.json, {out}/tables/, {out}/results.bag, {out}/analysis.txt")
     index = os.path.join(out, "report", "index.html")
     if os.path.exists(index):
