@@ -1,9 +1,9 @@
 // Google Benchmark suite of the Morlet CWT (docs/method.md §7): throughput in (samples x scales)/s
 // of gear_damping_id::MorletCwt, and the FFTW lower bound it is measured against (one inverse
 // complex FFT of the same padded length per scale, same planner flags), of the grouped and
-// threaded MorletScalogram (BM_Scalogram/n/threads) and of the per-mode damping without a
-// scalogram (BM_ModeDamping). Nothing is asserted; bench/compare_peers runs this binary beside
-// fCWT and PyWavelets and prints the ratios.
+// threaded MorletScalogram (BM_Scalogram/n/threads, BM_ScalogramSingle in float) and of the
+// per-mode damping without a scalogram (BM_ModeDamping). Nothing is asserted; bench/compare_peers
+// runs this binary beside fCWT and PyWavelets and prints the ratios.
 //
 // Set-up (outside the timed region): the signal, MorletCwt::configure (FFTW plans, aligned
 // buffers, first touch of every buffer) and one warm-up transform. The timed region of BM_Cwt
@@ -133,13 +133,14 @@ void BM_FftBound(benchmark::State& state) {
 
 // The full scalogram as analyzeWavelet computes it: MorletScalogram (padding per group of rows,
 // rows on state.range(1) threads), |W| of each row into a per-thread buffer.
-void BM_Scalogram(benchmark::State& state) {
+void scalogram(benchmark::State& state, gear_damping_id::Precision precision) {
   const long n = state.range(0);
   const int threads = static_cast<int>(state.range(1));
   const std::vector<double> y = signalOf(n);
   gear_damping_id::MorletScalogram scal;
   std::string error;
-  if (!scal.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, threads, &error)) {
+  if (!scal.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, threads, &error,
+                      precision)) {
     state.SkipWithError(error.c_str());
     return;
   }
@@ -159,6 +160,14 @@ void BM_Scalogram(benchmark::State& state) {
   state.counters["groups"] = scal.groups();
   state.counters["threads"] = threads;
   state.SetLabel(g_planning == FftPlanning::kMeasure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
+}
+
+void BM_Scalogram(benchmark::State& state) {
+  scalogram(state, gear_damping_id::Precision::kDouble);
+}
+// Same in single precision (Precision::kSingle: the rows' inverse FFTs in float, like fCWT).
+void BM_ScalogramSingle(benchmark::State& state) {
+  scalogram(state, gear_damping_id::Precision::kSingle);
 }
 
 // Per-mode damping without a scalogram (full_scalogram = false: only the rows the fits need):
@@ -182,6 +191,13 @@ void BM_ModeDamping(benchmark::State& state) {
 
 BENCHMARK(BM_Cwt)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Scalogram)
+    ->Args({100000, 1})
+    ->Args({100000, 2})
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(BM_ScalogramSingle)
     ->Args({100000, 1})
     ->Args({100000, 2})
     ->Args({1000000, 1})

@@ -4,7 +4,7 @@
 //     [--stiffness-shape square|fourier:H|table:N]
 //     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
 //     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
-//                [--decay-region T0,T1]...]
+//                [--decay-region T0,T1]... [--threads N]]
 //     [--summary | --table] [--quiet]
 //
 // Identifies the mesh damping of a DTE record (CSV with the docs/method.md §6 columns, or a bag of
@@ -412,6 +412,10 @@ int run(int argc, char** argv) {
                  "wavelet: decay region T0,T1 [s from the analysed record's start] (once for all "
                  "modes, or once per --mode-freq)")
       ->take_all();
+  app.add_option("--threads", wopt.threads,
+                 "wavelet: threads of the full scalogram's rows (default 1; results identical "
+                 "for any count)")
+      ->check(CLI::Range(1, 256));
   app.add_option("--prominence", wopt.peak_prominence,
                  "wavelet: minimum peak prominence, fraction of the highest peak (default 0: "
                  "adapts to the noise floor)");
@@ -471,6 +475,7 @@ int run(int argc, char** argv) {
       return fail(kExitUsage, "--decay-region " + r + ": expected T0,T1 in seconds");
     wopt.decay_regions.push_back(region);
   }
+  wopt.full_scalogram = !csv_out.empty();  // only wavelet_scalogram.csv needs every row
   if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
 
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.

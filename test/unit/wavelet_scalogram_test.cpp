@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <complex>
 #include <random>
 #include <string>
 #include <vector>
@@ -86,6 +87,78 @@ TEST(MorletScalogram, GivesBitIdenticalRowsForAnyThreadCount) {
   WaveletResult r2 = validateWavelet(y, 1.0, o);
   ASSERT_TRUE(r1.ok() && r2.ok()) << r1.error << r2.error;
   EXPECT_TRUE(r1.modulus == r2.modulus);
+}
+
+// Single precision (Precision::kSingle) against double, relative to the largest |W|: float
+// rounds the band (2^-24 = 6e-8 relative) and each FFT stage adds about that again, so a few
+// 1e-7 over the log2 N ~ 13 stages; bound 1e-6.
+constexpr double kSingleVsDoubleTol = 1e-6;
+
+TEST(MorletScalogram, SinglePrecisionAgreesWithDoubleWithinOnePpmOfThePeak) {
+  for (const long n : {3000L, 5011L}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    const std::vector<double> y = testSignal(n, 7);
+    const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 60);
+    std::string e;
+    MorletScalogram dbl, sgl;
+    ASSERT_TRUE(dbl.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e)) << e;
+    ASSERT_TRUE(sgl.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e, Precision::kSingle))
+        << e;
+    std::vector<double> a(f.size() * size_t(n)), b(a.size());
+    ASSERT_TRUE(dbl.modulus(y.data(), a.data(), &e)) << e;
+    ASSERT_TRUE(sgl.modulus(y.data(), b.data(), &e)) << e;
+    double peak = 0.0, worst = 0.0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      peak = std::max(peak, a[i]);
+      worst = std::max(worst, std::abs(a[i] - b[i]));
+    }
+    EXPECT_LE(worst, kSingleVsDoubleTol * peak);
+    EXPECT_GT(worst, 0.0);  // it did run in float
+    // Threads: bit-identical in single precision too.
+    MorletScalogram sgl2;
+    ASSERT_TRUE(sgl2.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 2, &e, Precision::kSingle))
+        << e;
+    std::vector<double> c(a.size());
+    ASSERT_TRUE(sgl2.modulus(y.data(), c.data(), &e)) << e;
+    EXPECT_EQ(b, c);
+  }
+}
+
+// The complex rows (row(), rowAt(): the damping fits) take the pruned path when the band is
+// narrow; they equal the full inverse FFT up to rounding (relative to the row's peak).
+constexpr double kPrunedVsFullTol = 1e-12;
+
+TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
+  const long n = 6000;
+  const std::vector<double> y = testSignal(n, 11);
+  const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 40);
+  std::string e;
+  MorletCwt pruned, full;
+  ASSERT_TRUE(pruned.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, &e)) << e;
+  ASSERT_TRUE(full.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, &e)) << e;
+  full.setPrunedModulus(false);
+  ASSERT_TRUE(pruned.setSignal(y.data(), &e) && full.setSignal(y.data(), &e)) << e;
+  for (int i = 0; i < pruned.rows(); ++i) {
+    const std::vector<std::complex<double>> a(pruned.row(i), pruned.row(i) + n);
+    const std::complex<double>* b = full.row(i);
+    double peak = 0.0, worst = 0.0;
+    for (long j = 0; j < n; ++j) {
+      peak = std::max(peak, std::abs(b[j]));
+      worst = std::max(worst, std::abs(a[size_t(j)] - b[j]));
+    }
+    EXPECT_LE(worst, kPrunedVsFullTol * peak) << "row " << i << " f = " << f[size_t(i)];
+  }
+  // An off-grid row (the fits' rowAt) as well.
+  const std::vector<std::complex<double>> a(pruned.rowAt(0.0371, 14.0),
+                                            pruned.rowAt(0.0371, 14.0) + n);
+  const std::complex<double>* b = full.rowAt(0.0371, 14.0);
+  ASSERT_NE(b, nullptr);
+  double peak = 0.0, worst = 0.0;
+  for (long j = 0; j < n; ++j) {
+    peak = std::max(peak, std::abs(b[j]));
+    worst = std::max(worst, std::abs(a[size_t(j)] - b[j]));
+  }
+  EXPECT_LE(worst, kPrunedVsFullTol * peak);
 }
 
 TEST(MorletScalogram, RefusesBadThreadCountsAndNonFiniteSamples) {

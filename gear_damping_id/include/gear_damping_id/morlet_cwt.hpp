@@ -54,6 +54,14 @@ namespace gear_damping_id {
 /// kEstimate: heuristic plan, no measurement; use for a handful of rows.
 enum class FftPlanning { kEstimate, kMeasure };
 
+/// Arithmetic of the per-row inverse FFTs of |W| (MorletCwt::rowModulus, MorletScalogram).
+/// The signal's FFT, the Morlet multiplier and the complex rows (row(), rowAt()) are always
+/// double. kSingle rounds each row's band to float and runs FFTW's single-precision
+/// transforms: about half the time of the FFTs and half the memory traffic; |W| agrees with
+/// kDouble within 1e-6 of the scalogram's largest |W| (wavelet_scalogram_test bounds it;
+/// measured ~1e-7), the precision fCWT works in.
+enum class Precision { kDouble, kSingle };
+
 /// Smallest length >= min_length whose only prime factors are 2, 3, 5 and 7 (fast for FFTW).
 /// Returns -1 if min_length < 1 or the result would overflow.
 long fastFftLength(long min_length);
@@ -122,18 +130,24 @@ class MorletCwt {
   /// padding allows (more than 8 s of it would wrap around: use a smaller omega0 or configure
   /// a row with that (f, omega0)).
   const std::complex<double>* rowAt(double frequency_hz, double omega0);
+  /// Whether the padding holds 8 scales of the wavelet at (f [Hz], omega0), i.e. rowAt(f,
+  /// omega0) is exact up to the e^-32 wrap-around (false if not configured).
+  bool fitsPadding(double frequency_hz, double omega0) const;
 
   /// |W| of row i into out[0, size()) (double or float). False if row(i) would be null.
   /// Rows whose band of nonzero bins fits in M <= N/16 bins (M a divisor of N) skip the full
-  /// inverse FFT: with j = q*(N/M) + p, |W_j| is the modulus of N/M inverse FFTs of size M of
+  /// inverse FFT: with j = q*(N/M) + p, W_j is the value of N/M inverse FFTs of size M of
   /// twiddled copies of the band (exact up to rounding, ~1e-14 relative to the row's peak;
   /// N log M work instead of N log N, in cache; FFTW_ESTIMATE plans, one per size M). With
   /// the default log grid (10 cycles per record to 0.4 fs, omega0 = 6) 2/3 to 3/4 of the rows
-  /// take this path. setPrunedModulus(false) always uses the full inverse FFT. The pruned
-  /// path leaves row()'s buffer untouched.
+  /// take this path; row() and rowAt() use it too (complex W). setPrunedModulus(false) always
+  /// uses the full inverse FFT. The pruned |W| leaves row()'s buffer untouched.
   bool rowModulus(int i, double* out);
   bool rowModulus(int i, float* out);
   void setPrunedModulus(bool enabled) { pruned_ = enabled; }
+  /// Precision of rowModulus's inverse FFTs (default kDouble; see Precision).
+  void setPrecision(Precision precision) { precision_ = precision; }
+  Precision precision() const { return precision_; }
 
   /// Whole transform of y: setSignal(y) then every row; output row-major [row][time] with
   /// rows()*size() elements (caller-allocated; allocate once and reuse). False + *error on
@@ -170,17 +184,18 @@ class MorletCwt {
   struct Fftw;
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
   bool fillRow(double frequency_hz, double omega0);
-  template <typename T>
-  bool prunedModulus(T* out);
+  template <typename R, typename T>
+  bool prunedRow(T* out);
+  bool fullRowSingle();
   template <typename T>
   bool rowModulusImpl(int i, T* out);
-  bool fitsPadding(double frequency_hz, double omega0) const;
   void release();
 
   long n_ = 0, n_fft_ = 0;
   double fs_ = 0.0, mean_ = 0.0;
   bool has_signal_ = false;
   bool pruned_ = true;
+  Precision precision_ = Precision::kDouble;
   FftPlanning planning_ = FftPlanning::kMeasure;
   std::vector<double> frequencies_, omega0s_;
   std::unique_ptr<Fftw> fftw_;
@@ -202,9 +217,10 @@ class MorletScalogram {
   static constexpr double kGroupLengthRatio = 1.25;
 
   /// Same preconditions as MorletCwt::configure (one omega0 for all rows), plus threads >= 1.
-  /// False + *error on failure.
+  /// precision: of the rows' inverse FFTs (see Precision). False + *error on failure.
   bool configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
-                 double omega0, FftPlanning planning, int threads, std::string* error);
+                 double omega0, FftPlanning planning, int threads, std::string* error,
+                 Precision precision = Precision::kDouble);
   /// |W| of every row for signal y (n samples) into out, row-major [row][time], rows()*size()
   /// values (double or float). False + *error (a non-finite sample names its index).
   bool modulus(const double* y, double* out, std::string* error);

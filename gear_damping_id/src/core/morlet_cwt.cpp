@@ -11,6 +11,7 @@
 #include <mutex>
 #include <numeric>
 #include <thread>
+#include <type_traits>
 
 #include "wavelet_detail.hpp"
 
@@ -26,6 +27,9 @@ using wavelet_detail::setError;
 // Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
 // (exp(-8.6^2/2) = 8.7e-17): those bins are set to zero, not multiplied.
 constexpr double kBandHalfWidth = 8.6;
+// Psi(s*w)^2 = 4*exp(-(s*w - omega0)^2) is below 1e-16 of its peak when |s*w - omega0| > 6.07
+// (exp(-6.07^2) = 1e-16): the band of the Parseval sums (meanPower, noiseGain).
+constexpr double kPowerBandHalfWidth = 6.07;
 // Zero padding of 8 scales after the record: the wavelet's Gaussian exp(-u^2/2) is exp(-32) =
 // 1.3e-14 where it would wrap around the circular convolution.
 constexpr double kPadScales = 8.0;
@@ -33,7 +37,7 @@ constexpr double kPadScales = 8.0;
 // exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
 constexpr long kRecurrenceBlock = 64;
 constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
-// The pruned |W| of a row (MorletCwt::prunedModulus) is used when its band fits in M <= N/16
+// The pruned |W| of a row (MorletCwt::prunedRow) is used when its band fits in M <= N/16
 // bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
 // inverse FFT, whose size-M transforms then no longer fit in cache); they take the full path.
 constexpr long kMinPrunedBatches = 16;
@@ -54,6 +58,45 @@ unsigned fftwFlags(FftPlanning planning) {
   return planning == FftPlanning::kMeasure ? FFTW_MEASURE : FFTW_ESTIMATE;
 }
 
+// FFTW's double and single-precision interfaces behind one name, for the code templated on
+// the real type R of the inverse FFTs (Precision::kDouble: double, kSingle: float).
+template <typename R>
+struct FftwApi;
+template <>
+struct FftwApi<double> {
+  using Complex = fftw_complex;
+  using Plan = fftw_plan;
+  static Complex* alloc(size_t n) { return fftw_alloc_complex(n); }
+  static void free(void* p) { fftw_free(p); }
+  static void destroy(Plan p) { fftw_destroy_plan(p); }
+  static void execute(Plan p) { fftw_execute(p); }
+  static void timeLimit(double s) { fftw_set_timelimit(s); }
+  static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
+    return fftw_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
+  }
+  static Plan many(int m, int howmany, Complex* b) {
+    return fftw_plan_many_dft(1, &m, howmany, b, nullptr, 1, m, b, nullptr, 1, m, FFTW_BACKWARD,
+                              FFTW_ESTIMATE);
+  }
+};
+template <>
+struct FftwApi<float> {
+  using Complex = fftwf_complex;
+  using Plan = fftwf_plan;
+  static Complex* alloc(size_t n) { return fftwf_alloc_complex(n); }
+  static void free(void* p) { fftwf_free(p); }
+  static void destroy(Plan p) { fftwf_destroy_plan(p); }
+  static void execute(Plan p) { fftwf_execute(p); }
+  static void timeLimit(double s) { fftwf_set_timelimit(s); }
+  static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
+    return fftwf_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
+  }
+  static Plan many(int m, int howmany, Complex* b) {
+    return fftwf_plan_many_dft(1, &m, howmany, b, nullptr, 1, m, b, nullptr, 1, m, FFTW_BACKWARD,
+                               FFTW_ESTIMATE);
+  }
+};
+
 // out[i] = sqrt(sq[i]) for n non-negative values, two per SSE2 instruction (see modulusOf).
 template <typename T>
 void sqrtOf(const double* sq, long n, T* out) {
@@ -69,13 +112,68 @@ void sqrtOf(const double* sq, long n, T* out) {
   for (; i < n; ++i) out[i] = static_cast<T>(std::sqrt(sq[i]));
 }
 
+// |w| of n complex floats (interleaved re, im) into out, four per SSE instruction (computed in
+// float: relative error ~1e-7, the precision of the single-precision path).
+template <typename T>
+void modulusOfFloats(const float* w, long n, T* out) {
+  long i = 0;
+#if defined(__SSE2__)
+  for (; i + 3 < n; i += 4) {
+    const __m128 a = _mm_loadu_ps(w + 2 * i), b = _mm_loadu_ps(w + 2 * i + 4);
+    const __m128 sa = _mm_mul_ps(a, a), sb = _mm_mul_ps(b, b);
+    const __m128 re = _mm_shuffle_ps(sa, sb, _MM_SHUFFLE(2, 0, 2, 0));
+    const __m128 im = _mm_shuffle_ps(sa, sb, _MM_SHUFFLE(3, 1, 3, 1));
+    alignas(16) float tmp[4];
+    _mm_store_ps(tmp, _mm_sqrt_ps(_mm_add_ps(re, im)));
+    for (int k = 0; k < 4; ++k) out[i + k] = static_cast<T>(tmp[k]);
+  }
+#endif
+  for (; i < n; ++i)
+    out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
+}
+
 // Bins [lo, hi] of the band where Psi(s*w_k) > 1e-16 of its peak, with a = s * 2*pi*fs/N
 // (so s*w_k = a*k), clipped to the positive frequencies 1..N/2. lo > hi when empty.
-void bandOf(double a, double omega0, long n_fft, long* lo, long* hi) {
-  const double k_lo = std::ceil((omega0 - kBandHalfWidth) / a);
-  const double k_hi = std::floor((omega0 + kBandHalfWidth) / a);
+void bandOf(double a, double omega0, long n_fft, long* lo, long* hi,
+            double half_width = kBandHalfWidth) {
+  const double k_lo = std::ceil((omega0 - half_width) / a);
+  const double k_hi = std::floor((omega0 + half_width) / a);
   *lo = static_cast<long>(std::max(1.0, k_lo));
   *hi = static_cast<long>(std::min(static_cast<double>(n_fft / 2), k_hi));
+}
+
+// bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the
+// twiddles advance one step: t[k] *= (sr[k] + i si[k]). Built for AVX2 too (runtime dispatch,
+// GCC target_clones) where the compiler supports it: the same operations in the same order, so
+// results do not depend on the clone (no FMA contraction in either).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
+                 const double* __restrict sr, const double* __restrict si, double* __restrict bc,
+                 long count) {
+  for (long k = 0; k < count; ++k) {
+    const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
+    bc[2 * k] = xr * ar - xi * ai;
+    bc[2 * k + 1] = xr * ai + xi * ar;
+    tr[k] = ar * sr[k] - ai * si[k];
+    ti[k] = ar * si[k] + ai * sr[k];
+  }
+}
+// Same, rounded to float for the single-precision batches (twiddles kept in double).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
+                 const double* __restrict sr, const double* __restrict si, float* __restrict bc,
+                 long count) {
+  for (long k = 0; k < count; ++k) {
+    const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
+    bc[2 * k] = static_cast<float>(xr * ar - xi * ai);
+    bc[2 * k + 1] = static_cast<float>(xr * ai + xi * ar);
+    tr[k] = ar * sr[k] - ai * si[k];
+    ti[k] = ar * si[k] + ai * sr[k];
+  }
 }
 
 }  // namespace
@@ -159,23 +257,58 @@ struct MorletCwt::Fftw {
   fftw_plan r2c = nullptr;
   fftw_plan c2c = nullptr;
   long band_lo = 1, band_hi = 0;
-  // Pruned |W| of narrow-band rows (see prunedModulus): divisors of N (ascending), the batch
+  // Pruned |W| of narrow-band rows (see prunedRow): divisors of N (ascending), the batch
   // buffer of N values (allocated on first use) and one batched size-M plan per M used.
   std::vector<long> divisors;
   fftw_complex* batch = nullptr;  // one chunk of batches
   std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
   std::map<long, fftw_plan> batch_plans;
+  // Precision::kSingle: the band rounded to float (in_f, zero outside the band), the float
+  // inverse FFT (c2c_f into out_f) and the float batches of the pruned path.
+  fftwf_complex* in_f = nullptr;
+  fftwf_complex* out_f = nullptr;
+  fftwf_plan c2c_f = nullptr;
+  long band_lo_f = 1, band_hi_f = 0;
+  fftwf_complex* batch_f = nullptr;
+  std::map<long, fftwf_plan> batch_plans_f;
+  // The batch buffer and plans of real type R (double or float).
+  template <typename R>
+  typename FftwApi<R>::Complex*& batchOf();
+  template <typename R>
+  std::map<long, typename FftwApi<R>::Plan>& batchPlansOf();
   ~Fftw() {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (r2c) fftw_destroy_plan(r2c);
     if (c2c) fftw_destroy_plan(c2c);
     for (auto& p : batch_plans) fftw_destroy_plan(p.second);
+    if (c2c_f) fftwf_destroy_plan(c2c_f);
+    for (auto& p : batch_plans_f) fftwf_destroy_plan(p.second);
     fftw_free(spec);
     fftw_free(in);
     fftw_free(out);
     fftw_free(batch);
+    fftwf_free(in_f);
+    fftwf_free(out_f);
+    fftwf_free(batch_f);
   }
 };
+
+template <>
+fftw_complex*& MorletCwt::Fftw::batchOf<double>() {
+  return batch;
+}
+template <>
+fftwf_complex*& MorletCwt::Fftw::batchOf<float>() {
+  return batch_f;
+}
+template <>
+std::map<long, fftw_plan>& MorletCwt::Fftw::batchPlansOf<double>() {
+  return batch_plans;
+}
+template <>
+std::map<long, fftwf_plan>& MorletCwt::Fftw::batchPlansOf<float>() {
+  return batch_plans_f;
+}
 
 MorletCwt::MorletCwt() = default;
 MorletCwt::~MorletCwt() = default;
@@ -298,8 +431,11 @@ bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
 
 const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double omega0) {
   if (!fillRow(frequency_hz, omega0)) return nullptr;
+  // The r2c input in `out` is no longer needed once the spectrum is computed.
+  auto* w = reinterpret_cast<std::complex<double>*>(fftw_->out);
+  if (pruned_ && prunedRow<double>(w)) return w;
   fftw_execute(fftw_->c2c);
-  return reinterpret_cast<const std::complex<double>*>(fftw_->out);
+  return w;
 }
 
 bool MorletCwt::fillRow(double frequency_hz, double omega0) {
@@ -356,17 +492,19 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   return true;
 }
 
-// |W| of the row whose band fillRow left in in[lo..hi], without the full inverse FFT.
-// With B = hi - lo + 1 nonzero bins, M a divisor of N with M >= B and P = N/M, sample
-// j = q*P + p (0 <= p < P, 0 <= q < M) of the inverse DFT is
-//   W_j = e^{2 pi i lo j/N} * sum_{k<M} (in_{lo+k} e^{2 pi i k p/N}) e^{2 pi i k q/M},
-// i.e. P inverse FFTs of size M of twiddled copies of the band, and |W_j| drops the leading
-// phase. Cost ~ N log M + N twiddles instead of N log N. The P batches are processed in
-// chunks of C (C*M <= kPrunedChunk values) so twiddling, the FFTs and the transposition into
-// time order all stay in cache. Returns false when no divisor makes it worthwhile
-// (M > N/kMinPrunedBatches): the caller then uses the full inverse FFT.
-template <typename T>
-bool MorletCwt::prunedModulus(T* out) {
+// W (T = std::complex<double>) or |W| (T = double, float) of the row whose band fillRow left in
+// in[lo..hi], without the full inverse FFT. With B = hi - lo + 1 nonzero bins, M a divisor of N
+// with M >= B and P = N/M, sample j = q*P + p (0 <= p < P, 0 <= q < M) of the inverse DFT is
+//   W_j = sum_{k<B} (in_{lo+k} e^{2 pi i (lo+k) p/N}) e^{2 pi i ((lo+k) mod M) q/M},
+// i.e. P inverse FFTs of size M of twiddled copies of the band, each bin placed at its index
+// modulo M (exact: e^{2 pi i (lo+k) q P/N} = e^{2 pi i (lo+k) q/M}). Cost ~ N log M + N
+// twiddles instead of N log N. The P batches are processed in chunks of C (C*M <= kPrunedChunk
+// values) so twiddling, the FFTs and the transposition into time order all stay in cache.
+// Returns false when no divisor makes it worthwhile (M > N/kMinPrunedBatches): the caller then
+// uses the full inverse FFT.
+template <typename R, typename T>
+bool MorletCwt::prunedRow(T* out) {
+  using Api = FftwApi<R>;
   Fftw& f = *fftw_;
   const long lo = f.band_lo, hi = f.band_hi;
   if (lo > hi) {
@@ -379,31 +517,34 @@ bool MorletCwt::prunedModulus(T* out) {
   const long M = *it, P = n_fft_ / M;
   long C = std::max(1L, std::min(P, kPrunedChunk / M));
   while (P % C != 0) --C;  // chunks of equal size: one plan
-  fftw_plan plan = nullptr;
+  typename Api::Plan plan = nullptr;
+  typename Api::Complex*& batch = f.template batchOf<R>();
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
-    if (!f.batch) {
+    if (!batch) {
       // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches.
-      f.batch = fftw_alloc_complex(
-          static_cast<size_t>(std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches)));
-      if (!f.batch) return false;
+      batch = Api::alloc(static_cast<size_t>(std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches)));
+      if (!batch) return false;
+    }
+    if (f.tw.empty()) {
       f.tw.resize(static_cast<size_t>(4 * (n_fft_ / kMinPrunedBatches + 1) + n_fft_));
     }
-    auto found = f.batch_plans.find(M);
-    if (found == f.batch_plans.end()) {
+    auto& plans = f.template batchPlansOf<R>();
+    auto found = plans.find(M);
+    if (found == plans.end()) {
       // FFTW_ESTIMATE always: up to one plan per row size, each planned in ~1 ms.
-      fftw_set_timelimit(FFTW_NO_TIMELIMIT);
-      const int m = static_cast<int>(M);
-      fftw_plan pl = fftw_plan_many_dft(1, &m, static_cast<int>(C), f.batch, nullptr, 1, m, f.batch,
-                                        nullptr, 1, m, FFTW_BACKWARD, FFTW_ESTIMATE);
+      Api::timeLimit(FFTW_NO_TIMELIMIT);
+      const typename Api::Plan pl = Api::many(static_cast<int>(M), static_cast<int>(C), batch);
       if (!pl) return false;
-      found = f.batch_plans.emplace(M, pl).first;
+      found = plans.emplace(M, pl).first;
     }
     plan = found->second;
   }
-  // Twiddles e^{2 pi i k p/N} for k < B, kept per k (structure of arrays: tr, ti) and advanced
-  // along p by the per-k step e^{2 pi i k/N} (sr, si): independent per k, so the loop
-  // vectorises; re-seeded exactly (integer phase k*p mod N) every kRecurrenceBlock batches.
+  // Twiddles e^{2 pi i (lo+k) p/N} for k < B, kept per k (structure of arrays: tr, ti) and
+  // advanced along p by the per-k step e^{2 pi i (lo+k)/N} (sr, si): independent per k, so the
+  // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kRecurrenceBlock
+  // batches. The modulus does not depend on the common phase e^{2 pi i lo j/N}, but keeping it
+  // costs nothing and makes the complex row exact.
   double* tr = f.tw.data();
   double* ti = tr + B;
   double* sr = ti + B;
@@ -411,42 +552,48 @@ bool MorletCwt::prunedModulus(T* out) {
   double* sq = si + B;  // C squared moduli
   const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
   for (long k = 0; k < B; ++k) {
-    sr[k] = std::cos(two_pi_over_n * static_cast<double>(k));
-    si[k] = std::sin(two_pi_over_n * static_cast<double>(k));
+    sr[k] = std::cos(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+    si[k] = std::sin(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
   }
+  // Bin k of the band goes to index (r0 + k) mod M of each batch: [r0, r0 + B1) then [0, B - B1).
+  const long r0 = lo % M, B1 = std::min(B, M - r0);
   const double* x = reinterpret_cast<const double*>(f.in + lo);
-  double* b = reinterpret_cast<double*>(f.batch);
+  R* b = reinterpret_cast<R*>(batch);
   const long q_end = (n_ + P - 1) / P;  // q with some q*P + p < n
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
       if (p % kRecurrenceBlock == 0) {
         for (long k = 0; k < B; ++k) {
-          const double ph = two_pi_over_n * static_cast<double>((k * p) % n_fft_);
+          const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
           ti[k] = std::sin(ph);
         }
       }
-      double* bc = b + 2 * c * M;
-      for (long k = 0; k < B; ++k) {
-        const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
-        bc[2 * k] = xr * ar - xi * ai;
-        bc[2 * k + 1] = xr * ai + xi * ar;
-        tr[k] = ar * sr[k] - ai * si[k];
-        ti[k] = ar * si[k] + ai * sr[k];
+      R* bc = b + 2 * c * M;
+      if (B1 == B) {
+        std::fill(bc, bc + 2 * r0, R(0));
+        std::fill(bc + 2 * (r0 + B), bc + 2 * M, R(0));
+      } else {
+        std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
       }
-      std::memset(bc + 2 * B, 0, sizeof(fftw_complex) * static_cast<size_t>(M - B));
+      twiddleBand(x, tr, ti, sr, si, bc + 2 * r0, B1);
+      twiddleBand(x + 2 * B1, tr + B1, ti + B1, sr + B1, si + B1, bc, B - B1);
     }
-    fftw_execute(plan);
-    // out[q*P + p] = |chunk[(p - p0)*M + q]| (squares gathered, then vector square roots).
+    Api::execute(plan);
+    // out[q*P + p] = chunk[(p - p0)*M + q] (moduli: squares gathered, then vector roots).
     for (long q = 0; q < q_end; ++q) {
       const long j0 = q * P + p0;
       const long ce = std::min(C, n_ - j0);
-      for (long c = 0; c < ce; ++c) {
-        const double re = b[2 * (c * M + q)], im = b[2 * (c * M + q) + 1];
-        sq[c] = re * re + im * im;
+      if constexpr (std::is_same<T, std::complex<double>>::value) {
+        for (long c = 0; c < ce; ++c) out[j0 + c] = {b[2 * (c * M + q)], b[2 * (c * M + q) + 1]};
+      } else {
+        for (long c = 0; c < ce; ++c) {
+          const double re = b[2 * (c * M + q)], im = b[2 * (c * M + q) + 1];  // R -> double
+          sq[c] = re * re + im * im;
+        }
+        if (ce > 0) sqrtOf(sq, ce, out + j0);
       }
-      if (ce > 0) sqrtOf(sq, ce, out + j0);
     }
   }
   return true;
@@ -471,9 +618,47 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
   if (!fillRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)])) {
     return false;
   }
-  if (pruned_ && prunedModulus(out)) return true;
+  if (precision_ == Precision::kSingle) {
+    if (pruned_ && prunedRow<float>(out)) return true;
+    if (!fullRowSingle()) return false;
+    modulusOfFloats(reinterpret_cast<const float*>(fftw_->out_f), n_, out);
+    return true;
+  }
+  if (pruned_ && prunedRow<double>(out)) return true;
   fftw_execute(fftw_->c2c);
   modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
+  return true;
+}
+
+// The full inverse FFT of the band fillRow left in `in`, in single precision: the band rounded
+// to float into in_f (zero elsewhere; only what the previous row set is cleared), then c2c_f.
+bool MorletCwt::fullRowSingle() {
+  Fftw& f = *fftw_;
+  const size_t nc = static_cast<size_t>(n_fft_);
+  if (!f.c2c_f) {
+    f.in_f = fftwf_alloc_complex(nc);
+    f.out_f = fftwf_alloc_complex(nc);
+    if (!f.in_f || !f.out_f) return false;
+    {
+      std::lock_guard<std::mutex> lock(plannerMutex());
+      const unsigned flags = fftwFlags(planning_);
+      fftwf_set_timelimit(planning_ == FftPlanning::kMeasure ? kMeasureTimeLimitS
+                                                             : FFTW_NO_TIMELIMIT);
+      f.c2c_f = fftwf_plan_dft_1d(static_cast<int>(n_fft_), f.in_f, f.out_f, FFTW_BACKWARD, flags);
+    }
+    if (!f.c2c_f) return false;
+    std::memset(f.in_f, 0, sizeof(fftwf_complex) * nc);
+    std::memset(f.out_f, 0, sizeof(fftwf_complex) * nc);
+    f.band_lo_f = 1;
+    f.band_hi_f = 0;
+  }
+  float* p = reinterpret_cast<float*>(f.in_f);
+  if (f.band_lo_f <= f.band_hi_f) std::fill(p + 2 * f.band_lo_f, p + 2 * (f.band_hi_f + 1), 0.0f);
+  const double* x = reinterpret_cast<const double*>(f.in);
+  for (long k = 2 * f.band_lo; k < 2 * (f.band_hi + 1); ++k) p[k] = static_cast<float>(x[k]);
+  f.band_lo_f = f.band_lo;
+  f.band_hi_f = f.band_hi;
+  fftwf_execute(f.c2c_f);
   return true;
 }
 
@@ -521,7 +706,7 @@ namespace {
 template <typename Weight>
 double bandSumPsi2(double a, double omega0, long n_fft, Weight weight) {
   long lo = 0, hi = 0;
-  bandOf(a, omega0, n_fft, &lo, &hi);
+  bandOf(a, omega0, n_fft, &lo, &hi, kPowerBandHalfWidth);
   const double q = std::exp(-2.0 * a * a);
   double sum = 0.0;
   for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
@@ -568,7 +753,8 @@ const std::complex<double>* MorletCwt::spectrum() const {
 
 bool MorletScalogram::configure(long n, double sample_rate,
                                 const std::vector<double>& frequencies_hz, double omega0,
-                                FftPlanning planning, int threads, std::string* error) {
+                                FftPlanning planning, int threads, std::string* error,
+                                Precision precision) {
   n_ = 0;
   frequencies_.clear();
   group_rows_.clear();
@@ -613,6 +799,7 @@ bool MorletScalogram::configure(long n, double sample_rate,
       for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
       MorletCwt cwt;
       if (!cwt.configure(n, sample_rate, f, omega0, planning, error)) return false;
+      cwt.setPrecision(precision);
       w.push_back(std::move(cwt));
     }
   }

@@ -751,17 +751,26 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
     fit_f[i] = seeds[i].f_spec;
     fit_w[i] = auto_w ? std::max(a->opt.omega0, need[i]) : a->opt.fit_omega0;
   }
-  MorletCwt fit;
-  if (!fit.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::kEstimate, a->error) ||
-      !fit.setSignal(a->y, a->error)) {
-    return false;
+  // The fit rows come from the spectrum already computed (a->scal) when its padding holds
+  // them (the usual case: the modes lie above the grid's lowest row); else from their own.
+  bool reuse = true;
+  for (size_t i = 0; i < seeds.size(); ++i)
+    reuse = reuse && a->scal.fitsPadding(fit_f[i], fit_w[i]);
+  MorletCwt own;
+  MorletCwt* fit = &a->scal;
+  if (!reuse) {
+    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::kEstimate, a->error) ||
+        !own.setSignal(a->y, a->error)) {
+      return false;
+    }
+    fit = &own;
   }
   std::vector<double> env, work;
-  highFrequencyNoise(a, &fit, seeds, &env, &work);
+  highFrequencyNoise(a, fit, seeds, &env, &work);
   const std::vector<double> orders = resolvedOrders(a);
   for (size_t i = 0; i < seeds.size(); ++i) {
     WaveletMode m;
-    const RowFit r = fitMode(a, &fit, seeds[i], fit_w[i], need[i], &m.omega0, &env, &work);
+    const RowFit r = fitMode(a, fit, seeds[i], fit_w[i], need[i], &m.omega0, &env, &work);
     m.spectrum_frequency_hz = seeds[i].f_spec;
     m.frequency_hz = r.ok ? r.fd : seeds[i].f_spec;
     m.peak_amplitude = r.peak;
