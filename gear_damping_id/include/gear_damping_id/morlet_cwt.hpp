@@ -187,6 +187,7 @@ class MorletCwt {
   template <typename R, typename T>
   bool prunedRow(T* out);
   bool fullRowSingle();
+  void fullInverse();
   template <typename T>
   bool rowModulusImpl(int i, T* out);
   void release();

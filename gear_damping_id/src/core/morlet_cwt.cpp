@@ -257,6 +257,7 @@ struct MorletCwt::Fftw {
   fftw_plan r2c = nullptr;
   fftw_plan c2c = nullptr;
   long band_lo = 1, band_hi = 0;
+  bool in_clean = false;  // `in` is zero outside [band_lo, band_hi]
   // Pruned |W| of narrow-band rows (see prunedRow): divisors of N (ascending), the batch
   // buffer of N values (allocated on first use) and one batched size-M plan per M used.
   std::vector<long> divisors;
@@ -379,11 +380,10 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
                                   f->spec, flags);
   }
   if (!f->r2c) return setError(error, "MorletCwt: FFTW could not plan the forward FFT"), false;
-  // First touch of every buffer here, not in the first transform (FFTW_MEASURE scribbles on
-  // them, so zero them after planning).
-  std::memset(f->spec, 0, sizeof(fftw_complex) * (nc / 2 + 1));
-  std::memset(f->in, 0, sizeof(fftw_complex) * nc);
-  std::memset(f->out, 0, sizeof(fftw_complex) * nc);
+  // No buffer is touched here: setSignal writes `out`'s first N doubles and `spec`; `in` is
+  // written only in each row's band, and zeroed outside it on the first full inverse FFT
+  // (in_clean). A spectrum-only or pruned-rows use (the damping fits) never faults in most
+  // of the pages (fresh pages cost the kernel's zeroing, ~1/3 of an analysis of 1e6 samples).
   for (long d = 1; d * d <= n_fft; ++d) {
     if (n_fft % d == 0) {
       f->divisors.push_back(d);
@@ -434,8 +434,25 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
   // The r2c input in `out` is no longer needed once the spectrum is computed.
   auto* w = reinterpret_cast<std::complex<double>*>(fftw_->out);
   if (pruned_ && prunedRow<double>(w)) return w;
-  fftw_execute(fftw_->c2c);
+  fullInverse();
   return w;
+}
+
+// The full inverse FFT of the band fillRow left in `in` (into `out`); zeroes `in` outside the
+// band first if it has not been yet (the buffer is not touched until a row needs it).
+void MorletCwt::fullInverse() {
+  Fftw& f = *fftw_;
+  if (!f.in_clean) {
+    double* p = reinterpret_cast<double*>(f.in);
+    if (f.band_lo <= f.band_hi) {
+      std::fill(p, p + 2 * f.band_lo, 0.0);
+      std::fill(p + 2 * (f.band_hi + 1), p + 2 * n_fft_, 0.0);
+    } else {
+      std::fill(p, p + 2 * n_fft_, 0.0);
+    }
+    f.in_clean = true;
+  }
+  fftw_execute(f.c2c);
 }
 
 bool MorletCwt::fillRow(double frequency_hz, double omega0) {
@@ -444,11 +461,12 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
     std::lock_guard<std::mutex> lock(plannerMutex());
     const unsigned flags = fftwFlags(planning_);
     // Out-of-place, input preserved (FFTW's default for c2c): only the band changes per row.
-    // FFTW_MEASURE overwrites both arrays while planning: zero `in` again afterwards; `out`
-    // (which holds the r2c input) is not needed once the spectrum is computed.
+    // FFTW_MEASURE overwrites both arrays while planning: `in` is zeroed again before the
+    // first full inverse FFT (in_clean); `out` (which holds the r2c input) is not needed once
+    // the spectrum is computed.
     f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD, flags);
     if (!f.c2c) return false;
-    std::memset(f.in, 0, sizeof(fftw_complex) * static_cast<size_t>(n_fft_));
+    f.in_clean = false;
     f.band_lo = 1;
     f.band_hi = 0;
   }
@@ -625,7 +643,7 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
     return true;
   }
   if (pruned_ && prunedRow<double>(out)) return true;
-  fftw_execute(fftw_->c2c);
+  fullInverse();
   modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
   return true;
 }
