@@ -190,20 +190,15 @@ void BM_ModeDamping(benchmark::State& state) {
 }
 
 BENCHMARK(BM_Cwt)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_Scalogram)
-    ->Args({100000, 1})
-    ->Args({100000, 2})
-    ->Args({1000000, 1})
-    ->Args({1000000, 2})
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
-BENCHMARK(BM_ScalogramSingle)
-    ->Args({100000, 1})
-    ->Args({100000, 2})
-    ->Args({1000000, 1})
-    ->Args({1000000, 2})
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+// Cases of the scalograms: n in {1e5, 1e6} x threads in {1, 2}.
+void scalogramCases(benchmark::internal::Benchmark* b) {
+  for (const long n : {100000L, 1000000L}) {
+    for (const long threads : {1L, 2L}) b->Args({n, threads});
+  }
+  b->Unit(benchmark::kMillisecond)->UseRealTime();
+}
+BENCHMARK(BM_Scalogram)->Apply(scalogramCases);
+BENCHMARK(BM_ScalogramSingle)->Apply(scalogramCases);
 BENCHMARK(BM_ModeDamping)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_FftBound)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
