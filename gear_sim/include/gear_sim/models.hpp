@@ -29,6 +29,9 @@ class MeshStiffness {
   const std::vector<double>& cycleBreakpoints() const { return breaks_; }
   /// True when k is constant on each smooth piece (square and constant models).
   bool piecewiseConstant() const { return piecewise_constant_; }
+  /// True, with the value in *k, when k is constant on the smooth piece that contains u_ref
+  /// (square and constant models everywhere, the trapezoid's flat parts).
+  bool constantOnPiece(double u_ref, double* k) const;
   /// out[i] = at(u[i], u_ref) for phases u[0..n) on the smooth piece that contains u_ref (the
   /// simulator's block evaluation: the piece is found once, trapezoid ramps are a linear
   /// formula). When du > 0 the phases are uniform, u[i] = u[0] + i du, and the Fourier model

@@ -63,6 +63,18 @@ double MeshStiffness::at(double u, double u_ref) const {
   return o_.k_mean;
 }
 
+bool MeshStiffness::constantOnPiece(double u_ref, double* k) const {
+  if (o_.model == StiffnessModel::Fourier) return false;
+  if (o_.model == StiffnessModel::Trapezoid) {
+    const double e = o_.contact_ratio - 1.0, w = o_.transition_fraction;
+    double f = u_ref - std::floor(u_ref);
+    if (f >= 1.0 - 0.5 * w) f -= 1.0;
+    if (f < 0.5 * w || (f >= e - 0.5 * w && f < e + 0.5 * w)) return false;  // on a ramp
+  }
+  *k = at(u_ref, u_ref);
+  return true;
+}
+
 void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, double* out) const {
   switch (o_.model) {
     case StiffnessModel::Square:
@@ -213,7 +225,10 @@ void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
     // at() with a cursor instead of a binary search per point (the times ascend).
     const auto& x = o_.times;
     const auto& v = o_.values;
+    // The slope of the current interval is computed once per interval (at() divides per
+    // point; the values agree to rounding).
     size_t k = 0;  // first table time > t (upper_bound), advanced monotonically
+    double slope = 0.0;
     for (long i = 0; i < n; ++i) {
       const double t = t0 + static_cast<double>(i) * dt;
       if (t <= x.front()) {
@@ -221,9 +236,11 @@ void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
       } else if (t >= x.back()) {
         out[i] = v.back();
       } else {
-        while (k < x.size() && x[k] <= t) ++k;
-        const double w = (t - x[k - 1]) / (x[k] - x[k - 1]);
-        out[i] = v[k - 1] + w * (v[k] - v[k - 1]);
+        if (k == 0 || x[k] <= t) {
+          while (k < x.size() && x[k] <= t) ++k;
+          slope = (v[k] - v[k - 1]) / (x[k] - x[k - 1]);
+        }
+        out[i] = v[k - 1] + (t - x[k - 1]) * slope;
       }
     }
     return;

@@ -367,8 +367,10 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
         cb *= inv_me;
         const Eigen::Index j0 = 2 * m * (n - n0);
         const double* Tp = T.data() + j0;
-        if (pc) {
-          const double k_phys = model.k(mid, mid), K = k_phys * inv_me;
+        double k_phys = 0.0;
+        if (pc || stiffness.constantOnPiece(model.timing.phase(mid), &k_phys)) {
+          if (pc) k_phys = model.k(mid, mid);
+          const double K = k_phys * inv_me;
           const double state = stiffness.state(model.timing.phase(mid));
           for (Eigen::Index i = n; i < n_end; ++i) {
             o.stiffness[i] = k_phys;
