@@ -119,7 +119,7 @@ double countImplausible(const gear_damping::SignalChunk& c, BagSignalInfo* info)
 class ChunkReader {
  public:
   using Chunk = gear_damping::SignalChunk::ConstPtr;
-  static constexpr size_t kQueueSamples = size_t{1} << 18;
+  static constexpr size_t kQueueSamples = size_t{1} << 16;
 
   ChunkReader(std::string path, std::string topic)
       : path_(std::move(path)), topic_(std::move(topic)), thread_([this] { run(); }) {}
