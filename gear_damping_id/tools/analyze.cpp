@@ -46,6 +46,7 @@
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
+#include "gear_damping_id/segment_driver.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -157,15 +158,14 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
   return primary ? std::string("/gear/") + leaf : "/gear/" + run.name() + "/" + leaf;
 }
 
-// Streaming analysis of a long bag: segment by segment, memory bounded by a segment.
-// Piecewise known/greybox/paper runs treat each segment as its own record (the unknowns are
-// segment-local, so this is the whole-record estimate; refinement and modeled response are per
-// segment, each response starting from its segment's identified state). Runs with shared
-// unknowns (constant, load_law, legacy) accumulate their normal equations with IntegralMethod;
-// their output-error refinement and modeled response need the whole record and are skipped
-// with a warning.
+// Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
+// pipeline of the whole-record identify(): the bag is read in groups of `threads` segments with
+// their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
+// equal those of the record read whole. Memory: a group of segments per read. The piecewise
+// modeled response is per segment (from its identified state); shared-unknown runs are not
+// refined and have no modeled response (both need the whole record), with a warning.
 bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
-                      std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
+                      int threads, std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                       std::vector<double>* wavelet_dte, size_t wavelet_max,
                       gear_sim::ProgressBar* progress, std::string* error) {
   gd::SignalView whole;
@@ -177,30 +177,23 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     *error = "no samples in the analysed time range";
     return false;
   }
-  // Legacy forcing: the mean load over the analysed range (one extra pass).
+  // Legacy forcing: the mean load over the analysed range (one extra pass, summed in order).
   double fbar = gd::kNaN;
   bool legacy = false;
   for (const auto& r : *runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
   if (legacy && info.torque) {
     double sum = 0.0;
-    long long cnt = 0;
     if (!gear_sim_ros::streamSignalBag(
-            info, ranges,
+            info, {{ranges.front().first, ranges.back().second}},
             [&](const gear_sim::SignalTable& t, size_t) {
-              sum += t.torque.sum();
-              cnt += t.torque.size();
+              for (Eigen::Index i = 0; i < t.torque.size(); ++i) sum += t.torque[i];
               return true;
             },
             error))
       return false;
-    fbar = gear.force_factor * sum / static_cast<double>(cnt);
+    fbar =
+        gear.force_factor * sum / static_cast<double>(ranges.back().second - ranges.front().first);
   }
-  struct State {
-    std::unique_ptr<gd::IntegralMethod> method;  // shared-unknown runs
-    FitAccumulator fit;
-    bool per_segment = false;
-  };
-  std::vector<State> states(runs->size());
   // The default window from the record's mean stiffness, as for a record read whole.
   double window = runs->front().options.window_length;
   if (!(window > 0.0)) {
@@ -209,78 +202,65 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     mean_k.stiffness = &info.stiffness_mean;
     window = gd::defaultWindowLength(mean_k, gear);
   }
+  std::vector<gd::SegmentDriver> drivers;
+  std::vector<FitAccumulator> fits(runs->size());
+  gd::DriverLimits limits;
+  limits.threads = threads;
+  for (auto& run : *runs) {
+    gd::IdentificationOptions o = run.options;
+    o.window_length = window;
+    drivers.emplace_back(o, gear, limits);
+    if (o.formulation == gd::Formulation::Legacy && info.torque)
+      drivers.back().setLegacyForcing(fbar);
+  }
+  gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt,
+                           static_cast<size_t>(std::max(threads, 1)));
+  const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
-  const bool ok = gear_sim_ros::streamSignalBag(
-      info, ranges,
-      [&](const gear_sim::SignalTable& block, size_t r) {
-        const gd::SignalView view = gd::SignalView::of(block);
-        if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
-          const size_t take =
-              std::min(wavelet_max - wavelet_dte->size(), static_cast<size_t>(block.dte.size()));
-          wavelet_dte->insert(wavelet_dte->end(), block.dte.data(), block.dte.data() + take);
-        }
-        for (size_t k = 0; k < runs->size(); ++k) {
-          gd::AnalysisRun& run = (*runs)[k];
-          State& st = states[k];
-          gd::IdentificationOptions o = run.options;
-          o.window_length = window;
-          const gd::Formulation f = o.formulation;
-          st.per_segment = o.model == gd::DampingModel::Piecewise && f != gd::Formulation::Legacy;
-          if (!st.per_segment) {
-            if (!st.method) {
-              st.method = std::make_unique<gd::IntegralMethod>(o, gear);
-              if (f == gd::Formulation::Legacy) st.method->setLegacyForcing(fbar);
-            }
-            st.method->addSegment(view, 0, view.n);
-            continue;
-          }
-          o.segment_length = std::numeric_limits<double>::infinity();
-          o.t_start = -std::numeric_limits<double>::infinity();
-          o.t_end = std::numeric_limits<double>::infinity();
-          gd::IdentificationResult seg;
-          std::string e;
-          if (!gd::identify(block, gear, o, &seg, &e)) {
-            *error = e;
-            return false;
-          }
-          if (run.result.segments.empty())
-            run.result = seg;  // formulation, Me, omega0, ...
-          else
-            run.result.segments.push_back(seg.segments.front());
-          for (const auto& w : seg.warnings) run.result.warnings.push_back(w);
-          gd::ModeledResponse resp;
-          std::string why;
-          if (seg.segments.front().identifiable &&
-              gd::modeledResponse(view, gear, seg, &resp, &why)) {
-            st.fit.add(resp);
-            bag->write(topicOf(run, k == 0, "modeled_response"), block.time[0],
-                       gear_damping_ros::toMsg(
-                           resp, info.sample_rate,
-                           info.first_index + static_cast<std::uint64_t>(ranges[r].first)));
-          }
-        }
-        progress->set(static_cast<double>(ranges[r].second - ranges.front().first),
-                      "segment " + std::to_string(r + 1) + " of " + std::to_string(ranges.size()));
-        return true;
-      },
-      error);
-  if (!ok) return false;
+  const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
+    if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
+      for (const auto& r : segs) {  // the analysed samples, in order
+        const size_t take =
+            std::min(wavelet_max - wavelet_dte->size(), static_cast<size_t>(r.second - r.first));
+        wavelet_dte->insert(wavelet_dte->end(), view.dte + r.first, view.dte + r.first + take);
+      }
+    }
+    for (size_t k = 0; k < runs->size(); ++k) {
+      const auto outs = drivers[k].addAll(view, segs);
+      if (drivers[k].sharedModel()) continue;
+      for (size_t j = 0; j < outs.size(); ++j) {
+        gd::ModeledResponse resp;
+        std::string why;
+        if (!outs[j].estimate.identifiable ||
+            !gd::modeledResponse(view, gear, outs[j].result, &resp, &why))
+          continue;
+        fits[k].add(resp);
+        bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
+                   gear_damping_ros::toMsg(
+                       resp, info.sample_rate,
+                       info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
+      }
+    }
+    progress->set(
+        static_cast<double>(ranges[first + segs.size() - 1].second - ranges.front().first),
+        "segment " + std::to_string(first + segs.size()) + " of " + std::to_string(ranges.size()));
+    return true;
+  };
+  if (!gear_sim_ros::streamSignalBag(
+          info, reads,
+          [&](const gear_sim::SignalTable& block, size_t r) { return feeder.push(block, r, sink); },
+          error))
+    return false;
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
-    if (states[k].per_segment) {
-      states[k].fit.finish(&run.response);
+    run.result = drivers[k].finish();
+    if (!drivers[k].sharedModel()) {
+      fits[k].finish(&run.response);
       run.response.observed.resize(0);
-      run.result.window_length = window;
     } else {
-      run.result = states[k].method->finish();
       run.response_error = "not computed for a record analysed streaming (" +
                            std::to_string(info.samples) +
                            " samples): the shared model's response needs the whole record";
-      run.result.warnings.push_back(
-          {gd::quality_code::kRefineSkipped,
-           "output-error refinement skipped: a record analysed streaming is refined per segment "
-           "only for the piecewise model"});
-      gd::applyQualityFlags(run.options, &run.result);
     }
   }
   return true;
@@ -336,6 +316,7 @@ int run(int argc, char** argv) {
   gd::IdentificationOptions base;
   std::optional<double> t_start, t_end;
   long max_in_memory = 1000000;
+  int threads = 1;
   bool wavelet = false;
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
@@ -353,11 +334,11 @@ int run(int argc, char** argv) {
   app.add_option("--output", output, "write the result JSON (docs/method.md §6) to this file");
   app.add_option("--formulation", formulations,
                  "known | greybox | paper | legacy (repeat for several; default known)")
-      ->check(CLI::IsMember({"known", "greybox", "paper", "legacy"}))
+      ->check(CLI::IsMember(gd::formulationNames()))
       ->take_all();
   app.add_option("--model", models,
                  "piecewise | constant | load_law (repeat for several; default piecewise)")
-      ->check(CLI::IsMember({"piecewise", "constant", "load_law"}))
+      ->check(CLI::IsMember(gd::dampingModelNames()))
       ->take_all();
   app.add_option("--segment", base.segment_length,
                  "damping segment length [s] (0 or inf: the whole record; default 1e-3)");
@@ -388,6 +369,9 @@ int run(int argc, char** argv) {
                  "bags with more samples are analysed streaming, one segment at a time "
                  "(default 1e6)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads,
+                 "identify this many segments in parallel (same results as 1; default 1)")
+      ->check(CLI::Range(1, 256));
   app.add_option("--csv-out", csv_out,
                  "write segments.csv, summary.csv, response_<run>.csv and the wavelet tables "
                  "into this directory");
@@ -546,16 +530,15 @@ int run(int argc, char** argv) {
       if (!e.empty()) return fail(kExitInput, input + ": " + e);
     }
   } else if (identification) {
-    for (const auto& o : runs_options) {
-      gear_sim::SignalTable shape;  // the columns present, for the formulation check
-      shape.time = Eigen::VectorXd::LinSpaced(2, 0.0, whole.dt);
-      shape.dte.resize(2);
-      if (bag_info.stiffness) shape.stiffness.resize(2);
-      if (bag_info.torque) shape.torque.resize(2);
-      if (bag_info.mesh_state) shape.mesh_state.resize(2);
-      if (const std::string e = gd::checkSignalTable(shape, o.formulation, o.model); !e.empty())
+    gd::ChannelSet present;
+    present.stiffness = bag_info.stiffness;
+    present.torque = bag_info.torque;
+    present.mesh_state = bag_info.mesh_state;
+    present.mesh_phase = bag_info.mesh_phase;
+    for (const auto& o : runs_options)
+      if (const std::string e = gd::missingChannelError(present, o.formulation, o.model);
+          !e.empty())
         return fail(kExitInput, input + ": " + e);
-    }
   }
   const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
   if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
@@ -602,8 +585,9 @@ int run(int argc, char** argv) {
   }
   gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
-    if (!analyzeStreaming(bag_info, gear, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
-                          wavelet_n_record, &progress, &error))
+    if (!analyzeStreaming(bag_info, gear, threads, &runs, &bag,
+                          wavelet_on_record ? &wavelet_dte : nullptr, wavelet_n_record, &progress,
+                          &error))
       return fail(kExitInput, input + ": " + error);
   } else if (streaming && wavelet_on_record) {
     if (!gear_sim_ros::streamSignalBag(
@@ -619,7 +603,7 @@ int run(int argc, char** argv) {
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
       progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
-      if (!gd::identify(table, gear, run.options, &run.result, &error))
+      if (!gd::identify(table, gear, run.options, &run.result, &error, threads))
         return fail(kExitInput, input + ": " + error);
       progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
       if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
