@@ -305,11 +305,20 @@ bool parseRegion(const std::string& text, std::pair<double, double>* out) {
 
 }  // namespace
 
-int run(int argc, char** argv) {
-  CLI::App app{
-      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
-      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
-      "the damping with Morlet wavelets."};
+// One run of the tool: parse -> check options -> load -> identify -> wavelet -> write, each step
+// returning kContinue or the exit code to stop with; the state they share is the members.
+class Analysis {
+ public:
+  static constexpr int kContinue = -1;
+  int parse(int argc, char** argv);
+  int checkOptions();
+  int load();
+  int identify();
+  int waveletStep();
+  int write();
+
+ private:
+  // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
   std::string refine = "auto", stiffness_shape = "square";
@@ -321,6 +330,45 @@ int run(int argc, char** argv) {
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
+  std::string wavelet_input;
+  bool quiet = false, summary = false, table_mode = false;
+  nlohmann::json given = nlohmann::json::object();  // the options set on the command line
+  std::vector<std::string> command_line;
+  // Options.
+  bool is_bag = false;
+  std::vector<gd::IdentificationOptions> runs_options;
+  // Input.
+  std::string error;
+  gear_sim::SignalTable table;
+  gear_sim_ros::BagSignalInfo bag_info;
+  bool streaming = false;
+  gear_sim::GearModel model;
+  std::string params_source;
+  bool identification = true;
+  gd::GearConstants gear;
+  double sample_rate = 0.0;
+  gd::SignalView whole;
+  Ranges analysed;
+  double duration = 0.0;
+  // Identification.
+  ResultBag bag;
+  std::vector<gd::AnalysisRun> runs;
+  std::vector<double> wavelet_dte;
+  Eigen::Index first = 0;
+  size_t wavelet_n_record = 0;
+  bool wavelet_on_record = false;
+  bool identifiable = false;
+  // Wavelet validation.
+  gd::WaveletResult wres;
+  double t_first = 0.0, wavelet_rate = 0.0;
+  size_t wavelet_n = 0;
+};
+
+int Analysis::parse(int argc, char** argv) {
+  CLI::App app{
+      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
+      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
+      "the damping with Morlet wavelets."};
   app.add_option(
          "--input", input,
          "signal record: CSV with the docs/method.md §6 columns, or a bag of SignalChunk messages")
@@ -399,7 +447,6 @@ int run(int argc, char** argv) {
   app.add_option("--prominence", wopt.peak_prominence,
                  "wavelet: minimum peak prominence, fraction of the highest peak (default 0: "
                  "adapts to the noise floor)");
-  std::string wavelet_input;
   app.add_option("--wavelet-input", wavelet_input,
                  "wavelet: analyse the dte of this record (CSV or bag, e.g. a free decay from "
                  "`simulate --free-response`) instead of the identification record")
@@ -409,7 +456,6 @@ int run(int argc, char** argv) {
                  "record (default 2^18 = 262144: a free decay of a 10 kHz mode lasts milliseconds)")
       ->check(CLI::PositiveNumber);
   // Output of the run on the terminal (docs/method.md §6 "Trust fields").
-  bool quiet = false, summary = false, table_mode = false;
   app.add_flag("--quiet,-q", quiet,
                "no progress line on stderr (warnings and errors are still printed)");
   auto* summary_opt = app.add_flag(
@@ -425,9 +471,15 @@ int run(int argc, char** argv) {
     const int rc = app.exit(e);  // prints the help or the message naming the option
     return rc == 0 ? 0 : kExitUsage;
   }
+  for (const CLI::Option* o : app.get_options())  // the options set on the command line
+    if (o->count() > 0) given[o->get_name()] = o->results();
+  command_line.assign(argv, argv + argc);
+  return kContinue;
+}
 
-  // Options: validated before any file is read, each message naming the option.
-  const bool is_bag = endsWith(input, ".bag");
+// Options: validated before any file is read, each message naming the option.
+int Analysis::checkOptions() {
+  is_bag = endsWith(input, ".bag");
   if (!is_bag && !endsWith(input, ".csv"))
     return fail(kExitUsage, "--input " + input + ": must end in .csv or .bag");
   if (!bag_out.empty() && !endsWith(bag_out, ".bag"))
@@ -439,7 +491,6 @@ int run(int argc, char** argv) {
                 : refine == "never" ? gd::IdentificationOptions::Refine::Never
                                     : gd::IdentificationOptions::Refine::Auto;
   gd::parseStiffnessShape(stiffness_shape, &base.stiffness_shape);  // checked by the option
-  std::vector<gd::IdentificationOptions> runs_options;
   for (const auto& f : formulations) {
     for (const auto& m : models) {
       gd::IdentificationOptions o = base;
@@ -457,11 +508,11 @@ int run(int argc, char** argv) {
   }
   if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
 
+  return kContinue;
+}
+
+int Analysis::load() {
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
-  std::string error;
-  gear_sim::SignalTable table;
-  gear_sim_ros::BagSignalInfo bag_info;
-  bool streaming = false;
   if (is_bag) {
     if (!gear_sim_ros::scanSignalBag(input, topic, &bag_info, &error))
       return fail(kExitInput, error);
@@ -476,9 +527,7 @@ int run(int argc, char** argv) {
   }
 
   // Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
-  gear_sim::GearModel model;
-  std::string params_source = params;
-  bool identification = true;
+  params_source = params;
   if (!params.empty()) {
     if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
   } else if (is_bag && bag_info.has_params) {
@@ -507,17 +556,16 @@ int run(int argc, char** argv) {
                          : "") +
          "): running the wavelet validation only");
   }
-  const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
   if (identification) {
     if (const std::string e = gear.validate(); !e.empty())
       return fail(kExitInput, params_source + ": " + e);
   }
 
   // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
-  const double sample_rate = streaming ? bag_info.sample_rate
-                                       : static_cast<double>(table.size() - 1) /
-                                             (table.time[table.size() - 1] - table.time[0]);
-  gd::SignalView whole;
+  sample_rate = streaming ? bag_info.sample_rate
+                          : static_cast<double>(table.size() - 1) /
+                                (table.time[table.size() - 1] - table.time[0]);
   whole.dt = 1.0 / sample_rate;
   whole.t0 = streaming ? static_cast<double>(bag_info.first_index) * whole.dt : table.time[0];
   whole.n = streaming ? static_cast<Eigen::Index>(bag_info.samples) : table.size();
@@ -540,7 +588,7 @@ int run(int argc, char** argv) {
           !e.empty())
         return fail(kExitInput, input + ": " + e);
   }
-  const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
+  analysed = gd::segmentRanges(whole, runs_options.front());
   if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
     using gear_sim::formatNumber;
     const auto& o = runs_options.front();
@@ -552,8 +600,7 @@ int run(int argc, char** argv) {
                     formatNumber(o.segment_length) +
                     " s = " + formatNumber(o.segment_length * sample_rate) + " samples)");
   }
-  const double duration =
-      static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
+  duration = static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
   if (identification) {
     std::string rate_warning;
     if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
@@ -564,16 +611,17 @@ int run(int argc, char** argv) {
         return fail(kExitInput, input + ": " + e);
   }
 
-  ResultBag bag;
+  return kContinue;
+}
+
+int Analysis::identify() {
   if (!bag_out.empty() && !bag.open(bag_out, &error)) return fail(kExitOutput, error);
 
   // Identification (table or streaming); the wavelet's samples are collected on the way.
-  std::vector<gd::AnalysisRun> runs;
-  std::vector<double> wavelet_dte;
-  const Eigen::Index first = analysed.front().first;
-  const size_t wavelet_n_record =
+  first = analysed.front().first;
+  wavelet_n_record =
       static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
-  const bool wavelet_on_record = wavelet && wavelet_input.empty();
+  wavelet_on_record = wavelet && wavelet_input.empty();
   if (identification) {
     for (const auto& o : runs_options) {
       gd::AnalysisRun run;
@@ -619,7 +667,7 @@ int run(int argc, char** argv) {
     if (wavelet_on_record)
       wavelet_dte.assign(table.dte.data() + first, table.dte.data() + first + wavelet_n_record);
   }
-  bool identifiable = false;
+  identifiable = false;
   for (size_t k = 0; k < runs.size(); ++k) {
     identifiable = identifiable || anyIdentifiable(runs[k].result);
     bag.write(topicOf(runs[k], k == 0, "damping"), whole.t0 + duration,
@@ -632,11 +680,14 @@ int run(int argc, char** argv) {
                   : table_mode ? gd::RunPrintMode::Table
                                : gd::RunPrintMode::Auto);
 
+  return kContinue;
+}
+
+int Analysis::waveletStep() {
   // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
-  gd::WaveletResult wres;
-  double t_first = whole.t0 + static_cast<double>(first) * whole.dt;
-  double wavelet_rate = sample_rate;
-  size_t wavelet_n = wavelet_n_record;
+  t_first = whole.t0 + static_cast<double>(first) * whole.dt;
+  wavelet_rate = sample_rate;
+  wavelet_n = wavelet_n_record;
   if (!wavelet_input.empty()) {
     wavelet = true;
     gear_sim::SignalTable w;
@@ -698,6 +749,10 @@ int run(int argc, char** argv) {
     }
   }
 
+  return kContinue;
+}
+
+int Analysis::write() {
   nlohmann::json in = {
       {"file", input},
       {"params", identification ? nlohmann::json(params_source) : nlohmann::json(nullptr)},
@@ -709,11 +764,7 @@ int run(int argc, char** argv) {
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
   nlohmann::json doc = gd::analysisJson(runs, in);
-  nlohmann::json given = nlohmann::json::object();  // the options set on the command line
-  for (const CLI::Option* o : app.get_options())
-    if (o->count() > 0) given[o->get_name()] = o->results();
-  doc["metadata"] = gd::runMetadata(std::vector<std::string>(argv, argv + argc), input, given,
-                                    GEAR_DAMPING_VERSION);
+  doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {
     doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
     if (wres.ok()) {
@@ -735,6 +786,16 @@ int run(int argc, char** argv) {
   if (!bag.close(&error, &stage) || !stage.commit(&error)) return fail(kExitOutput, error);
   if (identification && !identifiable)
     return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
+  return 0;
+}
+
+int run(int argc, char** argv) {
+  Analysis a;
+  if (const int rc = a.parse(argc, argv); rc != Analysis::kContinue) return rc;
+  for (int (Analysis::*step)() : {&Analysis::checkOptions, &Analysis::load, &Analysis::identify,
+                                  &Analysis::waveletStep, &Analysis::write}) {
+    if (const int rc = (a.*step)(); rc != Analysis::kContinue) return rc;
+  }
   return 0;
 }
 
