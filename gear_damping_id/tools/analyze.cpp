@@ -62,6 +62,9 @@ using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
 namespace {
 
 constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitNothing = 4, kExitInternal = 5;
+// Segments per read of a streamed bag (memory: this many segments; the --threads workers share
+// them).
+constexpr size_t kStreamGroup = 64;
 // Largest --scales (README "Limits"): each scale is one inverse FFT of the analysed samples.
 constexpr int kMaxScales = 2000;
 
@@ -159,7 +162,7 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
 }
 
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
-// pipeline of the whole-record identify(): the bag is read in groups of `threads` segments with
+// pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
 // their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
 // equal those of the record read whole. Memory: a group of segments per read. The piecewise
 // modeled response is per segment (from its identified state); shared-unknown runs are not
@@ -213,8 +216,9 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     if (o.formulation == gd::Formulation::Legacy && info.torque)
       drivers.back().setLegacyForcing(fbar);
   }
-  gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt,
-                           static_cast<size_t>(std::max(threads, 1)));
+  // Reads of kStreamGroup segments whatever --threads is: the views (and so every time stamp)
+  // are the same for any number of threads, so the output is too.
+  gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
   const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
   const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
