@@ -207,6 +207,46 @@ void coverage(long counts, int seeds, double torque_noise, double min_reported) 
 TEST(EncoderNoise, Encoder16BitCoverage) { coverage(1L << 16, 30, 0.1, 0.3); }
 TEST(EncoderNoise, Encoder20BitCoverage) { coverage(1L << 20, 30, 0.1, 0.95); }
 
+// Edge times at 5000 counts/rev (exact, and on an 80 MHz counter clock) against uniform input.
+TEST_F(EncoderChain, EdgeTimesGiveTheUniformC) {
+  const SimConfig& c = *config_;
+  const gear_sim::EncoderOptions enc = encoder(0);
+  IdentificationOptions io;  // the same segments for both (the edge grid starts a few us later)
+  io.t_start = 1e-4;
+  io.t_end = 9.9e-3;
+  const IdentificationResult uni =
+      identifyOrFail(frontEnd(gear_sim::rigRecord(c, enc, *clean_), c).table, c, io);
+  for (double clock : {0.0, 80e6}) {
+    gear_sim::EncoderOptions e = enc;
+    e.edge_clock = clock;
+    const auto e1 = gear_sim::encoderEdges(c, e, *clean_, 1, 5000);
+    const auto e2 = gear_sim::encoderEdges(c, e, *clean_, 2, 5000);
+    ASSERT_GT(e1.size(), 100u);
+    SignalTable rig;
+    std::string res, err;
+    ASSERT_TRUE(gd::edgesToRigTable(e1, 5000, e2, 5000, *clean_, &rig, &res, &err)) << err;
+    gd::EncoderFrontEndOptions o;
+    const IdentificationResult r = identifyOrFail(frontEnd(rig, c, o).table, c, io);
+    // Compare the segments that start at the same time (the edge grid starts a few us later).
+    int compared = 0, within = 0;
+    double worst = 0.0;
+    for (const auto& s : r.segments)
+      for (const auto& u : uni.segments)
+        if (std::abs(s.t_end - u.t_end) < 2e-6 && s.identifiable) {
+          ++compared;
+          const double z = std::abs(s.C - u.C) / s.C_std;
+          worst = std::max(worst, std::abs(s.C - u.C) / u.C);
+          if (z <= 2.0) ++within;
+        }
+    std::printf(
+        "edge times, 5000 counts/rev, clock %g Hz: %d of %d segments within 2 SE of the "
+        "uniform C (largest difference %.3g %%)\n",
+        clock, within, compared, 100 * worst);
+    EXPECT_GE(compared, 8);
+    EXPECT_GE(within, compared - 1);
+  }
+}
+
 TEST(EncoderNoise, QuantisationModelMatchesTheMeasuredNoise) {
   SimConfig c = table1Config();
   c.simulation.duration = 0.002;

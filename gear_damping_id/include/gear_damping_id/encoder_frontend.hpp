@@ -151,6 +151,14 @@ bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
                        const Eigen::VectorXd& grid, Eigen::VectorXd* theta, std::string* error,
                        double max_gap_ratio = 20.0);
 
+/// A uniform rig table from edge-time records: the grid is `grid` (e.g. the torque file's time
+/// column, with its torque) cropped to the span both edge records cover; theta1/theta2 by
+/// edgeTimesToAngles. `resampling` describes it for the report.
+bool edgesToRigTable(const std::vector<double>& edges1, long counts1,
+                     const std::vector<double>& edges2, long counts2,
+                     const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
+                     std::string* resampling, std::string* error);
+
 /// Decimation by an integer factor with a linear-phase anti-aliasing FIR (windowed sinc, Blackman
 /// window, cutoff 0.4 of the output rate, 16 taps per factor either side; unit DC gain, so a
 /// linear ramp such as a rotating angle passes unchanged). The first and last half-filter spans

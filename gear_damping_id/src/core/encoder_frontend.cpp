@@ -539,6 +539,45 @@ bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
   return true;
 }
 
+bool edgesToRigTable(const std::vector<double>& edges1, long counts1,
+                     const std::vector<double>& edges2, long counts2,
+                     const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
+                     std::string* resampling, std::string* error) {
+  if (edges1.size() < 4 || edges2.size() < 4) {
+    if (error) *error = "each edge-time record needs at least 4 edges";
+    return false;
+  }
+  const double lo = std::max(edges1.front(), edges2.front());
+  const double hi = std::min(edges1.back(), edges2.back());
+  Eigen::Index b = 0, e = grid.size();
+  while (b < e && grid.time[b] < lo) ++b;
+  while (e > b && grid.time[e - 1] > hi) --e;
+  if (e - b < 16) {
+    if (error)
+      *error = "the edge times cover [" + num(lo) + ", " + num(hi) +
+               "] s: fewer than 16 samples of the time grid lie inside";
+    return false;
+  }
+  *rig = gear_sim::SignalTable{};
+  rig->time = grid.time.segment(b, e - b);
+  if (grid.torque.size() == grid.size()) rig->torque = grid.torque.segment(b, e - b);
+  std::string err;
+  if (!edgeTimesToAngles(edges1, counts1, rig->time, &rig->theta1, &err)) {
+    if (error) *error = "edge times of shaft 1: " + err;
+    return false;
+  }
+  if (!edgeTimesToAngles(edges2, counts2, rig->time, &rig->theta2, &err)) {
+    if (error) *error = "edge times of shaft 2: " + err;
+    return false;
+  }
+  if (resampling)
+    *resampling = "edge times (" + std::to_string(edges1.size()) + " and " +
+                  std::to_string(edges2.size()) + " edges at " + std::to_string(counts1) + " and " +
+                  std::to_string(counts2) +
+                  " counts/rev) to the time grid by local cubics through four edges";
+  return true;
+}
+
 bool decimateRig(const gear_sim::SignalTable& in, int factor, gear_sim::SignalTable* out,
                  std::string* error) {
   const Eigen::Index n = in.size();
