@@ -39,12 +39,12 @@
 #include <string>
 #include <vector>
 
-#include "gear_damping_id/rig_input.hpp"
 #include "gear_damping_id/input_checks.hpp"
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/rig_input.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
 #include "gear_damping_id/wavelet.hpp"

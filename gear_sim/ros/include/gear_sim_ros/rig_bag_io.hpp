@@ -22,7 +22,6 @@ struct RigBagTopics {
 /// Writes `rig` (time, theta1, theta2, torque) as JointState + WrenchStamped messages (and the
 /// gear parameters when `params` is not null). Temporary file renamed on success.
 bool writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
-                 const gear_sim::GearModel* params, const RigBagTopics& topics,
-                 std::string* error);
+                 const gear_sim::GearModel* params, const RigBagTopics& topics, std::string* error);
 
 }  // namespace gear_sim_ros
