@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A longer libFuzzer campaign on one target of fuzz/ (csv, yaml, bag, stream), single process,
+# A longer libFuzzer campaign on one target of fuzz/ (csv, yaml, bag, stream, rig), single process,
 # in the sanitizer workspace of scripts/sanitize.sh (configured and built first if needed). New inputs
 # accumulate in <asan workspace>/fuzz_corpus/TARGET across campaigns; a crash is written there
 # as crash-* and the exit status is non-zero. Prints the number of executions.
@@ -10,8 +10,8 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 target=${1:?usage: scripts/fuzz.sh TARGET MINUTES}
 minutes=${2:?usage: scripts/fuzz.sh TARGET MINUTES}
 shift 2
-case "$target" in csv | yaml | bag | stream) ;; *)
-  echo "fuzz.sh: unknown target '$target' (csv, yaml, bag, stream)" >&2
+case "$target" in csv | yaml | bag | stream | rig) ;; *)
+  echo "fuzz.sh: unknown target '$target' (csv, yaml, bag, stream, rig)" >&2
   exit 1
   ;;
 esac

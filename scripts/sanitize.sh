@@ -104,7 +104,7 @@ echo "sanitize: unit tests $(($(date +%s) - start)) s" >&2
 
 if [ "$fuzz_seconds" -gt 0 ]; then
   start=$(date +%s)
-  for target in csv yaml bag stream; do
+  for target in csv yaml bag stream rig; do
     work=$(mktemp -d)
     log="$results/fuzz_$target.log"
     # Single process; new inputs go to a scratch corpus, the seeds in the repository stay.

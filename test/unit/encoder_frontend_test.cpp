@@ -14,6 +14,7 @@
 #include <cstdio>
 
 #include "gear_sim/encoders.hpp"
+#include "gear_sim/rig_csv.hpp"
 #include "id_test_support.hpp"
 
 namespace {
@@ -265,6 +266,76 @@ TEST(EncoderNoise, QuantisationModelMatchesTheMeasuredNoise) {
                 sd, b.report.quantisation_noise_std);
     EXPECT_NEAR(sd, b.report.quantisation_noise_std, 0.1 * b.report.quantisation_noise_std);
   }
+}
+
+}  // namespace
+
+namespace {
+
+std::string writeTemp(const std::string& name, const std::string& text) {
+  const std::string path = ::testing::TempDir() + "/rigfront_" + name;
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  std::fputs(text.c_str(), f);
+  std::fclose(f);
+  return path;
+}
+
+// Regression tests of the rig input path (fuzz/fuzz_rig.cpp covers it with libFuzzer): every
+// hostile file is refused with a message naming the reason, never a crash or a number.
+TEST(RigInputs, HostileFilesAreRefusedWithReasons) {
+  gear_sim::SignalTable t, out;
+  std::string e;
+  EXPECT_FALSE(gear_sim::readRigCsv(
+      writeTemp("dte.csv", "time,dte,theta1,theta2\n0,0,0,0\n1,0,1,1\n"), &t, &e));
+  EXPECT_NE(e.find("not a rig record"), std::string::npos) << e;
+  EXPECT_FALSE(
+      gear_sim::readRigCsv(writeTemp("nan.csv", "time,theta1,theta2\n0,nan,0\n1,1,1\n"), &t, &e));
+  EXPECT_FALSE(e.empty());
+  EXPECT_FALSE(
+      gear_sim::readRigCsv(writeTemp("time.csv", "time,theta1,theta2\n1,0,0\n0,1,1\n"), &t, &e));
+  EXPECT_FALSE(e.empty());
+  // Too short for the front end; a missing torque with offsets to estimate.
+  ASSERT_TRUE(gear_sim::readRigCsv(
+      writeTemp("short.csv", "time,theta1,theta2\n0,0,0\n1e-6,1e-3,5e-4\n2e-6,2e-3,1e-3\n"), &t,
+      &e))
+      << e;
+  gear_sim::GearModel model;
+  EXPECT_FALSE(gd::encoderToSignalTable(t, model, {}, &out, nullptr, &e));
+  EXPECT_NE(e.find("16"), std::string::npos) << e;
+  // Edge files: decreasing, a gap, too few edges, the grid outside.
+  std::vector<double> edges;
+  EXPECT_FALSE(gear_sim::readEdgeCsv(writeTemp("e1.csv", "time\n0\n2e-6\n1e-6\n"), &edges, &e));
+  Eigen::VectorXd theta;
+  EXPECT_FALSE(
+      gd::edgeTimesToAngles({0, 1, 2}, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  EXPECT_NE(e.find("4 edges"), std::string::npos) << e;
+  std::vector<double> gap;
+  for (int k = 0; k < 40; ++k) gap.push_back(k);
+  gap.push_back(5000.0);  // 125x the mean interval: a standstill or lost edges
+  EXPECT_FALSE(gd::edgeTimesToAngles(gap, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  EXPECT_NE(e.find("gap"), std::string::npos) << e;
+  EXPECT_FALSE(gd::edgeTimesToAngles({0, 1, 2, 3, 4}, 100, Eigen::VectorXd::LinSpaced(3, -1, 2),
+                                     &theta, &e));
+  EXPECT_NE(e.find("outside"), std::string::npos) << e;
+  EXPECT_FALSE(
+      gd::edgeTimesToAngles({0, 1, 2, 3}, 0, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  // Cubic edges reproduce a cubic rotation exactly.
+  std::vector<double> cubic;
+  for (int k = 0; k < 50; ++k) cubic.push_back(0.01 * k + 1e-5 * k * k);
+  ASSERT_TRUE(
+      gd::edgeTimesToAngles(cubic, 1000, Eigen::VectorXd::LinSpaced(7, 0.0, 0.4), &theta, &e))
+      << e;
+  // Streaming: a sample index that goes back is refused.
+  gd::EncoderFrontEndOptions o;
+  o.mesh_offset = 0.0, o.dte_offset = 0.0, o.calibration_samples = 16;
+  gd::EncoderFrontEnd fe(model, o);
+  std::vector<double> a(20), b(20);
+  for (int i = 0; i < 20; ++i) a[i] = 1e-3 * i, b[i] = 5e-4 * i;
+  ASSERT_TRUE(fe.push(1e6, 0, a.data(), b.data(), nullptr, 20, &e)) << e;
+  EXPECT_FALSE(fe.push(1e6, 5, a.data(), b.data(), nullptr, 20, &e));
+  EXPECT_NE(e.find("not after"), std::string::npos) << e;
+  EXPECT_FALSE(fe.push(2e6, 100, a.data(), b.data(), nullptr, 20, &e));
+  EXPECT_NE(e.find("rate changed"), std::string::npos) << e;
 }
 
 }  // namespace
