@@ -33,6 +33,42 @@ double thirdDifferenceNoise(const std::vector<double>& y) {
   return std::sqrt(s / static_cast<double>(y.size() - 3) / 20.0);
 }
 
+// Mean squared residual per sample of `table` under `options` (integral equations, or the
+// output-error residual when `refined`), over the segments that have one; inf when none.
+double meanSquaredResidual(const gear_sim::SignalTable& table, const GearConstants& gear,
+                           const IdentificationOptions& options, bool refined) {
+  IdentificationResult r;
+  std::string e;
+  if (!identify(table, gear, options, &r, &e)) return std::numeric_limits<double>::infinity();
+  double sum = 0.0;
+  long used = 0;
+  for (const auto& seg : r.segments) {
+    const double rms = refined ? (seg.refined ? seg.residuals.rms : kNaNd)
+                               : (seg.identifiable ? seg.residual_rms : kNaNd);
+    if (!std::isfinite(rms)) continue;
+    sum += rms * rms * static_cast<double>(seg.samples);
+    used += seg.samples;
+  }
+  return used > 0 ? sum / static_cast<double>(used) : std::numeric_limits<double>::infinity();
+}
+
+// Golden-section search for a minimum of f on [a, b] until the bracket is below `tol` or after
+// `iterations`; returns the bracket's middle.
+template <class F>
+double goldenSection(F&& f, double a, double b, double tol, int iterations) {
+  const double gr = 0.5 * (std::sqrt(5.0) - 1.0);
+  double x1 = b - gr * (b - a), x2 = a + gr * (b - a);
+  double f1 = f(x1), f2 = f(x2);
+  for (int it = 0; it < iterations && b - a > tol; ++it) {
+    if (f1 < f2) {
+      b = x2, x2 = x1, f2 = f1, x1 = b - gr * (b - a), f1 = f(x1);
+    } else {
+      a = x1, x1 = x2, f1 = f2, x2 = a + gr * (b - a), f2 = f(x2);
+    }
+  }
+  return 0.5 * (a + b);
+}
+
 }  // namespace
 
 std::string EncoderFrontEndOptions::validate() const {
@@ -251,17 +287,7 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
   auto rss = [&](double y0) {
     gear_sim::SignalTable c = t;
     c.dte.array() -= y0;
-    IdentificationResult r;
-    std::string e;
-    if (!identify(c, gear, io, &r, &e)) return std::numeric_limits<double>::infinity();
-    double s = 0.0;
-    long used = 0;
-    for (const auto& seg : r.segments)
-      if (seg.identifiable && std::isfinite(seg.residual_rms)) {
-        s += seg.residual_rms * seg.residual_rms * static_cast<double>(seg.samples);
-        used += seg.samples;
-      }
-    return used > 0 ? s / static_cast<double>(used) : std::numeric_limits<double>::infinity();
+    return meanSquaredResidual(c, gear, io, false);
   };
   // y0 enters the known equations linearly (through int int K y0), so the RSS minimised over
   // the other unknowns is a quadratic in y0: three evaluations give its minimum exactly.
@@ -307,18 +333,7 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
         return false;
       }
       // Golden section on the neighbouring grid cells.
-      double a = (best_i - 1.0) / kGrid, b = (best_i + 1.0) / kGrid;
-      const double gr = 0.5 * (std::sqrt(5.0) - 1.0);
-      double x1 = b - gr * (b - a), x2 = a + gr * (b - a);
-      double f1 = objective(x1), f2 = objective(x2);
-      for (int it = 0; it < 40 && b - a > 1e-9; ++it) {
-        if (f1 < f2) {
-          b = x2, x2 = x1, f2 = f1, x1 = b - gr * (b - a), f1 = objective(x1);
-        } else {
-          a = x1, x1 = x2, f1 = f2, x2 = a + gr * (b - a), f2 = objective(x2);
-        }
-      }
-      u0 = 0.5 * (a + b);
+      u0 = goldenSection(objective, (best_i - 1.0) / kGrid, (best_i + 1.0) / kGrid, 1e-9, 40);
       // When the switches fall on samples, every offset within a sample's mesh-phase advance
       // gives the same quadrature: the objective is flat there and the golden section may stop
       // at an edge of the plateau, where a rounding flips a switch to the next sample. Take the
@@ -347,33 +362,14 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
           fill(u);
           gear_sim::SignalTable c = t;
           c.dte.array() -= y0_keep;
-          IdentificationResult r;
-          std::string e;
-          if (!identify(c, gear, ro, &r, &e)) return std::numeric_limits<double>::infinity();
-          double sum = 0.0;
-          long used = 0;
-          for (const auto& seg : r.segments)
-            if (seg.refined && std::isfinite(seg.residuals.rms)) {
-              sum += seg.residuals.rms * seg.residuals.rms * static_cast<double>(seg.samples);
-              used += seg.samples;
-            }
-          return used > 0 ? sum / static_cast<double>(used)
-                          : std::numeric_limits<double>::infinity();
+          return meanSquaredResidual(c, gear, ro, true);
         };
         // With coarse encoders the integral stage can miss by several samples: the bracket spans
         // at least +-0.01 mesh cycles.
         const double half = std::max(0.5 * (hi - lo) + step, 0.01);
-        double ra = 0.5 * (lo + hi) - half, rb = 0.5 * (lo + hi) + half;
-        double r1 = rb - gr * (rb - ra), r2 = ra + gr * (rb - ra);
-        double g1 = refined(r1), g2 = refined(r2);
-        for (int it = 0; it < 40 && rb - ra > 1e-3 * step; ++it) {
-          if (g1 < g2) {
-            rb = r2, r2 = r1, g2 = g1, r1 = rb - gr * (rb - ra), g1 = refined(r1);
-          } else {
-            ra = r1, r1 = r2, g1 = g2, r2 = ra + gr * (rb - ra), g2 = refined(r2);
-          }
-        }
-        if (std::isfinite(g1) || std::isfinite(g2)) u0 = 0.5 * (ra + rb);
+        const double centre = 0.5 * (lo + hi);
+        const double u_ref = goldenSection(refined, centre - half, centre + half, 1e-3 * step, 40);
+        if (std::isfinite(refined(u_ref))) u0 = u_ref;
       }
     }
     report_.mesh_offset_estimated = true;

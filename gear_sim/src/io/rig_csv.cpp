@@ -14,6 +14,29 @@ void put(std::string* line, double v) {
   const auto r = std::to_chars(buf, buf + sizeof buf, v);
   line->append(buf, r.ptr);
 }
+// Writes `header` and the rows row(i), i < n, to `path`; false with `*error` when it cannot.
+template <class Row>
+bool writeRows(const std::string& path, const char* header, Eigen::Index n, Row&& row,
+               std::string* error) {
+  std::ofstream f(path);
+  if (f) {
+    f << header;
+    std::string line;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      line.clear();
+      row(i, &line);
+      line += '\n';
+      f << line;
+    }
+    f.close();
+  }
+  if (!f) {
+    if (error) *error = path + ": cannot write";
+    return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 bool writeRigCsv(const std::string& path, const SignalTable& t, std::string* error) {
@@ -23,33 +46,20 @@ bool writeRigCsv(const std::string& path, const SignalTable& t, std::string* err
     if (error) *error = path + ": a rig record needs theta1 and theta2 as long as time";
     return false;
   }
-  std::ofstream f(path);
-  if (!f) {
-    if (error) *error = path + ": cannot write";
-    return false;
-  }
-  f << (torque ? "time,theta1,theta2,torque\n" : "time,theta1,theta2\n");
-  std::string line;
-  for (Eigen::Index i = 0; i < n; ++i) {
-    line.clear();
-    put(&line, t.time[i]);
-    line += ',';
-    put(&line, t.theta1[i]);
-    line += ',';
-    put(&line, t.theta2[i]);
-    if (torque) {
-      line += ',';
-      put(&line, t.torque[i]);
-    }
-    line += '\n';
-    f << line;
-  }
-  f.close();
-  if (!f) {
-    if (error) *error = path + ": cannot write";
-    return false;
-  }
-  return true;
+  return writeRows(
+      path, torque ? "time,theta1,theta2,torque\n" : "time,theta1,theta2\n", n,
+      [&](Eigen::Index i, std::string* line) {
+        put(line, t.time[i]);
+        *line += ',';
+        put(line, t.theta1[i]);
+        *line += ',';
+        put(line, t.theta2[i]);
+        if (torque) {
+          *line += ',';
+          put(line, t.torque[i]);
+        }
+      },
+      error);
 }
 
 bool isRigCsv(const std::string& path) {
@@ -83,25 +93,9 @@ bool readRigCsv(const std::string& path, SignalTable* out, std::string* error) {
 }
 
 bool writeEdgeCsv(const std::string& path, const std::vector<double>& edges, std::string* error) {
-  std::ofstream f(path);
-  if (!f) {
-    if (error) *error = path + ": cannot write";
-    return false;
-  }
-  f << "time\n";
-  std::string line;
-  for (double e : edges) {
-    line.clear();
-    put(&line, e);
-    line += '\n';
-    f << line;
-  }
-  f.close();
-  if (!f) {
-    if (error) *error = path + ": cannot write";
-    return false;
-  }
-  return true;
+  return writeRows(
+      path, "time\n", static_cast<Eigen::Index>(edges.size()),
+      [&](Eigen::Index i, std::string* line) { put(line, edges[static_cast<size_t>(i)]); }, error);
 }
 
 bool readEdgeCsv(const std::string& path, std::vector<double>* edges, std::string* error) {
