@@ -14,6 +14,7 @@
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
 namespace gear_sim_ros {
@@ -112,6 +113,9 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
                    std::string* error) {
   BagSignalInfo out;
   out.path = path;
+  // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
+  // length): every record is checked first.
+  if (!checkBagStructure(path, error)) return false;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
