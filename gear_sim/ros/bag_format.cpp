@@ -8,6 +8,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -181,15 +182,16 @@ class FileSource : public RecordSource {
 
 class MemorySource : public RecordSource {
  public:
-  explicit MemorySource(const std::string* bytes) : b_(bytes) {}
+  MemorySource(const char* bytes, std::uint64_t size) : b_(bytes), size_(size) {}
   bool read(std::uint64_t pos, std::uint64_t n, std::string* out) override {
-    if (pos > b_->size() || n > b_->size() - pos) return false;
-    out->assign(*b_, pos, n);
+    if (pos > size_ || n > size_ - pos) return false;
+    out->assign(b_ + pos, n);
     return true;
   }
 
  private:
-  const std::string* b_;
+  const char* b_;
+  std::uint64_t size_;
 };
 
 // The records inside a chunk's (uncompressed) bytes [begin, begin + size) of `src`: message
@@ -230,19 +232,19 @@ std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t be
   return messages;
 }
 
-std::string decompress(const std::string& compression, std::string* in, std::uint32_t size,
-                       std::uint64_t at) {
-  std::string out(size, '\0');
+// The chunk's `size` bytes, uncompressed (the buffer is left uninitialised: a corrupt size
+// claims address space, not memory, as in rosbag).
+std::unique_ptr<char[]> decompress(const std::string& compression, std::string* in,
+                                   std::uint32_t size, std::uint64_t at) {
+  std::unique_ptr<char[]> out(new char[std::max<std::uint32_t>(size, 1)]);
   unsigned int produced = size;
-  int rc;
   if (compression == "bz2") {
-    rc = BZ2_bzBuffToBuffDecompress(out.data(), &produced, in->data(),
-                                    static_cast<unsigned int>(in->size()), 0, 0);
-    if (rc != BZ_OK) throw Corrupt{"a bz2 chunk that does not decompress", at};
-  } else {
-    rc = roslz4_buffToBuffDecompress(in->data(), static_cast<unsigned int>(in->size()), out.data(),
-                                     &produced);
-    if (rc != ROSLZ4_OK) throw Corrupt{"an lz4 chunk that does not decompress", at};
+    if (BZ2_bzBuffToBuffDecompress(out.get(), &produced, in->data(),
+                                   static_cast<unsigned int>(in->size()), 0, 0) != BZ_OK)
+      throw Corrupt{"a bz2 chunk that does not decompress", at};
+  } else if (roslz4_buffToBuffDecompress(in->data(), static_cast<unsigned int>(in->size()),
+                                         out.get(), &produced) != ROSLZ4_OK) {
+    throw Corrupt{"an lz4 chunk that does not decompress", at};
   }
   if (produced != size)
     throw Corrupt{"a chunk of " + std::to_string(produced) + " bytes uncompressed, not " +
@@ -300,9 +302,9 @@ void walk(std::ifstream* f, std::uint64_t file_size) {
           std::string packed;
           if (!src.read(r.data_pos, r.data_len, &packed))
             throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
-          const std::string bytes = decompress(c->second, &packed, size, r.start);
-          MemorySource mem(&bytes);
-          chunk_messages[r.start] = checkChunkRecords(&mem, 0, bytes.size(), r.start, false);
+          const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
+          MemorySource mem(bytes.get(), size);
+          chunk_messages[r.start] = checkChunkRecords(&mem, 0, size, r.start, false);
         } else {
           throw Corrupt{
               "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
