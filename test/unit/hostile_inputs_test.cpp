@@ -419,6 +419,30 @@ TEST_F(Hostile, TimesInMessagesHaveEnoughDigitsToDiffer) {
   EXPECT_TRUE(has(e, "time 6e-06 is not greater than the previous 6.0000001e-06")) << e;
 }
 
+// Time steps of 1e-300 s and 1e300 s and a segment of 1e-12 s name their real cause, not "no
+// samples in the analysed time range" (a segment of 1e297 sample steps was an out-of-range
+// integer conversion in segmentRanges).
+TEST_F(Hostile, ExtremeTimeStepsAndSegmentsNameTheirCause) {
+  auto withStep = [&](const std::string& name, double dt) {
+    std::string text = "time,dte\n";
+    for (int i = 0; i < 200; ++i)
+      text += gear_sim::formatNumber(i * dt) + "," + gear_sim::formatNumber(table_.dte[i]) + "\n";
+    writeText(dir() / name, text);
+    return path(name);
+  };
+  const std::string params = " --params " + kParams + " --formulation paper";
+  ToolRun r = run("analyze", "--input " + withStep("tiny_step.csv", 1e-300) + params);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "shorter than one damping segment")) << r.err;
+  r = run("analyze", "--input " + withStep("huge_step.csv", 1e300) + params);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "--segment 0.001 s is shorter than one sample step")) << r.err;
+  r = run("analyze", "--input " + path("good.csv") + params + " --segment 1e-12");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "--segment 1e-12 s is shorter than one sample step (1e-06 s")) << r.err;
+  EXPECT_FALSE(has(r.err, "no samples in the analysed")) << r.err;
+}
+
 TEST_F(Hostile, CsvTimesABagCannotStampAreInvalidInput) {
   writeText(dir() / "negative.csv", "time,dte\n-2,1e-6\n-1,2e-6\n0,1e-6\n");
   ToolRun r = run("convert", "--input " + path("negative.csv") + " --output " + path("neg.bag"));
