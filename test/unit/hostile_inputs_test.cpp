@@ -271,6 +271,25 @@ TEST_F(Hostile, CorruptBagRecordLengthsAreRefusedBeforeRosbagReadsThem) {
   EXPECT_FALSE(fs::exists(path("header_overflow.csv")));
 }
 
+// A SignalChunk whose dte length claims 2^31 - 1 samples: ROS's deserialiser resized the
+// vector (16 GB) before checking the bytes (out of memory, found by fuzz_bag); the layout is
+// checked first.
+TEST_F(Hostile, ChunkArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
+  std::string b = readBytes(writeBag("array.bag", [](size_t k) { return 500 * k; }));
+  // The first chunk: sample_rate (1e6), first_index 0, then dte's length 500.
+  std::string pattern(20, '\0');
+  const double rate = 1e6;
+  std::memcpy(&pattern[0], &rate, 8);
+  pattern[16] = static_cast<char>(0xF4);  // 500, little-endian
+  pattern[17] = 0x01;
+  putLe32(&b, find(b, pattern) + 16, 0x7FFFFFFF);
+  writeBytes(path("array_overflow.bag"), b);
+  const std::string e = scanError(path("array_overflow.bag"));
+  EXPECT_TRUE(has(e, "dte claims 2147483647 elements")) << e;
+  EXPECT_TRUE(has(e, "message 1")) << e;
+  EXPECT_EQ(run("analyze", "--input " + path("array_overflow.bag")).code, 2);
+}
+
 // A compressed chunk is decompressed and its records checked the same way.
 TEST_F(Hostile, CorruptCompressedChunksAreRefused) {
   const std::string good = readBytes(writeBag(
