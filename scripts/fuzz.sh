@@ -34,12 +34,7 @@ export ASAN_OPTIONS=${ASAN_OPTIONS:-allocator_may_return_null=1:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$repo/fuzz/lsan.supp:print_suppressions=0}
 log="$corpus/../$target.log"
-# The bag target: rosbag reserves up to 4 GB (untouched) for a corrupt 32-bit record length
-# (see scripts/sanitize.sh); single mallocs up to that size are allowed there.
-extra=()
-[ "$target" = bag ] && extra=(-malloc_limit_mb=4200)
 "$bin" -max_total_time=$((minutes * 60)) -timeout=20 -rss_limit_mb=2560 -print_final_stats=1 \
-  "${extra[@]}" \
   -artifact_prefix="$corpus/../${target}_" "$@" "$corpus" "$repo/fuzz/corpus/$target" 2>&1 |
   tee "$log" | grep -E "^#[0-9]+ *(pulse|DONE)|ERROR|SUMMARY|runtime error|stat::"
 rc=${PIPESTATUS[0]}

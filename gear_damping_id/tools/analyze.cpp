@@ -647,6 +647,11 @@ int Analysis::load() {
   if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
     using gear_sim::formatNumber;
     const auto& o = runs_options.front();
+    if (o.segment_length > 0.0 && o.segment_length * sample_rate < 1.0)
+      return fail(kExitInput, input + ": --segment " + formatNumber(o.segment_length) +
+                                  " s is shorter than one sample step (" + formatNumber(whole.dt) +
+                                  " s, " + formatNumber(sample_rate) +
+                                  " Hz): a segment would hold no sample");
     return fail(kExitInput,
                 input + ": no samples in the analysed time range (record " +
                     formatNumber(whole.t0) + " to " +
