@@ -44,13 +44,32 @@ struct Model {
   LoadTorque load;
   DampingLaw damping;
   double me, ff;
+  const StaticTransmissionError* ste = nullptr;  // docs/ste.md; null or inactive: none
+  bool ste_relative = true;                      // damping on y' - e' (else on y')
 
   double k(double t, double t_ref) const {
     return stiffness.at(timing.phase(t), timing.phase(t_ref));
   }
   SdofCoefficients sdof(double t, double t_ref) const {
     const double t1 = load.at(t);
-    return {damping.at(t_ref, t1) / me, k(t, t_ref) / me, ff * t1};
+    SdofCoefficients c{damping.at(t_ref, t1) / me, k(t, t_ref) / me, ff * t1};
+    if (ste) c.F += steForcing(t, c.C, c.K);
+    return c;
+  }
+  // The STE as a known forcing of eq. (4): K e + C e' (relative damping) or K e.
+  double steForcing(double t, double C, double K) const {
+    const double u = timing.phase(t);
+    double f = K * ste->value(u);
+    if (ste_relative) f += C * ste->derivative(u) * timing.meshFrequency(t);
+    return f;
+  }
+  // The STE's displacement and rate [m, m/s] at t (torsional model).
+  void steAt(double t, double* e, double* e_dot) const {
+    *e = *e_dot = 0.0;
+    if (!ste) return;
+    const double u = timing.phase(t);
+    *e = ste->value(u);
+    if (ste_relative) *e_dot = ste->derivative(u) * timing.meshFrequency(t);
   }
 };
 
@@ -59,9 +78,11 @@ struct Torsional {
   double th1, th2, w1, w2;
 };
 
-Torsional torsionalRate(const Torsional& s, double c, double k, double t1, const GearPair& g) {
+Torsional torsionalRate(const Torsional& s, double c, double k, double t1, const GearPair& g,
+                        double e = 0.0, double e_dot = 0.0) {
   const double r1 = g.pinion.base_radius, r2 = g.gear.base_radius;
-  const double f = c * (r1 * s.w1 - r2 * s.w2) + k * (r1 * s.th1 - r2 * s.th2);  // mesh force [N]
+  // mesh force [N]; e, e_dot: the static transmission error and its rate (docs/ste.md)
+  const double f = c * (r1 * s.w1 - r2 * s.w2 - e_dot) + k * (r1 * s.th1 - r2 * s.th2 - e);
   return {s.w1, s.w2, (t1 - r1 * f) / g.pinion.inertia, (-t1 + r2 * f) / g.gear.inertia};
 }
 
@@ -178,10 +199,15 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
   }
   const MeshStiffness stiffness(cfg.mesh);
   const double me = cfg.gears.equivalentMass();
-  const Model model{
+  Model model{
       stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
       load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
       me,        cfg.gears.forceFactor()};
+  const StaticTransmissionError ste(cfg.ste, cfg.gears.pinion.teeth, cfg.gears.gear.teeth);
+  if (ste.active()) {
+    model.ste = &ste;
+    model.ste_relative = cfg.ste.damping == SteDamping::Relative;
+  }
 
   // Every instant where a coefficient jumps or kinks: stiffness switches (from the mesh
   // phase's closed-form inverse), load kinks/steps, damping segment starts.
@@ -224,7 +250,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
     o.mesh_state[n] = stiffness.state(u + kPhaseNudge);
     o.damping[n] = model.damping.at(o.time[n] + 1e-6 * dt, o.torque[n]);
   };
-  const bool fast_path = !torsional && stiffness.piecewiseConstant();
+  const bool fast_path = !torsional && stiffness.piecewiseConstant() && !model.ste;
   if (!fast_path)
     for (Eigen::Index n = 0; n < n_samples; ++n) sampleColumns(n);
 
@@ -250,7 +276,9 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
         const double h = e - a;
         auto rate = [&](const Torsional& x, double t) {
           const double t1 = model.load.at(t);
-          return torsionalRate(x, model.damping.at(mid, t1), model.k(t, mid), t1, g);
+          double e, e_dot;
+          model.steAt(t, &e, &e_dot);
+          return torsionalRate(x, model.damping.at(mid, t1), model.k(t, mid), t1, g, e, e_dot);
         };
         if (so.integrator == Integrator::RK4) {
           const Torsional k1 = rate(s, a), k2 = rate(axpy(s, 0.5 * h, k1), mid),
@@ -266,8 +294,9 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
       });
       write(n + 1);
     }
-  } else if (!stiffness.piecewiseConstant()) {
-    // Smooth or kinked stiffness: the generic driver evaluates K at every stage.
+  } else if (!stiffness.piecewiseConstant() || model.ste) {
+    // Smooth or kinked stiffness, or an STE forcing: the generic driver evaluates K (and the
+    // STE) at every stage.
     std::string e =
         integrateSdof(coeffs, bps, 0.0, dt, n_samples, {so.initial_dte, so.initial_velocity},
                       so.integrator, m, o.dte.data(), o.dte_velocity.data());
