@@ -46,6 +46,7 @@
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
+#include "gear_damping_id/ste_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -340,6 +341,7 @@ int run(int argc, char** argv) {
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
+  std::string ste_spec, ste_damping = "relative";  // docs/ste.md
   app.add_option(
          "--input", input,
          "signal record: CSV with the docs/method.md §6 columns, or a bag of SignalChunk messages")
@@ -394,6 +396,14 @@ int run(int argc, char** argv) {
   app.add_option("--bag-out", bag_out,
                  "write the results as gear_damping messages (DampingArray, ModeledResponse, "
                  "WaveletModes) to this bag");
+  app.add_option("--ste", ste_spec,
+                 "identify the static transmission error jointly with the damping (docs/ste.md): "
+                 "comma-separated mesh:H, shaft:S (or pinion:S, gear:S), nooffset; known and "
+                 "greybox formulations, piecewise or constant damping; needs mesh_phase");
+  app.add_option("--ste-damping", ste_damping,
+                 "with --ste: damping on the deflection rate y' - e' (relative, default) or on "
+                 "y' alone (dte)")
+      ->check(CLI::IsMember({"relative", "dte"}));
   app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (docs/method.md §5)");
   app.add_option("--f-min", wopt.f_min,
                  "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
@@ -472,6 +482,13 @@ int run(int argc, char** argv) {
     wopt.decay_regions.push_back(region);
   }
   if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
+  gd::SteModelOptions ste_options;
+  if (!ste_spec.empty()) {
+    std::string e;
+    if (!gd::parseSteSpec(ste_spec, &ste_options, &e)) return fail(kExitUsage, e);
+    ste_options.damping =
+        ste_damping == "dte" ? gear_sim::SteDamping::Dte : gear_sim::SteDamping::Relative;
+  }
 
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
   std::string error;
@@ -524,6 +541,14 @@ int run(int argc, char** argv) {
          "): running the wavelet validation only");
   }
   const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  if (!ste_spec.empty()) {  // docs/ste.md
+    if (!identification) return fail(kExitUsage, "--ste needs --params GEAR.yaml");
+    if (streaming) return fail(kExitUsage, "--ste: a bag beyond --max-in-memory is not supported");
+    ste_options.pinion_teeth = model.gears.pinion.teeth;
+    ste_options.gear_teeth = model.gears.gear.teeth;
+    if (const std::string e = ste_options.validate(); !e.empty()) return fail(kExitUsage, e);
+  }
+  std::vector<gd::SteResult> ste_results;
   if (identification) {
     if (const std::string e = gear.validate(); !e.empty())
       return fail(kExitInput, params_source + ": " + e);
@@ -619,10 +644,19 @@ int run(int argc, char** argv) {
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
       progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
-      if (!gd::identify(table, gear, run.options, &run.result, &error))
+      if (!ste_spec.empty()) {
+        ste_results.emplace_back();
+        if (!gd::identifyWithSte(table, gear, run.options, ste_options, &run.result,
+                                 &ste_results.back(), &error))
+          return fail(kExitInput, input + ": " + error);
+      } else if (!gd::identify(table, gear, run.options, &run.result, &error)) {
         return fail(kExitInput, input + ": " + error);
+      }
       progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
-      if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
+      if (!ste_spec.empty()) {  // the forward model has no STE forcing (docs/ste.md)
+        run.response = gd::ModeledResponse{};
+        run.response_error = "the modeled response does not include the STE (--ste)";
+      } else if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
         run.response = gd::ModeledResponse{};
       } else {
         const double tr = table.time[run.response.begin];
@@ -725,6 +759,11 @@ int run(int argc, char** argv) {
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
   nlohmann::json doc = gd::analysisJson(runs, in);
+  if (!ste_results.empty()) {  // the STE of the primary run, and of every run (docs/ste.md)
+    doc["identification"]["ste"] = gd::steJson(ste_results.front());
+    for (size_t k = 0; k < ste_results.size() && k < doc["runs"].size(); ++k)
+      doc["runs"][k]["ste"] = gd::steJson(ste_results[k]);
+  }
   nlohmann::json given = nlohmann::json::object();  // the options set on the command line
   for (const CLI::Option* o : app.get_options())
     if (o->count() > 0) given[o->get_name()] = o->results();
@@ -742,6 +781,8 @@ int run(int argc, char** argv) {
     return fail(kExitOutput, error);
   if (!csv_out.empty()) {
     if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error, &stage))
+      return fail(kExitOutput, error);
+    if (!ste_results.empty() && !gd::writeSteCsv(csv_out, ste_results.front(), &error, &stage))
       return fail(kExitOutput, error);
     if (wavelet && wres.ok() &&
         !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),

@@ -1,6 +1,8 @@
 // Issue 19 (STE part): the simulator's static transmission error and its joint identification
 // with the damping (ste_model.hpp, docs/ste.md), scored against known simulated truth on several
 // gears, speeds, STE spectra and seeds.
+#include "gear_damping_id/ste_model.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 #include <iostream>
 
 #include "gear_damping_id/quality_flags.hpp"
-#include "gear_damping_id/ste_model.hpp"
 #include "id_test_support.hpp"
 
 namespace {
@@ -76,10 +77,12 @@ double maxSteError(const SteResult& s, const SimConfig& c) {
     std::complex<double> truth;
     const size_t k = static_cast<size_t>(t.order) - 1;
     if (t.kind == "offset") truth = c.ste.offset;
-    if (t.kind == "mesh" && k < c.ste.mesh_cos.size()) truth = {c.ste.mesh_cos[k], c.ste.mesh_sin[k]};
+    if (t.kind == "mesh" && k < c.ste.mesh_cos.size())
+      truth = {c.ste.mesh_cos[k], c.ste.mesh_sin[k]};
     if (t.kind == "pinion" && k < c.ste.pinion_cos.size())
       truth = {c.ste.pinion_cos[k], c.ste.pinion_sin[k]};
-    if (t.kind == "gear" && k < c.ste.gear_cos.size()) truth = {c.ste.gear_cos[k], c.ste.gear_sin[k]};
+    if (t.kind == "gear" && k < c.ste.gear_cos.size())
+      truth = {c.ste.gear_cos[k], c.ste.gear_sin[k]};
     const double err = std::abs(std::complex<double>(t.cos, t.sin) - truth) / std::abs(truth);
     worst = std::max(worst, err);
   }
@@ -207,11 +210,12 @@ TEST(SteModel, IgnoringTheSteBiasesOrFlagsModellingItDoesNot) {
     for (const auto& e : r.segments) ste_flagged += !e.warnings.empty();
     EXPECT_LT(ste_err, 5e-4) << k.name;
     EXPECT_EQ(ste_flagged, 0) << k.name;
-    EXPECT_TRUE(r.warnings.empty()) << k.name << ": " << gear_damping_id::joinCodes(r.warnings) << " " << (r.warnings.empty() ? "" : r.warnings[0].text);
+    EXPECT_TRUE(r.warnings.empty()) << k.name << ": " << gear_damping_id::joinCodes(r.warnings)
+                                    << " " << (r.warnings.empty() ? "" : r.warnings[0].text);
     std::cout << "[ measured ] " << k.name << ": STE ignored: max C error " << 100 * plain_err
               << " %, " << flagged << "/" << plain.segments.size()
-              << " segments flagged or not identifiable; STE modelled: max C error " << 100 * ste_err << " %, "
-              << ste_flagged << " flagged\n";
+              << " segments flagged or not identifiable; STE modelled: max C error "
+              << 100 * ste_err << " %, " << ste_flagged << " flagged\n";
   }
 }
 
@@ -254,7 +258,8 @@ TEST(SteModel, ShortRecordFlagsNotSeparable) {
   SteResult s;
   ASSERT_TRUE(runSte(t, c, idOptions(), steOptions(c, 3, 2), &r, &s));
   EXPECT_FALSE(s.separable) << "condition " << s.condition << " corr " << s.max_correlation;
-  EXPECT_TRUE(gear_damping_id::hasCode(r.warnings, gear_damping_id::quality_code::kSteNotSeparable));
+  EXPECT_TRUE(
+      gear_damping_id::hasCode(r.warnings, gear_damping_id::quality_code::kSteNotSeparable));
 }
 
 }  // namespace

@@ -72,10 +72,10 @@ struct SteTerm {
 
 struct SteResult {
   SteModelOptions options;
-  std::vector<SteTerm> terms;       ///< offset first, then mesh, pinion, gear orders
+  std::vector<SteTerm> terms;            ///< offset first, then mesh, pinion, gear orders
   std::vector<double> theta, theta_std;  ///< the raw coefficients in SteBasis order [m]
-  double condition = kNaN;          ///< of the equilibrated joint normal matrix
-  double max_correlation = kNaN;    ///< largest |corr| between a damping and an STE unknown
+  double condition = kNaN;               ///< of the equilibrated joint normal matrix
+  double max_correlation = kNaN;         ///< largest |corr| between a damping and an STE unknown
   bool separable = false;
   int iterations = 0;
   double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations

@@ -58,8 +58,9 @@ bool parseSteSpec(const std::string& spec, SteModelOptions* out, std::string* er
     }
     if (v < 0 || v > 32 || (key != "mesh" && key != "shaft" && key != "pinion" && key != "gear")) {
       if (error)
-        *error = "--ste: '" + item +
-                 "' is not one of mesh:H, shaft:S, pinion:S, gear:S (0..32), offset, nooffset, none";
+        *error =
+            "--ste: '" + item +
+            "' is not one of mesh:H, shaft:S, pinion:S, gear:S (0..32), offset, nooffset, none";
       return false;
     }
     if (key == "mesh") o.mesh_orders = v;
@@ -145,8 +146,9 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
   if (options.formulation != Formulation::Known && !greybox)
     return fail("--ste: only the known and greybox formulations model the STE");
   if (options.model == DampingModel::LoadLaw)
-    return fail("--ste: the load_law damping model is not available with the STE (use piecewise "
-                "or constant)");
+    return fail(
+        "--ste: the load_law damping model is not available with the STE (use piecewise "
+        "or constant)");
   if (greybox && options.stiffness_shape.kind != StiffnessShape::Kind::Square)
     return fail("--ste: greybox needs the square stiffness shape");
   using gear_sim::SignalTable;
@@ -166,15 +168,14 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
   const double h = view.dt, me = gear.equivalent_mass;
   for (Eigen::Index i = 0; i < n; ++i)
     if (!std::isfinite(view.dte[i]) || !std::isfinite(view.mesh_phase[i]) ||
-        !std::isfinite(view.torque[i]) ||
-        (!greybox && !std::isfinite(view.stiffness[i])) ||
+        !std::isfinite(view.torque[i]) || (!greybox && !std::isfinite(view.stiffness[i])) ||
         (greybox && !std::isfinite(view.mesh_state[i])))
       return fail("--ste: non-finite input at sample " + std::to_string(i) +
                   " (the joint STE solve needs a clean record)");
   const auto ranges = segmentRanges(view, options);
   if (ranges.empty()) return fail("no samples in the analysed time range");
-  double window = options.window_length > 0.0 ? options.window_length
-                                              : defaultWindowLength(view, gear);
+  double window =
+      options.window_length > 0.0 ? options.window_length : defaultWindowLength(view, gear);
 
   // Sampled inputs.
   const gear_sim::SteBasis basis = so.basis();
@@ -185,8 +186,7 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
   std::vector<double> F(n), W(n), theta(n, 1.0);
   for (Eigen::Index i = 0; i < n; ++i) F[i] = gear.force_factor * view.torque[i];
   const bool held = greybox || gear.piecewise_constant_stiffness;
-  for (Eigen::Index i = 0; i < n; ++i)
-    W[i] = greybox ? view.mesh_state[i] : view.stiffness[i] / me;
+  for (Eigen::Index i = 0; i < n; ++i) W[i] = greybox ? view.mesh_state[i] : view.stiffness[i] / me;
   long unlocated = 0;
   if (held)
     for (Eigen::Index j = 0; j + 1 < n; ++j)
@@ -233,61 +233,60 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
   // The raw columns of window [w0, w1), nuisance {1, t - T} projected out, into Z.
   auto buildWindow = [&](Eigen::Index w0, Eigen::Index w1) {
     const Eigen::Index m = w1 - w0;
-      Z.resize(m, R);
-      P1.resize(m);
-      Q1.resize(m);
-      P2.resize(m);
-      Q2.resize(m);
-      // b0 = y - IIF (+ IIKy for known)
-      cumulate(F.data(), nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(),
-               scratch);
-      for (Eigen::Index i = 0; i < m; ++i) Z(i, 0) = view.dte[w0 + i] - Q1[i];
-      // y integrals
-      cumulate(view.dte, nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(),
-               scratch);  // P_y, IIy
-      if (!greybox) {
-        cumulate(view.dte, W.data(), held, theta.data(), w0, w1, n, h, rules, P2.data(),
-                 Q2.data(), scratch);  // IIKy
-        for (Eigen::Index i = 0; i < m; ++i) Z(i, 0) += Q2[i];
-      }
-      for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[0]) = P1[i];
+    Z.resize(m, R);
+    P1.resize(m);
+    Q1.resize(m);
+    P2.resize(m);
+    Q2.resize(m);
+    // b0 = y - IIF (+ IIKy for known)
+    cumulate(F.data(), nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(), scratch);
+    for (Eigen::Index i = 0; i < m; ++i) Z(i, 0) = view.dte[w0 + i] - Q1[i];
+    // y integrals
+    cumulate(view.dte, nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(),
+             scratch);  // P_y, IIy
+    if (!greybox) {
+      cumulate(view.dte, W.data(), held, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
+               scratch);  // IIKy
+      for (Eigen::Index i = 0; i < m; ++i) Z(i, 0) += Q2[i];
+    }
+    for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[0]) = P1[i];
+    if (greybox) {
+      for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[1]) = Q1[i];
+      cumulate(view.dte, W.data(), true, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
+               scratch);  // IIsy
+      for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[2]) = Q2[i];
+    }
+    // basis integrals
+    for (int j = 0; j < J; ++j) {
+      const double* b = Bt.col(j).data();
+      cumulate(b, nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(), scratch);
+      if (col_B[0] >= 0)
+        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[0] + j) = P1[i];
       if (greybox) {
-        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[1]) = Q1[i];
-        cumulate(view.dte, W.data(), true, theta.data(), w0, w1, n, h, rules, P2.data(),
-                 Q2.data(), scratch);  // IIsy
-        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Y[2]) = Q2[i];
+        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[1] + j) = Q1[i];
+        cumulate(b, W.data(), true, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
+                 scratch);
+        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[2] + j) = Q2[i];
+      } else {
+        cumulate(b, W.data(), held, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
+                 scratch);
+        for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Kb + j) = Q2[i];
       }
-      // basis integrals
-      for (int j = 0; j < J; ++j) {
-        const double* b = Bt.col(j).data();
-        cumulate(b, nullptr, false, nullptr, w0, w1, n, h, rules, P1.data(), Q1.data(), scratch);
-        if (col_B[0] >= 0)
-          for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[0] + j) = P1[i];
-        if (greybox) {
-          for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[1] + j) = Q1[i];
-          cumulate(b, W.data(), true, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
-                   scratch);
-          for (Eigen::Index i = 0; i < m; ++i) Z(i, col_B[2] + j) = Q2[i];
-        } else {
-          cumulate(b, W.data(), held, theta.data(), w0, w1, n, h, rules, P2.data(), Q2.data(),
-                   scratch);
-          for (Eigen::Index i = 0; i < m; ++i) Z(i, col_Kb + j) = Q2[i];
-        }
+    }
+    // Project out the window's nuisance {1, t - T} (two passes: no cancellation).
+    const double tbar = 0.5 * static_cast<double>(m - 1);
+    double p1p1 = 0.0;
+    for (Eigen::Index i = 0; i < m; ++i) p1p1 += (i - tbar) * (i - tbar);
+    for (int c = 0; c < R; ++c) {
+      auto z = Z.col(c);
+      z.array() -= z.mean();
+      if (p1p1 > 0.0) {
+        double zp = 0.0;
+        for (Eigen::Index i = 0; i < m; ++i) zp += z[i] * (i - tbar);
+        const double k = zp / p1p1;
+        for (Eigen::Index i = 0; i < m; ++i) z[i] -= k * (i - tbar);
       }
-      // Project out the window's nuisance {1, t - T} (two passes: no cancellation).
-      const double tbar = 0.5 * static_cast<double>(m - 1);
-      double p1p1 = 0.0;
-      for (Eigen::Index i = 0; i < m; ++i) p1p1 += (i - tbar) * (i - tbar);
-      for (int c = 0; c < R; ++c) {
-        auto z = Z.col(c);
-        z.array() -= z.mean();
-        if (p1p1 > 0.0) {
-          double zp = 0.0;
-          for (Eigen::Index i = 0; i < m; ++i) zp += z[i] * (i - tbar);
-          const double k = zp / p1p1;
-          for (Eigen::Index i = 0; i < m; ++i) z[i] -= k * (i - tbar);
-        }
-      }
+    }
   };
   auto windowCount = [&](Eigen::Index len) {
     return std::max<Eigen::Index>(1,
@@ -418,9 +417,9 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
     if (with_theta && it == max_it) {
       cov = d.asDiagonal() * Ainv_e * d.asDiagonal();
       solved = true;
-      result->warnings.push_back({quality_code::kRefineNotConverged,
-                                  "the joint STE Gauss-Newton did not converge in " +
-                                      std::to_string(max_it) + " iterations"});
+      result->warnings.push_back(
+          {quality_code::kRefineNotConverged, "the joint STE Gauss-Newton did not converge in " +
+                                                  std::to_string(max_it) + " iterations"});
     }
   }
   if (!solved)
@@ -519,9 +518,9 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
     res.constant = c;
   }
   if (unlocated > 0)
-    res.warnings.push_back({quality_code::kSwitchesUnlocated,
-                            std::to_string(unlocated) +
-                                " stiffness switches could not be located from mesh_phase"});
+    res.warnings.push_back(
+        {quality_code::kSwitchesUnlocated,
+         std::to_string(unlocated) + " stiffness switches could not be located from mesh_phase"});
 
   // STE result and separability.
   SteResult& st = *ste;
@@ -558,8 +557,8 @@ bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& ge
   for (int s = 0; s < S; ++s)
     for (int j = 0; j < J; ++j) {
       const int ic = index(s, 0), it = off_theta + j;
-      const double r = inv_unscaled(ic, it) /
-                       std::sqrt(inv_unscaled(ic, ic) * inv_unscaled(it, it));
+      const double r =
+          inv_unscaled(ic, it) / std::sqrt(inv_unscaled(ic, ic) * inv_unscaled(it, it));
       if (std::isfinite(r)) max_corr = std::max(max_corr, std::abs(r));
     }
   st.condition = cond;

@@ -27,8 +27,8 @@ enum class SteDamping {
 /// STE amplitudes [m]; every list may be empty (all empty and offset 0: no STE, the simulator
 /// is bit-identical to one without the section).
 struct SteOptions {
-  double offset = 0.0;                      ///< [m] e0, order 0
-  std::vector<double> mesh_cos, mesh_sin;   ///< [m] a_h, b_h for mesh orders h = 1..
+  double offset = 0.0;                         ///< [m] e0, order 0
+  std::vector<double> mesh_cos, mesh_sin;      ///< [m] a_h, b_h for mesh orders h = 1..
   std::vector<double> pinion_cos, pinion_sin;  ///< [m] shaft orders s = 1.. of the pinion angle
   std::vector<double> gear_cos, gear_sin;      ///< [m] shaft orders s = 1.. of the gear angle
   SteDamping damping = SteDamping::Relative;

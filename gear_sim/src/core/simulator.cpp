@@ -199,10 +199,9 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
   }
   const MeshStiffness stiffness(cfg.mesh);
   const double me = cfg.gears.equivalentMass();
-  Model model{
-      stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
-      load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
-      me,        cfg.gears.forceFactor()};
+  Model model{stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
+              load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
+              me,        cfg.gears.forceFactor()};
   const StaticTransmissionError ste(cfg.ste, cfg.gears.pinion.teeth, cfg.gears.gear.teeth);
   if (ste.active()) {
     model.ste = &ste;

@@ -306,8 +306,8 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
     } else if (ste_damping == "dte") {
       c.ste.damping = SteDamping::Dte;
     } else {
-      st.fail("ste.damping", "unknown name " + quoteForMessage(ste_damping) +
-                                 " (one of: relative, dte)");
+      st.fail("ste.damping",
+              "unknown name " + quoteForMessage(ste_damping) + " (one of: relative, dte)");
     }
   }
   if (err.empty()) err = c.validate();
