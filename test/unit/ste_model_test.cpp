@@ -117,6 +117,14 @@ std::vector<Case> cases() {
   return v;
 }
 
+// A case's configuration over `duration` [s], the piecewise truth re-aligned to 1 ms segments.
+SimConfig withDuration(const Case& k, double duration) {
+  SimConfig c = k.config;
+  c.simulation.duration = duration;
+  setPiecewiseTruth(&c, 1e-3);
+  return c;
+}
+
 // Acceptance: noise-free, known stiffness, 3 mesh harmonics and run-out: C within 0.05 % per
 // 1 ms segment, STE coefficients within 0.1 %.
 TEST(SteModel, NoiseFreeKnownStiffnessRecoversDampingAndSte) {
@@ -152,9 +160,7 @@ TEST(SteModel, NoisyStandardErrorsCoverTheTruth) {
   std::vector<double> rel;
   for (int seed = 1; seed <= 30; ++seed) {
     const Case& k = all[seed % all.size()];
-    SimConfig c = k.config;
-    c.simulation.duration = 0.01;
-    setPiecewiseTruth(&c, 1e-3);
+    const SimConfig c = withDuration(k, 0.01);
     SignalTable t = simulateOrFail(c);
     addWhiteNoise(&t.dte, 40.0, 1000 + seed);
     std::mt19937_64 gen(5000 + seed);
@@ -186,9 +192,7 @@ namespace {
 // it removes both.
 TEST(SteModel, IgnoringTheSteBiasesOrFlagsModellingItDoesNot) {
   for (const Case& k : cases()) {
-    SimConfig c = k.config;
-    c.simulation.duration = 0.01;
-    setPiecewiseTruth(&c, 1e-3);
+    const SimConfig c = withDuration(k, 0.01);
     const SignalTable t = simulateOrFail(c);
     IdentificationOptions o;
     o.formulation = Formulation::Known;
@@ -223,9 +227,7 @@ TEST(SteModel, IgnoringTheSteBiasesOrFlagsModellingItDoesNot) {
 // separability check.
 TEST(SteModel, GreyboxIdentifiesDampingStiffnessAndSte) {
   for (const Case& k : cases()) {
-    SimConfig c = k.config;
-    c.simulation.duration = 0.02;
-    setPiecewiseTruth(&c, 1e-3);
+    const SimConfig c = withDuration(k, 0.02);
     const SignalTable t = simulateOrFail(c);
     IdentificationResult r;
     SteResult s;
