@@ -36,11 +36,17 @@ FIGURES = [
     ("fig10_scalogram.png", "Fig. 10: Morlet scalogram with the cone of influence"),
     ("fig11_spectrum.png", "Fig. 11: spectrum with the picked modes"),
     ("fig12_envelopes.png", "Fig. 12: wavelet envelopes and their decay fits"),
+    ("fig13_ste.png", "Identified static transmission error (docs/ste.md)"),
 ]
 
 
 class Missing(Exception):
     """An input a figure needs is absent."""
+
+
+class NotApplicable(Exception):
+    """The figure does not belong to this kind of result (e.g. no STE identified): omitted
+    without a note."""
 
 
 def read_csv(path):
@@ -402,6 +408,43 @@ class Report:
         a.legend(loc="upper right", fontsize=7, framealpha=0.9)
         save(fig, path)
 
+    # The STE spectrum (analyze --ste, docs/ste.md)
+    def fig13_ste(self, path):
+        ste = self.res.get("identification", {}).get("ste")
+        if not ste:
+            raise NotApplicable()
+        labels, amps, errs = [], [], []
+        off = ste.get("offset")
+        if off and fval(off.get("value")) == fval(off.get("value")):
+            labels.append("e0")
+            amps.append(abs(fval(off.get("value"))) * 1e6)
+            errs.append(2 * fval(off.get("std")) * 1e6)
+        terms = [("mesh", t) for t in ste.get("mesh", [])] + \
+                [(t.get("shaft", "shaft"), t) for t in ste.get("shaft", [])]
+        for kind, t in terms:
+            labels.append(f"{kind} {t.get('order')}")
+            amps.append(fval(t.get("amplitude")) * 1e6)
+            errs.append(2 * max(fval(t.get("cos_std")), fval(t.get("sin_std"))) * 1e6)
+        fig, (a, b) = plt.subplots(2, 1, figsize=FIGSIZE, dpi=DPI)  # different x axes
+        x = np.arange(len(labels))
+        a.bar(x, amps, yerr=errs, capsize=3, color="tab:blue")
+        a.set_xticks(x)
+        a.set_xticklabels(labels, fontsize=8)
+        a.set_ylabel("amplitude [µm] (±2 SE)")
+        flag = "" if ste.get("separable", True) else "  — NOT SEPARABLE from the damping"
+        a.set_title(f"STE spectrum, shared by the record ({ste.get('damping')} damping){flag}",
+                    fontsize=9, color="black" if not flag else "red")
+        u = np.linspace(0.0, 2.0, 400)
+        e = np.zeros_like(u)
+        for t in ste.get("mesh", []):
+            h = t.get("order")
+            e += fval(t.get("cos")) * np.cos(2 * np.pi * h * u) + \
+                fval(t.get("sin")) * np.sin(2 * np.pi * h * u)
+        b.plot(u, e * 1e6, lw=1)
+        b.set_xlabel("mesh phase u [mesh cycles]")
+        b.set_ylabel("mesh-order STE [µm]")
+        save(fig, path)
+
     def metadata_html(self):
         """Run metadata: package version, command line, input file (size, SHA-256), date, options."""
         meta = self.res.get("metadata")
@@ -587,6 +630,8 @@ def make_report(result_dir, out_dir=None, quiet=False):
             written.append((name, title))
         except Missing as e:
             notes.append((name, title, str(e)))
+            plt.close("all")
+        except NotApplicable:
             plt.close("all")
     progress.step(len(FIGURES), "index.html (hashing the input)")
     body = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>gear_damping report</title>",

@@ -48,6 +48,7 @@
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
 #include "gear_damping_id/segment_driver.hpp"
+#include "gear_damping_id/ste_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -336,6 +337,9 @@ class Analysis {
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
   std::string wavelet_input;
+  std::string ste_spec, ste_damping = "relative";  // docs/ste.md
+  gd::SteModelOptions ste_options;
+  std::vector<gd::SteResult> ste_results;
   bool quiet = false, summary = false, table_mode = false;
   nlohmann::json given = nlohmann::json::object();  // the options set on the command line
   std::vector<std::string> command_line;
@@ -461,6 +465,14 @@ int Analysis::parse(int argc, char** argv) {
   app.add_option("--bag-out", bag_out,
                  "write the results as gear_damping messages (DampingArray, ModeledResponse, "
                  "WaveletModes) to this bag");
+  app.add_option("--ste", ste_spec,
+                 "identify the static transmission error jointly with the damping (docs/ste.md): "
+                 "comma-separated mesh:H, shaft:S (or pinion:S, gear:S), nooffset; known and "
+                 "greybox formulations, piecewise or constant damping; needs mesh_phase");
+  app.add_option("--ste-damping", ste_damping,
+                 "with --ste: damping on the deflection rate y' - e' (relative, default) or on "
+                 "y' alone (dte)")
+      ->check(CLI::IsMember({"relative", "dte"}));
   app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (docs/method.md §5)");
   app.add_option("--f-min", wopt.f_min,
                  "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
@@ -546,6 +558,12 @@ int Analysis::checkOptions() {
   wopt.full_scalogram = !csv_out.empty();  // only wavelet_scalogram.csv needs every row
   wopt.threads = threads;
   if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
+  if (!ste_spec.empty()) {
+    std::string e;
+    if (!gd::parseSteSpec(ste_spec, &ste_options, &e)) return fail(kExitUsage, e);
+    ste_options.damping =
+        ste_damping == "dte" ? gear_sim::SteDamping::Dte : gear_sim::SteDamping::Relative;
+  }
 
   return kContinue;
 }
@@ -615,6 +633,13 @@ int Analysis::load() {
          "): running the wavelet validation only");
   }
   gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  if (!ste_spec.empty()) {  // docs/ste.md
+    if (!identification) return fail(kExitUsage, "--ste needs --params GEAR.yaml");
+    if (streaming) return fail(kExitUsage, "--ste: a bag beyond --max-in-memory is not supported");
+    ste_options.pinion_teeth = model.gears.pinion.teeth;
+    ste_options.gear_teeth = model.gears.gear.teeth;
+    if (const std::string e = ste_options.validate(); !e.empty()) return fail(kExitUsage, e);
+  }
   if (identification) {
     if (const std::string e = gear.validate(); !e.empty())
       return fail(kExitInput, params_source + ": " + e);
@@ -714,10 +739,19 @@ int Analysis::identify() {
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
       progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
-      if (!gd::identify(table, gear, run.options, &run.result, &error, threads))
+      if (!ste_spec.empty()) {
+        ste_results.emplace_back();
+        if (!gd::identifyWithSte(table, gear, run.options, ste_options, &run.result,
+                                 &ste_results.back(), &error))
+          return fail(kExitInput, input + ": " + error);
+      } else if (!gd::identify(table, gear, run.options, &run.result, &error, threads)) {
         return fail(kExitInput, input + ": " + error);
+      }
       progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
-      if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
+      if (!ste_spec.empty()) {  // the forward model has no STE forcing (docs/ste.md)
+        run.response = gd::ModeledResponse{};
+        run.response_error = "the modeled response does not include the STE (--ste)";
+      } else if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
         run.response = gd::ModeledResponse{};
       } else {
         const double tr = table.time[run.response.begin];
@@ -828,6 +862,11 @@ int Analysis::write() {
       {"gaps", is_bag ? bag_info.gaps : 0}};
   if (rig_input) in["encoder"] = gd::toJson(rig_report);
   nlohmann::json doc = gd::analysisJson(runs, in);
+  if (!ste_results.empty()) {  // the STE of the primary run, and of every run (docs/ste.md)
+    doc["identification"]["ste"] = gd::steJson(ste_results.front());
+    for (size_t k = 0; k < ste_results.size() && k < doc["runs"].size(); ++k)
+      doc["runs"][k]["ste"] = gd::steJson(ste_results[k]);
+  }
   doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {
     doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
@@ -841,6 +880,8 @@ int Analysis::write() {
     return fail(kExitOutput, error);
   if (!csv_out.empty()) {
     if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error, &stage))
+      return fail(kExitOutput, error);
+    if (!ste_results.empty() && !gd::writeSteCsv(csv_out, ste_results.front(), &error, &stage))
       return fail(kExitOutput, error);
     if (wavelet && wres.ok() &&
         !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),

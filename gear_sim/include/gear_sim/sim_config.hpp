@@ -11,6 +11,7 @@
 
 #include "gear_sim/gear_pair.hpp"
 #include "gear_sim/sdof_integrator.hpp"
+#include "gear_sim/ste.hpp"
 
 namespace gear_sim {
 
@@ -142,6 +143,7 @@ struct SimConfig {
   LoadOptions load;
   DampingOptions damping;
   SimulationOptions simulation;
+  SteOptions ste;  ///< static transmission error (YAML section `ste`, docs/ste.md); none by default
 
   GearModel gearModel() const { return {gears, mesh, speed}; }
   /// Empty when valid; else names the YAML key (e.g. "mesh.contact_ratio"), value and rule,

@@ -210,6 +210,7 @@ std::string SimConfig::validate() const {
   if (auto e = load.validate(); !e.empty()) return e;
   if (auto e = damping.validate(); !e.empty()) return e;
   if (auto e = simulation.validate(); !e.empty()) return e;
+  if (auto e = ste.validate(); !e.empty()) return e;
   const double max_rpm = speed.profile == SpeedProfile::Ramp
                              ? std::max(speed.pinion_rpm, speed.end_rpm)
                              : speed.pinion_rpm;

@@ -44,13 +44,24 @@ struct Model {
   LoadTorque load;
   DampingLaw damping;
   double me, ff;
+  const StaticTransmissionError* ste = nullptr;  // docs/ste.md; null or inactive: none
+  bool ste_relative = true;                      // damping on y' - e' (else on y')
 
   double k(double t, double t_ref) const {
     return stiffness.at(timing.phase(t), timing.phase(t_ref));
   }
   SdofCoefficients sdof(double t, double t_ref) const {
     const double t1 = load.at(t);
-    return {damping.at(t_ref, t1) / me, k(t, t_ref) / me, ff * t1};
+    SdofCoefficients c{damping.at(t_ref, t1) / me, k(t, t_ref) / me, ff * t1};
+    if (ste) c.F += steForcing(t, c.C, c.K);
+    return c;
+  }
+  // The STE as a known forcing of eq. (4): K e + C e' (relative damping) or K e.
+  double steForcing(double t, double C, double K) const {
+    const double u = timing.phase(t);
+    double f = K * ste->value(u);
+    if (ste_relative) f += C * ste->derivative(u) * timing.meshFrequency(t);
+    return f;
   }
 };
 
@@ -242,10 +253,14 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
   }
   const MeshStiffness stiffness(cfg.mesh);
   const double me = cfg.gears.equivalentMass();
-  const Model model{
-      stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
-      load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
-      me,        cfg.gears.forceFactor()};
+  Model model{stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
+              load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
+              me,        cfg.gears.forceFactor()};
+  const StaticTransmissionError ste(cfg.ste, cfg.gears.pinion.teeth, cfg.gears.gear.teeth);
+  if (ste.active()) {
+    model.ste = &ste;
+    model.ste_relative = cfg.ste.damping == SteDamping::Relative;
+  }
 
   // Every instant where a coefficient jumps or kinks: stiffness switches (from the mesh
   // phase's closed-form inverse), load kinks/steps, damping segment starts.
@@ -358,6 +373,10 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
         while (n_end + 1 <= n1 && o.time[n_end + 1] < *bp_scan) ++n_end;
         // now t[n_end] < bp < t[n_end + 1] or bp == t[n_end + 1] handled by the <= above
       }
+      // An STE forcing (docs/ste.md) is evaluated at every stage: every interval takes the
+      // generic path, whose coefficients (Model::sdof) carry it. The torsional model's rigid
+      // combination q does not see the mesh force, so it needs nothing more.
+      if (model.ste) n_end = n;
       if (n_end > n) {
         const double mid = o.time[n] + 0.5 * dt;
         double ca, cb;

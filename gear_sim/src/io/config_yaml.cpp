@@ -178,15 +178,15 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
   if (!root || !root.IsMap()) err = "the configuration must be a YAML mapping of sections";
   if (err.empty()) {
     // `encoder` is read by loadEncoderOptions (encoder_yaml.hpp).
-    const std::set<std::string> sections{"pinion", "gear",    "mesh",       "speed",
-                                         "load",   "damping", "simulation", "encoder"};
+    const std::set<std::string> sections{"pinion",  "gear",       "mesh", "speed",  "load",
+                                         "damping", "simulation", "ste",  "encoder"};
     for (const auto& kv : root) {
       std::string key;
       if (!keyName(kv.first, "", &key, &err)) break;
       if (!sections.count(key)) {
         err = keyForMessage(key) +
               ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
-              "encoder)";
+              "ste, encoder)";
         break;
       }
     }
@@ -288,6 +288,28 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
     s.get("initial_velocity", &c.simulation.initial_velocity);
     s.get("noise_snr_db", &c.simulation.noise_snr_db);
     s.get("seed", &c.simulation.seed);
+
+    // Static transmission error (docs/ste.md): absent = none.
+    Section st(root, "ste", &err);
+    st.allow({"offset", "mesh_cos", "mesh_sin", "pinion_cos", "pinion_sin", "gear_cos", "gear_sin",
+              "damping"});
+    st.get("offset", &c.ste.offset);
+    st.get("mesh_cos", &c.ste.mesh_cos);
+    st.get("mesh_sin", &c.ste.mesh_sin);
+    st.get("pinion_cos", &c.ste.pinion_cos);
+    st.get("pinion_sin", &c.ste.pinion_sin);
+    st.get("gear_cos", &c.ste.gear_cos);
+    st.get("gear_sin", &c.ste.gear_sin);
+    std::string ste_damping = "relative";
+    st.get("damping", &ste_damping);
+    if (ste_damping == "relative") {
+      c.ste.damping = SteDamping::Relative;
+    } else if (ste_damping == "dte") {
+      c.ste.damping = SteDamping::Dte;
+    } else {
+      st.fail("ste.damping",
+              "unknown name " + quoteForMessage(ste_damping) + " (one of: relative, dte)");
+    }
   }
   if (err.empty()) err = c.validate();
   if (!err.empty()) {
@@ -427,6 +449,17 @@ YAML::Node toYaml(const SimConfig& c) {
   n["simulation"]["initial_velocity"] = s.initial_velocity;
   n["simulation"]["noise_snr_db"] = s.noise_snr_db;
   n["simulation"]["seed"] = s.seed;
+  if (c.ste.active()) {
+    auto& e = c.ste;
+    n["ste"]["offset"] = e.offset;
+    n["ste"]["mesh_cos"] = e.mesh_cos;
+    n["ste"]["mesh_sin"] = e.mesh_sin;
+    n["ste"]["pinion_cos"] = e.pinion_cos;
+    n["ste"]["pinion_sin"] = e.pinion_sin;
+    n["ste"]["gear_cos"] = e.gear_cos;
+    n["ste"]["gear_sin"] = e.gear_sin;
+    n["ste"]["damping"] = e.damping == SteDamping::Relative ? "relative" : "dte";
+  }
   return n;
 }
 
