@@ -56,7 +56,7 @@ void setRate(benchmark::State& state, long n) {
 }
 
 void runIdentify(benchmark::State& state, Formulation f, DampingModel m,
-                 IdentificationOptions::Refine refine) {
+                 IdentificationOptions::Refine refine, int threads = 1) {
   const long n = state.range(0);
   const Data& d = data(n);
   IdentificationOptions o;
@@ -66,7 +66,7 @@ void runIdentify(benchmark::State& state, Formulation f, DampingModel m,
   gear_damping_id::IdentificationResult r;
   std::string e;
   for (auto _ : state) {
-    if (!gear_damping_id::identify(d.table, d.gear, o, &r, &e)) {
+    if (!gear_damping_id::identify(d.table, d.gear, o, &r, &e, threads)) {
       state.SkipWithError(e.c_str());
       break;
     }
@@ -102,6 +102,16 @@ void BM_IdentifyKnownLoadLawRefined(benchmark::State& s) {
   runIdentify(s, Formulation::Known, DampingModel::LoadLaw, IdentificationOptions::Refine::Always);
 }
 
+// identify() with segments on range(1) threads (SegmentDriver; results equal to one thread's).
+void BM_IdentifyKnownPiecewiseIntegralThreads(benchmark::State& s) {
+  runIdentify(s, Formulation::Known, DampingModel::Piecewise, IdentificationOptions::Refine::Never,
+              static_cast<int>(s.range(1)));
+}
+void BM_IdentifyKnownPiecewiseRefinedThreads(benchmark::State& s) {
+  runIdentify(s, Formulation::Known, DampingModel::Piecewise, IdentificationOptions::Refine::Always,
+              static_cast<int>(s.range(1)));
+}
+
 // The streaming API as a node uses it, one IntegralMethod reused (see the file comment).
 void BM_StreamKnownPiecewiseReused(benchmark::State& state) {
   const long n = state.range(0);
@@ -135,4 +145,14 @@ BENCHMARK(BM_IdentifyKnownConstantIntegral)->Arg(1000000)->Unit(benchmark::kMill
 BENCHMARK(BM_IdentifyKnownPiecewiseRefined)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_IdentifyGreyboxPiecewiseRefined)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_IdentifyKnownLoadLawRefined)->Arg(1000000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_IdentifyKnownPiecewiseIntegralThreads)
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_IdentifyKnownPiecewiseRefinedThreads)
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -7,7 +7,8 @@ target_include_directories(gear_test_main PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/tes
 foreach(src IN LISTS GEAR_UNIT_TESTS)
   get_filename_component(name ${src} NAME_WE)
   catkin_add_gtest(${name} ${src} WORKING_DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR})
-  target_link_libraries(${name} gear_test_main gear_damping_id_io gear_sim_io gear_ros_conversions)
+  target_link_libraries(${name} gear_test_main gear_damping_id_io gear_sim_io gear_ros_conversions
+                        gear_id_ros_conversions gear_live_ros_conversions)
   target_compile_options(${name} PRIVATE ${GEAR_WARNINGS})
   target_compile_definitions(${name} PRIVATE GEAR_SOURCE_DIR="${CMAKE_CURRENT_SOURCE_DIR}"
                              GEAR_TOOL_DIR="$<TARGET_FILE_DIR:analyze>")

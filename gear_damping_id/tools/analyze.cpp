@@ -46,6 +46,7 @@
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
+#include "gear_damping_id/segment_driver.hpp"
 #include "gear_damping_id/wavelet.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -61,6 +62,9 @@ using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
 namespace {
 
 constexpr int kExitUsage = 1, kExitInput = 2, kExitOutput = 3, kExitNothing = 4, kExitInternal = 5;
+// Segments per read of a streamed bag (memory: this many segments; the --threads workers share
+// them).
+constexpr size_t kStreamGroup = 64;
 // Largest --scales (README "Limits"): each scale is one inverse FFT of the analysed samples.
 constexpr int kMaxScales = 2000;
 
@@ -157,15 +161,14 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
   return primary ? std::string("/gear/") + leaf : "/gear/" + run.name() + "/" + leaf;
 }
 
-// Streaming analysis of a long bag: segment by segment, memory bounded by a segment.
-// Piecewise known/greybox/paper runs treat each segment as its own record (the unknowns are
-// segment-local, so this is the whole-record estimate; refinement and modeled response are per
-// segment, each response starting from its segment's identified state). Runs with shared
-// unknowns (constant, load_law, legacy) accumulate their normal equations with IntegralMethod;
-// their output-error refinement and modeled response need the whole record and are skipped
-// with a warning.
+// Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
+// pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
+// their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
+// equal those of the record read whole. Memory: a group of segments per read. The piecewise
+// modeled response is per segment (from its identified state); shared-unknown runs are not
+// refined and have no modeled response (both need the whole record), with a warning.
 bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
-                      std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
+                      int threads, std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                       std::vector<double>* wavelet_dte, size_t wavelet_max,
                       gear_sim::ProgressBar* progress, std::string* error) {
   gd::SignalView whole;
@@ -177,30 +180,23 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     *error = "no samples in the analysed time range";
     return false;
   }
-  // Legacy forcing: the mean load over the analysed range (one extra pass).
+  // Legacy forcing: the mean load over the analysed range (one extra pass, summed in order).
   double fbar = gd::kNaN;
   bool legacy = false;
   for (const auto& r : *runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
   if (legacy && info.torque) {
     double sum = 0.0;
-    long long cnt = 0;
     if (!gear_sim_ros::streamSignalBag(
-            info, ranges,
+            info, {{ranges.front().first, ranges.back().second}},
             [&](const gear_sim::SignalTable& t, size_t) {
-              sum += t.torque.sum();
-              cnt += t.torque.size();
+              for (Eigen::Index i = 0; i < t.torque.size(); ++i) sum += t.torque[i];
               return true;
             },
             error))
       return false;
-    fbar = gear.force_factor * sum / static_cast<double>(cnt);
+    fbar =
+        gear.force_factor * sum / static_cast<double>(ranges.back().second - ranges.front().first);
   }
-  struct State {
-    std::unique_ptr<gd::IntegralMethod> method;  // shared-unknown runs
-    FitAccumulator fit;
-    bool per_segment = false;
-  };
-  std::vector<State> states(runs->size());
   // The default window from the record's mean stiffness, as for a record read whole.
   double window = runs->front().options.window_length;
   if (!(window > 0.0)) {
@@ -209,78 +205,66 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
     mean_k.stiffness = &info.stiffness_mean;
     window = gd::defaultWindowLength(mean_k, gear);
   }
+  std::vector<gd::SegmentDriver> drivers;
+  std::vector<FitAccumulator> fits(runs->size());
+  gd::DriverLimits limits;
+  limits.threads = threads;
+  for (auto& run : *runs) {
+    gd::IdentificationOptions o = run.options;
+    o.window_length = window;
+    drivers.emplace_back(o, gear, limits);
+    if (o.formulation == gd::Formulation::Legacy && info.torque)
+      drivers.back().setLegacyForcing(fbar);
+  }
+  // Reads of kStreamGroup segments whatever --threads is: the views (and so every time stamp)
+  // are the same for any number of threads, so the output is too.
+  gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
+  const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
-  const bool ok = gear_sim_ros::streamSignalBag(
-      info, ranges,
-      [&](const gear_sim::SignalTable& block, size_t r) {
-        const gd::SignalView view = gd::SignalView::of(block);
-        if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
-          const size_t take =
-              std::min(wavelet_max - wavelet_dte->size(), static_cast<size_t>(block.dte.size()));
-          wavelet_dte->insert(wavelet_dte->end(), block.dte.data(), block.dte.data() + take);
-        }
-        for (size_t k = 0; k < runs->size(); ++k) {
-          gd::AnalysisRun& run = (*runs)[k];
-          State& st = states[k];
-          gd::IdentificationOptions o = run.options;
-          o.window_length = window;
-          const gd::Formulation f = o.formulation;
-          st.per_segment = o.model == gd::DampingModel::Piecewise && f != gd::Formulation::Legacy;
-          if (!st.per_segment) {
-            if (!st.method) {
-              st.method = std::make_unique<gd::IntegralMethod>(o, gear);
-              if (f == gd::Formulation::Legacy) st.method->setLegacyForcing(fbar);
-            }
-            st.method->addSegment(view, 0, view.n);
-            continue;
-          }
-          o.segment_length = std::numeric_limits<double>::infinity();
-          o.t_start = -std::numeric_limits<double>::infinity();
-          o.t_end = std::numeric_limits<double>::infinity();
-          gd::IdentificationResult seg;
-          std::string e;
-          if (!gd::identify(block, gear, o, &seg, &e)) {
-            *error = e;
-            return false;
-          }
-          if (run.result.segments.empty())
-            run.result = seg;  // formulation, Me, omega0, ...
-          else
-            run.result.segments.push_back(seg.segments.front());
-          for (const auto& w : seg.warnings) run.result.warnings.push_back(w);
-          gd::ModeledResponse resp;
-          std::string why;
-          if (seg.segments.front().identifiable &&
-              gd::modeledResponse(view, gear, seg, &resp, &why)) {
-            st.fit.add(resp);
-            bag->write(topicOf(run, k == 0, "modeled_response"), block.time[0],
-                       gear_damping_ros::toMsg(
-                           resp, info.sample_rate,
-                           info.first_index + static_cast<std::uint64_t>(ranges[r].first)));
-          }
-        }
-        progress->set(static_cast<double>(ranges[r].second - ranges.front().first),
-                      "segment " + std::to_string(r + 1) + " of " + std::to_string(ranges.size()));
-        return true;
-      },
-      error);
-  if (!ok) return false;
+  const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
+    if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
+      for (const auto& r : segs) {  // the analysed samples, in order
+        const size_t take =
+            std::min(wavelet_max - wavelet_dte->size(), static_cast<size_t>(r.second - r.first));
+        wavelet_dte->insert(wavelet_dte->end(), view.dte + r.first, view.dte + r.first + take);
+      }
+    }
+    for (size_t k = 0; k < runs->size(); ++k) {
+      const auto outs = drivers[k].addAll(view, segs);
+      if (drivers[k].sharedModel()) continue;
+      for (size_t j = 0; j < outs.size(); ++j) {
+        gd::ModeledResponse resp;
+        std::string why;
+        if (!outs[j].estimate.identifiable ||
+            !gd::modeledResponse(view, gear, outs[j].result, &resp, &why))
+          continue;
+        fits[k].add(resp);
+        bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
+                   gear_damping_ros::toMsg(
+                       resp, info.sample_rate,
+                       info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
+      }
+    }
+    progress->set(
+        static_cast<double>(ranges[first + segs.size() - 1].second - ranges.front().first),
+        "segment " + std::to_string(first + segs.size()) + " of " + std::to_string(ranges.size()));
+    return true;
+  };
+  if (!gear_sim_ros::streamSignalBag(
+          info, reads,
+          [&](const gear_sim::SignalTable& block, size_t r) { return feeder.push(block, r, sink); },
+          error))
+    return false;
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
-    if (states[k].per_segment) {
-      states[k].fit.finish(&run.response);
+    run.result = drivers[k].finish();
+    if (!drivers[k].sharedModel()) {
+      fits[k].finish(&run.response);
       run.response.observed.resize(0);
-      run.result.window_length = window;
     } else {
-      run.result = states[k].method->finish();
       run.response_error = "not computed for a record analysed streaming (" +
                            std::to_string(info.samples) +
                            " samples): the shared model's response needs the whole record";
-      run.result.warnings.push_back(
-          {gd::quality_code::kRefineSkipped,
-           "output-error refinement skipped: a record analysed streaming is refined per segment "
-           "only for the piecewise model"});
-      gd::applyQualityFlags(run.options, &run.result);
     }
   }
   return true;
@@ -325,21 +309,70 @@ bool parseRegion(const std::string& text, std::pair<double, double>* out) {
 
 }  // namespace
 
-int run(int argc, char** argv) {
-  CLI::App app{
-      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
-      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
-      "the damping with Morlet wavelets."};
+// One run of the tool: parse -> check options -> load -> identify -> wavelet -> write, each step
+// returning kContinue or the exit code to stop with; the state they share is the members.
+class Analysis {
+ public:
+  static constexpr int kContinue = -1;
+  int parse(int argc, char** argv);
+  int checkOptions();
+  int load();
+  int identify();
+  int waveletStep();
+  int write();
+
+ private:
+  // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
   std::string refine = "auto", stiffness_shape = "square";
   gd::IdentificationOptions base;
   std::optional<double> t_start, t_end;
   long max_in_memory = 1000000;
+  int threads = 1;
   bool wavelet = false;
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
+  std::string wavelet_input;
+  bool quiet = false, summary = false, table_mode = false;
+  nlohmann::json given = nlohmann::json::object();  // the options set on the command line
+  std::vector<std::string> command_line;
+  // Options.
+  bool is_bag = false;
+  std::vector<gd::IdentificationOptions> runs_options;
+  // Input.
+  std::string error;
+  gear_sim::SignalTable table;
+  gear_sim_ros::BagSignalInfo bag_info;
+  bool streaming = false;
+  gear_sim::GearModel model;
+  std::string params_source;
+  bool identification = true;
+  gd::GearConstants gear;
+  double sample_rate = 0.0;
+  gd::SignalView whole;
+  Ranges analysed;
+  double duration = 0.0;
+  // Identification.
+  ResultBag bag;
+  std::vector<gd::AnalysisRun> runs;
+  std::vector<double> wavelet_dte;
+  Eigen::Index first = 0;
+  size_t wavelet_n_record = 0;
+  bool wavelet_on_record = false;
+  bool identifiable = false;
+  // Wavelet validation.
+  gd::WaveletResult wres;
+  double t_first = 0.0, wavelet_rate = 0.0;
+  size_t wavelet_n = 0;
+};
+
+int Analysis::parse(int argc, char** argv) {
+  CLI::App app{
+      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
+      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
+      "the damping with Morlet wavelets."};
   app.add_option(
          "--input", input,
          "signal record: CSV with the docs/method.md §6 columns, or a bag of SignalChunk messages")
@@ -353,11 +386,11 @@ int run(int argc, char** argv) {
   app.add_option("--output", output, "write the result JSON (docs/method.md §6) to this file");
   app.add_option("--formulation", formulations,
                  "known | greybox | paper | legacy (repeat for several; default known)")
-      ->check(CLI::IsMember({"known", "greybox", "paper", "legacy"}))
+      ->check(CLI::IsMember(gd::formulationNames()))
       ->take_all();
   app.add_option("--model", models,
                  "piecewise | constant | load_law (repeat for several; default piecewise)")
-      ->check(CLI::IsMember({"piecewise", "constant", "load_law"}))
+      ->check(CLI::IsMember(gd::dampingModelNames()))
       ->take_all();
   app.add_option("--segment", base.segment_length,
                  "damping segment length [s] (0 or inf: the whole record; default 1e-3)");
@@ -388,6 +421,9 @@ int run(int argc, char** argv) {
                  "bags with more samples are analysed streaming, one segment at a time "
                  "(default 1e6)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads,
+                 "identify this many segments in parallel (same results as 1; default 1)")
+      ->check(CLI::Range(1, 256));
   app.add_option("--csv-out", csv_out,
                  "write segments.csv, summary.csv, response_<run>.csv and the wavelet tables "
                  "into this directory");
@@ -415,7 +451,6 @@ int run(int argc, char** argv) {
   app.add_option("--prominence", wopt.peak_prominence,
                  "wavelet: minimum peak prominence, fraction of the highest peak (default 0: "
                  "adapts to the noise floor)");
-  std::string wavelet_input;
   app.add_option("--wavelet-input", wavelet_input,
                  "wavelet: analyse the dte of this record (CSV or bag, e.g. a free decay from "
                  "`simulate --free-response`) instead of the identification record")
@@ -425,7 +460,6 @@ int run(int argc, char** argv) {
                  "record (default 2^18 = 262144: a free decay of a 10 kHz mode lasts milliseconds)")
       ->check(CLI::PositiveNumber);
   // Output of the run on the terminal (docs/method.md §6 "Trust fields").
-  bool quiet = false, summary = false, table_mode = false;
   app.add_flag("--quiet,-q", quiet,
                "no progress line on stderr (warnings and errors are still printed)");
   auto* summary_opt = app.add_flag(
@@ -441,9 +475,15 @@ int run(int argc, char** argv) {
     const int rc = app.exit(e);  // prints the help or the message naming the option
     return rc == 0 ? 0 : kExitUsage;
   }
+  for (const CLI::Option* o : app.get_options())  // the options set on the command line
+    if (o->count() > 0) given[o->get_name()] = o->results();
+  command_line.assign(argv, argv + argc);
+  return kContinue;
+}
 
-  // Options: validated before any file is read, each message naming the option.
-  const bool is_bag = endsWith(input, ".bag");
+// Options: validated before any file is read, each message naming the option.
+int Analysis::checkOptions() {
+  is_bag = endsWith(input, ".bag");
   if (!is_bag && !endsWith(input, ".csv"))
     return fail(kExitUsage, "--input " + input + ": must end in .csv or .bag");
   if (!bag_out.empty() && !endsWith(bag_out, ".bag"))
@@ -455,7 +495,6 @@ int run(int argc, char** argv) {
                 : refine == "never" ? gd::IdentificationOptions::Refine::Never
                                     : gd::IdentificationOptions::Refine::Auto;
   gd::parseStiffnessShape(stiffness_shape, &base.stiffness_shape);  // checked by the option
-  std::vector<gd::IdentificationOptions> runs_options;
   for (const auto& f : formulations) {
     for (const auto& m : models) {
       gd::IdentificationOptions o = base;
@@ -473,11 +512,11 @@ int run(int argc, char** argv) {
   }
   if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
 
+  return kContinue;
+}
+
+int Analysis::load() {
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
-  std::string error;
-  gear_sim::SignalTable table;
-  gear_sim_ros::BagSignalInfo bag_info;
-  bool streaming = false;
   if (is_bag) {
     if (!gear_sim_ros::scanSignalBag(input, topic, &bag_info, &error))
       return fail(kExitInput, error);
@@ -492,9 +531,7 @@ int run(int argc, char** argv) {
   }
 
   // Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
-  gear_sim::GearModel model;
-  std::string params_source = params;
-  bool identification = true;
+  params_source = params;
   if (!params.empty()) {
     if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
   } else if (is_bag && bag_info.has_params) {
@@ -523,17 +560,16 @@ int run(int argc, char** argv) {
                          : "") +
          "): running the wavelet validation only");
   }
-  const gd::GearConstants gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
+  gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
   if (identification) {
     if (const std::string e = gear.validate(); !e.empty())
       return fail(kExitInput, params_source + ": " + e);
   }
 
   // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
-  const double sample_rate = streaming ? bag_info.sample_rate
-                                       : static_cast<double>(table.size() - 1) /
-                                             (table.time[table.size() - 1] - table.time[0]);
-  gd::SignalView whole;
+  sample_rate = streaming ? bag_info.sample_rate
+                          : static_cast<double>(table.size() - 1) /
+                                (table.time[table.size() - 1] - table.time[0]);
   whole.dt = 1.0 / sample_rate;
   whole.t0 = streaming ? static_cast<double>(bag_info.first_index) * whole.dt : table.time[0];
   whole.n = streaming ? static_cast<Eigen::Index>(bag_info.samples) : table.size();
@@ -546,18 +582,17 @@ int run(int argc, char** argv) {
       if (!e.empty()) return fail(kExitInput, input + ": " + e);
     }
   } else if (identification) {
-    for (const auto& o : runs_options) {
-      gear_sim::SignalTable shape;  // the columns present, for the formulation check
-      shape.time = Eigen::VectorXd::LinSpaced(2, 0.0, whole.dt);
-      shape.dte.resize(2);
-      if (bag_info.stiffness) shape.stiffness.resize(2);
-      if (bag_info.torque) shape.torque.resize(2);
-      if (bag_info.mesh_state) shape.mesh_state.resize(2);
-      if (const std::string e = gd::checkSignalTable(shape, o.formulation, o.model); !e.empty())
+    gd::ChannelSet present;
+    present.stiffness = bag_info.stiffness;
+    present.torque = bag_info.torque;
+    present.mesh_state = bag_info.mesh_state;
+    present.mesh_phase = bag_info.mesh_phase;
+    for (const auto& o : runs_options)
+      if (const std::string e = gd::missingChannelError(present, o.formulation, o.model);
+          !e.empty())
         return fail(kExitInput, input + ": " + e);
-    }
   }
-  const Ranges analysed = gd::segmentRanges(whole, runs_options.front());
+  analysed = gd::segmentRanges(whole, runs_options.front());
   if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
     using gear_sim::formatNumber;
     const auto& o = runs_options.front();
@@ -569,8 +604,7 @@ int run(int argc, char** argv) {
                     formatNumber(o.segment_length) +
                     " s = " + formatNumber(o.segment_length * sample_rate) + " samples)");
   }
-  const double duration =
-      static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
+  duration = static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
   if (identification) {
     std::string rate_warning;
     if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
@@ -581,16 +615,17 @@ int run(int argc, char** argv) {
         return fail(kExitInput, input + ": " + e);
   }
 
-  ResultBag bag;
+  return kContinue;
+}
+
+int Analysis::identify() {
   if (!bag_out.empty() && !bag.open(bag_out, &error)) return fail(kExitOutput, error);
 
   // Identification (table or streaming); the wavelet's samples are collected on the way.
-  std::vector<gd::AnalysisRun> runs;
-  std::vector<double> wavelet_dte;
-  const Eigen::Index first = analysed.front().first;
-  const size_t wavelet_n_record =
+  first = analysed.front().first;
+  wavelet_n_record =
       static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, analysed.back().second - first));
-  const bool wavelet_on_record = wavelet && wavelet_input.empty();
+  wavelet_on_record = wavelet && wavelet_input.empty();
   if (identification) {
     for (const auto& o : runs_options) {
       gd::AnalysisRun run;
@@ -602,8 +637,9 @@ int run(int argc, char** argv) {
   }
   gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
-    if (!analyzeStreaming(bag_info, gear, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
-                          wavelet_n_record, &progress, &error))
+    if (!analyzeStreaming(bag_info, gear, threads, &runs, &bag,
+                          wavelet_on_record ? &wavelet_dte : nullptr, wavelet_n_record, &progress,
+                          &error))
       return fail(kExitInput, input + ": " + error);
   } else if (streaming && wavelet_on_record) {
     if (!gear_sim_ros::streamSignalBag(
@@ -619,7 +655,7 @@ int run(int argc, char** argv) {
     for (size_t k = 0; k < runs.size(); ++k) {
       gd::AnalysisRun& run = runs[k];
       progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
-      if (!gd::identify(table, gear, run.options, &run.result, &error))
+      if (!gd::identify(table, gear, run.options, &run.result, &error, threads))
         return fail(kExitInput, input + ": " + error);
       progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
       if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
@@ -635,7 +671,7 @@ int run(int argc, char** argv) {
     if (wavelet_on_record)
       wavelet_dte.assign(table.dte.data() + first, table.dte.data() + first + wavelet_n_record);
   }
-  bool identifiable = false;
+  identifiable = false;
   for (size_t k = 0; k < runs.size(); ++k) {
     identifiable = identifiable || anyIdentifiable(runs[k].result);
     bag.write(topicOf(runs[k], k == 0, "damping"), whole.t0 + duration,
@@ -648,11 +684,14 @@ int run(int argc, char** argv) {
                   : table_mode ? gd::RunPrintMode::Table
                                : gd::RunPrintMode::Auto);
 
+  return kContinue;
+}
+
+int Analysis::waveletStep() {
   // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
-  gd::WaveletResult wres;
-  double t_first = whole.t0 + static_cast<double>(first) * whole.dt;
-  double wavelet_rate = sample_rate;
-  size_t wavelet_n = wavelet_n_record;
+  t_first = whole.t0 + static_cast<double>(first) * whole.dt;
+  wavelet_rate = sample_rate;
+  wavelet_n = wavelet_n_record;
   if (!wavelet_input.empty()) {
     wavelet = true;
     gear_sim::SignalTable w;
@@ -714,6 +753,10 @@ int run(int argc, char** argv) {
     }
   }
 
+  return kContinue;
+}
+
+int Analysis::write() {
   nlohmann::json in = {
       {"file", input},
       {"params", identification ? nlohmann::json(params_source) : nlohmann::json(nullptr)},
@@ -725,11 +768,7 @@ int run(int argc, char** argv) {
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
   nlohmann::json doc = gd::analysisJson(runs, in);
-  nlohmann::json given = nlohmann::json::object();  // the options set on the command line
-  for (const CLI::Option* o : app.get_options())
-    if (o->count() > 0) given[o->get_name()] = o->results();
-  doc["metadata"] = gd::runMetadata(std::vector<std::string>(argv, argv + argc), input, given,
-                                    GEAR_DAMPING_VERSION);
+  doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {
     doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
     if (wres.ok()) {
@@ -751,6 +790,16 @@ int run(int argc, char** argv) {
   if (!bag.close(&error, &stage) || !stage.commit(&error)) return fail(kExitOutput, error);
   if (identification && !identifiable)
     return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
+  return 0;
+}
+
+int run(int argc, char** argv) {
+  Analysis a;
+  if (const int rc = a.parse(argc, argv); rc != Analysis::kContinue) return rc;
+  for (int (Analysis::*step)() : {&Analysis::checkOptions, &Analysis::load, &Analysis::identify,
+                                  &Analysis::waveletStep, &Analysis::write}) {
+    if (const int rc = (a.*step)(); rc != Analysis::kContinue) return rc;
+  }
   return 0;
 }
 

@@ -8,9 +8,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <deque>
 #include <limits>
 #include <memory>
+#include <mutex>
+#include <thread>
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -105,6 +109,80 @@ double countImplausible(const gear_damping::SignalChunk& c, BagSignalInfo* info)
     if (std::isfinite(x)) m = std::max(m, std::abs(x));
   return m;
 }
+
+// Reads and deserialises the messages of a SignalChunk topic on a thread of its own, so that
+// what the caller does with one chunk overlaps the read of the next (issue 18: `analyze` reads
+// and computes at the same time). The queue between them is bounded by samples, so memory stays
+// at about kQueueSamples samples (or one chunk when chunks are larger). A message that does not
+// instantiate as a SignalChunk arrives as nullptr; an exception of the read ends the stream and
+// is reported by error().
+class ChunkReader {
+ public:
+  using Chunk = gear_damping::SignalChunk::ConstPtr;
+  static constexpr size_t kQueueSamples = size_t{1} << 16;
+
+  ChunkReader(std::string path, std::string topic)
+      : path_(std::move(path)), topic_(std::move(topic)), thread_([this] { run(); }) {}
+  ~ChunkReader() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  ChunkReader(const ChunkReader&) = delete;
+  ChunkReader& operator=(const ChunkReader&) = delete;
+
+  /// The next message into *c; false at the end of the topic or after a read error.
+  bool next(Chunk* c) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [this] { return !queue_.empty() || done_; });
+    if (queue_.empty()) return false;
+    *c = std::move(queue_.front());
+    queue_.pop_front();
+    queued_ -= *c ? (*c)->dte.size() : 0;
+    cv_.notify_all();
+    return true;
+  }
+  /// The read error (empty when none); valid once next() returned false.
+  const std::string& error() const { return error_; }
+
+ private:
+  void run() {
+    std::string error;
+    try {
+      rosbag::Bag bag;
+      bag.open(path_, rosbag::bagmode::Read);
+      rosbag::View view(bag, rosbag::TopicQuery(topic_));
+      for (const rosbag::MessageInstance& m : view) {
+        Chunk c = m.instantiate<gear_damping::SignalChunk>();
+        const size_t n = c ? c->dte.size() : 0;
+        std::unique_lock<std::mutex> lock(mutex_);
+        cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
+        if (stop_) break;
+        queue_.push_back(std::move(c));
+        queued_ += n;
+        cv_.notify_all();
+      }
+    } catch (const std::exception& e) {
+      error = openError(path_, e);
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    error_ = error;
+    done_ = true;
+    cv_.notify_all();
+  }
+
+  const std::string path_, topic_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<Chunk> queue_;
+  size_t queued_ = 0;  // samples in queue_
+  bool stop_ = false, done_ = false;
+  std::string error_;
+  std::thread thread_;  // last: started once the members above exist
+};
 
 }  // namespace
 
@@ -327,11 +405,9 @@ bool streamSignalBag(const BagSignalInfo& info,
   };
   startRange();
   try {
-    rosbag::Bag bag;
-    bag.open(info.path, rosbag::bagmode::Read);
-    rosbag::View view(bag, rosbag::TopicQuery(info.topic));
-    for (const rosbag::MessageInstance& m : view) {
-      const auto c = m.instantiate<gear_damping::SignalChunk>();
+    ChunkReader reader(info.path, info.topic);  // reads ahead on its own thread
+    ChunkReader::Chunk c;
+    while (reader.next(&c)) {
       // Validated by scanSignalBag; a bag changed since is not read out of bounds.
       if (!c || c->first_index < info.first_index ||
           c->first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
@@ -357,6 +433,10 @@ bool streamSignalBag(const BagSignalInfo& info,
         if (!sink(block, r)) return false;
         if (++r < ranges.size()) startRange();
       }
+    }
+    if (!reader.error().empty()) {
+      *error = reader.error();
+      return false;
     }
     if (!flushUpTo(std::numeric_limits<Eigen::Index>::max())) return false;
   } catch (const std::exception& e) {

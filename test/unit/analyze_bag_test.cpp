@@ -129,6 +129,26 @@ TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
   EXPECT_TRUE(fs::is_regular_file(out));
 }
 
+// --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,
+// for the record read whole and streamed, for segment-local and shared unknowns.
+TEST_F(AnalyzeBag, ThreadsGiveTheSameResultsAsOneThreadWholeAndStreamed) {
+  const fs::path bag = intactBag();
+  for (const std::string mode : {"", " --max-in-memory 1500"}) {
+    const fs::path j1 = dir() / "t1.json", j3 = dir() / "t3.json";
+    const std::string common =
+        " --model piecewise --model constant --formulation known "
+        "--formulation greybox" +
+        mode + " --output ";
+    ToolRun r = analyze("--input " + bag.string() + common + j1.string() + " --threads 1");
+    ASSERT_EQ(r.code, 0) << r.err;
+    r = analyze("--input " + bag.string() + common + j3.string() + " --threads 3");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto a = nlohmann::json::parse(readText(j1)), b = nlohmann::json::parse(readText(j3));
+    EXPECT_EQ(a.at("identification"), b.at("identification")) << mode;
+    EXPECT_EQ(a.at("runs"), b.at("runs")) << mode;
+  }
+}
+
 TEST_F(AnalyzeBag, AGapOrANanChunkMakesOnlyItsSegmentNotIdentifiable) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const fs::path gap =

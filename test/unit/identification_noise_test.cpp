@@ -157,4 +157,37 @@ TEST_F(NoisyIdentification, StandardErrorsAreHonestOverFiftySeeds) {
   expectHonestStandardErrors(*config_, *clean_, Formulation::Greybox, 30.0);
 }
 
+// The per-segment noise and signal levels (quality flags) are computed in one fused pass with
+// several accumulators: they equal the textbook two-pass definitions to 1e-12 relative
+// (issue 18: fused passes stay within 1e-12 of the unfused results).
+TEST(IdentificationLevels, FusedSegmentLevelsEqualTheirDefinitions) {
+  SimConfig c;
+  c.simulation.duration = 0.005;
+  const SignalTable t = noisy(simulateOrFail(c), 40.0, 7);
+  IdentificationOptions o;
+  o.refine = IdentificationOptions::Refine::Never;
+  const IdentificationResult r = identifyOrFail(t, c, o);
+  ASSERT_FALSE(r.segments.empty());
+  const double dt = t.time[1] - t.time[0];
+  constexpr double kRelTol = 1e-12;
+  for (const auto& seg : r.segments) {
+    const auto b = static_cast<Eigen::Index>(std::llround((seg.t_start - t.time[0]) / dt));
+    const auto n = static_cast<Eigen::Index>(seg.samples);
+    ASSERT_LE(b + n, t.size());
+    const double* y = t.dte.data() + b;
+    double sum = 0.0, d3 = 0.0, var = 0.0;
+    for (Eigen::Index i = 0; i < n; ++i) sum += y[i];
+    const double mean = sum / static_cast<double>(n);
+    for (Eigen::Index i = 0; i + 3 < n; ++i) {
+      const double d = y[i + 3] - 3.0 * y[i + 2] + 3.0 * y[i + 1] - y[i];
+      d3 += d * d;
+    }
+    for (Eigen::Index i = 0; i < n; ++i) var += (y[i] - mean) * (y[i] - mean);
+    const double noise = std::sqrt(d3 / (20.0 * static_cast<double>(n - 3)));
+    const double signal = std::sqrt(var / static_cast<double>(n));
+    EXPECT_NEAR(seg.noise_std, noise, kRelTol * noise);
+    EXPECT_NEAR(seg.signal_std, signal, kRelTol * signal);
+  }
+}
+
 }  // namespace

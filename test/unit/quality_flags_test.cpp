@@ -8,7 +8,7 @@
 //    that are not identifiable once the transient is below the noise;
 //  - in every case no clean identifiable segment is further than kCleanSE standard errors from
 //    the truth;
-//  - batch identify(), the per-segment identify() of analyze's streaming path and
+//  - batch identify(), a segment identified as a record of its own (what a streamed block was) and
 //    LiveIdentification flag each segment alike.
 #include "gear_damping_id/quality_flags.hpp"
 
@@ -259,7 +259,7 @@ std::set<std::string> codesOf(const SegmentEstimate& s) {
   return o;
 }
 
-// Batch, streamed (analyze: identify() per segment block) and live flags agree per segment.
+// Batch, a segment as a record of its own, and live flags agree per segment.
 // Without refinement, so that every path has the same estimates: the refinement iterates all
 // segments of a batch together (one convergence test, one step length) and a streamed or live
 // segment alone, so a poorly determined segment's refined numbers differ between the paths.

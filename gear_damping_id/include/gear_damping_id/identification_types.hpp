@@ -24,6 +24,16 @@ enum class Formulation { Known, Greybox, Paper, Legacy };
 /// How C varies: one per segment, one shared by all segments, or c(t) = c0 + c1*T1(t).
 enum class DampingModel { Piecewise, Constant, LoadLaw };
 
+/// Every formulation and damping model, in the order of their enums: the one list of names
+/// (toString, parse*, the command line and the nodes use it).
+inline constexpr Formulation kFormulations[] = {Formulation::Known, Formulation::Greybox,
+                                                Formulation::Paper, Formulation::Legacy};
+inline constexpr DampingModel kDampingModels[] = {DampingModel::Piecewise, DampingModel::Constant,
+                                                  DampingModel::LoadLaw};
+/// Their names ("known", ... / "piecewise", ...).
+std::vector<std::string> formulationNames();
+std::vector<std::string> dampingModelNames();
+
 std::string toString(Formulation f);
 std::string toString(DampingModel m);
 /// Parses "known|greybox|paper|legacy" / "piecewise|constant|load_law"; false if unknown.

@@ -6,7 +6,7 @@
 #include <string>
 
 #include "gear_damping_id/identification_types.hpp"
-#include "gear_damping_id/integral_method.hpp"
+#include "gear_damping_id/signal_view.hpp"
 
 namespace gear_damping_id {
 

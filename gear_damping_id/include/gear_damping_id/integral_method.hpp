@@ -75,42 +75,11 @@
 
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/quadrature.hpp"
+#include "gear_damping_id/signal_view.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
 
 namespace gear_damping_id {
-
-/// What the identification needs of the gear pair (from the simulator's YAML or the latched
-/// GearParams message).
-struct GearConstants {
-  double equivalent_mass = kNaN;  ///< Me [kg]
-  double force_factor = kNaN;     ///< R1/I1 + R2/I2 [1/(kg*m)]: F = force_factor * T1
-  double contact_ratio = kNaN;    ///< eps [-]: switch phases n and n + eps - 1 (square model)
-  double mean_stiffness = kNaN;   ///< [N/m] model time-mean stiffness
-  /// true for the square and constant stiffness models. Informational: the identification
-  /// decides held or smooth stiffness from the samples (forward_model.hpp), not from this flag.
-  bool piecewise_constant_stiffness = true;
-  std::string validate() const;
-};
-
-/// Constants of a gear model (validated GearModel).
-GearConstants gearConstants(const gear_sim::GearModel& model);
-
-/// Pointers into one contiguous, gap-free, uniformly sampled record: sample n at t0 + n*dt.
-/// Optional channels are null when absent. Values are read, never written.
-struct SignalView {
-  double t0 = 0.0;  ///< [s]
-  double dt = 0.0;  ///< [s]
-  Eigen::Index n = 0;
-  const double* dte = nullptr;         ///< [m] required
-  const double* stiffness = nullptr;   ///< [N/m] held from each sample on (known)
-  const double* torque = nullptr;      ///< [N*m] (known, greybox, load_law, legacy's mean)
-  const double* mesh_state = nullptr;  ///< [0/1] (greybox)
-  const double* mesh_phase = nullptr;  ///< [mesh cycles] locates switches between samples
-  double time(Eigen::Index i) const { return t0 + static_cast<double>(i) * dt; }
-  /// View of a table's columns (dt from the first and last time stamps).
-  static SignalView of(const gear_sim::SignalTable& table);
-};
 
 /// Checks that `table` can be analysed: the channels `formulation`/`model` need present (names the
 /// missing column) and a uniform time step within `rel_tolerance` of the sampling step (names the
@@ -166,6 +135,12 @@ class IntegralMethod {
   /// Effective integration window [s] (0 until resolved by the first segment).
   double windowLength() const { return window_length_; }
   size_t segmentCount() const { return segments_.size(); }
+  /// Stiffness switches that mesh_phase could not locate so far (values held from the sample).
+  long unlocatedSwitches() const { return unlocated_switches_; }
+  /// Appends the segments of `later` (same options and constants, segments after this one's):
+  /// lets segments be accumulated by several objects in parallel (SegmentDriver) with the result
+  /// of one object fed them all in order.
+  void append(IntegralMethod&& later);
 
  private:
   // StiffBasis: the greybox fourier/table shape's unknowns, StiffnessShape::unknowns() adjacent
@@ -216,11 +191,16 @@ class IntegralMethod {
   mutable long unlocated_switches_ = 0;
 };
 
-/// Convenience: identifies the damping over a whole table (segments of options.segment_length,
-/// window options.window_length or the default) in one call. Returns false with `*error` naming
-/// the problem (missing column, non-uniform time, invalid option, record shorter than a window).
+/// The run warning for `count` switches that mesh_phase could not locate.
+QualityWarning switchesUnlocatedWarning(long count);
+
+/// Identifies the damping over a whole table (segments of options.segment_length, window
+/// options.window_length or the default) in one call, through the segment driver
+/// (segment_driver.hpp, which defines it): the batch run. `threads` workers identify segments in
+/// parallel (same result as one). Returns false with `*error` naming the problem (missing
+/// column, non-uniform time, invalid option, record shorter than a window).
 bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
               const IdentificationOptions& options, IdentificationResult* result,
-              std::string* error);
+              std::string* error, int threads = 1);
 
 }  // namespace gear_damping_id

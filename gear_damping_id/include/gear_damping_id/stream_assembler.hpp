@@ -60,7 +60,7 @@
 #include <string>
 #include <vector>
 
-#include "gear_damping_id/integral_method.hpp"
+#include "gear_damping_id/signal_view.hpp"
 
 namespace gear_damping_id {
 
@@ -194,11 +194,6 @@ struct StreamSegment {
   /// View with t0 = first_index / sample_rate, dt = 1 / sample_rate (global stream time).
   SignalView view() const;
 };
-
-/// Name of the first channel that `formulation`/`model` need and `view` lacks (stiffness and
-/// torque for known; mesh_state and torque for greybox; torque for load_law), or "" if none.
-/// The integral method must not be given a view without them.
-std::string missingChannel(const SignalView& view, Formulation formulation, DampingModel model);
 
 class StreamAssembler {
  public:

@@ -32,9 +32,20 @@ std::string toString(DampingModel m) {
   return "?";
 }
 
+std::vector<std::string> formulationNames() {
+  std::vector<std::string> out;
+  for (Formulation f : kFormulations) out.push_back(toString(f));
+  return out;
+}
+
+std::vector<std::string> dampingModelNames() {
+  std::vector<std::string> out;
+  for (DampingModel m : kDampingModels) out.push_back(toString(m));
+  return out;
+}
+
 bool parseFormulation(const std::string& s, Formulation* out) {
-  for (Formulation f :
-       {Formulation::Known, Formulation::Greybox, Formulation::Paper, Formulation::Legacy}) {
+  for (Formulation f : kFormulations) {
     if (s == toString(f)) {
       *out = f;
       return true;
@@ -44,7 +55,7 @@ bool parseFormulation(const std::string& s, Formulation* out) {
 }
 
 bool parseDampingModel(const std::string& s, DampingModel* out) {
-  for (DampingModel m : {DampingModel::Piecewise, DampingModel::Constant, DampingModel::LoadLaw}) {
+  for (DampingModel m : kDampingModels) {
     if (s == toString(m)) {
       *out = m;
       return true;

@@ -6,6 +6,7 @@
 #include <limits>
 #include <sstream>
 
+#include "gear_damping_id/damping_units.hpp"
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/sdof_integrator.hpp"
@@ -761,8 +762,8 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   auto fillC = [&](SegmentEstimate* e, double C, double var) {
     e->C = C;
     e->C_std = std::sqrt(std::max(var, 0.0));
-    e->c = C * me;
-    e->xi = C / (2.0 * omega0);
+    e->c = coefficientFromC(C, me);
+    e->xi = ratioFromC(C, omega0);
     e->refined = true;
   };
   const std::string not_converged = "output-error refinement stopped after the iteration limit (" +

@@ -82,16 +82,6 @@ std::string StreamOptions::validate() const {
   return e.str();
 }
 
-std::string missingChannel(const SignalView& v, Formulation f, DampingModel m) {
-  if (v.dte == nullptr) return "dte";
-  if (f == Formulation::Known && v.stiffness == nullptr) return "stiffness";
-  if (f == Formulation::Greybox && v.mesh_state == nullptr) return "mesh_state";
-  const bool torque =
-      f == Formulation::Known || f == Formulation::Greybox || m == DampingModel::LoadLaw;
-  if (torque && v.torque == nullptr) return "torque";
-  return "";
-}
-
 SignalView StreamSegment::view() const {
   SignalView v;
   v.t0 = static_cast<double>(first_index) / sample_rate;

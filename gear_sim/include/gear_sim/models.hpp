@@ -4,6 +4,7 @@
 // can step onto them. No ROS; SI units. Construct only from validated options.
 #pragma once
 
+#include <cmath>
 #include <vector>
 
 #include "gear_sim/sim_config.hpp"
@@ -21,13 +22,21 @@ class MeshStiffness {
   double at(double u, double u_ref) const;
   double at(double u) const { return at(u, u); }
   /// 1 while the stiffer, double-contact phase holds (fractional phase < eps - 1), else 0.
-  int state(double u) const;
+  int state(double u) const { return u - std::floor(u) < o_.contact_ratio - 1.0 ? 1 : 0; }
   /// Time-mean stiffness over a mesh cycle [N/m].
   double mean() const { return mean_; }
   /// Fractional phases in [0, 1) where k jumps or has a kink (empty for smooth models).
   const std::vector<double>& cycleBreakpoints() const { return breaks_; }
   /// True when k is constant on each smooth piece (square and constant models).
   bool piecewiseConstant() const { return piecewise_constant_; }
+  /// True, with the value in *k, when k is constant on the smooth piece that contains u_ref
+  /// (square and constant models everywhere, the trapezoid's flat parts).
+  bool constantOnPiece(double u_ref, double* k) const;
+  /// out[i] = at(u[i], u_ref) for phases u[0..n) on the smooth piece that contains u_ref (the
+  /// simulator's block evaluation: the piece is found once, trapezoid ramps are a linear
+  /// formula). When du > 0 the phases are uniform, u[i] = u[0] + i du, and the Fourier model
+  /// rotates exact anchors instead of calling cos/sin per point (agrees to ~1e-15 relative).
+  void fillPiece(double u_ref, const double* u, long n, double du, double* out) const;
 
  private:
   MeshOptions o_;
@@ -41,14 +50,17 @@ class MeshTiming {
  public:
   MeshTiming(const SpeedOptions& speed, int pinion_teeth, double initial_phase);
   /// Cumulative mesh phase [mesh cycles] at t [s].
-  double phase(double t) const;
+  double phase(double t) const { return ramp_ ? rampPhase(t) : u0_ + z1_ * f0_ * t; }
   /// Mesh frequency [Hz] at t.
   double meshFrequency(double t) const;
+  /// True when the phase is linear in t (constant speed): phase(t) = phase(0) + meshFrequency * t.
+  bool linear() const { return !ramp_; }
   /// The time t >= 0 at which phase(t) == u (u >= phase(0)); closed form (phase is linear or
   /// quadratic in t).
   double timeOfPhase(double u) const;
 
  private:
+  double rampPhase(double t) const;
   double u0_, z1_, f0_, f1_, t_ramp_;  // f in rev/s
   bool ramp_;
 };

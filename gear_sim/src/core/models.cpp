@@ -63,9 +63,93 @@ double MeshStiffness::at(double u, double u_ref) const {
   return o_.k_mean;
 }
 
-int MeshStiffness::state(double u) const {
-  const double f = u - std::floor(u);
-  return f < o_.contact_ratio - 1.0 ? 1 : 0;
+bool MeshStiffness::constantOnPiece(double u_ref, double* k) const {
+  if (o_.model == StiffnessModel::Fourier) return false;
+  if (o_.model == StiffnessModel::Trapezoid) {
+    const double e = o_.contact_ratio - 1.0, w = o_.transition_fraction;
+    double f = u_ref - std::floor(u_ref);
+    if (f >= 1.0 - 0.5 * w) f -= 1.0;
+    if (f < 0.5 * w || (f >= e - 0.5 * w && f < e + 0.5 * w)) return false;  // on a ramp
+  }
+  *k = at(u_ref, u_ref);
+  return true;
+}
+
+void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, double* out) const {
+  switch (o_.model) {
+    case StiffnessModel::Square:
+    case StiffnessModel::Constant: {
+      const double k = at(u_ref, u_ref);
+      std::fill(out, out + n, k);
+      return;
+    }
+    case StiffnessModel::Trapezoid: {
+      // The piece of u_ref, as in at(): k = k0 + slope * (u - base) on the whole piece.
+      const double e = o_.contact_ratio - 1.0, w = o_.transition_fraction;
+      const double dk = o_.k_max - o_.k_min;
+      double base = std::floor(u_ref), f = u_ref - base;
+      if (f >= 1.0 - 0.5 * w) {
+        f -= 1.0;
+        base += 1.0;
+      }
+      double k0, slope = 0.0;  // k = k0 + slope * (u - base)
+      if (f < 0.5 * w) {
+        slope = dk / w;
+        k0 = o_.k_min + 0.5 * dk;
+      } else if (f < e - 0.5 * w) {
+        k0 = o_.k_max;
+      } else if (f < e + 0.5 * w) {
+        slope = -dk / w;
+        k0 = o_.k_max + dk * (e - 0.5 * w) / w;
+      } else {
+        k0 = o_.k_min;
+      }
+      if (slope == 0.0) {
+        std::fill(out, out + n, k0);
+      } else {
+        for (long i = 0; i < n; ++i) out[i] = k0 + slope * (u[i] - base);
+      }
+      return;
+    }
+    case StiffnessModel::Fourier: {
+      const size_t nh = o_.fourier_cos.size();
+      const double* ac = o_.fourier_cos.data();
+      const double* as = o_.fourier_sin.data();
+      // k = k_mean + sum_h Re((a_h - i b_h) z^h), z = exp(2 pi i u).
+      auto sum = [&](double zc, double zs) {
+        double k = o_.k_mean, pc = zc, ps = zs;
+        for (size_t h = 0; h < nh; ++h) {
+          k += ac[h] * pc + as[h] * ps;
+          const double qc = pc * zc - ps * zs;
+          ps = pc * zs + ps * zc;
+          pc = qc;
+        }
+        return k;
+      };
+      constexpr long kAnchor = 64;
+      if (du > 0.0 && n > kAnchor) {
+        double rc[kAnchor], rs[kAnchor];
+        for (long j = 0; j < kAnchor; ++j) {
+          const double a = 2.0 * M_PI * (du * static_cast<double>(j));
+          rc[j] = std::cos(a);
+          rs[j] = std::sin(a);
+        }
+        for (long i0 = 0; i0 < n; i0 += kAnchor) {
+          const double f = u[i0] - std::floor(u[i0]);
+          const double c0 = std::cos(2.0 * M_PI * f), s0 = std::sin(2.0 * M_PI * f);
+          const long m = std::min(n - i0, kAnchor);
+          for (long j = 0; j < m; ++j)
+            out[i0 + j] = sum(c0 * rc[j] - s0 * rs[j], s0 * rc[j] + c0 * rs[j]);
+        }
+      } else {
+        for (long i = 0; i < n; ++i) {
+          const double f = u[i] - std::floor(u[i]);
+          out[i] = sum(std::cos(2.0 * M_PI * f), std::sin(2.0 * M_PI * f));
+        }
+      }
+      return;
+    }
+  }
 }
 
 // ----------------------------------------------------------------------------- timing
@@ -77,8 +161,7 @@ MeshTiming::MeshTiming(const SpeedOptions& s, int pinion_teeth, double initial_p
       t_ramp_(s.profile == SpeedProfile::Ramp ? s.ramp_time : 1.0),
       ramp_(s.profile == SpeedProfile::Ramp) {}
 
-double MeshTiming::phase(double t) const {
-  if (!ramp_) return u0_ + z1_ * f0_ * t;
+double MeshTiming::rampPhase(double t) const {
   if (t <= t_ramp_) return u0_ + z1_ * (f0_ * t + 0.5 * (f1_ - f0_) / t_ramp_ * t * t);
   return u0_ + z1_ * (0.5 * (f0_ + f1_) * t_ramp_ + f1_ * (t - t_ramp_));
 }
@@ -138,8 +221,32 @@ double LoadTorque::at(double t) const {
 }
 
 void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
+  if (o_.profile == LoadProfile::Table && !o_.times.empty()) {
+    // at() with a cursor instead of a binary search per point (the times ascend).
+    const auto& x = o_.times;
+    const auto& v = o_.values;
+    // The slope of the current interval is computed once per interval (at() divides per
+    // point; the values agree to rounding).
+    size_t k = 0;  // first table time > t (upper_bound), advanced monotonically
+    double slope = 0.0;
+    for (long i = 0; i < n; ++i) {
+      const double t = t0 + static_cast<double>(i) * dt;
+      if (t <= x.front()) {
+        out[i] = v.front();
+      } else if (t >= x.back()) {
+        out[i] = v.back();
+      } else {
+        if (k == 0 || x[k] <= t) {
+          while (k < x.size() && x[k] <= t) ++k;
+          slope = (v[k] - v[k - 1]) / (x[k] - x[k - 1]);
+        }
+        out[i] = v[k - 1] + (t - x[k - 1]) * slope;
+      }
+    }
+    return;
+  }
   if (o_.profile != LoadProfile::Sine) {
-    for (long i = 0; i < n; ++i) out[i] = at(t0 + i * dt);
+    for (long i = 0; i < n; ++i) out[i] = at(t0 + static_cast<double>(i) * dt);
     return;
   }
   // sin(th0 + j w dt) = sin(th0) cos(j w dt) + cos(th0) sin(j w dt): exact sin/cos once per

@@ -1,0 +1,98 @@
+// SignalView, GearConstants and the channel requirements (see signal_view.hpp).
+#include "gear_damping_id/signal_view.hpp"
+
+#include <cmath>
+#include <sstream>
+
+#include "gear_sim/models.hpp"
+
+namespace gear_damping_id {
+
+std::string GearConstants::validate() const {
+  std::ostringstream e;
+  if (!(equivalent_mass > 0.0) || !std::isfinite(equivalent_mass)) {
+    e << "equivalent_mass = " << equivalent_mass << ": must be > 0 [kg]";
+  } else if (!(force_factor > 0.0) || !std::isfinite(force_factor)) {
+    e << "force_factor = " << force_factor << ": must be > 0 [1/(kg*m)]";
+  } else if (!(contact_ratio > 1.0 && contact_ratio <= 2.0)) {
+    e << "contact_ratio = " << contact_ratio << ": must be in (1, 2]";
+  } else if (!(mean_stiffness > 0.0) || !std::isfinite(mean_stiffness)) {
+    e << "mean_stiffness = " << mean_stiffness << ": must be > 0 [N/m]";
+  }
+  return e.str();
+}
+
+GearConstants gearConstants(const gear_sim::GearModel& model) {
+  GearConstants g;
+  g.equivalent_mass = model.gears.equivalentMass();
+  g.force_factor = model.gears.forceFactor();
+  g.contact_ratio = model.mesh.contact_ratio;
+  g.mean_stiffness = gear_sim::MeshStiffness(model.mesh).mean();
+  g.piecewise_constant_stiffness = model.mesh.model == gear_sim::StiffnessModel::Square ||
+                                   model.mesh.model == gear_sim::StiffnessModel::Constant;
+  return g;
+}
+
+SignalView SignalView::of(const gear_sim::SignalTable& t) {
+  SignalView v;
+  v.n = t.size();
+  if (v.n > 0) v.t0 = t.time[0];
+  if (v.n > 1) v.dt = (t.time[v.n - 1] - t.time[0]) / static_cast<double>(v.n - 1);
+  auto ptr = [](const Eigen::VectorXd& c) { return c.size() > 0 ? c.data() : nullptr; };
+  v.dte = ptr(t.dte);
+  v.stiffness = ptr(t.stiffness);
+  v.torque = ptr(t.torque);
+  v.mesh_state = ptr(t.mesh_state);
+  v.mesh_phase = ptr(t.mesh_phase);
+  return v;
+}
+
+bool needsStiffness(Formulation f) { return f == Formulation::Known; }
+bool needsTorque(Formulation f, DampingModel m) {
+  return f == Formulation::Known || f == Formulation::Greybox || m == DampingModel::LoadLaw;
+}
+bool needsMeshState(Formulation f) { return f == Formulation::Greybox; }
+
+ChannelSet ChannelSet::of(const SignalView& v) {
+  ChannelSet c;
+  c.dte = v.dte != nullptr;
+  c.stiffness = v.stiffness != nullptr;
+  c.torque = v.torque != nullptr;
+  c.mesh_state = v.mesh_state != nullptr;
+  c.mesh_phase = v.mesh_phase != nullptr;
+  return c;
+}
+
+ChannelSet ChannelSet::of(const gear_sim::SignalTable& t) {
+  ChannelSet c;
+  c.dte = t.dte.size() > 0;
+  c.stiffness = t.stiffness.size() > 0;
+  c.torque = t.torque.size() > 0;
+  c.mesh_state = t.mesh_state.size() > 0;
+  c.mesh_phase = t.mesh_phase.size() > 0;
+  return c;
+}
+
+std::string missingChannel(const ChannelSet& c, Formulation f, DampingModel m) {
+  if (!c.dte) return "dte";
+  if (needsStiffness(f) && !c.stiffness) return "stiffness";
+  if (needsMeshState(f) && !c.mesh_state) return "mesh_state";
+  if (needsTorque(f, m) && !c.torque) return "torque";
+  return "";
+}
+
+std::string missingChannelError(const ChannelSet& c, Formulation f, DampingModel m) {
+  const std::string name = missingChannel(c, f, m);
+  if (name.empty()) return "";
+  const bool by_formulation =
+      name != "torque" || f == Formulation::Known || f == Formulation::Greybox;
+  return "column '" + name + "' is required by " +
+         (by_formulation ? "formulation '" + toString(f) + "'" : std::string("model 'load_law'")) +
+         " but missing";
+}
+
+std::string missingChannel(const SignalView& v, Formulation f, DampingModel m) {
+  return missingChannel(ChannelSet::of(v), f, m);
+}
+
+}  // namespace gear_damping_id

@@ -1,0 +1,231 @@
+// SegmentDriver: batch identify(), the bounded-memory streaming of a long record (SegmentFeeder,
+// as `analyze` reads a bag) and live identification (StreamAssembler chunks into
+// LiveIdentification) are one pipeline, so they give the same segment results for every
+// formulation x damping model; and segments identified on several threads equal one thread's.
+#include "gear_damping_id/segment_driver.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+
+#include "gear_damping_id/live_identification.hpp"
+#include "gear_damping_id/quality_flags.hpp"
+#include "gear_damping_id/stream_assembler.hpp"
+#include "id_test_support.hpp"
+
+namespace {
+
+namespace gd = gear_damping_id;
+using gear_id_test::addWhiteNoise;
+using gear_id_test::simulateOrFail;
+using gear_id_test::table1Config;
+using Refine = gd::IdentificationOptions::Refine;
+
+// Same samples and arithmetic; the only difference allowed is the time axis: the batch view's
+// step is (t_last - t_first) / (n - 1) of the table, the live view's 1 / sample_rate, which may
+// differ in the last bit (measured: results equal to 1e-15 relative).
+constexpr double kSameRelTol = 1e-12;
+
+struct Record {
+  gear_sim::SignalTable table;
+  gd::GearConstants gear;
+  double sample_rate = 0.0;
+  Record() {
+    gear_sim::SimConfig c = table1Config();
+    c.simulation.duration = 0.006;  // six 1 ms segments
+    table = simulateOrFail(c);
+    // 40 dB: the piecewise segments are refined (Auto), each on its own.
+    addWhiteNoise(&table.dte, 40.0, 7);
+    gear = gd::gearConstants(c.gearModel());
+    sample_rate = c.simulation.sample_rate;
+  }
+};
+
+const Record& record() {
+  static const Record r;
+  return r;
+}
+
+gd::IdentificationOptions optionsFor(gd::Formulation f, gd::DampingModel m) {
+  gd::IdentificationOptions o;
+  o.formulation = f;
+  o.model = m;
+  // Shared unknowns are refined over the whole record only (a streamed or live run cannot):
+  // the three paths are compared on their common ground, the integral estimate.
+  o.refine = m == gd::DampingModel::Piecewise ? Refine::Auto : Refine::Never;
+  o.window_length = gd::defaultWindowLength(gd::SignalView::of(record().table), record().gear);
+  return o;
+}
+
+std::string label(const gd::IdentificationOptions& o) {
+  return gd::toString(o.formulation) + "/" + gd::toString(o.model);
+}
+
+gd::IdentificationResult batch(const gd::IdentificationOptions& o, int threads = 1) {
+  gd::IdentificationResult r;
+  std::string e;
+  EXPECT_TRUE(gd::identify(record().table, record().gear, o, &r, &e, threads)) << e;
+  return r;
+}
+
+// The record read in blocks of `group` segments plus context, as analyze streams a bag.
+gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t group,
+                                  int threads = 1) {
+  const gear_sim::SignalTable& t = record().table;
+  const gd::SignalView whole = gd::SignalView::of(t);
+  const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
+  gd::DriverLimits limits;
+  limits.threads = threads;
+  gd::SegmentDriver driver(o, record().gear, limits);
+  if (o.formulation == gd::Formulation::Legacy)
+    driver.setLegacyForcing(gd::legacyForcing(whole, ranges, record().gear));
+  gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, group);
+  const gd::SampleRanges reads = feeder.readRanges();
+  for (size_t k = 0; k < reads.size(); ++k) {
+    const Eigen::Index a = reads[k].first, n = reads[k].second - a;
+    gear_sim::SignalTable block;  // only this block in memory, as from the bag
+    block.time = t.time.segment(a, n);
+    block.dte = t.dte.segment(a, n);
+    block.stiffness = t.stiffness.segment(a, n);
+    block.torque = t.torque.segment(a, n);
+    block.mesh_state = t.mesh_state.segment(a, n);
+    block.mesh_phase = t.mesh_phase.segment(a, n);
+    EXPECT_TRUE(
+        feeder.push(block, k, [&](const gd::SignalView& v, const gd::SampleRanges& segs, size_t) {
+          driver.addAll(v, segs);
+          return true;
+        }));
+  }
+  return driver.finish();
+}
+
+// The record published in chunks of arbitrary sizes, assembled and identified live.
+gd::IdentificationResult live(const gd::IdentificationOptions& o, unsigned seed) {
+  const gear_sim::SignalTable& t = record().table;
+  gd::StreamOptions so;
+  so.segment_length = o.segment_length;
+  so.max_jump = INFINITY;
+  gd::StreamAssembler assembler(so);
+  gd::LiveIdentification li(o, record().gear);
+  if (o.formulation == gd::Formulation::Legacy) {
+    const gd::SignalView whole = gd::SignalView::of(t);
+    li.setLegacyForcing(gd::legacyForcing(whole, gd::segmentRanges(whole, o), record().gear));
+  }
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> size(1, 900);
+  gd::StreamSegment s;
+  auto drain = [&] {
+    while (assembler.nextSegment(&s)) li.add(s.view(), s.begin, s.end);
+  };
+  for (Eigen::Index i = 0; i < t.size();) {
+    const Eigen::Index n = std::min<Eigen::Index>(size(rng), t.size() - i);
+    gd::ChunkData c;
+    c.first_index = static_cast<std::uint64_t>(i);
+    c.sample_rate = record().sample_rate;
+    c.n = static_cast<size_t>(n);
+    c.dte = t.dte.data() + i;
+    c.stiffness = t.stiffness.data() + i;
+    c.torque = t.torque.data() + i;
+    c.mesh_state = t.mesh_state.data() + i;
+    c.mesh_phase = t.mesh_phase.data() + i;
+    assembler.push(c);
+    drain();
+    i += n;
+  }
+  assembler.endOfStream();
+  drain();
+  return li.cumulative();
+}
+
+void expectNear(double a, double b, double rel, const std::string& what) {
+  if (std::isnan(b)) {
+    EXPECT_TRUE(std::isnan(a)) << what;
+    return;
+  }
+  EXPECT_NEAR(a, b, rel * std::abs(b) + 1e-300) << what;
+}
+
+void expectSameEstimate(const gd::SegmentEstimate& a, const gd::SegmentEstimate& b, double rel,
+                        const std::string& what) {
+  ASSERT_EQ(a.identifiable, b.identifiable) << what << " " << a.reason << " | " << b.reason;
+  EXPECT_EQ(a.reason, b.reason) << what;
+  EXPECT_EQ(a.samples, b.samples) << what;
+  EXPECT_EQ(a.refined, b.refined) << what;
+  EXPECT_EQ(gd::joinCodes(a.warnings), gd::joinCodes(b.warnings)) << what;
+  EXPECT_NEAR(a.t_start, b.t_start, 1e-12) << what;
+  expectNear(a.C, b.C, rel, what + " C");
+  expectNear(a.C_std, b.C_std, rel, what + " C_std");
+  expectNear(a.c, b.c, rel, what + " c");
+  expectNear(a.xi, b.xi, rel, what + " xi");
+  expectNear(a.k_min, b.k_min, rel, what + " k_min");
+  expectNear(a.k_max, b.k_max, rel, what + " k_max");
+  expectNear(a.C_integral, b.C_integral, rel, what + " C_integral");
+}
+
+void expectSameResult(const gd::IdentificationResult& a, const gd::IdentificationResult& b,
+                      double rel, const std::string& what) {
+  ASSERT_EQ(a.segments.size(), b.segments.size()) << what;
+  expectNear(a.omega0, b.omega0, rel, what + " omega0");
+  for (size_t i = 0; i < b.segments.size(); ++i)
+    expectSameEstimate(a.segments[i], b.segments[i], rel, what + " segment " + std::to_string(i));
+  ASSERT_EQ(a.constant.has_value(), b.constant.has_value()) << what;
+  if (b.constant) expectSameEstimate(*a.constant, *b.constant, rel, what + " constant");
+  ASSERT_EQ(a.load_law.has_value(), b.load_law.has_value()) << what;
+  if (b.load_law) {
+    expectNear(a.load_law->c0, b.load_law->c0, rel, what + " c0");
+    expectNear(a.load_law->c1, b.load_law->c1, rel, what + " c1");
+    expectNear(a.load_law->c0_std, b.load_law->c0_std, rel, what + " c0_std");
+  }
+}
+
+TEST(SegmentDriver, BatchStreamedAndLiveGiveTheSameSegmentsForEveryFormulationAndModel) {
+  int refined = 0;
+  for (const auto f : gd::kFormulations) {
+    for (const auto m : gd::kDampingModels) {
+      const gd::IdentificationOptions o = optionsFor(f, m);
+      const gd::IdentificationResult b = batch(o);
+      ASSERT_EQ(b.segments.size(), 6u) << label(o);
+      for (const auto& s : b.segments) refined += s.refined ? 1 : 0;
+      // Smallest memory budget: one segment (plus its context) per read.
+      expectSameResult(streamed(o, 1), b, 0.0, label(o) + " streamed");
+      expectSameResult(live(o, 11), b, kSameRelTol, label(o) + " live");
+      expectSameResult(live(o, 12), b, kSameRelTol, label(o) + " live, other chunking");
+    }
+  }
+  EXPECT_GT(refined, 0) << "the case must exercise the per-segment refinement";
+}
+
+TEST(SegmentDriver, SegmentsOnSeveralThreadsEqualOneThreadBitForBit) {
+  for (const auto f : gd::kFormulations) {
+    for (const auto m : gd::kDampingModels) {
+      const gd::IdentificationOptions o = optionsFor(f, m);
+      const gd::IdentificationResult one = batch(o, 1);
+      expectSameResult(batch(o, 3), one, 0.0, label(o) + " 3 threads");
+      expectSameResult(streamed(o, 4, 4), one, 0.0, label(o) + " streamed, 4 threads");
+    }
+  }
+}
+
+TEST(SegmentDriver, AStreamedSharedRunThatWantsRefinementSaysItWasSkipped) {
+  gd::IdentificationOptions o = optionsFor(gd::Formulation::Known, gd::DampingModel::Constant);
+  o.refine = Refine::Always;
+  const gd::IdentificationResult s = streamed(o, 2);
+  EXPECT_TRUE(gd::hasCode(s.warnings, gd::quality_code::kRefineSkipped));
+  const gd::IdentificationResult b = batch(o);
+  EXPECT_FALSE(gd::hasCode(b.warnings, gd::quality_code::kRefineSkipped));
+  ASSERT_TRUE(b.constant.has_value());
+  EXPECT_TRUE(b.constant->refined);
+}
+
+TEST(SegmentFeeder, ReadRangesAreContiguousAndCoverEverySegmentWithItsContext) {
+  const gd::SampleRanges segs = {{0, 100}, {100, 200}, {200, 300}, {300, 450}};
+  gd::SegmentFeeder feeder(segs, 460, 0.0, 1e-6, 3);
+  const gd::SampleRanges reads = feeder.readRanges();
+  ASSERT_EQ(reads.size(), 2u);
+  EXPECT_EQ(reads[0], std::make_pair(Eigen::Index{0}, Eigen::Index{302}));
+  EXPECT_EQ(reads[1], std::make_pair(Eigen::Index{302}, Eigen::Index{452}));
+}
+
+}  // namespace
