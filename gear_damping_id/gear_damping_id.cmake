@@ -63,3 +63,11 @@ install(TARGETS gear_live_ros_conversions damping_id_node wavelet_node
         ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
         RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+
+# rig_frontend_node: shaft encoders (JointState) + torque -> SignalChunk (docs/rig.md).
+add_executable(rig_frontend_node gear_damping_id/nodes/rig_frontend_node.cpp)
+target_link_libraries(rig_frontend_node gear_damping_id_core gear_ros_conversions gear_sim_io
+                      ${catkin_LIBRARIES})
+target_compile_options(rig_frontend_node PRIVATE ${GEAR_WARNINGS})
+add_dependencies(rig_frontend_node ${PROJECT_NAME}_generate_messages_cpp)
+install(TARGETS rig_frontend_node RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

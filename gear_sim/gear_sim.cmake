@@ -22,10 +22,12 @@ else()
 endif()
 
 # ROS side: message <-> core conversions shared by the tools and nodes.
-add_library(gear_ros_conversions gear_sim/ros/conversions.cpp gear_sim/ros/bag_io.cpp)
+add_library(gear_ros_conversions gear_sim/ros/conversions.cpp gear_sim/ros/bag_io.cpp
+            gear_sim/ros/rig_bag_io.cpp gear_sim/ros/bag_format.cpp)
 target_include_directories(gear_ros_conversions PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/gear_sim/ros/include
                            ${CATKIN_DEVEL_PREFIX}/${CATKIN_GLOBAL_INCLUDE_DESTINATION})
-target_link_libraries(gear_ros_conversions PUBLIC gear_sim_io ${catkin_LIBRARIES})
+# bz2 and roslz4 (rosbag's own dependencies) decompress chunks for checkBagStructure.
+target_link_libraries(gear_ros_conversions PUBLIC gear_sim_io ${catkin_LIBRARIES} PRIVATE bz2 roslz4)
 target_compile_options(gear_ros_conversions PRIVATE ${GEAR_WARNINGS})
 add_dependencies(gear_ros_conversions ${PROJECT_NAME}_generate_messages_cpp)
 

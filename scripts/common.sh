@@ -25,6 +25,8 @@ GEAR_APT_PACKAGES=(
   librosbag-dev librostest-dev libstd-msgs-dev libstd-srvs-dev libdiagnostic-updater-dev
   libdynamic-reconfigure-config-init-mutex-dev
   libdiagnostic-aggregator-dev libdiagnostic-aggregator-tools
+  libsensor-msgs-dev libgeometry-msgs-dev libmessage-filters-dev
+  python3-sensor-msgs python3-geometry-msgs
   rosbash python3-rostest python3-rosbag python3-catkin-pkg python3-std-srvs
   python3-roslaunch python3-rostopic python3-rosservice python3-rosmsg python3-genpy
   python3-std-msgs python3-diagnostic-msgs python3-rosgraph-msgs python3-dynamic-reconfigure

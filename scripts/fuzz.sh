@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A longer libFuzzer campaign on one target of fuzz/ (csv, yaml, bag, stream), single process,
+# A longer libFuzzer campaign on one target of fuzz/ (csv, yaml, bag, stream, rig), single process,
 # in the sanitizer workspace of scripts/sanitize.sh (configured and built first if needed). New inputs
 # accumulate in <asan workspace>/fuzz_corpus/TARGET across campaigns; a crash is written there
 # as crash-* and the exit status is non-zero. Prints the number of executions.
@@ -10,8 +10,8 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 target=${1:?usage: scripts/fuzz.sh TARGET MINUTES}
 minutes=${2:?usage: scripts/fuzz.sh TARGET MINUTES}
 shift 2
-case "$target" in csv | yaml | bag | stream) ;; *)
-  echo "fuzz.sh: unknown target '$target' (csv, yaml, bag, stream)" >&2
+case "$target" in csv | yaml | bag | stream | rig) ;; *)
+  echo "fuzz.sh: unknown target '$target' (csv, yaml, bag, stream, rig)" >&2
   exit 1
   ;;
 esac
@@ -34,12 +34,7 @@ export ASAN_OPTIONS=${ASAN_OPTIONS:-allocator_may_return_null=1:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$repo/fuzz/lsan.supp:print_suppressions=0}
 log="$corpus/../$target.log"
-# The bag target: rosbag reserves up to 4 GB (untouched) for a corrupt 32-bit record length
-# (see scripts/sanitize.sh); single mallocs up to that size are allowed there.
-extra=()
-[ "$target" = bag ] && extra=(-malloc_limit_mb=4200)
 "$bin" -max_total_time=$((minutes * 60)) -timeout=20 -rss_limit_mb=2560 -print_final_stats=1 \
-  "${extra[@]}" \
   -artifact_prefix="$corpus/../${target}_" "$@" "$corpus" "$repo/fuzz/corpus/$target" 2>&1 |
   tee "$log" | grep -E "^#[0-9]+ *(pulse|DONE)|ERROR|SUMMARY|runtime error|stat::"
 rc=${PIPESTATUS[0]}

@@ -44,6 +44,7 @@
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/result_io.hpp"
+#include "gear_damping_id/rig_input.hpp"
 #include "gear_damping_id/run_metadata.hpp"
 #include "gear_damping_id/run_summary.hpp"
 #include "gear_damping_id/segment_driver.hpp"
@@ -338,6 +339,12 @@ class Analysis {
   bool quiet = false, summary = false, table_mode = false;
   nlohmann::json given = nlohmann::json::object();  // the options set on the command line
   std::vector<std::string> command_line;
+  // Rig records (docs/rig.md): the front end's options and what it reported.
+  gd::RigInputOptions rig_opts;
+  std::vector<long> edge_counts, counts_per_rev;
+  std::optional<double> mesh_offset, dte_offset;
+  gd::EncoderFrontEndReport rig_report;
+  bool rig_input = false;
   // Options.
   bool is_bag = false;
   std::vector<gd::IdentificationOptions> runs_options;
@@ -382,6 +389,29 @@ int Analysis::parse(int argc, char** argv) {
                  "gear parameters: the simulator's YAML (pinion, gear, mesh, speed sections); "
                  "default for a bag: its GearParams message; none: wavelet validation only")
       ->check(CLI::ExistingFile);
+  // Rig records (docs/rig.md): encoder angles or edge times through the encoder front end.
+  app.add_option("--edges1", rig_opts.edges1,
+                 "rig: edge-time file of the pinion encoder (column time); --input is then the "
+                 "torque file (time, torque) whose time column is the analysis grid")
+      ->check(CLI::ExistingFile);
+  app.add_option("--edges2", rig_opts.edges2, "rig: edge-time file of the gear encoder")
+      ->check(CLI::ExistingFile);
+  app.add_option("--edge-counts", edge_counts,
+                 "rig: counts per revolution of the edge records (N, or N1 N2)")
+      ->expected(1, 2)
+      ->check(CLI::PositiveNumber);
+  app.add_option("--counts-per-rev", counts_per_rev,
+                 "rig: counts per revolution of quantised uniform angles (N, or N1 N2): the "
+                 "quantisation-noise model of the report")
+      ->expected(1, 2)
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--mesh-offset", mesh_offset,
+                 "rig: mesh phase [cycles] at zero inertia-weighted encoder angle (the double-"
+                 "contact start); default: estimated from the data");
+  app.add_option("--dte-offset", dte_offset,
+                 "rig: the constant [m] removed from the encoder DTE; default: estimated");
+  app.add_option("--ratio-tolerance", rig_opts.front_end.ratio_tolerance,
+                 "rig: relative tolerance of the rotation ratio against Z2/Z1 (default 1e-3)");
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
   app.add_option("--output", output, "write the result JSON (docs/method.md §6) to this file");
   app.add_option("--formulation", formulations,
@@ -489,6 +519,8 @@ int Analysis::checkOptions() {
   if (!bag_out.empty() && !endsWith(bag_out, ".bag"))
     return fail(kExitUsage, "--bag-out " + bag_out + ": must end in .bag");
   if (!is_bag && !topic.empty()) return fail(kExitUsage, "--topic applies to bag input only");
+  if (is_bag && (!rig_opts.edges1.empty() || !rig_opts.edges2.empty()))
+    return fail(kExitUsage, "--edges1/--edges2 take a CSV torque file as --input");
   if (t_start) base.t_start = *t_start;
   if (t_end) base.t_end = *t_end;
   base.refine = refine == "always"  ? gd::IdentificationOptions::Refine::Always
@@ -524,6 +556,25 @@ int Analysis::load() {
     streaming = bag_info.samples > max_in_memory;
     if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
       return fail(kExitInput, error);
+  } else if (gd::isRigInput(input, rig_opts)) {
+    // A rig record: the encoder front end first, with the gear parameters (required).
+    if (params.empty())
+      return fail(kExitUsage, "--params GEAR.yaml is required for a rig record (encoder input)");
+    gear_sim::GearModel rig_model;
+    if (!gear_sim::loadGearModelFile(params, &rig_model, &error)) return fail(kExitInput, error);
+    if (!edge_counts.empty()) {
+      rig_opts.edge_counts1 = edge_counts.front();
+      rig_opts.edge_counts2 = edge_counts.back();
+    }
+    if (!counts_per_rev.empty()) {
+      rig_opts.front_end.counts_per_rev1 = counts_per_rev.front();
+      rig_opts.front_end.counts_per_rev2 = counts_per_rev.back();
+    }
+    if (mesh_offset) rig_opts.front_end.mesh_offset = *mesh_offset;
+    if (dte_offset) rig_opts.front_end.dte_offset = *dte_offset;
+    if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error))
+      return fail(kExitInput, error);
+    rig_input = true;
   } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
                                       /*allow_non_finite=*/true)) {
     // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
@@ -596,6 +647,11 @@ int Analysis::load() {
   if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
     using gear_sim::formatNumber;
     const auto& o = runs_options.front();
+    if (o.segment_length > 0.0 && o.segment_length * sample_rate < 1.0)
+      return fail(kExitInput, input + ": --segment " + formatNumber(o.segment_length) +
+                                  " s is shorter than one sample step (" + formatNumber(whole.dt) +
+                                  " s, " + formatNumber(sample_rate) +
+                                  " Hz): a segment would hold no sample");
     return fail(kExitInput,
                 input + ": no samples in the analysed time range (record " +
                     formatNumber(whole.t0) + " to " +
@@ -767,6 +823,7 @@ int Analysis::write() {
       {"streaming", streaming},
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
+  if (rig_input) in["encoder"] = gd::toJson(rig_report);
   nlohmann::json doc = gd::analysisJson(runs, in);
   doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {

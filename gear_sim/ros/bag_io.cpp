@@ -10,6 +10,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <deque>
 #include <limits>
 #include <memory>
@@ -18,6 +19,7 @@
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
 namespace gear_sim_ros {
@@ -184,12 +186,52 @@ class ChunkReader {
   std::thread thread_;  // last: started once the members above exist
 };
 
+// ROS deserialises a float64[] by resizing the vector to the length it reads and only then
+// checking that the bytes are there: a corrupt length in a SignalChunk allocated (and zeroed) up
+// to 32 GB (found by fuzz_bag). The serialized layout is checked first: every array's length
+// must fit in the message's bytes. Returns the problem, empty when none.
+std::string chunkLayoutError(const rosbag::MessageInstance& m) {
+  const std::uint32_t n = m.size();
+  std::vector<std::uint8_t> buf(n);
+  ros::serialization::OStream out(buf.data(), n);
+  m.write(out);
+  std::uint64_t k = 0;
+  auto skip = [&](std::uint64_t bytes) {
+    if (bytes > n - k) return false;
+    k += bytes;
+    return true;
+  };
+  auto array = [&](std::uint64_t element, const char* name) -> std::string {
+    if (n - k < 4) return std::string("cut before the length of ") + name;
+    std::uint32_t len;
+    std::memcpy(&len, buf.data() + k, 4);
+    k += 4;
+    if (!skip(element * len))
+      return std::string(name) + " claims " + std::to_string(len) + " elements in a message of " +
+             std::to_string(n) + " bytes";
+    return {};
+  };
+  // std_msgs/Header: seq, stamp, frame_id; then sample_rate, first_index.
+  if (!skip(12)) return "cut in its header";
+  if (std::string e = array(1, "header.frame_id"); !e.empty()) return e;
+  if (!skip(16)) return "cut before sample_rate and first_index";
+  const std::pair<std::uint64_t, const char*> arrays[] = {
+      {8, "dte"},        {8, "dte_velocity"}, {8, "stiffness"}, {8, "torque"},
+      {1, "mesh_state"}, {8, "mesh_phase"},   {8, "damping"}};
+  for (const auto& [size, name] : arrays)
+    if (std::string e = array(size, name); !e.empty()) return e;
+  return {};
+}
+
 }  // namespace
 
 bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
                    std::string* error) {
   BagSignalInfo out;
   out.path = path;
+  // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
+  // length): every record is checked first.
+  if (!checkBagStructure(path, error)) return false;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
@@ -251,6 +293,13 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
     std::string largest_gap_at;
     std::vector<double> chunk_max;  // max |dte| per chunk, for the outlier check
     for (const rosbag::MessageInstance& m : view) {
+      if (m.getDataType() == kChunkType) {
+        if (const std::string bad = chunkLayoutError(m); !bad.empty()) {
+          *error = path + ": " + gear_sim::quoteForMessage(out.topic) + " message " +
+                   std::to_string(out.chunks + 1) + ": corrupt " + kChunkType + " (" + bad + ")";
+          return false;
+        }
+      }
       const auto c = m.instantiate<gear_damping::SignalChunk>();
       const std::string where = path + ": " + gear_sim::quoteForMessage(out.topic) + " message " +
                                 std::to_string(out.chunks + 1) + " (first_index " +

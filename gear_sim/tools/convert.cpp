@@ -7,7 +7,9 @@
 // (--params) are written as a GearParams message when given. Bag -> CSV: gaps are written as NaN
 // rows (a warning counts them). Exit codes: 0 success, 1 invalid command line, 2 invalid input
 // (also beyond the limits of README "Limits", or times a bag cannot stamp), 3 output not written, 4
-// internal error (an exception, out of memory included; message on stderr).
+// internal error (an exception, out of memory included; message on stderr). A rig CSV (time,
+// theta1, theta2, torque; docs/rig.md) becomes a bag of sensor_msgs/JointState (/rig/joint_states)
+// and geometry_msgs/WrenchStamped (/rig/torque).
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
@@ -15,9 +17,11 @@
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/message_text.hpp"
+#include "gear_sim/rig_csv.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
+#include "gear_sim_ros/rig_bag_io.hpp"
 
 namespace {
 
@@ -64,6 +68,18 @@ int run(int argc, char** argv) {
     gear_sim::GearModel model;
     if (!params.empty() && !gear_sim::loadGearModelFile(params, &model, &error))
       return fail(kExitInput, error);
+    if (gear_sim::isRigCsv(input)) {
+      // A rig record (time, theta1, theta2, torque; docs/rig.md): a bag of JointState and
+      // WrenchStamped messages, one per sample, as a rig's drivers would record it.
+      if (!gear_sim::readRigCsv(input, &table, &error)) return fail(kExitInput, error);
+      if (table.torque.size() != table.size())
+        return fail(kExitInput, input + ": a rig bag needs the torque column");
+      if (!gear_sim_ros::writeRigBag(output, table, params.empty() ? nullptr : &model, {}, &error))
+        return fail(kExitOutput, error);
+      std::cerr << "convert: " << table.size() << " rig samples " << input << " -> " << output
+                << " (/rig/joint_states, /rig/torque)\n";
+      return 0;
+    }
     if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"}, true))
       return fail(kExitInput, error);
     const Eigen::Index n = table.size();

@@ -16,12 +16,16 @@
 #include <optional>
 
 #include "gear_sim/config_yaml.hpp"
+#include "gear_sim/encoder_yaml.hpp"
+#include "gear_sim/encoders.hpp"
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/progress.hpp"
+#include "gear_sim/rig_csv.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
+#include "gear_sim_ros/rig_bag_io.hpp"
 
 namespace {
 
@@ -55,6 +59,22 @@ int run(int argc, char** argv) {
                "the difference of two runs, from the static deflection under the mean load and "
                "from the configured initial state (the start-up transient without the forced "
                "part; what the wavelet validation needs, docs/wavelet.md)");
+  // Rig output (docs/rig.md): what shaft encoders and a torque meter would record.
+  bool rig = false;
+  std::string edges_prefix;
+  std::optional<long> counts;
+  app.add_flag("--rig", rig,
+               "write the rig record instead (also when the YAML says encoder.enabled: true): "
+               "CSV columns time, theta1, theta2, torque, or a bag of sensor_msgs/JointState "
+               "(/rig/joint_states, joints pinion_joint, gear_joint) and "
+               "geometry_msgs/WrenchStamped (/rig/torque, torque.z) messages, one per sample; "
+               "the encoder section sets quantisation, zeros and torque noise");
+  app.add_option("--edges", edges_prefix,
+                 "also write the encoders' edge times to PREFIX1.csv and PREFIX2.csv (column "
+                 "time; counts per revolution from encoder.counts_per_rev1/2 or --counts-per-rev)");
+  app.add_option("--counts-per-rev", counts,
+                 "override encoder.counts_per_rev1 and 2 (0 = exact angles)")
+      ->check(CLI::Range(0L, 1L << 40));
   bool no_output = false;
   app.add_flag("--quiet,-q", no_output, "no progress line and no closing note on stderr");
   try {
@@ -72,6 +92,22 @@ int run(int argc, char** argv) {
   std::string error;
   if (!gear_sim::loadSimConfigFile(config_path, &c, &error)) {
     std::cerr << "simulate: " << error << "\n";
+    return 1;
+  }
+  gear_sim::EncoderOptions enc;
+  if (!gear_sim::loadEncoderOptionsFile(config_path, &enc, &error)) {
+    std::cerr << "simulate: " << error << "\n";
+    return 1;
+  }
+  if (counts) enc.counts_per_rev1 = enc.counts_per_rev2 = *counts;
+  rig = rig || enc.enabled;
+  if (rig && free_response) {
+    std::cerr << "simulate: --rig and --free-response exclude each other\n";
+    return 1;
+  }
+  if (!edges_prefix.empty() && (enc.counts_per_rev1 <= 0 || enc.counts_per_rev2 <= 0)) {
+    std::cerr << "simulate: --edges needs counts per revolution (encoder.counts_per_rev1/2 or "
+                 "--counts-per-rev)\n";
     return 1;
   }
   if (duration) c.simulation.duration = *duration;
@@ -112,7 +148,27 @@ int run(int argc, char** argv) {
   // (writeSignalBag does so itself).
   const gear_sim::GearModel model = c.gearModel();
   bool ok;
-  if (endsWith(output, ".csv")) {
+  if (!edges_prefix.empty()) {
+    for (int shaft : {1, 2}) {
+      const auto e = gear_sim::encoderEdges(c, enc, t, shaft,
+                                            shaft == 1 ? enc.counts_per_rev1 : enc.counts_per_rev2);
+      const std::string path = edges_prefix + std::to_string(shaft) + ".csv";
+      if (!gear_sim::writeEdgeCsv(path, e, &error)) {
+        std::cerr << "simulate: " << error << "\n";
+        return 2;
+      }
+    }
+  }
+  if (rig) {
+    const gear_sim::SignalTable r = gear_sim::rigRecord(c, enc, t);
+    if (endsWith(output, ".csv")) {
+      const std::string tmp = output + ".partial";
+      ok = gear_sim::writeRigCsv(tmp, r, &error) && gear_sim::commitFile(tmp, output, &error);
+      if (!ok) std::remove(tmp.c_str());
+    } else {
+      ok = gear_sim_ros::writeRigBag(output, r, &model, {}, &error);
+    }
+  } else if (endsWith(output, ".csv")) {
     const std::string tmp = output + ".partial";
     ok = gear_sim::writeSignalCsv(tmp, t, &error) && gear_sim::commitFile(tmp, output, &error);
     if (!ok) std::remove(tmp.c_str());

@@ -9,8 +9,11 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <string>
 
@@ -21,6 +24,7 @@
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim/tool_main.hpp"
+#include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "tool_runner.hpp"
@@ -54,9 +58,11 @@ class Hostile : public ::testing::Test {
   // first_index and `edit` may change the chunk.
   static std::string writeBag(
       const std::string& name, const std::function<std::uint64_t(size_t)>& index,
-      const std::function<void(size_t, gear_damping::SignalChunk*)>& edit = nullptr) {
+      const std::function<void(size_t, gear_damping::SignalChunk*)>& edit = nullptr,
+      rosbag::compression::CompressionType compression = rosbag::compression::Uncompressed) {
     const std::string p = path(name);
     rosbag::Bag bag(p, rosbag::bagmode::Write);
+    bag.setCompression(compression);
     const ros::Time base(1.0);
     bag.write("/gear/params", base, gear_sim_ros::toMsg(config_.gearModel()));
     gear_damping::SignalChunk c;
@@ -156,6 +162,152 @@ TEST_F(Hostile, AGapAsLongAsTheSamplesPresentIsStillAccepted) {
   ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
   EXPECT_EQ(info.gap_samples, 2000);
   EXPECT_EQ(info.real_samples, 2000);
+}
+
+// ---- Bag structure (checkBagStructure, before rosbag opens the file) ----
+
+std::string readBytes(const std::string& p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+void writeBytes(const std::string& p, const std::string& b) {
+  std::ofstream(p, std::ios::binary | std::ios::trunc) << b;
+}
+void putLe32(std::string* b, size_t at, std::uint32_t v) {
+  ASSERT_LE(at + 4, b->size());
+  for (int k = 0; k < 4; ++k) (*b)[at + k] = static_cast<char>((v >> (8 * k)) & 0xFF);
+}
+// Offset of the first occurrence of `what` in b (fails the test when absent).
+size_t find(const std::string& b, const std::string& what) {
+  const size_t at = b.find(what);
+  EXPECT_NE(at, std::string::npos) << what;
+  return at == std::string::npos ? 0 : at;
+}
+
+TEST_F(Hostile, IntactBagsPassTheStructureCheckCompressedOrNot) {
+  using rosbag::compression::CompressionType;
+  for (CompressionType c :
+       {rosbag::compression::Uncompressed, rosbag::compression::BZ2, rosbag::compression::LZ4}) {
+    const std::string bag = writeBag(
+        "intact" + std::to_string(static_cast<int>(c)) + ".bag", [](size_t k) { return 500 * k; },
+        nullptr, c);
+    std::string e;
+    EXPECT_TRUE(gear_sim_ros::checkBagStructure(bag, &e)) << e;
+    gear_sim_ros::BagSignalInfo info;
+    ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+    EXPECT_EQ(info.samples, 2000);
+  }
+}
+
+// Each corruption is refused by the structure check, naming it, before rosbag reads the file:
+// without the check, the first one is a heap read out of bounds in ros::Header::parse (found
+// by fuzz_bag under AddressSanitizer; the sanitizer stage runs this test), the others send
+// rosbag's unchecked parser of chunk records to arbitrary offsets.
+TEST_F(Hostile, CorruptBagRecordLengthsAreRefusedBeforeRosbagReadsThem) {
+  const std::string good = readBytes(writeBag("layout.bag", [](size_t k) { return 500 * k; }));
+  struct Case {
+    std::string name;
+    std::function<void(std::string*)> corrupt;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      // The connection header inside the first chunk: its md5sum field claims 900000 bytes
+      // (below ROS's own 1e6 limit, far beyond the header).
+      {"connection header field",
+       [](std::string* b) { putLe32(b, find(*b, "md5sum=") - 4, 900000); },
+       "connection header: a field of 900000 bytes"},
+      // A record header field (the first connection record's topic) beyond its header.
+      {"record header field",
+       [](std::string* b) { putLe32(b, find(*b, "topic=/gear") - 4, 70000); },
+       "record header: a field of 70000 bytes"},
+      // The bag header record's header_len beyond the file.
+      {"header_len", [](std::string* b) { putLe32(b, 13, 0x7FFFFFFF); },
+       "a record header of 2147483647 bytes"},
+      // The first message record's data_len (right after the header's time field) beyond the
+      // chunk.
+      {"data_len",
+       [](std::string* b) {
+         const size_t op = find(*b, std::string("op=\x02", 4));
+         putLe32(b, find(b->substr(op), "time=") + op + 13, 0x00FFFFFF);
+       },
+       "data bytes where the chunk has"},
+      // The first index entry's offset (after 'ver', data_len and the 8-byte time) inside a
+      // record rather than at one.
+      {"index offset",
+       [](std::string* b) {
+         putLe32(b, find(*b, std::string("ver=\x01\x00\x00\x00", 8)) + 8 + 4 + 8, 3);
+       },
+       "an index entry pointing at chunk offset 3"},
+      // The bag header's index_pos inside a record.
+      {"index_pos", [](std::string* b) { putLe32(b, find(*b, "index_pos=") + 10, 20); },
+       "index_pos 20 is not the start of a record"},
+      // An unknown op code on the first chunk record.
+      {"op code", [](std::string* b) { (*b)[find(*b, std::string("op=\x05", 4)) + 3] = 0x19; },
+       "unknown op code 25"},
+      // The version line.
+      {"version", [](std::string* b) { (*b)[11] = '9'; }, "bag format '2.9'"},
+      // Cut inside the index section.
+      {"truncated", [](std::string* b) { b->resize(b->size() - 7); }, "rosbag reindex"},
+  };
+  for (const Case& c : cases) {
+    std::string b = good;
+    c.corrupt(&b);
+    const std::string bag = path("corrupt_" + std::to_string(&c - cases.data()) + ".bag");
+    writeBytes(bag, b);
+    const std::string e = scanError(bag);
+    EXPECT_TRUE(has(e, "cannot read as a bag")) << c.name << ": " << e;
+    EXPECT_TRUE(has(e, c.message)) << c.name << ": " << e;
+    expectPrintableAndShort(e);
+  }
+  // The tools exit 2 (invalid input) on the first, the original fuzz finding.
+  std::string b = good;
+  putLe32(&b, find(b, "md5sum=") - 4, 900000);
+  writeBytes(path("header_overflow.bag"), b);
+  EXPECT_EQ(run("analyze", "--input " + path("header_overflow.bag")).code, 2);
+  const ToolRun r = run("convert", "--input " + path("header_overflow.bag") + " --output " +
+                                       path("header_overflow.csv"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "connection header")) << r.err;
+  EXPECT_FALSE(fs::exists(path("header_overflow.csv")));
+}
+
+// A SignalChunk whose dte length claims 2^31 - 1 samples: ROS's deserialiser resized the
+// vector (16 GB) before checking the bytes (out of memory, found by fuzz_bag); the layout is
+// checked first.
+TEST_F(Hostile, ChunkArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
+  std::string b = readBytes(writeBag("array.bag", [](size_t k) { return 500 * k; }));
+  // The first chunk: sample_rate (1e6), first_index 0, then dte's length 500.
+  std::string pattern(20, '\0');
+  const double rate = 1e6;
+  std::memcpy(&pattern[0], &rate, 8);
+  pattern[16] = static_cast<char>(0xF4);  // 500, little-endian
+  pattern[17] = 0x01;
+  putLe32(&b, find(b, pattern) + 16, 0x7FFFFFFF);
+  writeBytes(path("array_overflow.bag"), b);
+  const std::string e = scanError(path("array_overflow.bag"));
+  EXPECT_TRUE(has(e, "dte claims 2147483647 elements")) << e;
+  EXPECT_TRUE(has(e, "message 1")) << e;
+  EXPECT_EQ(run("analyze", "--input " + path("array_overflow.bag")).code, 2);
+}
+
+// A compressed chunk is decompressed and its records checked the same way.
+TEST_F(Hostile, CorruptCompressedChunksAreRefused) {
+  const std::string good = readBytes(writeBag(
+      "bz2.bag", [](size_t k) { return 500 * k; }, nullptr, rosbag::compression::BZ2));
+  std::string b = good;
+  // The chunk's uncompressed size ('size' field) one byte short.
+  const size_t size_at = find(b, "size=") + 5;
+  std::uint32_t size;
+  std::memcpy(&size, b.data() + size_at, 4);
+  putLe32(&b, size_at, size - 1);
+  writeBytes(path("bz2_size.bag"), b);
+  EXPECT_TRUE(has(scanError(path("bz2_size.bag")), "cannot read as a bag"))
+      << scanError(path("bz2_size.bag"));
+  b = good;
+  // Garbage in the compressed stream (just after 'BZh').
+  b[find(b, "BZh") + 8] ^= 0x55;
+  writeBytes(path("bz2_garbage.bag"), b);
+  EXPECT_TRUE(has(scanError(path("bz2_garbage.bag")), "cannot read as a bag"));
 }
 
 TEST_F(Hostile, ImplausibleChunkValuesAreCountedReportedAndReadAsNan) {
@@ -284,6 +436,30 @@ TEST_F(Hostile, UserTextInMessagesIsEscapedAndTruncated) {
 TEST_F(Hostile, TimesInMessagesHaveEnoughDigitsToDiffer) {
   const std::string e = csvError("times.csv", "time,dte\n6e-06,1\n6.0000001e-06,1\n6e-06,1\n");
   EXPECT_TRUE(has(e, "time 6e-06 is not greater than the previous 6.0000001e-06")) << e;
+}
+
+// Time steps of 1e-300 s and 1e300 s and a segment of 1e-12 s name their real cause, not "no
+// samples in the analysed time range" (a segment of 1e297 sample steps was an out-of-range
+// integer conversion in segmentRanges).
+TEST_F(Hostile, ExtremeTimeStepsAndSegmentsNameTheirCause) {
+  auto withStep = [&](const std::string& name, double dt) {
+    std::string text = "time,dte\n";
+    for (int i = 0; i < 200; ++i)
+      text += gear_sim::formatNumber(i * dt) + "," + gear_sim::formatNumber(table_.dte[i]) + "\n";
+    writeText(dir() / name, text);
+    return path(name);
+  };
+  const std::string params = " --params " + kParams + " --formulation paper";
+  ToolRun r = run("analyze", "--input " + withStep("tiny_step.csv", 1e-300) + params);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "shorter than one damping segment")) << r.err;
+  r = run("analyze", "--input " + withStep("huge_step.csv", 1e300) + params);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "--segment 0.001 s is shorter than one sample step")) << r.err;
+  r = run("analyze", "--input " + path("good.csv") + params + " --segment 1e-12");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "--segment 1e-12 s is shorter than one sample step (1e-06 s")) << r.err;
+  EXPECT_FALSE(has(r.err, "no samples in the analysed")) << r.err;
 }
 
 TEST_F(Hostile, CsvTimesABagCannotStampAreInvalidInput) {

@@ -79,8 +79,12 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
   const double eps = 1e-3;
   const double ta = std::max(o.t_start, s.t0);
   const double tb = std::min(o.t_end, s.time(s.n - 1));
-  const auto first = static_cast<Eigen::Index>(std::ceil((ta - s.t0) / s.dt - eps));
-  const auto last = static_cast<Eigen::Index>(std::floor((tb - s.t0) / s.dt + eps));  // incl.
+  // (clamped as doubles: a range far beyond a record of tiny steps is no integer overflow)
+  const double n_d = static_cast<double>(s.n);
+  const auto first =
+      static_cast<Eigen::Index>(std::clamp(std::ceil((ta - s.t0) / s.dt - eps), -1.0, n_d));
+  const auto last = static_cast<Eigen::Index>(
+      std::clamp(std::floor((tb - s.t0) / s.dt + eps), -1.0, n_d));  // incl.
   const Eigen::Index lo = std::max<Eigen::Index>(0, first);
   const Eigen::Index hi = std::min<Eigen::Index>(s.n, last + 1);
   if (hi <= lo) return out;
@@ -90,13 +94,18 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
     return out;
   }
   const double t_first = s.time(lo);
+  // Boundary indices are clamped to [0, hi] as doubles before the conversion: a segment of
+  // 1e297 sample steps (a time step of 1e-300 s) ends at the record's end, not at an
+  // out-of-range integer.
+  const double hi_d = static_cast<double>(hi);
+  auto boundary = [&](double t) {
+    return std::clamp(std::ceil((t - s.t0) / s.dt - eps), 0.0, hi_d);
+  };
   for (long i = 0;; ++i) {
     const double seg_t = t_first + static_cast<double>(i) * o.segment_length;
-    const auto b = static_cast<Eigen::Index>(std::ceil((seg_t - s.t0) / s.dt - eps));
+    const auto b = static_cast<Eigen::Index>(boundary(seg_t));
     if (b >= hi) break;
-    const double next_t = seg_t + o.segment_length;
-    auto e = static_cast<Eigen::Index>(std::ceil((next_t - s.t0) / s.dt - eps));
-    e = std::min(e, hi);
+    const auto e = static_cast<Eigen::Index>(boundary(seg_t + o.segment_length));
     if (e <= b) break;
     out.emplace_back(b, e);
   }

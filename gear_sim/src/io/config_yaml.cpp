@@ -177,14 +177,16 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
   SimConfig c;
   if (!root || !root.IsMap()) err = "the configuration must be a YAML mapping of sections";
   if (err.empty()) {
-    const std::set<std::string> sections{"pinion", "gear",    "mesh",      "speed",
-                                         "load",   "damping", "simulation"};
+    // `encoder` is read by loadEncoderOptions (encoder_yaml.hpp).
+    const std::set<std::string> sections{"pinion", "gear",    "mesh",       "speed",
+                                         "load",   "damping", "simulation", "encoder"};
     for (const auto& kv : root) {
       std::string key;
       if (!keyName(kv.first, "", &key, &err)) break;
       if (!sections.count(key)) {
         err = keyForMessage(key) +
-              ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation)";
+              ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
+              "encoder)";
         break;
       }
     }

@@ -1,0 +1,407 @@
+#include "gear_sim_ros/bag_format.hpp"
+
+#include <bzlib.h>
+#include <roslz4/lz4s.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "gear_sim/message_text.hpp"
+
+namespace gear_sim_ros {
+namespace {
+
+enum Op : std::uint8_t {
+  kMessageData = 0x02,
+  kBagHeader = 0x03,
+  kIndexData = 0x04,
+  kChunk = 0x05,
+  kChunkInfo = 0x06,
+  kConnection = 0x07,
+};
+
+using Fields = std::map<std::string, std::string>;
+
+std::uint32_t le32(const char* p) {
+  std::uint32_t v;
+  std::memcpy(&v, p, 4);  // the bag format is little-endian, like the hosts ROS runs on
+  return v;
+}
+
+// Thrown by the walker with the reason and the byte offset; turned into the error message.
+struct Corrupt {
+  std::string what;
+  std::uint64_t at;
+  bool truncated = false;
+};
+
+// Parses `n` bytes as header fields (each a 4-byte length, then `name=value`), as
+// ros::Header::parse does, but with every length checked against what is left.
+Fields parseFields(const char* p, std::uint64_t n, std::uint64_t at, const char* what) {
+  Fields fields;
+  std::uint64_t k = 0;
+  while (k < n) {
+    if (n - k < 4)
+      throw Corrupt{std::string(what) + ": a field length cut by the end of the header", at + k};
+    const std::uint32_t len = le32(p + k);
+    k += 4;
+    if (len > n - k)
+      throw Corrupt{std::string(what) + ": a field of " + std::to_string(len) +
+                        " bytes where the header has " + std::to_string(n - k) + " left",
+                    at + k - 4};
+    const std::string field(p + k, len);
+    const size_t eq = field.find('=');
+    if (eq == std::string::npos)
+      throw Corrupt{std::string(what) + ": a field without '='", at + k - 4};
+    fields[field.substr(0, eq)] = field.substr(eq + 1);
+    k += len;
+  }
+  return fields;
+}
+
+// A numeric field of exactly sizeof(T) bytes, as rosbag requires.
+template <typename T>
+T field(const Fields& f, const char* name, std::uint64_t at, const char* what) {
+  const auto it = f.find(name);
+  if (it == f.end()) throw Corrupt{std::string(what) + " without its '" + name + "' field", at};
+  if (it->second.size() != sizeof(T))
+    throw Corrupt{std::string(what) + ": field '" + name + "' of " +
+                      std::to_string(it->second.size()) + " bytes, not " +
+                      std::to_string(sizeof(T)),
+                  at};
+  T v;
+  std::memcpy(&v, it->second.data(), sizeof(T));
+  return v;
+}
+
+const char* opName(std::uint8_t op) {
+  switch (op) {
+    case kMessageData:
+      return "message data record";
+    case kBagHeader:
+      return "bag header record";
+    case kIndexData:
+      return "index data record";
+    case kChunk:
+      return "chunk record";
+    case kChunkInfo:
+      return "chunk info record";
+    case kConnection:
+      return "connection record";
+    default:
+      return "record";
+  }
+}
+
+// One record: where it starts, its op code and fields, where and how long its data is.
+struct Record {
+  std::uint64_t start = 0;
+  std::uint8_t op = 0;
+  Fields fields;
+  std::uint64_t data_pos = 0;
+  std::uint32_t data_len = 0;
+};
+
+// Reads records from a byte source (the file, or a chunk's bytes in memory) within
+// [begin, end), checking every length.
+class RecordSource {
+ public:
+  virtual ~RecordSource() = default;
+  // Reads n bytes at pos into out; false when the source ends first.
+  virtual bool read(std::uint64_t pos, std::uint64_t n, std::string* out) = 0;
+
+  Record next(std::uint64_t pos, std::uint64_t end, const char* where) {
+    Record r;
+    r.start = pos;
+    std::string b;
+    if (end - pos < 4 || !read(pos, 4, &b))
+      throw Corrupt{std::string("a record header length cut by the end of the ") + where, pos,
+                    true};
+    const std::uint32_t header_len = le32(b.data());
+    if (header_len > end - pos - 4)
+      throw Corrupt{"a record header of " + std::to_string(header_len) + " bytes where the " +
+                        where + " has " + std::to_string(end - pos - 4) + " left",
+                    pos, true};
+    if (header_len > kMaxBagHeaderBytes)
+      throw Corrupt{"a record header of " + std::to_string(header_len) + " bytes", pos};
+    if (!read(pos + 4, header_len, &b))
+      throw Corrupt{"a record header cut by the end of the " + std::string(where), pos, true};
+    r.fields = parseFields(b.data(), header_len, pos + 4, "record header");
+    const auto op = r.fields.find("op");
+    if (op == r.fields.end() || op->second.size() != 1)
+      throw Corrupt{"a record without a one-byte 'op' field", pos};
+    r.op = static_cast<std::uint8_t>(op->second[0]);
+    const std::uint64_t len_pos = pos + 4 + header_len;
+    if (end - len_pos < 4 || !read(len_pos, 4, &b))
+      throw Corrupt{std::string("a data length cut by the end of the ") + where, len_pos, true};
+    r.data_len = le32(b.data());
+    r.data_pos = len_pos + 4;
+    if (r.data_len > end - r.data_pos)
+      throw Corrupt{"a " + std::string(opName(r.op)) + " with " + std::to_string(r.data_len) +
+                        " data bytes where the " + where + " has " +
+                        std::to_string(end - r.data_pos) + " left",
+                    len_pos, true};
+    return r;
+  }
+
+  // A connection record: its conn and topic fields, and the connection header in its data.
+  void checkConnection(const Record& r) {
+    field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
+    if (r.fields.find("topic") == r.fields.end())
+      throw Corrupt{"connection record without its 'topic' field", r.start};
+    if (r.data_len > kMaxBagHeaderBytes)
+      throw Corrupt{"a connection header of " + std::to_string(r.data_len) + " bytes", r.data_pos};
+    std::string b;
+    if (!read(r.data_pos, r.data_len, &b))
+      throw Corrupt{"a connection header cut by the end of the file", r.data_pos, true};
+    parseFields(b.data(), r.data_len, r.data_pos, "connection header");
+  }
+};
+
+class FileSource : public RecordSource {
+ public:
+  explicit FileSource(std::ifstream* f) : f_(f) {}
+  bool read(std::uint64_t pos, std::uint64_t n, std::string* out) override {
+    out->resize(n);
+    f_->clear();
+    f_->seekg(static_cast<std::streamoff>(pos));
+    f_->read(out->data(), static_cast<std::streamsize>(n));
+    return static_cast<std::uint64_t>(f_->gcount()) == n;
+  }
+
+ private:
+  std::ifstream* f_;
+};
+
+class MemorySource : public RecordSource {
+ public:
+  MemorySource(const char* bytes, std::uint64_t size) : b_(bytes), size_(size) {}
+  bool read(std::uint64_t pos, std::uint64_t n, std::string* out) override {
+    if (pos > size_ || n > size_ - pos) return false;
+    out->assign(b_ + pos, n);
+    return true;
+  }
+
+ private:
+  const char* b_;
+  std::uint64_t size_;
+};
+
+// The records inside a chunk's (uncompressed) bytes [begin, begin + size) of `src`: message
+// data and connection records only. Returns the offsets (from the chunk's start) of the
+// message-data records, ascending. `base` is the file offset of the chunk's data (for messages).
+std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t begin,
+                                             std::uint64_t size, std::uint64_t base, bool in_file) {
+  std::vector<std::uint32_t> messages;
+  const std::uint64_t end = begin + size;
+  for (std::uint64_t pos = begin; pos < end;) {
+    Record r;
+    try {
+      r = src->next(pos, end, "chunk");
+    } catch (Corrupt& c) {
+      if (!in_file) c.at = base;  // offsets inside compressed data mean nothing to the reader
+      c.truncated = false;
+      throw;
+    }
+    const std::uint64_t at = in_file ? r.start : base;
+    if (r.op == kMessageData) {
+      field<std::uint32_t>(r.fields, "conn", at, "message data record");
+      field<std::uint64_t>(r.fields, "time", at, "message data record");
+      messages.push_back(static_cast<std::uint32_t>(r.start - begin));
+    } else if (r.op == kConnection) {
+      try {
+        src->checkConnection(r);
+      } catch (Corrupt& c) {
+        if (!in_file) c.at = base;
+        throw;
+      }
+    } else {
+      throw Corrupt{
+          "a " + std::string(opName(r.op)) + " (op " + std::to_string(r.op) + ") inside a chunk",
+          at};
+    }
+    pos = r.data_pos + r.data_len;
+  }
+  return messages;
+}
+
+// The chunk's `size` bytes, uncompressed (the buffer is left uninitialised: a corrupt size
+// claims address space, not memory, as in rosbag).
+std::unique_ptr<char[]> decompress(const std::string& compression, std::string* in,
+                                   std::uint32_t size, std::uint64_t at) {
+  std::unique_ptr<char[]> out(new char[std::max<std::uint32_t>(size, 1)]);
+  unsigned int produced = size;
+  if (compression == "bz2") {
+    if (BZ2_bzBuffToBuffDecompress(out.get(), &produced, in->data(),
+                                   static_cast<unsigned int>(in->size()), 0, 0) != BZ_OK)
+      throw Corrupt{"a bz2 chunk that does not decompress", at};
+  } else if (roslz4_buffToBuffDecompress(in->data(), static_cast<unsigned int>(in->size()),
+                                         out.get(), &produced) != ROSLZ4_OK) {
+    throw Corrupt{"an lz4 chunk that does not decompress", at};
+  }
+  if (produced != size)
+    throw Corrupt{"a chunk of " + std::to_string(produced) + " bytes uncompressed, not " +
+                      std::to_string(size) + " as its header says",
+                  at};
+  return out;
+}
+
+void walk(std::ifstream* f, std::uint64_t file_size) {
+  static const char kVersion[] = "#ROSBAG V2.0\n";
+  const std::uint64_t version_len = sizeof(kVersion) - 1;
+  FileSource src(f);
+  std::string b;
+  if (!src.read(0, version_len, &b) || b != kVersion) {
+    std::string line;
+    src.read(0, std::min<std::uint64_t>(file_size, 64), &line);
+    line = line.substr(0, line.find('\n'));
+    if (line.rfind("#ROSBAG V", 0) == 0)
+      throw Corrupt{
+          "bag format " + gear_sim::quoteForMessage(line.substr(9)) + ": only version 2.0 is read",
+          0};
+    throw Corrupt{"no '#ROSBAG V2.0' line: not a bag", 0};
+  }
+  std::uint64_t index_pos = 0;
+  std::vector<std::uint64_t> starts;                                   // top-level record starts
+  std::map<std::uint64_t, std::vector<std::uint32_t>> chunk_messages;  // chunk start -> offsets
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> chunk_refs;     // chunk info: (at, pos)
+  std::optional<std::uint64_t> last_chunk;
+  for (std::uint64_t pos = version_len; pos < file_size;) {
+    const Record r = src.next(pos, file_size, "file");
+    starts.push_back(r.start);
+    if (starts.size() == 1 && r.op != kBagHeader)
+      throw Corrupt{"the first record is not the bag header", r.start};
+    switch (r.op) {
+      case kBagHeader:
+        if (starts.size() != 1) throw Corrupt{"a second bag header record", r.start};
+        index_pos = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
+        field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
+        field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
+        break;
+      case kChunk: {
+        const auto c = r.fields.find("compression");
+        if (c == r.fields.end()) throw Corrupt{"chunk record without 'compression'", r.start};
+        const std::uint32_t size = field<std::uint32_t>(r.fields, "size", r.start, "chunk record");
+        if (c->second == "none") {
+          if (size != r.data_len)
+            throw Corrupt{"an uncompressed chunk of " + std::to_string(r.data_len) +
+                              " bytes whose header says " + std::to_string(size),
+                          r.start};
+          chunk_messages[r.start] =
+              checkChunkRecords(&src, r.data_pos, r.data_len, r.data_pos, true);
+        } else if (c->second == "bz2" || c->second == "lz4") {
+          if (size > kMaxBagChunkBytes || r.data_len > kMaxBagChunkBytes)
+            throw Corrupt{"a compressed chunk of " + std::to_string(size) + " bytes", r.start};
+          std::string packed;
+          if (!src.read(r.data_pos, r.data_len, &packed))
+            throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
+          const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
+          MemorySource mem(bytes.get(), size);
+          chunk_messages[r.start] = checkChunkRecords(&mem, 0, size, r.start, false);
+        } else {
+          throw Corrupt{
+              "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
+              r.start};
+        }
+        last_chunk = r.start;
+        break;
+      }
+      case kIndexData: {
+        if (field<std::uint32_t>(r.fields, "ver", r.start, "index data record") != 1)
+          throw Corrupt{"index data record of a version other than 1", r.start};
+        field<std::uint32_t>(r.fields, "conn", r.start, "index data record");
+        const std::uint32_t count =
+            field<std::uint32_t>(r.fields, "count", r.start, "index data record");
+        if (!last_chunk) throw Corrupt{"an index data record before any chunk", r.start};
+        if (std::uint64_t{count} * 12 != r.data_len)
+          throw Corrupt{"an index data record of " + std::to_string(count) + " entries in " +
+                            std::to_string(r.data_len) + " bytes (12 each)",
+                        r.start};
+        const auto& messages = chunk_messages[*last_chunk];
+        const std::uint64_t block = 12 * 4096;
+        for (std::uint64_t k = 0; k < r.data_len; k += block) {
+          const std::uint64_t n = std::min<std::uint64_t>(block, r.data_len - k);
+          if (!src.read(r.data_pos + k, n, &b))
+            throw Corrupt{"an index cut by the end of the file", r.data_pos + k, true};
+          for (std::uint64_t e = 0; e < n; e += 12) {
+            const std::uint32_t offset = le32(b.data() + e + 8);
+            if (!std::binary_search(messages.begin(), messages.end(), offset))
+              throw Corrupt{"an index entry pointing at chunk offset " + std::to_string(offset) +
+                                ", not a message of the chunk at byte " +
+                                std::to_string(*last_chunk),
+                            r.data_pos + k + e};
+          }
+        }
+        break;
+      }
+      case kChunkInfo: {
+        if (field<std::uint32_t>(r.fields, "ver", r.start, "chunk info record") != 1)
+          throw Corrupt{"chunk info record of a version other than 1", r.start};
+        const std::uint64_t chunk_pos =
+            field<std::uint64_t>(r.fields, "chunk_pos", r.start, "chunk info record");
+        field<std::uint64_t>(r.fields, "start_time", r.start, "chunk info record");
+        field<std::uint64_t>(r.fields, "end_time", r.start, "chunk info record");
+        const std::uint32_t count =
+            field<std::uint32_t>(r.fields, "count", r.start, "chunk info record");
+        if (std::uint64_t{count} * 8 != r.data_len)
+          throw Corrupt{"a chunk info record of " + std::to_string(count) + " entries in " +
+                            std::to_string(r.data_len) + " bytes (8 each)",
+                        r.start};
+        chunk_refs.emplace_back(r.start, chunk_pos);
+        break;
+      }
+      case kConnection:
+        src.checkConnection(r);
+        break;
+      case kMessageData:
+        field<std::uint32_t>(r.fields, "conn", r.start, "message data record");
+        field<std::uint64_t>(r.fields, "time", r.start, "message data record");
+        break;
+      default:
+        throw Corrupt{"unknown op code " + std::to_string(r.op), r.start};
+    }
+    pos = r.data_pos + r.data_len;
+  }
+  if (starts.empty()) throw Corrupt{"no bag header record", version_len, true};
+  if (index_pos == 0)
+    throw Corrupt{"unindexed (index_pos 0): the recording did not finish", version_len, true};
+  if (!std::binary_search(starts.begin(), starts.end(), index_pos))
+    throw Corrupt{"index_pos " + std::to_string(index_pos) + " is not the start of a record",
+                  version_len, index_pos >= file_size};
+  for (const auto& [at, chunk_pos] : chunk_refs)
+    if (chunk_messages.find(chunk_pos) == chunk_messages.end())
+      throw Corrupt{"chunk_pos " + std::to_string(chunk_pos) + " is not a chunk record", at};
+}
+
+}  // namespace
+
+bool checkBagStructure(const std::string& path, std::string* error) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) {
+    *error = path + ": cannot read as a bag (cannot open the file)";
+    return false;
+  }
+  f.seekg(0, std::ios::end);
+  const std::streamoff end = f.tellg();
+  if (end < 0) {
+    *error = path + ": cannot read as a bag (cannot determine its size)";
+    return false;
+  }
+  try {
+    walk(&f, static_cast<std::uint64_t>(end));
+  } catch (const Corrupt& c) {
+    *error = path + ": cannot read as a bag (" + c.what + " at byte " + std::to_string(c.at) + ")" +
+             (c.truncated ? "; if it is truncated, `rosbag reindex` may recover it" : "");
+    return false;
+  }
+  return true;
+}
+
+}  // namespace gear_sim_ros

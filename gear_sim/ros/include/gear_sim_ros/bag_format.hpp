@@ -1,0 +1,34 @@
+// Structural check of a rosbag file (bag format 2.0) before rosbag reads it.
+//
+// rosbag trusts the lengths in a bag: ROS's header parser (ros::Header::parse) reads a field
+// length and copies that many bytes without comparing them with the header's size, and the
+// records inside a chunk are parsed at the offsets the index gives without bounds checks. A
+// corrupt bag is then read out of bounds (found by the bag fuzz target under AddressSanitizer).
+// checkBagStructure walks every record the way the format defines it and refuses the file,
+// naming the byte offset, unless every length stays inside its record, chunk and file:
+//   - the version line `#ROSBAG V2.0`;
+//   - every record: header_len, each header field's length (`name=value`, a one-byte `op`),
+//     data_len; op codes 0x02 (message data), 0x03 (bag header, first), 0x04 (index data),
+//     0x05 (chunk), 0x06 (chunk info), 0x07 (connection);
+//   - the bag header's index_pos (a record start; 0: unindexed), its counts;
+//   - chunks: compression none/bz2/lz4 (compressed chunks are decompressed to check them), the
+//     uncompressed size, and the message-data and connection records inside;
+//   - connection records: the connection header in their data (the same field layout);
+//   - index data records: version 1, count x 12 bytes, every offset a message-data record of
+//     the chunk they follow; chunk info records: version 1, count x 8 bytes, chunk_pos a chunk.
+#pragma once
+
+#include <string>
+
+namespace gear_sim_ros {
+
+/// Largest record header or connection header accepted [bytes] (ROS refuses fields above 1e6).
+constexpr unsigned kMaxBagHeaderBytes = 16u << 20;
+/// Largest uncompressed chunk accepted [bytes] (rosbag allocates it; its default is 768 KiB).
+constexpr unsigned kMaxBagChunkBytes = 1u << 30;
+
+/// True when `path` is a structurally sound bag of format 2.0; else false with a one-line
+/// `*error` ("<path>: cannot read as a bag (<reason> at byte N)").
+bool checkBagStructure(const std::string& path, std::string* error);
+
+}  // namespace gear_sim_ros

@@ -1,0 +1,27 @@
+// Rig records in rosbag files as a real rig would record them (docs/rig.md): the two shaft angles
+// as sensor_msgs/JointState and the pinion torque as geometry_msgs/WrenchStamped, one message
+// per sample each, stamped 1 s + the sample time; the gear parameters as GearParams.
+#pragma once
+
+#include <string>
+
+#include "gear_sim/signal_table.hpp"
+#include "gear_sim/sim_config.hpp"
+
+namespace gear_sim_ros {
+
+struct RigBagTopics {
+  std::string joints = "/rig/joint_states";
+  std::string torque = "/rig/torque";
+  std::string params = "/gear/params";
+  std::string joint1 = "pinion_joint";  ///< JointState name of the pinion shaft
+  std::string joint2 = "gear_joint";    ///< JointState name of the gear shaft
+  char axis = 'z';                      ///< torque component of the WrenchStamped carrying T1
+};
+
+/// Writes `rig` (time, theta1, theta2, torque) as JointState + WrenchStamped messages (and the
+/// gear parameters when `params` is not null). Temporary file renamed on success.
+bool writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
+                 const gear_sim::GearModel* params, const RigBagTopics& topics, std::string* error);
+
+}  // namespace gear_sim_ros
