@@ -31,6 +31,7 @@ FIGURES = [
     ("fig06_response_legacy.png", "Fig. 6: modeled vs observed DTE, legacy formulation"),
     ("fig07_response_constant.png", "Fig. 7: modeled vs observed DTE, constant damping"),
     ("fig08_damping.png", "Fig. 8: identified damping C(t)"),
+    ("fig08b_stiffness_curve.png", "Identified stiffness curve over a mesh cycle (greybox shape)"),
     ("fig09_response_piecewise.png", "Fig. 9: modeled vs observed DTE, piecewise damping"),
     ("fig09b_response_load_law.png", "Modeled vs observed DTE, load-law damping"),
     ("fig10_scalogram.png", "Fig. 10: Morlet scalogram with the cone of influence"),
@@ -298,6 +299,54 @@ class Report:
         a.set_xlabel("time [ms]")
         a.set_ylabel("damping C = c/Me [1/s]")
         a.legend(loc="best")
+        save(fig, path)
+
+    def fig08b_stiffness_curve(self, path):
+        """The greybox fourier:H / table:N stiffness curve of every segment against the mesh
+        phase, beside the measured stiffness when signal.csv has it."""
+        run = next((r for r in self.res.get("runs", [])
+                    if r.get("stiffness_shape", "square") != "square"
+                    and any(s.get("stiffness_curve") for s in r.get("segments", []))), None)
+        if run is None:
+            raise NotApplicable("no greybox fourier/table stiffness shape in result.json")
+        kind, _, n = run["stiffness_shape"].partition(":")
+        u = np.linspace(0.0, 1.0, 401)
+
+        def curve(theta):
+            theta = np.asarray([fval(v) for v in theta])
+            if kind == "fourier":
+                k = np.full_like(u, theta[0])
+                for h in range(1, (len(theta) - 1) // 2 + 1):
+                    k += theta[2 * h - 1] * np.cos(2 * np.pi * h * u)
+                    k += theta[2 * h] * np.sin(2 * np.pi * h * u)
+                return k
+            nodes = np.arange(len(theta) + 1) / len(theta)  # periodic: node N = node 0
+            return np.interp(u, nodes, np.append(theta, theta[0]))
+
+        fig, (a,) = new_fig()
+        try:
+            s = self.signal()
+            names = s.dtype.names or ()
+            if "stiffness" in names and "mesh_phase" in names:
+                step = max(1, len(s) // 20000)
+                ph = np.mod(s["mesh_phase"][::step], 1.0)
+                a.plot(ph, s["stiffness"][::step] / 1e8, ".", ms=1.5, color="0.7",
+                       label="measured stiffness (signal.csv)")
+        except Missing:
+            pass
+        segs = [x for x in run["segments"] if x.get("identifiable") and x.get("stiffness_curve")]
+        cmap = plt.get_cmap("viridis")
+        for i, seg in enumerate(segs):
+            flagged = bool(segment_flags(seg))
+            a.plot(u, curve(seg["stiffness_curve"]) / 1e8, lw=1.2, ls="--" if flagged else "-",
+                   color=cmap(i / max(1, len(segs) - 1)),
+                   label=(f"segment {fnum(seg.get('t_start')) * 1e3:.1f} ms"
+                          + (" (flagged)" if flagged else "")) if i < 12 else None)
+        a.set_xlabel("mesh phase [cycles]")
+        a.set_ylabel("mesh stiffness k [1e8 N/m]")
+        a.set_title(f"{run['formulation']} {run['stiffness_shape']}, {run.get('estimator', '')}",
+                    fontsize=9)
+        a.legend(loc="upper right", fontsize=7, framealpha=0.9)
         save(fig, path)
 
     # Fig. 10
@@ -628,6 +677,8 @@ def make_report(result_dir, out_dir=None, quiet=False):
         try:
             getattr(rep, name[:-4])(os.path.join(out_dir, name))
             written.append((name, title))
+        except NotApplicable:
+            plt.close("all")
         except Missing as e:
             notes.append((name, title, str(e)))
             plt.close("all")

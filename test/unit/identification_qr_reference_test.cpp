@@ -10,10 +10,11 @@
 //
 // with the integrals accumulated from the documented four-point cubic rules (quadrature.hpp),
 // every interval holding a stiffness / mesh-state switch split at the instant located from
-// mesh_phase. Rows: every sample of every window; columns: the damping (and stiffness) unknowns
-// and two nuisance columns (1, t - T) per window. The window partition is taken from the
-// result's windows (checked to tile each segment). Noisy data (40 dB), integral method only, so
-// the residual, and with it the standard error, is well above rounding.
+// mesh_phase and every stencil on one side of the switches (CubicRules::parts). Rows: every sample
+// of every window; columns: the damping (and stiffness) unknowns and two nuisance columns (1, t -
+// T) per window. The window partition is taken from the result's windows (checked to tile each
+// segment). Noisy data (40 dB), integral method only, so the residual, and with it the standard
+// error, is well above rounding.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -61,41 +62,45 @@ Eigen::MatrixXd windowColumns(const SignalView& s, const GearConstants& g, Formu
   // Cumulative single (G) and double (Q) integrals of y, K y, s y, F; D_r of the load law.
   double Gy = 0, Qy = 0, Gk = 0, Qk = 0, Gs = 0, Qs = 0, Gf = 0, Qf = 0, S = 0, D = 0;
   const double Tc = s.torque[w0];
+  // The held channel's switches in the segment: breaks of the quadrature (every stencil on one
+  // side of them, the interval holding one split there).
+  const double* held_ch = grey ? s.mesh_state : s.stiffness;
+  const double scale = grey ? 1.0 : 1.0 / me;
+  std::vector<gear_damping_id::QuadratureBreak> breaks;
+  for (Index j = lo; j + 1 < hi; ++j) {
+    if (held_ch[j] != held_ch[j + 1]) {
+      breaks.push_back({j, switchFraction(s, j, held_ch[j + 1] > held_ch[j], g.contact_ratio)});
+    }
+  }
   for (Index r = 0; r < L; ++r) {
     if (r > 0) {
       const Index j = w0 + r - 1;
-      const CubicIntervalRule& rule = rules.forInterval(j, lo, hi);
-      const Index b = j + rule.offset();
-      // Integrals over [u0, u1] of the cubic through samples of channel x (times weight v).
-      auto part = [&](const double* x, double u0, double u1, double* a, double* mo) {
-        const auto wa = rule.area(u0, u1), wm = rule.moment(u0, u1);
-        *a = 0, *mo = 0;
-        for (int c = 0; c < 4; ++c) *a += wa[c] * x[b + c], *mo += wm[c] * x[b + c];
-        *a *= h, *mo *= h * h;
-      };
-      // y times a held channel (value at j before the switch, at j + 1 after it).
-      auto held = [&](const double* k, double scale, double* a, double* mo) {
-        double th = 1.0;
-        if (k[j] != k[j + 1]) th = switchFraction(s, j, k[j + 1] > k[j], g.contact_ratio);
-        double a0, m0, a1, m1;
-        part(s.dte, 0.0, th, &a0, &m0);
-        part(s.dte, th, 1.0, &a1, &m1);
-        *a = scale * (k[j] * a0 + k[j + 1] * a1);
-        *mo = scale * (k[j] * m0 + k[j + 1] * m1);
-      };
-      double ay, my, af, mf;
-      part(s.dte, 0.0, 1.0, &ay, &my);
-      part(s.torque, 0.0, 1.0, &af, &mf);
-      af *= ff, mf *= ff;
+      std::vector<gear_damping_id::QuadratureBreak> near;
+      for (const auto& b : breaks) {
+        if (std::abs(b.j - j) <= 2) near.push_back(b);
+      }
+      gear_damping_id::IntervalPart parts[2];
+      const int np = rules.parts(j, lo, hi, near.data(), static_cast<int>(near.size()), parts);
+      double ay = 0, my = 0, af = 0, mf = 0, ak = 0, mk = 0;
+      for (int q = 0; q < np; ++q) {
+        const auto& P = parts[q];
+        const auto wa = P.rule->area(P.u0, P.u1), wm = P.rule->moment(P.u0, P.u1);
+        const Index b = j + P.rule->offset();
+        double pa = 0, pm = 0, ta = 0, tm = 0;
+        for (int c = 0; c < 4; ++c) {
+          pa += wa[c] * s.dte[b + c], pm += wm[c] * s.dte[b + c];
+          ta += wa[c] * s.torque[b + c], tm += wm[c] * s.torque[b + c];
+        }
+        const double v = (P.right ? held_ch[j + 1] : held_ch[j]) * scale;
+        ay += h * pa, my += h * h * pm;
+        af += ff * h * ta, mf += ff * h * h * tm;
+        ak += v * h * pa, mk += v * h * h * pm;
+      }
       Qy += h * Gy + my, Gy += ay;
       Qf += h * Gf + mf, Gf += af;
       if (grey) {
-        double as, ms;
-        held(s.mesh_state, 1.0, &as, &ms);
-        Qs += h * Gs + ms, Gs += as;
+        Qs += h * Gs + mk, Gs += ak;
       } else {
-        double ak, mk;
-        held(s.stiffness, 1.0 / me, &ak, &mk);
         Qk += h * Gk + mk, Gk += ak;
       }
       // Stieltjes trapezoid of int (T1 - T_c) dy, then trapezoid in time.

@@ -223,6 +223,36 @@ TEST(ReportFlags, HighlightsEveryKindOfDoubtfulValue) {
   EXPECT_EQ(rows, 6u) << html;
 }
 
+// A greybox fourier/table run: the identified stiffness curve of every segment over a mesh
+// cycle is drawn (a flagged segment dashed); without such a run the figure is left out silently.
+TEST(ReportStiffnessCurve, DrawsTheGreyboxShapeCurve) {
+  gear_test::ScratchDir scratch("report_curve_test");
+  const fs::path res = scratch.path();
+  gear_test::writeText(res / "result.json", R"({
+  "input": {"file": "rig.csv", "samples": 2000, "sample_rate": 1e6, "duration": 0.002},
+  "identification": {"formulation": "greybox", "model": "piecewise", "segments": []},
+  "runs": [
+    {"formulation": "greybox", "model": "piecewise", "estimator": "output_error",
+     "stiffness_shape": "fourier:2", "warnings": [], "segments": [
+      {"t_start": 0.000, "t_end": 0.001, "C": 6275.0, "C_std": 9.0, "identifiable": true,
+       "stiffness_curve": [3.0e8, 6.0e7, 2.0e7, -1.5e7, 1.0e7], "warnings": []},
+      {"t_start": 0.001, "t_end": 0.002, "C": 6100.0, "C_std": 9.0, "identifiable": true,
+       "stiffness_curve": [3.1e8, 5.0e7, 2.5e7, -1.0e7, 0.5e7],
+       "warnings": [{"code": "model_mismatch", "text": "residual 9x the noise"}]}]}]
+})");
+  const fs::path out = res / "out.txt";
+  ASSERT_EQ(shell(kReport + res.string() + " >" + out.string() + " 2>&1"), 0)
+      << gear_test::readText(out);
+  const fs::path fig = res / "report" / "fig08b_stiffness_curve.png";
+  ASSERT_TRUE(fs::is_regular_file(fig)) << gear_test::readText(out);
+  EXPECT_GT(fs::file_size(fig), 10000u);
+  const auto size = pngSize(fig);
+  EXPECT_EQ(size[0], 1200u);
+  EXPECT_EQ(size[1], 750u);
+  EXPECT_NE(gear_test::readText(res / "report" / "index.html").find("fig08b_stiffness_curve.png"),
+            std::string::npos);
+}
+
 TEST(ReportErrors, ExitsWithTwoWithoutAResult) {
   gear_test::ScratchDir scratch("report_missing_test");
   const fs::path out = scratch.path() / "out.txt";

@@ -88,14 +88,11 @@ struct IdentificationOptions {
   double refine_threshold = 2e-4;
   int max_iterations = 30;  ///< Gauss-Newton iterations of the refinement
   /// Greybox stiffness parametrisation (ignored by the other formulations). fourier/table need
-  /// the `mesh_phase` channel and are not refined (the refinement's forward model knows the
-  /// square levels only): their estimates are the integral method's.
+  /// the `mesh_phase` channel; the refinement identifies C and the curve jointly.
   StiffnessShape stiffness_shape;
-  /// Whether the output-error refinement can run on these options (square greybox shape).
-  bool refinable() const {
-    return formulation != Formulation::Greybox ||
-           stiffness_shape.kind == StiffnessShape::Kind::Square;
-  }
+  /// Whether the output-error refinement can run on these options (every greybox shape and
+  /// the known formulation can; kept for callers that check).
+  bool refinable() const { return true; }
 
   /// Empty when valid; otherwise names the field, the value and the rule broken.
   std::string validate() const;
@@ -172,9 +169,10 @@ struct WindowEstimate {
 struct IdentificationResult {
   Formulation formulation = Formulation::Known;
   DampingModel model = DampingModel::Piecewise;
-  double equivalent_mass = kNaN;  ///< [kg] Me used for c = C*Me
-  double omega0 = kNaN;           ///< [rad/s] sqrt(mean K) used for xi
-  double window_length = kNaN;    ///< [s] effective integration window
+  StiffnessShape stiffness_shape;  ///< greybox: the shape of segments' stiffness_curve
+  double equivalent_mass = kNaN;   ///< [kg] Me used for c = C*Me
+  double omega0 = kNaN;            ///< [rad/s] sqrt(mean K) used for xi
+  double window_length = kNaN;     ///< [s] effective integration window
   /// Piecewise: one per segment. Constant: one spanning the analysed range. LoadLaw: per
   /// segment, C evaluated at the segment's mean torque (for plots), plus `load_law`.
   std::vector<SegmentEstimate> segments;

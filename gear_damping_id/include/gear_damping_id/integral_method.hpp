@@ -38,10 +38,12 @@
 // smooth product of the samples.
 //
 // Quadrature (see quadrature.hpp): the samples are interpolated by local cubics and integrated
-// exactly; where K or s changes between two samples the interval is split at the switch instant
-// (from `mesh_phase` when given; otherwise the new value holds from the sample where it is first
-// seen, docs/method.md §6) and each part gets its own K. This keeps the method fourth-order
-// accurate.
+// exactly. Held or smooth stiffness is decided from each segment's samples, and the breaks of
+// the data (switches of a held K or s, jumps and kinks of a smooth K: forward_model.hpp) are
+// located from `mesh_phase` or from the samples; the interval holding a break is split there
+// (each part with its own K, integrated by the cubic of the samples on its side) and no stencil
+// reaches across a break. This keeps the method fourth-order accurate up to the breaks, and the
+// refinement's forward model integrates the same K(t).
 //
 // Solution (numerically sound without forming the full design matrix): within each window the
 // nuisance columns 1 and (t - T) are removed exactly by projecting every data column onto the
@@ -167,8 +169,6 @@ class IntegralMethod {
   void buildColumns();
   int columnIndex(Column c) const;
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
-  double splitFraction(const SignalView& s, Eigen::Index j, bool rising) const;
-  double switchFraction(Eigen::Index j) const;  // from the current segment's switch list
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
 
   IdentificationOptions options_;
@@ -178,12 +178,12 @@ class IntegralMethod {
   int n_local_ = 0, n_shared_ = 0;
   std::vector<Column> columns_;  // locals first, then shared
   std::vector<SegmentRecord> segments_;
-  Eigen::MatrixXd rows_;                       // one window's rows (scratch, reused)
-  Eigen::MatrixXd inc_;                        // one window's per-interval increments (scratch)
-  std::vector<Eigen::Index> switches_, scan_;  // current segment's switch intervals (scratch)
-  std::vector<double> switch_theta_;           // their split fractions
-  bool shape_ = false;                         // greybox fourier/table stiffness shape
-  int n_basis_ = 0;                            // its unknowns
+  Eigen::MatrixXd rows_;                  // one window's rows (scratch, reused)
+  Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)
+  std::vector<QuadratureBreak> breaks_;   // current segment's breaks (forward_model.hpp)
+  bool held_k_ = false;                   // current segment's known stiffness is held
+  bool shape_ = false;                    // greybox fourier/table stiffness shape
+  int n_basis_ = 0;                       // its unknowns
   Eigen::MatrixXd basis_;                 // current segment: basis values, one column per sample
   Eigen::MatrixXd basis_inc_;             // one window's per-interval basis increments (scratch)
   double legacy_fbar_ = kNaN;             // [m/s^2]

@@ -66,6 +66,12 @@ bool refineOutputError(const SignalView& signal,
 /// the data are noisy; never for the paper and legacy formulations).
 bool wantsRefinement(const IdentificationOptions& options, const IdentificationResult& result);
 
+/// Extremes over a mesh cycle (720 phases) of the stiffness curve [N/m] of a fourier/table shape.
+void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve, double* k_min,
+                   double* k_max);
+/// The curve's stiffness [N/m] at mesh phase `phase`.
+double shapeStiffness(const StiffnessShape& shape, const std::vector<double>& curve, double phase);
+
 /// Modeled response (paper Figs. 6, 7, 9): eq. (4) re-simulated over samples [begin, end) of
 /// `signal` with the identified damping (and, for greybox/paper/legacy, the identified stiffness
 /// and forcing), from the identified state at the first sample, with gear_sim's RK4 driver

@@ -38,15 +38,41 @@ class CubicIntervalRule {
   Weights full_area_, full_moment_;
 };
 
-/// The three rules of a record: interior (-1), first interval (0), last interval (-2).
+/// A break of smoothness of the sampled data at t_j + th h (th in [0, 1]): a switch of a held
+/// channel, a jump or a kink of a smooth one. There the second derivative of y (a switch, a
+/// jump) or its third (a kink) and the integrand K y jump, so a cubic through samples on both
+/// sides would carry an O(h^2) interpolation error into every integral that crosses it.
+struct QuadratureBreak {
+  long j = 0;
+  double th = 1.0;
+};
+
+/// One part [u0, u1] of a sample interval, integrated with `rule`; `right`: the part lies after
+/// the interval's break (a held channel takes the value of sample j+1 there).
+struct IntervalPart {
+  const CubicIntervalRule* rule = nullptr;
+  double u0 = 0.0, u1 = 1.0;
+  bool right = false;
+};
+
+/// The rules of a record: interior (-1), first interval (0), last interval (-2), and for an
+/// interval split by a break the parts before it (samples j-3..j, -3) and after it (j+1..j+4, +1).
 struct CubicRules {
-  CubicIntervalRule first{0}, interior{-1}, last{-2};
+  CubicIntervalRule first{0}, interior{-1}, last{-2}, before{-3}, after{1};
   /// Rule for interval j of a record whose samples are [lo, hi) (needs hi - lo >= 4).
   const CubicIntervalRule& forInterval(long j, long lo, long hi) const {
     if (j - 1 < lo) return first;
     if (j + 2 >= hi) return last;
     return interior;
   }
+  /// Parts of interval j of the record [lo, hi) (hi - lo >= 4) given the breaks of `near` (at
+  /// least those of intervals j-2..j+2): one part with the interior rule when no stencil sample
+  /// lies beyond a break; else the rule of {-1, 0, -2} whose samples all lie on one side of every
+  /// break, and an interval holding a break strictly inside is split there into a part before it
+  /// (samples j-3..j) and one after it (j+1..j+4). Where the record's ends leave no such stencil,
+  /// the part falls back to forInterval. Returns the number of parts (1 or 2).
+  int parts(long j, long lo, long hi, const QuadratureBreak* near, int n_near,
+            IntervalPart out[2]) const;
 };
 
 }  // namespace gear_damping_id

@@ -26,9 +26,8 @@ struct GearConstants {
   double force_factor = kNaN;     ///< R1/I1 + R2/I2 [1/(kg*m)]: F = force_factor * T1
   double contact_ratio = kNaN;    ///< eps [-]: switch phases n and n + eps - 1 (square model)
   double mean_stiffness = kNaN;   ///< [N/m] model time-mean stiffness
-  /// true for the square and constant stiffness models: K is held between switch instants and
-  /// the quadrature splits intervals there. false (trapezoid, fourier): K y is integrated as a
-  /// smooth product of the samples.
+  /// true for the square and constant stiffness models. Informational: the identification
+  /// decides held or smooth stiffness from the samples (forward_model.hpp), not from this flag.
   bool piecewise_constant_stiffness = true;
   std::string validate() const;
 };

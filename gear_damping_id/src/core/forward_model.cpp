@@ -6,51 +6,14 @@
 namespace gear_damping_id {
 
 namespace {
-// A kink's two second differences against their neighbours': a smooth curve sampled at 1e2-1e3
-// points per mesh cycle gives a ratio near 1; a slope jump between straight (or gently curved)
-// pieces gives a ratio of ds / (h K'') >> 10.
-constexpr double kKinkRatio = 20.0;
-// Second differences below this fraction of |K| are rounding (K ~ 1e8 N/m carries ~1e-8 N/m).
-constexpr double kKinkFloor = 1e-12;
+// A jump's first difference, or a kink's two second differences, against their neighbours': a
+// smooth curve sampled at 1e2-1e3 points per mesh cycle gives a ratio near 1/2 (jump) or 1
+// (kink); a jump of size dk on a slope s gives dk / (2 h s), a slope jump ds between straight (or
+// gently curved) pieces ds / (h K''), both >> 10.
+constexpr double kBreakRatio = 20.0;
+// Differences below this fraction of |K| are rounding (K ~ 1e8 N/m carries ~1e-8 N/m).
+constexpr double kBreakFloor = 1e-12;
 }  // namespace
-
-ForwardModel::ForwardModel(const SignalView& s, const GearConstants& g, Formulation f)
-    : signal_(s),
-      gear_(g),
-      formulation_(f),
-      smooth_(f == Formulation::Known && !g.piecewise_constant_stiffness),
-      inv_me_(1.0 / g.equivalent_mass),
-      mid_first_(rules_.first.value(0.5)),
-      mid_interior_(rules_.interior.value(0.5)),
-      mid_last_(rules_.last.value(0.5)) {
-  if (!smooth_ || s.stiffness == nullptr || s.n < 8) return;
-  const double* k = s.stiffness;
-  auto d2 = [&](Index i) { return k[i + 1] - 2.0 * k[i] + k[i - 1]; };
-  for (Index j = 2; j + 3 < s.n; ++j) {
-    const double a = d2(j), b = d2(j + 1);
-    const double floor = kKinkFloor * std::abs(k[j]);
-    if (!(std::abs(a) + std::abs(b) > floor) || a * b < 0.0) continue;
-    const double outer = std::abs(d2(j - 1)) + std::abs(d2(j + 2));
-    if (!(std::abs(a) + std::abs(b) > kKinkRatio * outer + floor)) continue;
-    kinks_.push_back(j);
-    kink_th_.push_back(std::clamp(b / (a + b), 0.0, 1.0));
-    ++j;  // one kink per pair of intervals (a kink on a sample shows in both)
-  }
-}
-
-double ForwardModel::kink(Index j) const {
-  const auto it = std::lower_bound(kinks_.begin(), kinks_.end(), j);
-  return (it != kinks_.end() && *it == j) ? kink_th_[it - kinks_.begin()] : 1.0;
-}
-
-int ForwardModel::kinkSide(Index j) const {
-  const auto it = std::lower_bound(kinks_.begin(), kinks_.end(), j - 1);
-  if (it == kinks_.end()) return 0;
-  if (*it == j + 1) return -1;
-  if (*it == j - 1) return +1;
-  if (std::next(it) != kinks_.end() && *std::next(it) == j + 1) return -1;
-  return 0;
-}
 
 double switchFractionFromPhase(const double* phase, Eigen::Index j, Eigen::Index n, bool rising,
                                double contact_ratio) {
@@ -66,11 +29,120 @@ double switchFractionFromPhase(const double* phase, Eigen::Index j, Eigen::Index
   return std::clamp((c - ua) / (ub - ua), 0.0, 1.0);
 }
 
-double ForwardModel::switchFraction(const double* ch, Index j) const {
-  if (ch == nullptr || j + 1 >= signal_.n || ch[j] == ch[j + 1]) return 1.0;
-  const double th = switchFractionFromPhase(signal_.mesh_phase, j, signal_.n, ch[j + 1] > ch[j],
-                                            gear_.contact_ratio);
-  return std::isnan(th) ? 1.0 : th;  // unlocated: sample and hold
+bool channelIsHeld(const double* k, Eigen::Index lo, Eigen::Index hi) {
+  // Blocks of 16 intervals are first tested as a whole (branch-free): a held channel changes a
+  // few times per mesh period, a smooth one at once.
+  Eigen::Index j = lo;
+  for (; j + 17 < hi; j += 16) {
+    bool pair = false;
+    for (int q = 0; q < 16; ++q) {
+      pair |= (k[j + q] != k[j + q + 1]) & (k[j + q + 1] != k[j + q + 2]);
+    }
+    if (pair) return false;
+  }
+  for (; j + 2 < hi; ++j) {
+    if (k[j] != k[j + 1] && k[j + 1] != k[j + 2]) return false;
+  }
+  return true;
+}
+
+long findBreaks(const SignalView& s, const double* k, bool held, double contact_ratio,
+                Eigen::Index lo, Eigen::Index hi, std::vector<QuadratureBreak>* out) {
+  using Index = Eigen::Index;
+  long unlocated = 0;
+  const Index last = std::min(hi, s.n) - 1;  // intervals j < last
+  auto located = [&](Index j) {
+    const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, k[j + 1] > k[j], contact_ratio);
+    if (std::isnan(th)) ++unlocated;
+    out->push_back({static_cast<long>(j), std::isnan(th) ? 1.0 : th});
+  };
+  if (held) {
+    Index j = lo;
+    for (; j + 16 <= last; j += 16) {
+      bool change = false;
+      for (int q = 0; q < 16; ++q) change |= k[j + q] != k[j + q + 1];
+      if (!change) continue;
+      for (int q = 0; q < 16; ++q) {
+        if (k[j + q] != k[j + q + 1]) located(j + q);
+      }
+    }
+    for (; j < last; ++j) {
+      if (k[j] != k[j + 1]) located(j);
+    }
+    return unlocated;
+  }
+  auto d1 = [&](Index i) { return k[i + 1] - k[i]; };
+  auto d2 = [&](Index i) { return k[i + 1] - 2.0 * k[i] + k[i - 1]; };
+  for (Index j = lo + 1; j < last; ++j) {
+    const double floor = kBreakFloor * std::abs(k[j]);
+    // Jump: needs the neighbouring intervals j-1 and j+1 within the segment.
+    if (j + 2 < hi) {
+      const double a = std::abs(d1(j));
+      if (a > floor && a > kBreakRatio * (std::abs(d1(j - 1)) + std::abs(d1(j + 1))) + floor) {
+        located(j);
+        ++j;
+        continue;
+      }
+    }
+    // Kink: second differences at j-1..j+2 (samples j-2..j+3).
+    if (j - 2 < lo || j + 3 >= hi) continue;
+    const double a = d2(j), b = d2(j + 1);
+    if (!(std::abs(a) + std::abs(b) > floor) || a * b < 0.0) continue;
+    const double outer = std::abs(d2(j - 1)) + std::abs(d2(j + 2));
+    if (!(std::abs(a) + std::abs(b) > kBreakRatio * outer + floor)) continue;
+    out->push_back({static_cast<long>(j), std::clamp(b / (a + b), 0.0, 1.0)});
+    ++j;  // one kink per pair of intervals (a kink on a sample shows in both)
+  }
+  return unlocated;
+}
+
+ForwardModel::ForwardModel(const SignalView& s, const GearConstants& g, Formulation f,
+                           const Ranges& ranges)
+    : signal_(s),
+      gear_(g),
+      formulation_(f),
+      inv_me_(1.0 / g.equivalent_mass),
+      ranges_(ranges),
+      mid_first_(rules_.first.value(0.5)),
+      mid_interior_(rules_.interior.value(0.5)),
+      mid_last_(rules_.last.value(0.5)) {
+  if (ranges_.empty()) ranges_.emplace_back(0, s.n);
+  smooth_.assign(ranges_.size(), 0);
+  const double* ch = f == Formulation::Known     ? s.stiffness
+                     : f == Formulation::Greybox ? s.mesh_state
+                                                 : nullptr;
+  if (ch == nullptr) return;
+  for (size_t r = 0; r < ranges_.size(); ++r) {
+    const auto [lo, hi] = ranges_[r];
+    if (hi - lo < 2) continue;
+    const bool held = f == Formulation::Greybox || channelIsHeld(ch, lo, hi);
+    smooth_[r] = !held;
+    unlocated_ += findBreaks(s, ch, held, g.contact_ratio, lo, hi, &breaks_);
+  }
+}
+
+bool ForwardModel::smoothStiffness(Index j) const {
+  if (formulation_ != Formulation::Known) return false;
+  // The last range starting at or before j.
+  const auto it = std::upper_bound(ranges_.begin(), ranges_.end(), j,
+                                   [](Index v, const auto& r) { return v < r.first; });
+  return it != ranges_.begin() && smooth_[std::prev(it) - ranges_.begin()];
+}
+
+std::vector<Eigen::Index> ForwardModel::kinkIntervals() const {
+  std::vector<Index> out;
+  for (const auto& b : breaks_) {
+    if (smoothStiffness(b.j)) out.push_back(b.j);
+  }
+  return out;
+}
+
+int ForwardModel::nearBreaks(Index j, QuadratureBreak* near) const {
+  auto it = std::lower_bound(breaks_.begin(), breaks_.end(), j - 2,
+                             [](const QuadratureBreak& b, Index v) { return b.j < v; });
+  int n = 0;
+  for (; it != breaks_.end() && it->j <= j + 2 && n < 5; ++it) near[n++] = *it;
+  return n;
 }
 
 double ForwardModel::cubic(const double* ch, Index j, double u, Index lo, Index hi) const {
@@ -91,38 +163,27 @@ double ForwardModel::cubic(const double* ch, Index j, double u, Index lo, Index 
 }
 
 double ForwardModel::heldSplit(Index j) const {
-  if (formulation_ == Formulation::Greybox) return switchFraction(signal_.mesh_state, j);
-  if (formulation_ == Formulation::Known && !smooth_) return switchFraction(signal_.stiffness, j);
-  if (smooth_ && !kinks_.empty()) return kink(j);
-  return 1.0;
+  const auto it = std::lower_bound(breaks_.begin(), breaks_.end(), j,
+                                   [](const QuadratureBreak& b, Index v) { return b.j < v; });
+  return (it != breaks_.end() && it->j == j) ? it->th : 1.0;
 }
 
 double ForwardModel::knownStiffness(Index j, double u, bool right, Index lo, Index hi) const {
   const double* k = signal_.stiffness;
-  if (smooth_) {
-    if (kinks_.empty()) return cubic(k, j, u, lo, hi) * inv_me_;
-    if (kink(j) < 1.0) {
-      // On the kink interval: the line through the two samples on the piece's side.
-      if (!right && j - 1 >= lo) return (k[j] + u * (k[j] - k[j - 1])) * inv_me_;
-      if (right && j + 2 < hi) return (k[j + 1] + (u - 1.0) * (k[j + 2] - k[j + 1])) * inv_me_;
-      return ((1.0 - u) * k[j] + u * k[j + 1]) * inv_me_;
-    }
-    const int side = kinkSide(j);
-    if (side != 0) {
-      // Next to a kink: the one-sided cubic (samples j-2..j+1 before it, j..j+3 after it),
-      // else the line between the interval's samples.
-      const CubicIntervalRule& r = side < 0 ? rules_.last : rules_.first;
-      const Index b = j + r.offset();
-      if (b >= lo && b + 3 < hi) {
-        const auto w = r.value(u);
-        return (w[0] * k[b] + w[1] * k[b + 1] + w[2] * k[b + 2] + w[3] * k[b + 3]) * inv_me_;
-      }
-      return ((1.0 - u) * k[j] + u * k[j + 1]) * inv_me_;
-    }
-    return cubic(k, j, u, lo, hi) * inv_me_;
+  if (!smoothStiffness(j)) {
+    const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
+    return v * inv_me_;
   }
-  const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
-  return v * inv_me_;
+  QuadratureBreak near[5];
+  const int nn = nearBreaks(j, near);
+  if (nn == 0 || hi - lo < 4) return cubic(k, j, u, lo, hi) * inv_me_;
+  // Near a break: the cubic of the quadrature's stencil for the part holding u.
+  IntervalPart parts[2];
+  const int np = rules_.parts(j, lo, hi, near, nn, parts);
+  const IntervalPart& p = (np == 2 && right) ? parts[1] : parts[0];
+  const auto w = p.rule->value(u);
+  const Index b = j + p.rule->offset();
+  return (w[0] * k[b] + w[1] * k[b + 1] + w[2] * k[b + 2] + w[3] * k[b + 3]) * inv_me_;
 }
 
 double ForwardModel::meshState(Index j, bool right) const {

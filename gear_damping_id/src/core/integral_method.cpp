@@ -312,18 +312,6 @@ int IntegralMethod::columnIndex(Column c) const {
   return -1;
 }
 
-double IntegralMethod::switchFraction(Eigen::Index j) const {
-  const auto it = std::lower_bound(switches_.begin(), switches_.end(), j);
-  return (it != switches_.end() && *it == j) ? switch_theta_[it - switches_.begin()] : 1.0;
-}
-
-double IntegralMethod::splitFraction(const SignalView& s, Eigen::Index j, bool rising) const {
-  const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, rising, gear_.contact_ratio);
-  if (!std::isnan(th)) return th;
-  ++unlocated_switches_;
-  return 1.0;  // the phase channel disagrees with the sampled values: sample-and-hold
-}
-
 namespace {
 
 // Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
@@ -372,7 +360,7 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   const bool use_force = known || grey;
   const bool load = options_.model == DampingModel::LoadLaw;
   const bool need_iiy = !known;
-  const bool split_k = known && gear_.piecewise_constant_stiffness;
+  const bool split_k = known && held_k_;
   const double* y = s.dte;
   const double* k = s.stiffness;
   const double* T = s.torque;
@@ -465,38 +453,57 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   };
   for (Eigen::Index i = 0; i < i_lo; ++i) generic(i);
   for (Eigen::Index i = i_hi; i < ni; ++i) generic(i);
-  // Fix-up of intervals containing a switch: each part with its own held value.
-  auto splitParts = [&](Eigen::Index j, const double* ch, double* a_out, double* m_out,
-                        double scale) {
-    const double vl = ch[j] * scale, vr = ch[j + 1] * scale;
-    const double th = switchFraction(j);
-    const CubicIntervalRule& rule = intervalRule(j);
-    const Eigen::Index b = j + rule.offset();
-    const auto a0 = rule.area(0.0, th), a1 = rule.area(th, 1.0);
-    const auto m0 = rule.moment(0.0, th), m1 = rule.moment(th, 1.0);
-    double al = 0, ar = 0, ml = 0, mr = 0;
-    for (int c = 0; c < 4; ++c) {
-      al += a0[c] * y[b + c], ar += a1[c] * y[b + c];
-      ml += m0[c] * y[b + c], mr += m1[c] * y[b + c];
-    }
-    *a_out = h * (vl * al + vr * ar);
-    *m_out = h2 * (vl * ml + vr * mr);
-  };
-  if (split_k || grey) {
-    // The segment's switch list (see addSegment), restricted to this window's intervals.
-    auto it = std::lower_bound(switches_.begin(), switches_.end(), w0);
-    for (; it != switches_.end() && *it < w0 + ni; ++it) {
-      const Eigen::Index j = *it;
-      const Eigen::Index i = j - w0;
+  // Intervals next to a break (a switch of a held channel, a jump or kink of a smooth
+  // stiffness: quadrature.hpp): every stencil on one side of it, an interval holding one split
+  // there, each part with its own held value. Recomputed in full (all increments).
+  auto byParts = [&](Eigen::Index j) {
+    const Eigen::Index i = j - w0;
+    QuadratureBreak near[5];
+    int nn = 0;
+    auto it = std::lower_bound(breaks_.begin(), breaks_.end(), j - 2,
+                               [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
+    for (; it != breaks_.end() && it->j <= j + 2 && nn < 5; ++it) near[nn++] = *it;
+    IntervalPart parts[2];
+    const int np = rules_.parts(j, seg_lo_, seg_hi_, near, nn, parts);
+    double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0, xa = 0, xm = 0;
+    for (int p = 0; p < np; ++p) {
+      const IntervalPart& P = parts[p];
+      const auto wa = P.rule->area(P.u0, P.u1);
+      const auto wm = P.rule->moment(P.u0, P.u1);
+      const Eigen::Index b = j + P.rule->offset();
+      double pa = 0, pm = 0;
+      for (int c = 0; c < 4; ++c) {
+        pa += wa[c] * y[b + c], pm += wm[c] * y[b + c];
+        if (use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
+        if (known && !split_k) {
+          ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
+        }
+      }
+      sa += pa, sm += pm;
       if (split_k) {
-        // Replace the K y part, keep the forcing part: ag = K y part - F part.
-        const double K = k[j] * inv_me;
-        const double fa = K * ay[i] - ag[i], fm = K * my[i] - mg[i];
-        double ka, km;
-        splitParts(j, k, &ka, &km, inv_me);
-        ag[i] = ka - fa, mg[i] = km - fm;
-      } else {
-        splitParts(j, st, &as[i], &ms[i], 1.0);
+        const double K = (P.right ? k[j + 1] : k[j]) * inv_me;
+        ga += K * pa, gm += K * pm;
+      }
+      if (grey) {
+        const double sv = P.right ? st[j + 1] : st[j];
+        xa += sv * pa, xm += sv * pm;
+      }
+    }
+    ay[i] = h * sa, my[i] = h2 * sm;
+    if (known) {
+      ag[i] = h * (ga - fa), mg[i] = h2 * (gm - fm);
+    } else if (grey) {
+      ag[i] = -h * fa, mg[i] = -h2 * fm;
+      as[i] = h * xa, ms[i] = h2 * xm;
+    }
+  };
+  {
+    // The segment's breaks (see addSegment) whose neighbourhood meets this window's intervals.
+    auto it = std::lower_bound(breaks_.begin(), breaks_.end(), w0 - 1,
+                               [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
+    for (; it != breaks_.end() && it->j <= w0 + ni; ++it) {
+      for (Eigen::Index j = it->j - 1; j <= it->j + 1; ++j) {
+        if (j >= w0 && j < w0 + ni) byParts(j);
       }
     }
   }
@@ -745,44 +752,23 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     est.mean_torque = rec.mean_torque;
   }
   rec.duration = static_cast<double>(rows) * s.dt;
-  // Intervals j in [begin, end) (j + 1 < n) where the held stiffness / mesh state changes,
-  // with the switch's fraction of the interval: found once per segment by a branch-free scan.
-  const double* held = (f == Formulation::Known && gear_.piecewise_constant_stiffness)
-                           ? s.stiffness
-                           : (f == Formulation::Greybox && !shape_ ? s.mesh_state : nullptr);
-  switches_.clear();
-  switch_theta_.clear();
-  if (held != nullptr) {
-    const Eigen::Index last = std::min<Eigen::Index>(end, s.n - 1);
-    scan_.resize(static_cast<size_t>(std::max<Eigen::Index>(last - begin, 0)) + 1);
-    size_t cnt = 0;
-    // Blocks of 16 intervals are first tested as a whole (a branch-free, vectorisable
-    // comparison): switches are a few per mesh period, so most blocks are skipped.
-    auto scan = [&](Eigen::Index lo, Eigen::Index hi) {  // records the changes in [lo, hi)
-      for (Eigen::Index j = lo; j < hi; ++j) {
-        scan_[cnt] = j;
-        cnt += held[j] != held[j + 1];
-      }
-    };
-    Eigen::Index i = begin;
-    for (; i + 16 <= last; i += 16) {
-      bool change = false;
-      for (int k = 0; k < 16; ++k) change |= held[i + k] != held[i + k + 1];
-      if (change) scan(i, i + 16);
-    }
-    scan(i, last);
-    for (size_t c = 0; c < cnt; ++c) {
-      const Eigen::Index j = scan_[c];
-      switches_.push_back(j);
-      switch_theta_.push_back(splitFraction(s, j, held[j + 1] > held[j]));
-    }
+  // Breaks of the stiffness (held or smooth, decided from the segment's samples) or of the
+  // greybox mesh state on the segment's intervals (forward_model.hpp), shared with the
+  // refinement's forward model.
+  held_k_ = f == Formulation::Known && s.stiffness && channelIsHeld(s.stiffness, begin, end);
+  const double* brk = f == Formulation::Known                  ? s.stiffness
+                      : (f == Formulation::Greybox && !shape_) ? s.mesh_state
+                                                               : nullptr;
+  breaks_.clear();
+  if (brk != nullptr) {
+    unlocated_switches_ += findBreaks(s, brk, f == Formulation::Greybox || held_k_,
+                                      gear_.contact_ratio, begin, end, &breaks_);
   }
   if (s.stiffness) {
     double sum = channels[1].data ? channel_sum[1] : blockSum(s.stiffness, begin, end);
-    if (f == Formulation::Known && gear_.piecewise_constant_stiffness) {
-      for (size_t c = 0; c < switches_.size(); ++c) {
-        const Eigen::Index j = switches_[c];
-        sum += (1.0 - switch_theta_[c]) * (s.stiffness[j + 1] - s.stiffness[j]);
+    if (held_k_) {
+      for (const QuadratureBreak& b : breaks_) {
+        sum += (1.0 - b.th) * (s.stiffness[b.j + 1] - s.stiffness[b.j]);
       }
     }
     rec.k_integral = sum * s.dt / gear_.equivalent_mass;
@@ -806,12 +792,11 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     for (int k = 0; k < n_basis_; ++k) rec.basis_mean[k] = basis_.row(k).mean();
   } else if (s.mesh_state && f == Formulation::Greybox) {
     double sum = channels[3].data ? channel_sum[3] : blockSum(s.mesh_state, begin, end);
-    for (size_t c = 0; c < switches_.size(); ++c) {
-      const Eigen::Index j = switches_[c];
-      sum += (1.0 - switch_theta_[c]) * (s.mesh_state[j + 1] - s.mesh_state[j]);
+    for (const QuadratureBreak& b : breaks_) {
+      sum += (1.0 - b.th) * (s.mesh_state[b.j + 1] - s.mesh_state[b.j]);
     }
     rec.mean_state = sum / static_cast<double>(rows);
-    if (switches_.empty()) {
+    if (breaks_.empty()) {
       return fail(
           "mesh state constant over the segment: the stiffness levels are not "
           "identifiable (segment shorter than a mesh period?)");
@@ -897,6 +882,7 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
   IdentificationResult res;
   res.formulation = options_.formulation;
   res.model = options_.model;
+  res.stiffness_shape = options_.stiffness_shape;
   res.equivalent_mass = gear_.equivalent_mass;
   res.window_length = window_length_;
   const int q = static_cast<int>(columns_.size());

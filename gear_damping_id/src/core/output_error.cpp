@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "gear_damping_id/damping_units.hpp"
@@ -17,9 +18,11 @@ namespace {
 using Index = Eigen::Index;
 
 // Roles of the unknowns of one segment's output-error problem.
-enum class Role { Y0, V0, Theta0, Theta1, K0, DK };
+// Basis: one unknown of a greybox fourier/table stiffness shape (K = sum theta_k b_k(phase)).
+enum class Role { Y0, V0, Theta0, Theta1, K0, DK, Basis };
 
-constexpr int kMaxParams = 7;  // y0, v0, theta0, theta1, K0, dK (+ spare)
+constexpr int kMaxBasis = 2 * StiffnessShape::kMaxHarmonics + 1;  // >= StiffnessShape::kMaxNodes
+constexpr int kMaxParams = 4 + kMaxBasis;  // y0, v0, theta0, theta1, K0/dK or the shape's basis
 constexpr int kMaxState = 2 + 2 * kMaxParams;
 // Largest order of the autoregressive noise model fitted to the residuals: enough for the
 // correlation of anti-aliasing filters and encoder interpolation, small against a segment.
@@ -35,13 +38,17 @@ struct Params {
   int m = 0;
   Role role[kMaxParams];
   double theta0 = 0, theta1 = 0, K0 = 0, dK = 0, y0 = 0, v0 = 0;
+  int nb = 0, basis_first = 0;  // shape: basis unknowns are parameters basis_first..+nb
+  double basis[kMaxBasis] = {0};
 };
 
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
   // `fast`: closed-form per-step affine maps where they apply (see run()).
-  SegmentSimulator(const ForwardModel& fm, bool fast) : fm_(fm), fast_(fast) {}
+  // `shape`: the greybox fourier/table stiffness shape (null: square levels or known K).
+  SegmentSimulator(const ForwardModel& fm, bool fast, const StiffnessShape* shape)
+      : fm_(fm), fast_(fast), shape_(shape) {}
 
   // Integrates over samples [b, e) from (p.y0, p.v0). Calls visit(n, z) for each sample with the
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
@@ -57,13 +64,17 @@ class SegmentSimulator {
     visit(b, z);
     const double h = fm_.signal().dt;
     const bool grey = fm_.formulation() == Formulation::Greybox;
-    const bool smooth = fm_.smoothStiffness();
+    const bool smooth = fm_.smoothStiffness(b);
     // Fast path: with K and the mesh state held on a whole sample interval, C constant (no load
     // law) and one step per sample, RK4 is an affine map of the state and the three stage
     // torques, z+ = M z + G T, the same for every such interval with the same K: formed once
     // (by stepping unit vectors) and applied in its block structure: the state x = (y, v) by
     // R x + Gx T, each sensitivity pair z_k by R z_k + S_k x + H_k T (S_k = H_k = 0 for the
     // initial-state sensitivities). Algebraically the same numbers as the RK4 step.
+    if (shape_ != nullptr) {
+      runShape(b, e, p, substeps, visit, z, D);
+      return;
+    }
     bool fast = fast_ && !smooth && substeps == 1;
     for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
     AffineMap maps[kMaxMaps];
@@ -128,8 +139,54 @@ class SegmentSimulator {
 
  private:
   struct Stage {
-    double K[3], T[3];  // at the step's start, midpoint and end
+    double K[3], T[3];               // at the step's start, midpoint and end
+    const double* B[3] = {0, 0, 0};  // shape: the basis values there
   };
+
+  // Greybox fourier/table shape: K(t) = sum_k theta_k b_k(u(t)) with the mesh phase u(t) the
+  // local cubic of the mesh_phase samples; each interval split where u crosses a table node
+  // (a kink of every table basis function), each part by `substeps` RK4 steps.
+  template <class Visit>
+  void runShape(Index b, Index e, const Params& p, int substeps, Visit& visit, double* z,
+                int D) const {
+    const double h = fm_.signal().dt;
+    const double* ph = fm_.signal().mesh_phase;
+    const bool table = shape_->kind == StiffnessShape::Kind::Table;
+    const double nodes = shape_->n;
+    double B[3][kMaxBasis];
+    auto stageAt = [&](Index j, double u, int q, Stage* st) {
+      const double phase = fm_.cubic(ph, j, u, b, e);
+      shape_->basis(phase, B[q]);
+      double K = 0.0;
+      for (int k = 0; k < p.nb; ++k) K += p.basis[k] * B[q][k];
+      st->K[q] = K;
+      st->T[q] = fm_.torque(j, u, b, e);
+      st->B[q] = B[q];
+    };
+    for (Index j = b; j + 1 < e; ++j) {
+      double th = 1.0;
+      if (table && ph[j + 1] > ph[j]) {
+        const double c = std::floor(ph[j] * nodes) + 1.0;  // next node after ph[j], in nodes
+        const double x = (c / nodes - ph[j]) / (ph[j + 1] - ph[j]);
+        if (x > 0.0 && x < 1.0) th = x;
+      }
+      const double parts[2][2] = {{0.0, th}, {th, 1.0}};
+      for (int piece = 0; piece < 2; ++piece) {
+        const double u0 = parts[piece][0], u1 = parts[piece][1];
+        if (!(u1 > u0)) continue;
+        const double du = (u1 - u0) / substeps;
+        for (int q = 0; q < substeps; ++q) {
+          const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
+          Stage st;
+          stageAt(j, ua, 0, &st);
+          stageAt(j, 0.5 * (ua + ub), 1, &st);
+          stageAt(j, ub, 2, &st);
+          step(z, D, p, st, 0.0, h * (ub - ua));
+        }
+      }
+      visit(j + 1, z);
+    }
+  }
   static constexpr int kMaxMaps = 4;  // distinct held K values cached per run (square: 2)
   struct AffineMap {
     double K = 0, sv = 0;
@@ -187,18 +244,18 @@ class SegmentSimulator {
   // One RK4 step of length hs with the coefficients at the stage times.
   void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
     double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
-    deriv(z, D, p, st.K[0], sv, st.T[0], k1);
+    deriv(z, D, p, st.K[0], sv, st.T[0], st.B[0], k1);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
-    deriv(tmp, D, p, st.K[1], sv, st.T[1], k2);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], k2);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k2[i];
-    deriv(tmp, D, p, st.K[1], sv, st.T[1], k3);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], k3);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
-    deriv(tmp, D, p, st.K[2], sv, st.T[2], k4);
+    deriv(tmp, D, p, st.K[2], sv, st.T[2], st.B[2], k4);
     for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
   }
 
   void deriv(const double* z, int D, const Params& p, double K, double sv, double T1,
-             double* dz) const {
+             const double* B, double* dz) const {
     const double C = p.theta0 + p.theta1 * T1;
     const double F = fm_.gear().force_factor * T1;
     const double y = z[0], v = z[1];
@@ -219,6 +276,9 @@ class SegmentSimulator {
         case Role::DK:
           forcing = -sv * y;
           break;
+        case Role::Basis:
+          forcing = -B[k - p.basis_first] * y;
+          break;
         default:
           break;
       }
@@ -229,6 +289,7 @@ class SegmentSimulator {
 
   const ForwardModel& fm_;
   bool fast_;
+  const StiffnessShape* shape_;
 };
 
 // Substeps per sample so that omega * h_step <= 0.1 (RK4 error well below the bars).
@@ -279,6 +340,28 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 
 }  // namespace
 
+void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve, double* k_min,
+                   double* k_max) {
+  constexpr int kGrid = 720;
+  std::vector<double> b(curve.size());
+  *k_min = std::numeric_limits<double>::infinity();
+  *k_max = -*k_min;
+  for (int g = 0; g < kGrid; ++g) {
+    shape.basis(static_cast<double>(g) / kGrid, b.data());
+    double k = 0.0;
+    for (size_t j = 0; j < b.size(); ++j) k += curve[j] * b[j];
+    *k_min = std::min(*k_min, k), *k_max = std::max(*k_max, k);
+  }
+}
+
+double shapeStiffness(const StiffnessShape& shape, const std::vector<double>& curve, double phase) {
+  double b[2 * StiffnessShape::kMaxHarmonics + 1];
+  shape.basis(phase, b);
+  double k = 0.0;
+  for (size_t j = 0; j < curve.size(); ++j) k += curve[j] * b[j];
+  return k;
+}
+
 bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult& r) {
   if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return false;
   if (o.refine == IdentificationOptions::Refine::Never) return false;
@@ -309,15 +392,28 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   const bool grey = o.formulation == Formulation::Greybox;
   const bool load = o.model == DampingModel::LoadLaw;
   const bool piecewise = o.model == DampingModel::Piecewise;
-  const ForwardModel fm(s, gear, o.formulation);
-  const SegmentSimulator sim(fm, !reference_integration);
+  const ForwardModel fm(s, gear, o.formulation, ranges);
+  // Greybox fourier/table shape: its basis unknowns replace the square levels.
+  const bool shape = grey && o.stiffness_shape.kind != StiffnessShape::Kind::Square;
+  const int nb = shape ? o.stiffness_shape.unknowns() : 0;
+  if (shape && s.mesh_phase == nullptr) {
+    *error = "refinement: the stiffness shape " + toString(o.stiffness_shape) +
+             " needs the mesh_phase channel";
+    return false;
+  }
+  const SegmentSimulator sim(fm, !reference_integration, shape ? &o.stiffness_shape : nullptr);
   const int substeps = substepsFor(res->omega0, s.dt);
 
   // Unknowns: per segment locals [y0, v0, (theta0 if piecewise), (K0, dK if greybox)];
   // shared [theta0 (constant, load_law), theta1 (load_law)].
   std::vector<Role> local_roles = {Role::Y0, Role::V0};
   if (piecewise) local_roles.push_back(Role::Theta0);
-  if (grey) local_roles.push_back(Role::K0), local_roles.push_back(Role::DK);
+  const int basis_first = static_cast<int>(local_roles.size());
+  if (shape) {
+    for (int k = 0; k < nb; ++k) local_roles.push_back(Role::Basis);
+  } else if (grey) {
+    local_roles.push_back(Role::K0), local_roles.push_back(Role::DK);
+  }
   std::vector<Role> shared_roles;
   if (!piecewise) shared_roles.push_back(Role::Theta0);
   if (load) shared_roles.push_back(Role::Theta1);
@@ -361,7 +457,13 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     }
     int k = 2;
     if (piecewise) x[k++] = e.C;
-    if (grey) {
+    if (shape) {
+      if (static_cast<int>(e.stiffness_curve.size()) != nb) {
+        *error = "refinement: no stiffness curve to start from";
+        return false;
+      }
+      for (int b = 0; b < nb; ++b) x[k++] = e.stiffness_curve[b] / me;
+    } else if (grey) {
       x[k++] = e.k_min / me;
       x[k++] = (e.k_max - e.k_min) / me;
     }
@@ -392,9 +494,14 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
         case Role::DK:
           p.dK = v;
           break;
+        case Role::Basis:
+          break;
       }
     };
     for (int k = 0; k < nl; ++k) set(local_roles[k], x[k]);
+    p.nb = nb;
+    p.basis_first = basis_first;
+    for (int k = 0; k < nb; ++k) p.basis[k] = x[basis_first + k];
     for (int k = 0; k < ns; ++k) set(shared_roles[k], g[k]);
     return p;
   };
@@ -686,7 +793,18 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     } else {
       fillC(&e, sh[0], cov_ss(0, 0));
     }
-    if (grey) {
+    if (shape) {
+      // The refined curve and its extremes over a mesh cycle.
+      e.stiffness_curve.resize(nb);
+      e.stiffness_curve_std.resize(nb);
+      for (int b = 0; b < nb; ++b) {
+        e.stiffness_curve[b] = me * x[basis_first + b];
+        e.stiffness_curve_std[b] =
+            me * std::sqrt(std::max(cov_ll(basis_first + b, basis_first + b), 0.0));
+      }
+      curveExtremes(o.stiffness_shape, e.stiffness_curve, &e.k_min, &e.k_max);
+      e.k_min_std = e.k_max_std = kNaN;
+    } else if (grey) {
       const int a = k, b = k + 1;
       e.k_min = me * x[a];
       e.k_max = me * (x[a] + x[b]);
@@ -798,13 +916,35 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   const bool load = r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable;
   const double th0 = load ? r.load_law->c0 / me : 0.0, th1 = load ? r.load_law->c1 / me : 0.0;
   const Formulation f = r.formulation;
-  const ForwardModel fm(s, gear, f);
-  // Breakpoints: switch instants of the held stiffness/mesh-state channel, and segment
-  // boundaries.
+  // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
+  // integral method and the refinement.
+  auto sampleOf = [&](double t) {
+    return std::clamp<Index>(static_cast<Index>(std::llround((t - s.t0) / s.dt)), 0, s.n);
+  };
+  ForwardModel::Ranges ranges;
+  for (const auto& e : seg) {
+    ranges.emplace_back(sampleOf(e.t_start), std::max(sampleOf(e.t_end), sampleOf(e.t_start)));
+  }
+  const ForwardModel fm(s, gear, f, ranges);
+  // Breakpoints: the breaks of the stiffness/mesh-state channel (switches, jumps, kinks), and
+  // segment boundaries.
   std::vector<double> bps;
-  for (Index j = begin; j + 1 < end; ++j) {
-    const double th = fm.heldSplit(j);
-    if (th < 1.0) bps.push_back(s.time(j) + th * s.dt);
+  for (const QuadratureBreak& b : fm.breaks()) {
+    if (b.j >= begin && b.j + 1 < end && b.th < 1.0) bps.push_back(s.time(b.j) + b.th * s.dt);
+  }
+  // Greybox fourier/table shape: K from the identified curve at the mesh phase; table nodes
+  // are kinks.
+  const bool shape = f == Formulation::Greybox &&
+                     r.stiffness_shape.kind != StiffnessShape::Kind::Square &&
+                     s.mesh_phase != nullptr;
+  if (shape && r.stiffness_shape.kind == StiffnessShape::Kind::Table) {
+    const double nodes = r.stiffness_shape.n;
+    for (Index j = begin; j + 1 < end; ++j) {
+      const double pa = s.mesh_phase[j], pb = s.mesh_phase[j + 1];
+      if (!(pb > pa)) continue;
+      const double x = ((std::floor(pa * nodes) + 1.0) / nodes - pa) / (pb - pa);
+      if (x > 0.0 && x < 1.0) bps.push_back(s.time(j) + x * s.dt);
+    }
   }
   for (const auto& e : seg) bps.push_back(e.t_start);
   std::sort(bps.begin(), bps.end());
@@ -818,11 +958,6 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
         hi = mid;
     }
     return lo;
-  };
-  // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
-  // integral method and the refinement.
-  auto sampleOf = [&](double t) {
-    return std::clamp<Index>(static_cast<Index>(std::llround((t - s.t0) / s.dt)), 0, s.n);
   };
   auto coeffs = [&](double t, double t_ref) {
     const double uref = (t_ref - s.t0) / s.dt;
@@ -840,6 +975,12 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
         c.F = gear.force_factor * T1;
         break;
       case Formulation::Greybox: {
+        if (shape && !e.stiffness_curve.empty()) {
+          const double phase = fm.cubic(s.mesh_phase, j, u, lo, hi);
+          c.K = shapeStiffness(r.stiffness_shape, e.stiffness_curve, phase) / me;
+          c.F = gear.force_factor * T1;
+          break;
+        }
         const double sv = fm.meshState(j, right);
         c.K = (e.k_min + (e.k_max - e.k_min) * sv) / me;
         c.F = gear.force_factor * T1;

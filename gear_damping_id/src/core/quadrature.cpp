@@ -59,4 +59,39 @@ CubicIntervalRule::Weights CubicIntervalRule::value(double u) const {
   return w;
 }
 
+int CubicRules::parts(long j, long lo, long hi, const QuadratureBreak* near, int n_near,
+                      IntervalPart out[2]) const {
+  double here = -1.0;  // this interval's break fraction, or -1
+  for (int k = 0; k < n_near; ++k) {
+    if (near[k].j == j) here = near[k].th;
+  }
+  // Whether the stencil starting at sample b reaches across no break (a break on a stencil
+  // sample is on both sides at once).
+  auto fits = [&](long b) {
+    if (b < lo || b + 3 >= hi) return false;
+    for (int k = 0; k < n_near; ++k) {
+      const double x = static_cast<double>(near[k].j - b) + near[k].th;
+      if (x > 0.0 && x < 3.0) return false;
+    }
+    return true;
+  };
+  const CubicIntervalRule& fallback = forInterval(j, lo, hi);
+  if (here > 0.0 && here < 1.0) {
+    // Split: each side by the cubic of its own samples (extrapolated over less than a step).
+    out[0] = {fits(j - 3) ? &before : &fallback, 0.0, here, false};
+    out[1] = {fits(j + 1) ? &after : &fallback, here, 1.0, true};
+    return 2;
+  }
+  const CubicIntervalRule* r = &fallback;
+  if (fits(j - 1)) {
+    r = &interior;
+  } else if (fits(j)) {
+    r = &first;
+  } else if (fits(j - 2)) {
+    r = &last;
+  }
+  out[0] = {r, 0.0, 1.0, here == 0.0};  // a break at t_j: the whole interval lies after it
+  return 1;
+}
+
 }  // namespace gear_damping_id

@@ -105,6 +105,7 @@ SegmentDriver::SegmentOutput SegmentDriver::unusableSegment(const SignalView& v,
                          toString(options_.formulation) + "/" + toString(options_.model) + ")";
   out.result.formulation = options_.formulation;
   out.result.model = options_.model;
+  out.result.stiffness_shape = options_.stiffness_shape;
   out.result.equivalent_mass = gear_.equivalent_mass;
   out.result.segments.push_back(est);
   return out;
@@ -181,6 +182,7 @@ IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
   IdentificationResult r;
   r.formulation = options_.formulation;
   r.model = options_.model;
+  r.stiffness_shape = options_.stiffness_shape;
   r.equivalent_mass = gear_.equivalent_mass;
   r.window_length = options_.window_length;
   r.omega0 = duration_ > 0.0 && k_time_ > 0.0
@@ -237,6 +239,7 @@ SegmentDriver::SegmentOutput SegmentDriver::addShared(const SignalView& v, Eigen
   } else {
     out.result.formulation = options_.formulation;
     out.result.model = options_.model;
+    out.result.stiffness_shape = options_.stiffness_shape;
     out.result.segments = {out.estimate};
   }
   // Sliding problem: method_ holds the older segments, newer_ the latest ones (both get every
@@ -272,6 +275,7 @@ IdentificationResult SegmentDriver::sharedResult(size_t last) const {
   if (!limits_.solve_shared_each_segment) applyQualityFlags(options_, &r);
   r.formulation = options_.formulation;
   r.model = options_.model;
+  r.stiffness_shape = options_.stiffness_shape;
   // The kept segments, with the latest shared solve where it covers them (segments that never
   // reached the method, e.g. a missing channel, are listed as they were reported).
   const size_t n = std::min(last, kept_.size());
@@ -323,6 +327,7 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
       o.estimate = it->estimate;
       o.result.formulation = options_.formulation;
       o.result.model = options_.model;
+      o.result.stiffness_shape = options_.stiffness_shape;
       o.result.segments = {o.estimate};
       outs.push_back(std::move(o));
     }
