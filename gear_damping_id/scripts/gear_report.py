@@ -682,8 +682,6 @@ def make_report(result_dir, out_dir=None, quiet=False):
         except Missing as e:
             notes.append((name, title, str(e)))
             plt.close("all")
-        except NotApplicable:
-            plt.close("all")
     progress.step(len(FIGURES), "index.html (hashing the input)")
     body = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>gear_damping report</title>",
             f"<style>{STYLE}</style></head><body>",
