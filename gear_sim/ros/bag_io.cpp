@@ -528,6 +528,27 @@ bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, dou
     *error = path + ": " + e;
     return false;
   }
+  return writeBagStaged(
+      path, params, params_topic,
+      [&](rosbag::Bag& bag, const ros::Time& base) {
+        const std::uint64_t first =
+            static_cast<std::uint64_t>(std::llround(std::max(0.0, t.time[0] * sample_rate)));
+        gear_damping::SignalChunk chunk;
+        for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
+          const Eigen::Index n = std::min<Eigen::Index>(chunk_size, t.size() - b);
+          toChunk(t, b, n, sample_rate, first + static_cast<std::uint64_t>(b), &chunk);
+          chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
+          chunk.header.stamp = base + ros::Duration(t.time[b]);
+          bag.write(topic, chunk.header.stamp, chunk);
+        }
+      },
+      error);
+}
+
+bool writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
+                    const std::string& params_topic,
+                    const std::function<void(rosbag::Bag&, const ros::Time&)>& fill,
+                    std::string* error) {
   const std::string tmp = path + ".partial";
   try {
     rosbag::Bag bag(tmp, rosbag::bagmode::Write);
@@ -537,16 +558,7 @@ bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, dou
       p.header.stamp = base;
       bag.write(params_topic, base, p);
     }
-    const std::uint64_t first =
-        static_cast<std::uint64_t>(std::llround(std::max(0.0, t.time[0] * sample_rate)));
-    gear_damping::SignalChunk chunk;
-    for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
-      const Eigen::Index n = std::min<Eigen::Index>(chunk_size, t.size() - b);
-      toChunk(t, b, n, sample_rate, first + static_cast<std::uint64_t>(b), &chunk);
-      chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
-      chunk.header.stamp = base + ros::Duration(t.time[b]);
-      bag.write(topic, chunk.header.stamp, chunk);
-    }
+    fill(bag, base);
     bag.close();
   } catch (const std::exception& e) {
     std::remove(tmp.c_str());

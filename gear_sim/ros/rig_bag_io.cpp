@@ -4,11 +4,7 @@
 #include <rosbag/bag.h>
 #include <sensor_msgs/JointState.h>
 
-#include <cstdio>
-
-#include "gear_sim/signal_csv.hpp"
 #include "gear_sim_ros/bag_io.hpp"
-#include "gear_sim_ros/conversions.hpp"
 
 namespace gear_sim_ros {
 
@@ -24,38 +20,27 @@ bool writeRigBag(const std::string& path, const gear_sim::SignalTable& t,
     *error = path + ": sample times outside [0, " + std::to_string(kMaxBagTime - 1.0) + "] s";
     return false;
   }
-  const std::string tmp = path + ".partial";
-  try {
-    rosbag::Bag bag(tmp, rosbag::bagmode::Write);
-    const ros::Time base(1.0);
-    if (params) {
-      auto p = toMsg(*params);
-      p.header.stamp = base;
-      bag.write(topics.params, base, p);
-    }
-    sensor_msgs::JointState js;
-    js.name = {topics.joint1, topics.joint2};
-    js.position.resize(2);
-    geometry_msgs::WrenchStamped w;
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const ros::Time stamp = base + ros::Duration(t.time[i]);
-      js.header.seq = w.header.seq = static_cast<std::uint32_t>(i);
-      js.header.stamp = w.header.stamp = stamp;
-      js.position[0] = t.theta1[i];
-      js.position[1] = t.theta2[i];
-      w.wrench.torque.x = topics.axis == 'x' ? t.torque[i] : 0.0;
-      w.wrench.torque.y = topics.axis == 'y' ? t.torque[i] : 0.0;
-      w.wrench.torque.z = topics.axis == 'z' ? t.torque[i] : 0.0;
-      bag.write(topics.joints, stamp, js);
-      bag.write(topics.torque, stamp, w);
-    }
-    bag.close();
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    *error = path + ": cannot write (" + e.what() + ")";
-    return false;
-  }
-  return gear_sim::commitFile(tmp, path, error);
+  return writeBagStaged(
+      path, params, topics.params,
+      [&](rosbag::Bag& bag, const ros::Time& base) {
+        sensor_msgs::JointState js;
+        js.name = {topics.joint1, topics.joint2};
+        js.position.resize(2);
+        geometry_msgs::WrenchStamped w;
+        for (Eigen::Index i = 0; i < n; ++i) {
+          const ros::Time stamp = base + ros::Duration(t.time[i]);
+          js.header.seq = w.header.seq = static_cast<std::uint32_t>(i);
+          js.header.stamp = w.header.stamp = stamp;
+          js.position[0] = t.theta1[i];
+          js.position[1] = t.theta2[i];
+          w.wrench.torque.x = topics.axis == 'x' ? t.torque[i] : 0.0;
+          w.wrench.torque.y = topics.axis == 'y' ? t.torque[i] : 0.0;
+          w.wrench.torque.z = topics.axis == 'z' ? t.torque[i] : 0.0;
+          bag.write(topics.joints, stamp, js);
+          bag.write(topics.torque, stamp, w);
+        }
+      },
+      error);
 }
 
 }  // namespace gear_sim_ros

@@ -13,6 +13,13 @@
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
 
+namespace rosbag {
+class Bag;
+}
+namespace ros {
+class Time;
+}
+
 namespace gear_sim_ros {
 
 /// Largest --chunk-size of the tools writing bags (samples per SignalChunk message).
@@ -104,6 +111,15 @@ constexpr double kMaxBagTime = 4294967294.0;
 /// Why `table` cannot be written as a bag at `sample_rate` (empty when it can): times outside
 /// [0, kMaxBagTime] s or sample indices beyond kMaxSampleIndex. Checked by writeSignalBag too.
 std::string bagTimeError(const gear_sim::SignalTable& table, double sample_rate);
+
+/// Writes a bag staged: into PATH.partial, first the gear parameters on `params_topic` (when
+/// `params` is not null) stamped at the base time 1 s, then what `fill` writes (given the bag and
+/// that base time); renamed onto PATH only when everything succeeded, removed otherwise.
+/// False with `*error`.
+bool writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
+                    const std::string& params_topic,
+                    const std::function<void(rosbag::Bag&, const ros::Time&)>& fill,
+                    std::string* error);
 
 /// Writes `table` (uniform time) as SignalChunk messages of `chunk_size` samples on
 /// `topic` (first_index = round(time[0] * sample_rate) + i) and, when `params` is not null, the
