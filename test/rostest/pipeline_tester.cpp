@@ -62,6 +62,8 @@ struct Collector {
   std::vector<gear_damping::WaveletModes> modes;
   // diagnostics: status name -> key -> value (latest)
   std::map<std::string, std::map<std::string, std::string>> diag;
+  // diagnostics: status name -> (level, message) (latest)
+  std::map<std::string, std::pair<int, std::string>> diag_level;
   std::vector<ros::Subscriber> subs;
 
   explicit Collector(bool signal_side_topics = true) {
@@ -74,6 +76,7 @@ struct Collector {
         "/diagnostics", 100, [this](const diagnostic_msgs::DiagnosticArray::ConstPtr& m) {
           for (const auto& s : m->status) {
             for (const auto& kv : s.values) diag[s.name][kv.key] = kv.value;
+            diag_level[s.name] = {s.level, s.message};
           }
         }));
     if (!signal_side_topics) return;
@@ -97,6 +100,12 @@ struct Collector {
       if (it != s.second.end()) return std::atof(it->second.c_str());
     }
     return std::nan("");
+  }
+  // Level and message of the status whose name contains `status` (-1, "" if absent).
+  std::pair<int, std::string> level(const std::string& status) const {
+    for (const auto& s : diag_level)
+      if (s.first.find(status) != std::string::npos) return s.second;
+    return {-1, ""};
   }
 };
 
@@ -324,6 +333,75 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
   ASSERT_TRUE(ros::service::call("damping_id/reset", reset));
   ASSERT_TRUE(ros::service::call("damping_id/get_damping", get));
   EXPECT_EQ(get.response.damping.segments.size(), 0u);
+}
+
+// A DAQ counter glitch: one chunk with a far-future first_index, then a pause longer than the
+// jump rule's max_jump and the end-of-stream timeout (0.5 s each), then the normal stream. The
+// glitch must neither end the stream nor make later chunks "late": the next chunk does not
+// continue the suspect, so the suspect is dropped and counted, the status stays WARN (persistent
+// until reset), and every segment still equals offline. Jumps of 1e6 and 1e15 samples.
+TEST(IndexGlitch, FarFutureChunkThenPauseIsDroppedAndTheStreamRecovers) {
+  Collector col;
+  CraftedStream s;
+  ASSERT_TRUE(s.ok()) << s.error();
+  ASSERT_TRUE(s.waitForSubscribers(2)) << "damping_id_node and wavelet_node must subscribe";
+  ros::WallDuration(0.5).sleep();  // let the latched parameters arrive
+  std::string e;
+  const gd::GearConstants gear = gd::gearConstants(s.config().gearModel());
+  gd::IdentificationResult offline;
+  ASSERT_TRUE(gd::identify(s.table(), gear, nodeOptions("damping_id"), &offline, &e)) << e;
+  ASSERT_EQ(offline.segments.size(), 10u);
+  const std::string st = "damping_id: stream";
+  const std::string rejected = "rejected chunks (index jump glitch)";
+  std_srvs::Empty reset;
+  ASSERT_TRUE(ros::service::waitForService("damping_id/reset", 10000));
+  double wavelet_rejected = 0.0;
+  for (const double jump : {1e6, 1e15}) {
+    SCOPED_TRACE("jump of " + std::to_string(jump) + " samples");
+    // damping_id_node starts afresh; wavelet_node sees the second pass as a restart at index 0.
+    ASSERT_TRUE(ros::service::call("damping_id/reset", reset));
+    ros::WallDuration(0.3).sleep();
+    col.have_cumulative = false;
+    for (int k : {0, 1, 2, 3, 4}) s.publish(s.chunk(k));
+    auto glitch = s.chunk(5);
+    glitch.first_index += static_cast<std::uint64_t>(jump);
+    s.publish(glitch);
+    ros::WallDuration(1.5).sleep();
+    for (int k : {5, 6, 7, 8, 9}) s.publish(s.chunk(k));
+    ASSERT_TRUE(waitFor(
+        [&] {
+          return col.value(st, rejected) == 1.0 && col.have_cumulative &&
+                 col.cumulative.segments.size() == 10 &&
+                 col.cumulative.segments.back().t_end > 0.0099;
+        },
+        60.0))
+        << rejected << " " << col.value(st, rejected) << ", segments "
+        << col.cumulative.segments.size();
+    EXPECT_EQ(col.value(st, "implausible index jumps"), 1.0);
+    EXPECT_EQ(col.value(st, "new records at a jump"), 0.0);
+    EXPECT_EQ(col.value(st, "samples received"), 10000.0);
+    EXPECT_EQ(col.value(st, "late chunks"), 0.0);
+    EXPECT_EQ(col.value(st, "gaps"), 0.0);
+    EXPECT_TRUE(waitFor(
+        [&] {
+          const auto l = col.level(st);
+          return l.first == diagnostic_msgs::DiagnosticStatus::WARN &&
+                 l.second.find("implausible index jump") != std::string::npos;
+        },
+        10.0))
+        << "level " << col.level(st).first << ": " << col.level(st).second;
+    for (size_t i = 0; i < 10; ++i) {
+      const auto& live = col.cumulative.segments[i];
+      ASSERT_TRUE(live.identifiable) << i << ": " << live.reason;
+      EXPECT_NEAR(live.t_start, offline.segments[i].t_start, 1e-12) << i;
+      EXPECT_NEAR(live.C, offline.segments[i].C, kLiveVsOfflineRelTol * offline.segments[i].C) << i;
+    }
+    wavelet_rejected += 1.0;
+    EXPECT_TRUE(
+        waitFor([&] { return col.value("wavelet: stream", rejected) == wavelet_rejected; }, 30.0))
+        << "wavelet_node " << rejected << " " << col.value("wavelet: stream", rejected);
+    EXPECT_EQ(col.value("wavelet: stream", "late chunks"), 0.0);
+  }
 }
 
 // ------------------------------------------------------------------------------------------
