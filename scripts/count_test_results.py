@@ -34,7 +34,12 @@ def main() -> int:
                 continue
             if broken:
                 failed += 1
-                bad_files.append(f"{f}: {case.get('classname')}.{case.get('name')} failed")
+                node = case.find("failure")
+                if node is None:
+                    node = case.find("error")
+                why = " ".join(((node.get("message") or "") + " " + (node.text or "")).split())
+                bad_files.append(f"{f}: {case.get('classname')}.{case.get('name')} failed"
+                                 + (f": {why[:400]}" if why else ""))
             elif case.find("skipped") is not None or case.get("status") == "notrun":
                 skipped += 1
             else:
