@@ -25,8 +25,9 @@
 //                        or damping law), so C_std understates the error
 //   damping_varies       the damping varies with the load within the segment: the term
 //                        C1 (T1 - mean T1) added to the refined segment's model is more than
-//                        kVariationZ standard errors from zero (SegmentEstimate::variation_z),
-//                        so C is a weighted mean of C(t) that need not be its time mean
+//                        kVariationZ standard errors from zero (SegmentEstimate::variation_z);
+//                        (C is then the damping at the segment's mean load, which the
+//                        constant-C fit, a weighted mean of C(t), need not be)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
 // Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
@@ -92,7 +93,9 @@ struct QualityLimits {
   /// Within-segment damping variation: |C1 / std(C1)| beyond this is flagged. C1 / std(C1) is
   /// N(0, 1) when the damping is constant in the segment (the refinement's prewhitened least
   /// squares), so a constant damping is flagged with probability 2 (1 - Phi(3)) = 0.27 % per
-  /// segment (one record of 10 segments in 37).
+  /// segment (one record of 10 segments in 37). Judged, like the whiteness, only where the
+  /// residual RMS exceeds kWhitenessFloor of the DTE's standard deviation: on noise-free data
+  /// the standard error of C1 describes the refinement's discretisation error, not noise.
   static constexpr double kVariationZ = 3.0;
 };
 

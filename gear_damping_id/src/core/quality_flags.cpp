@@ -82,7 +82,8 @@ void flagEstimate(SegmentEstimate* e) {
                      num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
                      "): the model leaves structure in the data, C_std understates the error"});
   }
-  if (std::abs(e->variation_z) > L::kVariationZ) {
+  if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
+      std::abs(e->variation_z) > L::kVariationZ) {
     w.push_back({quality_code::kDampingVaries,
                  "the damping varies with the load within the segment: a term C1 (T1 - mean T1) "
                  "is " +
