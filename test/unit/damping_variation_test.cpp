@@ -5,7 +5,8 @@
 // `damping_varies` beyond QualityLimits::kVariationZ. Checked on simulated truth:
 // - constant damping in every segment (piecewise truth aligned to the segments): the flag fires
 //   at most at its nominal false-alarm rate (binomial bound over 30 seeds) and variation_z has
-//   unit variance (chi-square bound), on trapezoid and Fourier stiffness;
+//   unit variance (chi-square bound), on trapezoid and Fourier stiffness, with white and with
+//   AR(1) noise (rho 0.9);
 // - the shipped load-dependent damping on trapezoid and Fourier stiffness at 40 dB over 30
 //   seeds, and a held-out gear with other shapes, load and damping: every segment is right
 //   (+-2 SE covers the time-mean truth in >= 90 % of the unflagged segments, none beyond
@@ -14,6 +15,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <sstream>
 
 #include "gear_damping_id/quality_flags.hpp"
@@ -86,11 +88,13 @@ struct Score {
   long weighted = 0, weighted_covered = 0;  // the constant-C fit (the estimate before)
   double worst = 0.0, worst_clean = 0.0, worst_weighted = 0.0, sum_vz2 = 0.0, se_ratio = 0.0;
   long vz_count = 0;
+  std::map<std::string, int> codes;
 
   void add(const IdentificationResult& r, const SignalTable& t, const SimConfig& c) {
     for (const SegmentEstimate& e : r.segments) {
       ++segments;
       if (!e.warnings.empty()) ++flagged;
+      for (const auto& w : e.warnings) ++codes[w.code];
       varies += gear_damping_id::hasCode(e.warnings, qc::kDampingVaries);
       if (!e.identifiable) continue;
       const double truth = trueC(t, c, e.t_start, e.t_end);
@@ -123,18 +127,25 @@ struct Score {
       << clean_far << " beyond " << kCleanSE << " SE); constant-C fit (before): coverage "
       << 100.0 * weighted_covered / std::max(weighted, 1L) << " % of " << weighted << " (worst "
       << worst_weighted << " SE); SE / constant-C SE " << se_ratio / std::max(vz_count, 1L)
-      << "; rms variation_z " << std::sqrt(sum_vz2 / std::max(vz_count, 1L));
+      << "; rms variation_z " << std::sqrt(sum_vz2 / std::max(vz_count, 1L)) << "; codes";
+    for (const auto& [code, n] : codes) o << " " << code << ":" << n;
     return o.str();
   }
 };
 
-Score overSeeds(const SimConfig& c, const std::string& label, unsigned long seed0) {
+// `rho` > 0: AR(1) noise of that lag-1 correlation instead of white noise.
+Score overSeeds(const SimConfig& c, const std::string& label, unsigned long seed0,
+                double rho = 0.0) {
   const SignalTable clean = simulateOrFail(c);
   IdentificationOptions o;  // defaults: known, piecewise, refinement when noisy
   Score s;
   for (int seed = 1; seed <= kSeeds; ++seed) {
     SignalTable t = clean;
-    addWhiteNoise(&t.dte, kSnrDb, seed0 + static_cast<unsigned long>(seed));
+    const unsigned long noise_seed = seed0 + static_cast<unsigned long>(seed);
+    if (rho > 0.0)
+      addAr1Noise(&t.dte, kSnrDb, rho, noise_seed);
+    else
+      addWhiteNoise(&t.dte, kSnrDb, noise_seed);
     const IdentificationResult r = identifyOrFail(t, c, o);
     EXPECT_EQ(r.estimator, "output_error") << label << " seed " << seed;
     s.add(r, t, c);
@@ -171,6 +182,14 @@ TEST(DampingVariation, ConstantDampingIsFlaggedAtMostAtTheNominalRate) {
     setPiecewiseTruth(&c, 1e-3);
     expectFalseAlarmsNominal(overSeeds(c, label + " constant damping", 9100), label);
   }
+}
+
+// Coloured noise: variation_z uses the refinement's AR noise model, so it stays N(0, 1).
+TEST(DampingVariation, ConstantDampingUnderColouredNoiseIsFlaggedAtMostAtTheNominalRate) {
+  SimConfig c = table1Trapezoid();
+  setPiecewiseTruth(&c, 1e-3);
+  expectFalseAlarmsNominal(overSeeds(c, "trapezoid constant damping, AR(1) rho 0.9", 9200, 0.9),
+                           "AR(1) rho 0.9");
 }
 
 TEST(DampingVariation, LoadDependentDampingIsRightOrFlagged) {
