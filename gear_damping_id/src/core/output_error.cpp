@@ -43,6 +43,27 @@ struct Params {
   double t_ref = 0;
   int nb = 0, basis_first = 0;  // shape: basis unknowns are parameters basis_first..+nb
   double basis[kMaxBasis] = {0};
+
+  // The value of unknown k.
+  double* slot(int k) {
+    switch (role[k]) {
+      case Role::Y0:
+        return &y0;
+      case Role::V0:
+        return &v0;
+      case Role::Theta0:
+        return &theta0;
+      case Role::Theta1:
+        return &theta1;
+      case Role::K0:
+        return &K0;
+      case Role::DK:
+        return &dK;
+      case Role::Basis:
+        break;
+    }
+    return &basis[k - basis_first];
+  }
 };
 
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
@@ -785,20 +806,42 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     p.theta1 = 0.0;
     p.t_ref = mean_t;
     ++p.m;
-    const Normal aug = evaluateAt(i, p, noise_of[i]);
+    Normal aug = evaluateAt(i, p, noise_of[i]);
     const int last = p.m - 1;
     // C1 identifiable: its sensitivity not (nearly) a combination of the others'.
     const Eigen::MatrixXd Nrr = aug.N.topLeftCorner(last, last);
     const Eigen::VectorXd Nr1 = aug.N.col(last).head(last);
     const double schur = aug.N(last, last) - Nr1.dot(Nrr.ldlt().solve(Nr1));
     if (!(schur > 1e-10 * aug.N(last, last))) return;
-    const Eigen::MatrixXd inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
-    const Eigen::VectorXd d = inv * aug.rhs;
+    Eigen::MatrixXd inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
+    Eigen::VectorXd d = inv * aug.rhs;
     const double var1 = sigma2 * inv(last, last);
     if (!(var1 > 0.0) || !std::isfinite(d[last])) return;
     e->variation_z = d[last] / std::sqrt(var1);
+    // Where C1 is significant the one step, linearised at C1 = 0, is iterated (Gauss-Newton on
+    // the enlarged problem, a step kept only while the cost falls), and sigma^2 is the enlarged
+    // fit's: the constant-C fit's residual holds the variation it could not follow.
+    double s2 = sigma2;
+    if (std::abs(e->variation_z) > QualityLimits::kVariationZ) {
+      int accepted = 0;
+      for (int it = 0; it < o.max_iterations; ++it) {
+        Params q = p;
+        for (int k = 0; k < p.m; ++k) *q.slot(k) += d[k];
+        const Normal next = evaluateAt(i, q, noise_of[i]);
+        if (!(next.cost < aug.cost)) break;
+        const bool settled = std::abs(d[2]) <= 1e-10 * std::abs(q.theta0);
+        p = q, aug = next, ++accepted;
+        inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
+        d = inv * aug.rhs;
+        if (settled) break;
+      }
+      if (accepted > 0) {
+        s2 = aug.cost / static_cast<double>(std::max<long>(aug.rows - p.m, 1));
+        d.setZero();  // p is the enlarged fit
+      }
+    }
     e->C_mean_load = p.theta0 + d[2];
-    e->C_mean_load_std = std::sqrt(std::max(sigma2 * inv(2, 2), 0.0));
+    e->C_mean_load_std = std::sqrt(std::max(s2 * inv(2, 2), 0.0));
   };
 
   const double omega0 = res->omega0;
