@@ -18,7 +18,8 @@
 //                        bias of C (sqrt(N) C_std) above kMismatchBias of C
 //   refine_disagrees     the refined and integral estimates differ by more than
 //                        kDisagreeSE combined standard errors and by more than
-//                        kDisagreeRelative of C
+//                        kDisagreeRelative of C (the refinement's constant-C fit,
+//                        SegmentEstimate::C_weighted, where C is the mean-load damping)
 //   residuals_not_white  the refinement's residual, after prewhitening with its fitted AR noise
 //                        model, still has a lag-1 autocorrelation beyond kWhitenessZ/sqrt(N):
 //                        the model leaves structure in the data (wrong stiffness shape, forcing

@@ -94,16 +94,19 @@ void flagEstimate(SegmentEstimate* e) {
                      " 1/s; --model load_law describes the law"});
   }
   if (e->refined && std::isfinite(e->C_integral)) {
-    const double se =
-        std::hypot(e->C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
-    const double d = std::abs(e->C - e->C_integral);
+    // Like with like: the refinement's constant-C fit where C is the mean-load damping.
+    const bool weighted = std::isfinite(e->C_weighted);
+    const double C = weighted ? e->C_weighted : e->C;
+    const double C_std = weighted ? e->C_weighted_std : e->C_std;
+    const double se = std::hypot(C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
+    const double d = std::abs(C - e->C_integral);
     if (!(d <= L::kDisagreeSE * se) && !(d <= L::kDisagreeRelative * std::abs(e->C_integral))) {
       w.push_back({quality_code::kRefineDisagrees,
-                   "refined C = " + num(e->C) + " 1/s and integral C = " + num(e->C_integral) +
-                       " 1/s differ by " + num(se > 0.0 ? d / se : INFINITY) +
-                       " combined standard errors (> " + num(L::kDisagreeSE) + ") and " +
-                       num(100.0 * d / std::abs(e->C_integral)) + " % (> " +
-                       num(100.0 * L::kDisagreeRelative) + " %)"});
+                   std::string(weighted ? "refined constant-C fit " : "refined C ") + "= " +
+                       num(C) + " 1/s and integral C = " + num(e->C_integral) + " 1/s differ by " +
+                       num(se > 0.0 ? d / se : INFINITY) + " combined standard errors (> " +
+                       num(L::kDisagreeSE) + ") and " + num(100.0 * d / std::abs(e->C_integral)) +
+                       " % (> " + num(100.0 * L::kDisagreeRelative) + " %)"});
     }
   }
 }
