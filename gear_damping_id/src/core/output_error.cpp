@@ -823,22 +823,28 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     // fit's: the constant-C fit's residual holds the variation it could not follow.
     double s2 = sigma2;
     if (std::abs(e->variation_z) > QualityLimits::kVariationZ) {
-      int accepted = 0;
+      // Until the next step of C0 is below kEnlargedTol of its standard error (statistically
+      // nothing; noise-free: 1e-10 relative) or no longer lowers the cost.
+      constexpr double kEnlargedTol = 1e-3;
+      auto sigma2Of = [&](const Normal& n) {
+        return n.cost / static_cast<double>(std::max<long>(n.rows - p.m, 1));
+      };
+      bool moved = false;
       for (int it = 0; it < o.max_iterations; ++it) {
+        const double se0 = std::sqrt(std::max(sigma2Of(aug) * inv(2, 2), 0.0));
+        if (std::abs(d[2]) <= std::max(kEnlargedTol * se0, 1e-10 * std::abs(p.theta0))) break;
         Params q = p;
         for (int k = 0; k < p.m; ++k) *q.slot(k) += d[k];
         const Normal next = evaluateAt(i, q, noise_of[i]);
-        if (!(next.cost < aug.cost)) break;
-        const bool settled = std::abs(d[2]) <= 1e-10 * std::abs(q.theta0);
-        p = q, aug = next, ++accepted;
+        if (!(next.cost < aug.cost)) {
+          if (moved) d.setZero();  // no descent left: p is the enlarged fit to rounding
+          break;
+        }
+        p = q, aug = next, moved = true;
         inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
         d = inv * aug.rhs;
-        if (settled) break;
       }
-      if (accepted > 0) {
-        s2 = aug.cost / static_cast<double>(std::max<long>(aug.rows - p.m, 1));
-        d.setZero();  // p is the enlarged fit
-      }
+      if (moved) s2 = sigma2Of(aug);
     }
     e->C_mean_load = p.theta0 + d[2];
     e->C_mean_load_std = std::sqrt(std::max(s2 * inv(2, 2), 0.0));
