@@ -178,7 +178,7 @@ void expectFalseAlarmsNominal(const Score& s, const std::string& label) {
   EXPECT_NEAR(s.sum_vz2, n, 4.5 * std::sqrt(2.0 * n)) << label << ": " << s.str();
 }
 
-TEST(DampingVariation, ConstantDampingIsFlaggedAtMostAtTheNominalRate) {
+TEST(DampingVariation, ConstantDampingIsFlaggedAtMostAtTheNominalRateOverSeeds) {
   for (const auto& [label, config] :
        {std::pair<std::string, SimConfig>{"trapezoid", table1Trapezoid()},
         {"fourier", table1Fourier()}}) {
@@ -189,19 +189,19 @@ TEST(DampingVariation, ConstantDampingIsFlaggedAtMostAtTheNominalRate) {
 }
 
 // Coloured noise: variation_z uses the refinement's AR noise model, so it stays N(0, 1).
-TEST(DampingVariation, ConstantDampingUnderColouredNoiseIsFlaggedAtMostAtTheNominalRate) {
+TEST(DampingVariation, ColouredNoiseConstantDampingIsFlaggedAtMostAtTheNominalRateOverSeeds) {
   SimConfig c = table1Trapezoid();
   setPiecewiseTruth(&c, 1e-3);
   expectFalseAlarmsNominal(overSeeds(c, "trapezoid constant damping, AR(1) rho 0.9", 9200, 0.9),
                            "AR(1) rho 0.9");
 }
 
-TEST(DampingVariation, LoadDependentDampingIsRightOrFlagged) {
+TEST(DampingVariation, LoadDependentDampingIsRightOrFlaggedOverSeeds) {
   expectRightOrFlagged(overSeeds(table1Trapezoid(), "trapezoid load-dependent", 9300), "trapezoid");
   expectRightOrFlagged(overSeeds(table1Fourier(), "fourier load-dependent", 9500), "fourier");
 }
 
-TEST(DampingVariation, HeldOutLoadDependentDampingIsRightOrFlagged) {
+TEST(DampingVariation, HeldOutLoadDependentDampingIsRightOrFlaggedOverSeeds) {
   const SimConfig h = heldOut(heldOutCase());
   expectRightOrFlagged(overSeeds(trapezoid(h, 0.07), "held-out trapezoid load-dependent", 9700),
                        "held-out trapezoid");
