@@ -498,35 +498,10 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     p.m = m;
     for (int k = 0; k < nl; ++k) p.role[k] = local_roles[k];
     for (int k = 0; k < ns; ++k) p.role[nl + k] = shared_roles[k];
-    auto set = [&](Role r, double v) {
-      switch (r) {
-        case Role::Y0:
-          p.y0 = v;
-          break;
-        case Role::V0:
-          p.v0 = v;
-          break;
-        case Role::Theta0:
-          p.theta0 = v;
-          break;
-        case Role::Theta1:
-          p.theta1 = v;
-          break;
-        case Role::K0:
-          p.K0 = v;
-          break;
-        case Role::DK:
-          p.dK = v;
-          break;
-        case Role::Basis:
-          break;
-      }
-    };
-    for (int k = 0; k < nl; ++k) set(local_roles[k], x[k]);
     p.nb = nb;
     p.basis_first = basis_first;
-    for (int k = 0; k < nb; ++k) p.basis[k] = x[basis_first + k];
-    for (int k = 0; k < ns; ++k) set(shared_roles[k], g[k]);
+    for (int k = 0; k < nl; ++k) *p.slot(k) = x[k];
+    for (int k = 0; k < ns; ++k) *p.slot(nl + k) = g[k];
     return p;
   };
 
