@@ -40,9 +40,10 @@ def main(out):
         codes = ",".join(x.get("code", "") for x in s.get("warnings") or [] if isinstance(x, dict))
         print(f"   {s['t_start'] * 1e3:5.2f}-{s['t_end'] * 1e3:5.2f}   {s['C']:9.1f}  {2 * s['C_std']:7.1f}   "
               f"{truth:9.1f}     {100 * err:+.2f} %   {codes or 'clean'}")
-    print(f"   (truth: time-mean of c(t)/Me over the segment; the damping changes within a segment, "
-          f"so the segment C is a weighted mean: median |error| {100 * np.median(errs):.2f} %;\n"
-          f"   the flags say so: a piecewise-constant C leaves structure in the residual, see docs/trust.md)")
+    print(f"   (truth: time-mean of c(t)/Me over the segment; the damping changes with the load within a "
+          f"segment, so C is the damping at the segment's mean load: median |error| {100 * np.median(errs):.2f} %;\n"
+          f"   the flags say so: damping_varies, and a piecewise-constant model leaves structure in the residual, "
+          f"see docs/trust.md)")
     print(f"   fit: piecewise {fit(('known', 'piecewise')):.2f} % vs constant {fit(('known', 'constant')):.2f} %"
           f" (constant C = {runs[('known', 'constant')]['constant']['C']:.1f} 1/s)")
     ll = runs[("known", "load_law")]["load_law"]

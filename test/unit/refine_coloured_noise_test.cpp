@@ -21,22 +21,6 @@ constexpr int kSeeds = 30;
 // is > 3 sigma wide on each side.
 constexpr double kMinCoverage = 0.90, kMaxCoverage = 0.99;
 
-// Stationary AR(1) noise x_n = rho x_{n-1} + sqrt(1 - rho^2) sigma w_n at SNR `snr_db` (std of
-// x is sigma, as for white noise), std::mt19937_64(seed).
-void addAr1Noise(Eigen::VectorXd* y, double snr_db, double rho, unsigned long seed) {
-  const double mean = y->mean();
-  const double sd = std::sqrt((y->array() - mean).square().sum() / static_cast<double>(y->size()));
-  const double sigma = sd / std::pow(10.0, snr_db / 20.0);
-  std::mt19937_64 gen(seed);
-  std::normal_distribution<double> nd(0.0, 1.0);
-  double x = sigma * nd(gen);
-  const double innov = sigma * std::sqrt(1.0 - rho * rho);
-  for (Eigen::Index i = 0; i < y->size(); ++i) {
-    (*y)[i] += x;
-    x = rho * x + innov * nd(gen);
-  }
-}
-
 class ColouredNoise : public PiecewiseDefaultCase {};
 
 struct Outcome {

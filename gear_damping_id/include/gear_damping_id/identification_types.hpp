@@ -147,6 +147,17 @@ struct SegmentEstimate {
   double residual_rms = kNaN;    ///< [m] RMS residual of the integral equations at the estimate
   QualityWarnings warnings;      ///< empty when the estimate is clean (codes: quality_flags.hpp)
   ResidualStatistics residuals;  ///< of the output-error refinement (when `refined`)
+  /// Damping that varies with the load within the segment (refined piecewise estimates with a
+  /// torque channel that varies in the segment; NaN otherwise): one Gauss-Newton step of the
+  /// refinement's prewhitened problem with the extra unknown C1 of
+  /// C(t) = C0 + C1 (T1(t) - mean_torque), from the converged constant-C fit.
+  double variation_z = kNaN;  ///< [-] C1 / std(C1): N(0, 1) when C is constant in the segment
+  /// C0 of that model, the damping at the segment's mean load [1/s], and its standard error:
+  /// then also C and C_std (the time mean of a C(t) linear in the load, constant included).
+  double C_mean_load = kNaN, C_mean_load_std = kNaN;
+  /// The refinement's constant-C fit [1/s] and its standard error: a mean of C(t) weighted by
+  /// the response's sensitivity to it (C and C_std where C_mean_load is NaN).
+  double C_weighted = kNaN, C_weighted_std = kNaN;
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).

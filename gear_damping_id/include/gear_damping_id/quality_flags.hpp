@@ -18,11 +18,17 @@
 //                        bias of C (sqrt(N) C_std) above kMismatchBias of C
 //   refine_disagrees     the refined and integral estimates differ by more than
 //                        kDisagreeSE combined standard errors and by more than
-//                        kDisagreeRelative of C
+//                        kDisagreeRelative of C (the refinement's constant-C fit,
+//                        SegmentEstimate::C_weighted, where C is the mean-load damping)
 //   residuals_not_white  the refinement's residual, after prewhitening with its fitted AR noise
 //                        model, still has a lag-1 autocorrelation beyond kWhitenessZ/sqrt(N):
 //                        the model leaves structure in the data (wrong stiffness shape, forcing
 //                        or damping law), so C_std understates the error
+//   damping_varies       the damping varies with the load within the segment: the term
+//                        C1 (T1 - mean T1) added to the refined segment's model is more than
+//                        kVariationZ standard errors from zero (SegmentEstimate::variation_z);
+//                        (C is then the damping at the segment's mean load, which the
+//                        constant-C fit, a weighted mean of C(t), need not be)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
 // Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
@@ -42,6 +48,7 @@ inline constexpr const char* kOverdamped = "overdamped";
 inline constexpr const char* kModelMismatch = "model_mismatch";
 inline constexpr const char* kRefineDisagrees = "refine_disagrees";
 inline constexpr const char* kResidualsNotWhite = "residuals_not_white";
+inline constexpr const char* kDampingVaries = "damping_varies";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -84,6 +91,13 @@ struct QualityLimits {
   /// amplitude, measured 1-2e-6 on a sampled rig stiffness table), whose correlation says
   /// nothing about the model.
   static constexpr double kWhitenessFloor = 1e-5;
+  /// Within-segment damping variation: |C1 / std(C1)| beyond this is flagged. C1 / std(C1) is
+  /// N(0, 1) when the damping is constant in the segment (the refinement's prewhitened least
+  /// squares), so a constant damping is flagged with probability 2 (1 - Phi(3)) = 0.27 % per
+  /// segment (one record of 10 segments in 37). Judged, like the whiteness, only where the
+  /// residual RMS exceeds kWhitenessFloor of the DTE's standard deviation: on noise-free data
+  /// the standard error of C1 describes the refinement's discretisation error, not noise.
+  static constexpr double kVariationZ = 3.0;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -38,8 +38,32 @@ struct Params {
   int m = 0;
   Role role[kMaxParams];
   double theta0 = 0, theta1 = 0, K0 = 0, dK = 0, y0 = 0, v0 = 0;
+  // C(t) = theta0 + theta1 (T1(t) - t_ref) [1/s]: t_ref = 0 for the load law; the segment's mean
+  // torque for the within-segment variation test (theta0 is then C at the mean load).
+  double t_ref = 0;
   int nb = 0, basis_first = 0;  // shape: basis unknowns are parameters basis_first..+nb
   double basis[kMaxBasis] = {0};
+
+  // The value of unknown k.
+  double* slot(int k) {
+    switch (role[k]) {
+      case Role::Y0:
+        return &y0;
+      case Role::V0:
+        return &v0;
+      case Role::Theta0:
+        return &theta0;
+      case Role::Theta1:
+        return &theta1;
+      case Role::K0:
+        return &K0;
+      case Role::DK:
+        return &dK;
+      case Role::Basis:
+        break;
+    }
+    return &basis[k - basis_first];
+  }
 };
 
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
@@ -256,7 +280,7 @@ class SegmentSimulator {
 
   void deriv(const double* z, int D, const Params& p, double K, double sv, double T1,
              const double* B, double* dz) const {
-    const double C = p.theta0 + p.theta1 * T1;
+    const double C = p.theta0 + p.theta1 * (T1 - p.t_ref);
     const double F = fm_.gear().force_factor * T1;
     const double y = z[0], v = z[1];
     dz[0] = v;
@@ -268,7 +292,7 @@ class SegmentSimulator {
           forcing = -v;
           break;
         case Role::Theta1:
-          forcing = -T1 * v;
+          forcing = -(T1 - p.t_ref) * v;
           break;
         case Role::K0:
           forcing = -y;
@@ -474,35 +498,10 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     p.m = m;
     for (int k = 0; k < nl; ++k) p.role[k] = local_roles[k];
     for (int k = 0; k < ns; ++k) p.role[nl + k] = shared_roles[k];
-    auto set = [&](Role r, double v) {
-      switch (r) {
-        case Role::Y0:
-          p.y0 = v;
-          break;
-        case Role::V0:
-          p.v0 = v;
-          break;
-        case Role::Theta0:
-          p.theta0 = v;
-          break;
-        case Role::Theta1:
-          p.theta1 = v;
-          break;
-        case Role::K0:
-          p.K0 = v;
-          break;
-        case Role::DK:
-          p.dK = v;
-          break;
-        case Role::Basis:
-          break;
-      }
-    };
-    for (int k = 0; k < nl; ++k) set(local_roles[k], x[k]);
     p.nb = nb;
     p.basis_first = basis_first;
-    for (int k = 0; k < nb; ++k) p.basis[k] = x[basis_first + k];
-    for (int k = 0; k < ns; ++k) set(shared_roles[k], g[k]);
+    for (int k = 0; k < nl; ++k) *p.slot(k) = x[k];
+    for (int k = 0; k < ns; ++k) *p.slot(nl + k) = g[k];
     return p;
   };
 
@@ -520,12 +519,12 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     double acov[kMaxArOrder + 1] = {0};  // sum_n r_n r_{n-k} within the segment
     double wlag1 = 0;                    // sum_n e_n e_{n-1}
   };
-  auto evaluate = [&](size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
-                      const NoiseModel& nm) {
+  // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
+  auto evaluateAt = [&](size_t i, const Params& p, const NoiseModel& nm) {
+    const int m = p.m;
     Normal out;
     out.N = Eigen::MatrixXd::Zero(m, m);
     out.rhs = Eigen::VectorXd::Zero(m);
-    const Params p = makeParams(x, g);
     double Nacc[kMaxParams][kMaxParams] = {{0}};
     double racc[kMaxParams] = {0};
     double hist[kMaxArOrder][kMaxParams + 1] = {{0}};  // previous raw [r, J] rows, newest first
@@ -580,6 +579,8 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     out.wlag1 = wlag;
     return out;
   };
+  auto evaluate = [&](size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
+                      const NoiseModel& nm) { return evaluateAt(i, makeParams(x, g), nm); };
 
   // Gauss-Newton step of a set of segments: locals eliminated per segment (Schur complement).
   auto solveStep = [&](const std::vector<size_t>& set, const std::vector<Normal>& normals,
@@ -758,6 +759,72 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   res->estimator = "output_error";
   res->iterations = iterations;
 
+  // Within-segment variation of the damping with the load (piecewise model): the converged
+  // constant-C problem plus the unknown C1 of C(t) = C0 + C1 (T1(t) - mean T1), evaluated once
+  // at C1 = 0 with the segment's noise model; one Gauss-Newton step gives C1 and C0, the damping
+  // at the segment's mean load, and their covariance sigma2 N^-1 (the prewhitened normal
+  // equations of the problem plus one column). C0 is the segment's time-mean damping whenever
+  // C(t) is linear in the load over the segment (constant C included), whereas the constant-C
+  // fit weights C(t) by the response's sensitivity to it. Skipped when the torque is unknown or
+  // does not vary in the segment (C1 not identifiable: the constant-C fit is then the same).
+  auto variationTest = [&](size_t i, double sigma2, SegmentEstimate* e) {
+    const Index b = ranges[i].first, en = ranges[i].second;
+    if (s.torque == nullptr || en - b < 2) return;
+    double mean_t = 0.0, var_t = 0.0;
+    for (Index n = b; n < en; ++n) mean_t += s.torque[n];
+    mean_t /= static_cast<double>(en - b);
+    for (Index n = b; n < en; ++n) var_t += (s.torque[n] - mean_t) * (s.torque[n] - mean_t);
+    if (!(std::sqrt(var_t / static_cast<double>(en - b)) > 1e-9 * std::abs(mean_t))) return;
+    Params p = makeParams(loc[i], sh);
+    if (p.m + 1 > kMaxParams) return;
+    p.role[p.m] = Role::Theta1;
+    p.theta1 = 0.0;
+    p.t_ref = mean_t;
+    ++p.m;
+    Normal aug = evaluateAt(i, p, noise_of[i]);
+    const int last = p.m - 1;
+    // C1 identifiable: its sensitivity not (nearly) a combination of the others'.
+    const Eigen::MatrixXd Nrr = aug.N.topLeftCorner(last, last);
+    const Eigen::VectorXd Nr1 = aug.N.col(last).head(last);
+    const double schur = aug.N(last, last) - Nr1.dot(Nrr.ldlt().solve(Nr1));
+    if (!(schur > 1e-10 * aug.N(last, last))) return;
+    Eigen::MatrixXd inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
+    Eigen::VectorXd d = inv * aug.rhs;
+    const double var1 = sigma2 * inv(last, last);
+    if (!(var1 > 0.0) || !std::isfinite(d[last])) return;
+    e->variation_z = d[last] / std::sqrt(var1);
+    // Where C1 is significant the one step, linearised at C1 = 0, is iterated (Gauss-Newton on
+    // the enlarged problem, a step kept only while the cost falls), and sigma^2 is the enlarged
+    // fit's: the constant-C fit's residual holds the variation it could not follow.
+    double s2 = sigma2;
+    if (std::abs(e->variation_z) > QualityLimits::kVariationZ) {
+      // Until the next step of C0 is below kEnlargedTol of its standard error (statistically
+      // nothing; noise-free: 1e-10 relative) or no longer lowers the cost.
+      constexpr double kEnlargedTol = 1e-3;
+      auto sigma2Of = [&](const Normal& n) {
+        return n.cost / static_cast<double>(std::max<long>(n.rows - p.m, 1));
+      };
+      bool moved = false;
+      for (int it = 0; it < o.max_iterations; ++it) {
+        const double se0 = std::sqrt(std::max(sigma2Of(aug) * inv(2, 2), 0.0));
+        if (std::abs(d[2]) <= std::max(kEnlargedTol * se0, 1e-10 * std::abs(p.theta0))) break;
+        Params q = p;
+        for (int k = 0; k < p.m; ++k) *q.slot(k) += d[k];
+        const Normal next = evaluateAt(i, q, noise_of[i]);
+        if (!(next.cost < aug.cost)) {
+          if (moved) d.setZero();  // no descent left: p is the enlarged fit to rounding
+          break;
+        }
+        p = q, aug = next, moved = true;
+        inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
+        d = inv * aug.rhs;
+      }
+      if (moved) s2 = sigma2Of(aug);
+    }
+    e->C_mean_load = p.theta0 + d[2];
+    e->C_mean_load_std = std::sqrt(std::max(s2 * inv(2, 2), 0.0));
+  };
+
   const double omega0 = res->omega0;
   auto fillC = [&](SegmentEstimate* e, double C, double var) {
     e->C = C;
@@ -785,7 +852,15 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     const Eigen::MatrixXd cov_ss = sigma2 * Ainv;
     int k = 2;
     if (piecewise) {
-      fillC(&e, x[k], cov_ll(k, k));
+      // The constant-C fit is a weighted mean of C(t) over the segment; the reported C is the
+      // damping at the segment's mean load where the load varies (variationTest).
+      e.C_weighted = x[k];
+      e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
+      variationTest(i, sigma2, &e);
+      if (std::isfinite(e.C_mean_load))
+        fillC(&e, e.C_mean_load, e.C_mean_load_std * e.C_mean_load_std);
+      else
+        fillC(&e, x[k], cov_ll(k, k));
       ++k;
     } else if (load) {
       const double T = e.mean_torque;

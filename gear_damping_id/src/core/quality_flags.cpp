@@ -14,7 +14,7 @@ using L = QualityLimits;
 bool ownedCode(const std::string& c) {
   return c == quality_code::kNonpositiveDamping || c == quality_code::kOverdamped ||
          c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
-         c == quality_code::kResidualsNotWhite;
+         c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries;
 }
 
 std::string num(double v) {
@@ -44,6 +44,8 @@ void flagEstimate(SegmentEstimate* e) {
     e->C = e->C_std = e->c = e->xi = kNaN;
     e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
     e->C_integral = e->C_integral_std = kNaN;
+    e->variation_z = e->C_mean_load = e->C_mean_load_std = kNaN;
+    e->C_weighted = e->C_weighted_std = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
     return;
@@ -80,17 +82,31 @@ void flagEstimate(SegmentEstimate* e) {
                      num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
                      "): the model leaves structure in the data, C_std understates the error"});
   }
+  if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
+      std::abs(e->variation_z) > L::kVariationZ) {
+    w.push_back({quality_code::kDampingVaries,
+                 "the damping varies with the load within the segment: a term C1 (T1 - mean T1) "
+                 "is " +
+                     num(e->variation_z) + " standard errors from zero (> " + num(L::kVariationZ) +
+                     "); C is the damping at the segment's mean load, the constant-C fit (a "
+                     "weighted mean of C(t)) gives " +
+                     num(e->C_weighted) + " +- " + num(e->C_weighted_std) +
+                     " 1/s; --model load_law describes the law"});
+  }
   if (e->refined && std::isfinite(e->C_integral)) {
-    const double se =
-        std::hypot(e->C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
-    const double d = std::abs(e->C - e->C_integral);
+    // Like with like: the refinement's constant-C fit where C is the mean-load damping.
+    const bool weighted = std::isfinite(e->C_weighted);
+    const double C = weighted ? e->C_weighted : e->C;
+    const double C_std = weighted ? e->C_weighted_std : e->C_std;
+    const double se = std::hypot(C_std, std::isfinite(e->C_integral_std) ? e->C_integral_std : 0.0);
+    const double d = std::abs(C - e->C_integral);
     if (!(d <= L::kDisagreeSE * se) && !(d <= L::kDisagreeRelative * std::abs(e->C_integral))) {
       w.push_back({quality_code::kRefineDisagrees,
-                   "refined C = " + num(e->C) + " 1/s and integral C = " + num(e->C_integral) +
-                       " 1/s differ by " + num(se > 0.0 ? d / se : INFINITY) +
-                       " combined standard errors (> " + num(L::kDisagreeSE) + ") and " +
-                       num(100.0 * d / std::abs(e->C_integral)) + " % (> " +
-                       num(100.0 * L::kDisagreeRelative) + " %)"});
+                   std::string(weighted ? "refined constant-C fit " : "refined C ") + "= " +
+                       num(C) + " 1/s and integral C = " + num(e->C_integral) + " 1/s differ by " +
+                       num(se > 0.0 ? d / se : INFINITY) + " combined standard errors (> " +
+                       num(L::kDisagreeSE) + ") and " + num(100.0 * d / std::abs(e->C_integral)) +
+                       " % (> " + num(100.0 * L::kDisagreeRelative) + " %)"});
     }
   }
 }

@@ -78,6 +78,11 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
     j["C_integral"] = s.C_integral;
     j["C_integral_std"] = num(s.C_integral_std);
   }
+  if (std::isfinite(s.variation_z)) {
+    j["variation_z"] = s.variation_z;
+    j["C_weighted"] = s.C_weighted;
+    j["C_weighted_std"] = num(s.C_weighted_std);
+  }
   if (!s.stiffness_curve.empty()) {
     json k = json::array(), ks = json::array();
     for (size_t i = 0; i < s.stiffness_curve.size(); ++i) {
