@@ -61,6 +61,7 @@
 #include <vector>
 
 #include "gear_damping_id/signal_view.hpp"
+#include "gear_sim/option_status.hpp"
 
 namespace gear_damping_id {
 
@@ -97,8 +98,9 @@ struct StreamOptions {
   double magnitude_factor = 1e6;
   /// [m] |dte| above this is rejected whatever the running scale (a DTE is micrometres). > 0.
   double max_abs_dte = 1.0;
-  /// Empty when valid; else names the field, the value and the rule broken.
-  std::string validate() const;
+  /// The first rule broken: field, value and rule (gear_sim/option_status.hpp).
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// What happened to a chunk given to push().

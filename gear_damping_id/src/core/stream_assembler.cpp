@@ -61,25 +61,24 @@ const char* toString(ChunkStatus s) {
   return "?";
 }
 
-std::string StreamOptions::validate() const {
-  std::ostringstream e;
-  if (!(segment_length >= 0.0)) {
-    e << "segment_length = " << segment_length << ": must be >= 0 [s] (0 or .inf = whole run)";
-  } else if (std::isnan(t_start) || std::isnan(t_end) || !(t_end > t_start)) {
-    e << "t_start = " << t_start << ", t_end = " << t_end << ": need t_start < t_end [s]";
-  } else if (reorder_chunks < 0 || reorder_chunks > 100000) {
-    e << "reorder_chunks = " << reorder_chunks << ": must be in [0, 100000]";
-  } else if (context < 0 || context > 1000) {
-    e << "context = " << context << ": must be in [0, 1000] [samples]";
-  } else if (!(max_jump > 0.0)) {
-    e << "max_jump = " << max_jump << ": must be > 0 [s] (.inf: no jump rule)";
-  } else if (!(magnitude_factor == 0.0 ||
-               (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor)))) {
-    e << "magnitude_factor = " << magnitude_factor << ": must be 0 (off) or finite >= 10";
-  } else if (!(max_abs_dte > 0.0)) {
-    e << "max_abs_dte = " << max_abs_dte << ": must be > 0 [m]";
-  }
-  return e.str();
+gear_sim::OptionStatus StreamOptions::check() const {
+  auto bad = [](const std::string& field, const auto& value, const std::string& rule) {
+    return gear_sim::violated("StreamOptions", field, value, rule);
+  };
+  if (!(segment_length >= 0.0))
+    return bad("segment_length", segment_length, "must be >= 0 [s] (0 or .inf = whole run)");
+  if (std::isnan(t_start)) return bad("t_start", t_start, "must be a number [s]");
+  if (!(t_end > t_start))
+    return bad("t_start", t_start, "must be < t_end = " + gear_sim::formatNumber(t_end) + " [s]");
+  if (reorder_chunks < 0 || reorder_chunks > 100000)
+    return bad("reorder_chunks", reorder_chunks, "must be in [0, 100000]");
+  if (context < 0 || context > 1000)
+    return bad("context", context, "must be in [0, 1000] [samples]");
+  if (!(max_jump > 0.0)) return bad("max_jump", max_jump, "must be > 0 [s] (.inf: no jump rule)");
+  if (!(magnitude_factor == 0.0 || (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor))))
+    return bad("magnitude_factor", magnitude_factor, "must be 0 (off) or finite >= 10");
+  if (!(max_abs_dte > 0.0)) return bad("max_abs_dte", max_abs_dte, "must be > 0 [m]");
+  return {};
 }
 
 SignalView StreamSegment::view() const {
