@@ -292,18 +292,18 @@ class ChunkIntake {
     }
     const auto status = assembler_.push(c, &why);
     switch (status) {
-      case gear_damping_id::ChunkStatus::kSuspect:
+      case gear_damping_id::ChunkStatus::Suspect:
         last_jump_ = why;
         ROS_WARN_THROTTLE(2.0, "%s", why.c_str());
         break;
-      case gear_damping_id::ChunkStatus::kRejectedNonFinite:
-      case gear_damping_id::ChunkStatus::kRejectedValue:
-      case gear_damping_id::ChunkStatus::kRejectedRate:
-      case gear_damping_id::ChunkStatus::kRejectedMalformed:
+      case gear_damping_id::ChunkStatus::RejectedNonFinite:
+      case gear_damping_id::ChunkStatus::RejectedValue:
+      case gear_damping_id::ChunkStatus::RejectedRate:
+      case gear_damping_id::ChunkStatus::RejectedMalformed:
         ROS_WARN_THROTTLE(2.0, "%s: %s", toString(status), why.c_str());
         break;
-      case gear_damping_id::ChunkStatus::kDuplicate:
-      case gear_damping_id::ChunkStatus::kLate:
+      case gear_damping_id::ChunkStatus::Duplicate:
+      case gear_damping_id::ChunkStatus::Late:
         ROS_WARN_THROTTLE(2.0, "chunk at index %lu ignored: %s",
                           static_cast<unsigned long>(msg.first_index), toString(status));
         break;
@@ -369,8 +369,8 @@ class ChunkIntake {
     s.add("resident memory [MiB]", residentMiB());
     s.add("process id", static_cast<long>(getpid()));
     const auto health = monitor_.update(k, now.toSec(), last_jump_);
-    if (health.level != gear_damping_id::LossMonitor::Level::kOk) {
-      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::kError
+    if (health.level != gear_damping_id::LossMonitor::Level::Ok) {
+      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::Error
                          ? diagnostic_msgs::DiagnosticStatus::ERROR
                          : diagnostic_msgs::DiagnosticStatus::WARN,
                      health.message);

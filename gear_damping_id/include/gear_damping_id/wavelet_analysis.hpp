@@ -73,11 +73,11 @@ struct WaveletOptions {
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
   long max_scalogram_columns = 2000;
-  /// FFTW planning of the scalogram's transforms. kEstimate (default) plans instantly; kMeasure
+  /// FFTW planning of the scalogram's transforms. Estimate (default) plans instantly; Measure
   /// costs ~0.1-3 s of planning once per FFT size and process and pays off for repeated
   /// full scalograms of long records (the benchmark uses it). The damping fits' few rows
-  /// always use kEstimate.
-  FftPlanning fft_planning = FftPlanning::kEstimate;
+  /// always use Estimate.
+  FftPlanning fft_planning = FftPlanning::Estimate;
   /// Threads of the full scalogram (rows in parallel, MorletScalogram; results identical to
   /// one thread). Rule: in [1, 256].
   int threads = 1;

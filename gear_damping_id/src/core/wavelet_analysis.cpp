@@ -370,7 +370,7 @@ bool frequencyGrid(Analysis* a) {
 // the time-averaged scalogram.
 bool spectraAndNoise(Analysis* a) {
   // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::kEstimate, a->error) ||
+  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate, a->error) ||
       !a->scal.setSignal(a->y, a->error)) {
     return false;
   }
@@ -756,7 +756,7 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   MorletCwt own;
   MorletCwt* fit = &a->scal;
   if (!reuse) {
-    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::kEstimate, a->error) ||
+    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate, a->error) ||
         !own.setSignal(a->y, a->error)) {
       return false;
     }

@@ -83,7 +83,12 @@ struct LoadOptions {
   std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
-enum class DampingModel {
+/// How the simulated (true) damping varies over the run, like SpeedProfile and LoadProfile: a
+/// law and its parametrisation (YAML damping.model). The one DampingModel of the package is
+/// gear_damping_id::DampingModel, the model the identification fits (piecewise, constant,
+/// load_law); ConstantRatio/ConstantCoefficient are its `constant`, LoadDependent/LoadLinear
+/// (both c linear in T1) its `load_law`, Piecewise its `piecewise` on aligned segments.
+enum class DampingProfile {
   ConstantRatio,        ///< xi = ratio
   ConstantCoefficient,  ///< c = coefficient
   Piecewise,            ///< xi = ratios[i] for times[i] <= t < times[i+1] (times[0] = 0)
@@ -94,7 +99,7 @@ enum class DampingModel {
 /// Damping ratio convention: xi = c / (2 sqrt(k_mean * Me)), k_mean the time-mean stiffness of
 /// the mesh model; T1_mean is the time-mean of the load over the simulated duration.
 struct DampingOptions {
-  DampingModel model = DampingModel::LoadDependent;
+  DampingProfile model = DampingProfile::LoadDependent;
   double ratio = 0.05;            ///< [-]
   double coefficient = 0.0;       ///< [N*s/m] constant coefficient model
   double load_sensitivity = 0.6;  ///< [-] beta of the load-dependent model
@@ -123,7 +128,7 @@ constexpr double kMaxDampingRatio = 10.0;
 struct SimulationOptions {
   double duration = 0.01;      ///< [s] > 0; samples n = 0..round(duration*fs)-1 at t = n/fs
   double sample_rate = 1.0e6;  ///< [Hz] output rate, >= 20x the natural frequency
-  Integrator integrator = Integrator::RK4;
+  Integrator integrator = Integrator::Rk4;
   int substeps = 1;  ///< integration steps per output sample, >= 1
   DynamicsModel dynamics = DynamicsModel::Reduced;
   double initial_dte = 0.0;                                       ///< [m] y(0)

@@ -138,14 +138,14 @@ OptionStatus DampingOptions::check() const {
       "must be finite and in [0, " + formatNumber(kMaxDampingRatio) + "]";
   auto ratioOk = [](double x) { return std::isfinite(x) && x >= 0.0 && x <= kMaxDampingRatio; };
   switch (model) {
-    case DampingModel::ConstantRatio:
+    case DampingProfile::ConstantRatio:
       if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       break;
-    case DampingModel::ConstantCoefficient:
+    case DampingProfile::ConstantCoefficient:
       if (!nonneg(coefficient))
         return bad("damping.coefficient", coefficient, "must be finite and >= 0 [N*s/m]");
       break;
-    case DampingModel::Piecewise:
+    case DampingProfile::Piecewise:
       if (times.empty()) return bad("damping.times", "[]", "needs at least one segment start");
       if (times.size() != ratios.size())
         return bad("damping.ratios", ratios.size(), "must have as many entries as damping.times");
@@ -156,12 +156,12 @@ OptionStatus DampingOptions::check() const {
         if (!ratioOk(ratios[i]))
           return bad("damping.ratios[" + std::to_string(i) + "]", ratios[i], ratio_rule);
       break;
-    case DampingModel::LoadDependent:
+    case DampingProfile::LoadDependent:
       if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       if (!std::isfinite(load_sensitivity))
         return bad("damping.load_sensitivity", load_sensitivity, "must be finite");
       break;
-    case DampingModel::LoadLinear:
+    case DampingProfile::LoadLinear:
       if (!std::isfinite(c0)) return bad("damping.c0", c0, "must be finite [N*s/m]");
       if (!std::isfinite(c1)) return bad("damping.c1", c1, "must be finite [N*s/m per N*m]");
       break;
@@ -259,8 +259,8 @@ const std::pair<const char*, LoadProfile> kLoad[] = {
     {"trapezoid", LoadProfile::Trapezoid}, {"table", LoadProfile::Table}};
 const std::pair<const char*, DynamicsModel> kDynamics[] = {{"reduced", DynamicsModel::Reduced},
                                                            {"torsional", DynamicsModel::Torsional}};
-const std::pair<const char*, Integrator> kIntegrator[] = {{"rk2", Integrator::RK2},
-                                                          {"rk4", Integrator::RK4}};
+const std::pair<const char*, Integrator> kIntegrator[] = {{"rk2", Integrator::Rk2},
+                                                          {"rk4", Integrator::Rk4}};
 }  // namespace
 
 std::string toString(StiffnessModel m) { return nameOf(m, kStiffness); }

@@ -86,7 +86,7 @@ inline AffineStep affineStep(Integrator method, double h, int substeps, double K
         c1{ca + cb * t1, K1, 0.0};
     const SdofCoefficients f0{c0.C, K0, ff * t0}, fm{cm.C, Km, ff * tm}, f1{c1.C, K1, ff * t1};
     SdofState e1, e2, g;
-    if (method == Integrator::RK4) {
+    if (method == Integrator::Rk4) {
       e1 = rk4Step({1.0, 0.0}, h, c0, cm, c1);
       e2 = rk4Step({0.0, 1.0}, h, c0, cm, c1);
       g = rk4Step({0.0, 0.0}, h, f0, fm, f1);
@@ -246,7 +246,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
 
   LoadTorque load(cfg.load);
   const double t1_mean = load.mean(so.duration);
-  if (cfg.damping.model == DampingModel::LoadDependent && !(std::abs(t1_mean) > 0.0)) {
+  if (cfg.damping.model == DampingProfile::LoadDependent && !(std::abs(t1_mean) > 0.0)) {
     if (error)
       *error = "damping.model = load_dependent: needs a non-zero time-mean load (load.* gives 0)";
     return false;
@@ -344,7 +344,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
   const double q_gain = r2 - r1, det = r1 * r1 * j2 + r2 * r2 * j1;
   SdofState q{r2 * j1 * so.initial_dte / r1, r2 * j1 * so.initial_velocity / r1};
   auto qStep = [&](double hs, double g0, double gm, double g1) {
-    if (so.integrator == Integrator::RK4) {
+    if (so.integrator == Integrator::Rk4) {
       q = {q.y + hs * q.v + hs * hs / 6.0 * (g0 + 2.0 * gm), q.v + hs / 6.0 * (g0 + 4.0 * gm + g1)};
     } else {
       q = {q.y + hs * (q.v + 0.5 * hs * g0), q.v + hs * gm};
@@ -395,7 +395,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
             o.stiffness[i] = k_phys;
             o.mesh_state[i] = state;
           }
-          if (so.integrator == Integrator::RK4 && m == 1) {
+          if (so.integrator == Integrator::Rk4 && m == 1) {
             affineRk4Block(n_end - n, h, K, ca, cb, ff, Tp, &maps, n - n0);
           } else {
             for (Eigen::Index i = n; i < n_end; ++i)
@@ -414,7 +414,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
             o.mesh_state[i] = stiffness.state(o.mesh_phase[i] + kPhaseNudge);
           }
           for (Eigen::Index j = 0; j < cnt; ++j) Kp[j] *= inv_me;
-          if (so.integrator == Integrator::RK4 && m == 1) {
+          if (so.integrator == Integrator::Rk4 && m == 1) {
             affineRk4BlockVaryingK(n_end - n, h, Kp, ca, cb, ff, Tp, &maps, n - n0);
           } else {
             for (Eigen::Index i = n; i < n_end; ++i)
@@ -464,7 +464,7 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
       double* __restrict th1 = o.theta1.data();
       double* __restrict th2 = o.theta2.data();
       const double a1 = r1 * j2 / det, b1 = r2 / det, a2 = -r2 * j1 / det, b2 = r1 / det;
-      const bool fast = so.integrator == Integrator::RK4 && m == 1;
+      const bool fast = so.integrator == Integrator::Rk4 && m == 1;
       const double h6 = h * h / 6.0, hs6 = h / 6.0;
       double qy = q.y, qv = q.v;
       for (Eigen::Index i = n0; i < n1; ++i) {

@@ -256,14 +256,14 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
     if (model == "constant") {
       if (d.has("ratio") && d.has("coefficient"))
         d.fail("damping.coefficient", "give either damping.ratio or damping.coefficient, not both");
-      c.damping.model =
-          d.has("coefficient") ? DampingModel::ConstantCoefficient : DampingModel::ConstantRatio;
+      c.damping.model = d.has("coefficient") ? DampingProfile::ConstantCoefficient
+                                             : DampingProfile::ConstantRatio;
     } else if (model == "piecewise") {
-      c.damping.model = DampingModel::Piecewise;
+      c.damping.model = DampingProfile::Piecewise;
     } else if (model == "load_dependent") {
-      c.damping.model = DampingModel::LoadDependent;
+      c.damping.model = DampingProfile::LoadDependent;
     } else if (model == "load_linear") {
-      c.damping.model = DampingModel::LoadLinear;
+      c.damping.model = DampingProfile::LoadLinear;
     } else {
       d.fail("damping.model", "unknown name " + quoteForMessage(model) +
                                   " (one of: constant, piecewise, load_dependent, load_linear)");
@@ -424,12 +424,12 @@ YAML::Node toYaml(const SimConfig& c) {
   n["load"]["times"] = l.times;
   n["load"]["values"] = l.values;
   auto& d = c.damping;
-  const char* model = d.model == DampingModel::Piecewise       ? "piecewise"
-                      : d.model == DampingModel::LoadDependent ? "load_dependent"
-                      : d.model == DampingModel::LoadLinear    ? "load_linear"
-                                                               : "constant";
+  const char* model = d.model == DampingProfile::Piecewise       ? "piecewise"
+                      : d.model == DampingProfile::LoadDependent ? "load_dependent"
+                      : d.model == DampingProfile::LoadLinear    ? "load_linear"
+                                                                 : "constant";
   n["damping"]["model"] = model;
-  if (d.model == DampingModel::ConstantCoefficient) {
+  if (d.model == DampingProfile::ConstantCoefficient) {
     n["damping"]["coefficient"] = d.coefficient;
   } else {
     n["damping"]["ratio"] = d.ratio;

@@ -24,25 +24,25 @@ class YamlParams : public gear_damping_nodes::ParamSource {
   bool get(const std::string& name, double* v) const override {
     const YAML::Node n = root_[name];
     const Kind k = kind(n);
-    if (k != Kind::kInt && k != Kind::kDouble) return false;
+    if (k != Kind::Int && k != Kind::Double) return false;
     *v = n.as<double>();
     return true;
   }
   bool get(const std::string& name, int* v) const override {
     const YAML::Node n = root_[name];
-    if (kind(n) != Kind::kInt) return false;
+    if (kind(n) != Kind::Int) return false;
     *v = n.as<int>();
     return true;
   }
   bool get(const std::string& name, bool* v) const override {
     const YAML::Node n = root_[name];
-    if (kind(n) != Kind::kBool) return false;
+    if (kind(n) != Kind::Bool) return false;
     *v = n.as<bool>();
     return true;
   }
   bool get(const std::string& name, std::string* v) const override {
     const YAML::Node n = root_[name];
-    if (kind(n) != Kind::kString) return false;
+    if (kind(n) != Kind::String) return false;
     *v = n.as<std::string>();
     return true;
   }
@@ -52,7 +52,7 @@ class YamlParams : public gear_damping_nodes::ParamSource {
     std::vector<double> out;
     for (const auto& e : n) {
       const Kind k = kind(e);
-      if (k != Kind::kInt && k != Kind::kDouble) return false;
+      if (k != Kind::Int && k != Kind::Double) return false;
       out.push_back(e.as<double>());
     }
     *v = out;
@@ -65,21 +65,21 @@ class YamlParams : public gear_damping_nodes::ParamSource {
   }
 
  private:
-  enum class Kind { kNone, kBool, kInt, kDouble, kString, kOther };
+  enum class Kind { None, Bool, Int, Double, String, Other };
   static Kind kind(const YAML::Node& n) {
-    if (!n || !n.IsScalar()) return n ? Kind::kOther : Kind::kNone;
+    if (!n || !n.IsScalar()) return n ? Kind::Other : Kind::None;
     const std::string s = n.Scalar();
-    if (n.Tag() == "!") return Kind::kString;  // quoted
+    if (n.Tag() == "!") return Kind::String;  // quoted
     static const std::regex kBool(
         "true|True|TRUE|false|False|FALSE|yes|Yes|YES|no|No|NO|on|On|ON|off|Off|OFF");
     static const std::regex kInt("[-+]?[0-9]+");
     static const std::regex kDouble(
         "[-+]?([0-9]+\\.?[0-9]*|\\.[0-9]+)([eE][-+]?[0-9]+)?|[-+]?\\.(inf|Inf|INF)|\\.(nan|NaN|"
         "NAN)");
-    if (std::regex_match(s, kBool)) return Kind::kBool;
-    if (std::regex_match(s, kInt)) return Kind::kInt;
-    if (std::regex_match(s, kDouble)) return Kind::kDouble;
-    return Kind::kString;
+    if (std::regex_match(s, kBool)) return Kind::Bool;
+    if (std::regex_match(s, kInt)) return Kind::Int;
+    if (std::regex_match(s, kDouble)) return Kind::Double;
+    return Kind::String;
   }
   YAML::Node root_;
 };
