@@ -34,7 +34,7 @@ void BM_SimulateDefaultRk4SwitchesBetweenSamples(benchmark::State& s) {
 
 void BM_SimulateRk2(benchmark::State& s) {
   gear_sim::SimConfig c;
-  c.simulation.integrator = gear_sim::Integrator::RK2;
+  c.simulation.integrator = gear_sim::Integrator::Rk2;
   runSim(s, c);
 }
 

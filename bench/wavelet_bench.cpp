@@ -42,7 +42,7 @@ using gear_damping_id::MorletCwt;
 constexpr int kScales = 200;
 constexpr double kOmega0 = 6.0;
 constexpr double kSampleRate = 1.0;  // frequencies are relative to fs; throughput does not care
-FftPlanning g_planning = FftPlanning::kMeasure;
+FftPlanning g_planning = FftPlanning::Measure;
 
 std::vector<double> gridFor(long n) {
   return gear_damping_id::logSpacedFrequencies(10.0 * kSampleRate / static_cast<double>(n),
@@ -93,7 +93,7 @@ void BM_Cwt(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n) * kScales);
   state.counters["padded_length"] = static_cast<double>(cwt.paddedSize());
   state.counters["scales"] = kScales;
-  state.SetLabel(g_planning == FftPlanning::kMeasure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
+  state.SetLabel(g_planning == FftPlanning::Measure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
 }
 
 // The FFT lower bound: 200 inverse complex FFTs of the padded length N of BM_Cwt, out of place,
@@ -102,7 +102,7 @@ void BM_FftBound(benchmark::State& state) {
   const long n = state.range(0);
   MorletCwt probe;  // only to get the same padded length
   std::string error;
-  if (!probe.configure(n, kSampleRate, gridFor(n), kOmega0, FftPlanning::kEstimate, &error)) {
+  if (!probe.configure(n, kSampleRate, gridFor(n), kOmega0, FftPlanning::Estimate, &error)) {
     state.SkipWithError(error.c_str());
     return;
   }
@@ -110,8 +110,8 @@ void BM_FftBound(benchmark::State& state) {
   fftw_complex* in = fftw_alloc_complex(static_cast<size_t>(N));
   fftw_complex* out = fftw_alloc_complex(static_cast<size_t>(N));
   // Same flags as MorletCwt, including its 5 s cap on FFTW_MEASURE planning.
-  const unsigned flags = g_planning == FftPlanning::kMeasure ? FFTW_MEASURE : FFTW_ESTIMATE;
-  fftw_set_timelimit(g_planning == FftPlanning::kMeasure ? 5.0 : FFTW_NO_TIMELIMIT);
+  const unsigned flags = g_planning == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE;
+  fftw_set_timelimit(g_planning == FftPlanning::Measure ? 5.0 : FFTW_NO_TIMELIMIT);
   fftw_plan plan = fftw_plan_dft_1d(static_cast<int>(N), in, out, FFTW_BACKWARD, flags);
   std::memset(in, 0, sizeof(fftw_complex) * static_cast<size_t>(N));
   std::memset(out, 0, sizeof(fftw_complex) * static_cast<size_t>(N));
@@ -125,7 +125,7 @@ void BM_FftBound(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n) * kScales);
   state.counters["padded_length"] = static_cast<double>(N);
   state.counters["scales"] = kScales;
-  state.SetLabel(g_planning == FftPlanning::kMeasure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
+  state.SetLabel(g_planning == FftPlanning::Measure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
   fftw_destroy_plan(plan);
   fftw_free(in);
   fftw_free(out);
@@ -159,15 +159,13 @@ void scalogram(benchmark::State& state, gear_damping_id::Precision precision) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n) * kScales);
   state.counters["groups"] = scal.groups();
   state.counters["threads"] = threads;
-  state.SetLabel(g_planning == FftPlanning::kMeasure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
+  state.SetLabel(g_planning == FftPlanning::Measure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
 }
 
-void BM_Scalogram(benchmark::State& state) {
-  scalogram(state, gear_damping_id::Precision::kDouble);
-}
-// Same in single precision (Precision::kSingle: the rows' inverse FFTs in float, like fCWT).
+void BM_Scalogram(benchmark::State& state) { scalogram(state, gear_damping_id::Precision::Double); }
+// Same in single precision (Precision::Single: the rows' inverse FFTs in float, like fCWT).
 void BM_ScalogramSingle(benchmark::State& state) {
-  scalogram(state, gear_damping_id::Precision::kSingle);
+  scalogram(state, gear_damping_id::Precision::Single);
 }
 
 // Per-mode damping without a scalogram (full_scalogram = false: only the rows the fits need):
@@ -208,7 +206,7 @@ int main(int argc, char** argv) {
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     if (std::string(argv[i]) == "--estimate") {
-      g_planning = FftPlanning::kEstimate;
+      g_planning = FftPlanning::Estimate;
     } else {
       args.push_back(argv[i]);
     }

@@ -28,6 +28,8 @@ foreach(src IN LISTS GEAR_UNIT_TESTS)
   target_link_libraries(${name} gear_test_main gear_damping_id_io gear_sim_io gear_ros_conversions
                         gear_id_ros_conversions gear_live_ros_conversions)
   target_compile_options(${name} PRIVATE ${GEAR_WARNINGS})
+  # The nodes' parameter readers (header-only) are tested on the shipped configuration files.
+  target_include_directories(${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/nodes)
   target_compile_definitions(${name} PRIVATE GEAR_SOURCE_DIR="${CMAKE_CURRENT_SOURCE_DIR}"
                              GEAR_TOOL_DIR="$<TARGET_FILE_DIR:analyze>")
   add_dependencies(${name} analyze convert simulate)  # tests of the tools run the executables

@@ -49,6 +49,7 @@
 #include <memory>
 #include <optional>
 
+#include "damping_id_params.hpp"
 #include "gear_damping_id/live_identification.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -67,100 +68,11 @@ constexpr double kSegmentLengthMax = 1e9;
 
 namespace {
 
-struct NodeOptions {
-  gd::IdentificationOptions id;
-  gd::StreamOptions stream;
-  nodes::IntakeOptions intake;
-  bool publish_modeled_response = true;
-  double cumulative_period = 0.1;  // [s] wall: most frequent /gear/damping update
-  int cumulative_segments = 1000;  // last segments in /gear/damping
-  int history_segments = 20000;    // segments kept for ~get_damping (bounded store)
-  int shared_segments = 1000;      // constant/load_law: span of the sliding problem
-  double refine_budget = 0.5;      // refinement while it costs at most this fraction of a core
-  std::string gear_config;         // YAML path; empty: /gear/params
-};
+using NodeOptions = nodes::DampingIdNodeOptions;
 
-// Reads and validates every private parameter; false after ROS_FATAL naming the parameter.
 bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
   nodes::ParamReader p(pnh);
-  std::string formulation = "known", model = "piecewise", refine = "auto";
-  std::string stiffness_shape = "square";
-  int max_iterations = o->id.max_iterations;
-  if (!p.get("formulation", &formulation) || !p.get("model", &model) ||
-      !p.getDouble("segment_length", &o->id.segment_length, "s") ||
-      !p.getDouble("window_length", &o->id.window_length, "s") ||
-      !p.getDouble("t_start", &o->id.t_start, "s") || !p.getDouble("t_end", &o->id.t_end, "s") ||
-      !p.getDouble("max_condition", &o->id.max_condition) || !p.get("refine", &refine) ||
-      !p.getDouble("refine_threshold", &o->id.refine_threshold) ||
-      !p.get("max_iterations", &max_iterations) || !p.get("stiffness_shape", &stiffness_shape) ||
-      !nodes::readIntakeParams(p, &o->intake) ||
-      !p.getDouble("cumulative_period", &o->cumulative_period, "s") ||
-      !p.get("publish_modeled_response", &o->publish_modeled_response) ||
-      !p.get("cumulative_segments", &o->cumulative_segments, "segments") ||
-      !p.get("history_segments", &o->history_segments, "segments") ||
-      !p.get("shared_segments", &o->shared_segments, "segments") ||
-      !p.getDouble("refine_budget", &o->refine_budget, "of one core") ||
-      !p.get("gear_config", &o->gear_config)) {
-    return false;
-  }
-  p.allow("diagnostic_period");  // read by diagnostic_updater
-  if (!p.rejectUnknown()) return false;
-  if (!gd::parseFormulation(formulation, &o->id.formulation)) {
-    ROS_FATAL("~formulation = '%s': must be known, greybox, paper or legacy", formulation.c_str());
-    return false;
-  }
-  if (!gd::parseDampingModel(model, &o->id.model)) {
-    ROS_FATAL("~model = '%s': must be piecewise, constant or load_law", model.c_str());
-    return false;
-  }
-  using R = gd::IdentificationOptions::Refine;
-  if (refine == "auto")
-    o->id.refine = R::Auto;
-  else if (refine == "always")
-    o->id.refine = R::Always;
-  else if (refine == "never")
-    o->id.refine = R::Never;
-  else {
-    ROS_FATAL("~refine = '%s': must be auto, always or never", refine.c_str());
-    return false;
-  }
-  o->id.max_iterations = max_iterations;
-  if (!gd::parseStiffnessShape(stiffness_shape, &o->id.stiffness_shape)) {
-    ROS_FATAL("~stiffness_shape = '%s': must be square, fourier:H (1..16) or table:N (3..32)",
-              stiffness_shape.c_str());
-    return false;
-  }
-  std::string e = o->id.validate();
-  if (e.empty()) {
-    o->stream.segment_length = o->id.segment_length;
-    o->stream.t_start = o->id.t_start;
-    o->stream.t_end = o->id.t_end;
-    nodes::applyIntake(o->intake, &o->stream);
-    e = o->stream.validate();
-  }
-  if (!e.empty()) {
-    ROS_FATAL("%s", nodes::paramError(e).c_str());
-    return false;
-  }
-  for (const auto& [name, v] :
-       {std::pair<const char*, int>{"cumulative_segments", o->cumulative_segments},
-        {"history_segments", o->history_segments},
-        {"shared_segments", o->shared_segments}}) {
-    if (v < 1 || v > 10000000) {
-      ROS_FATAL("~%s = %d: must be in [1, 1e7] [segments]", name, v);
-      return false;
-    }
-  }
-  if (!(o->refine_budget > 0.0 && o->refine_budget <= 1.0)) {
-    ROS_FATAL("~refine_budget = %g: must be in (0, 1] [fraction of one core]", o->refine_budget);
-    return false;
-  }
-  if (!(o->cumulative_period >= 0.0)) {
-    ROS_FATAL("~cumulative_period = %g: must be >= 0 [s]", o->cumulative_period);
-    return false;
-  }
-  ROS_INFO("damping_id_node:%s", p.summary().c_str());
-  return true;
+  return nodes::readDampingIdParameters(p, o);
 }
 
 class DampingIdNode {
@@ -341,9 +253,9 @@ class DampingIdNode {
     }
     gd::StreamOptions stream = o_.stream;
     stream.segment_length = id.segment_length;
-    std::string e = id.validate();
-    if (e.empty()) e = stream.validate();
-    if (!e.empty()) {
+    gear_sim::OptionStatus e = id.check();
+    if (e.ok()) e = stream.check();
+    if (!e.ok()) {
       ROS_ERROR("reconfigure refused: %s", nodes::paramError(e).c_str());
       id = before;
     }

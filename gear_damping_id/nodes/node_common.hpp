@@ -10,11 +10,12 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
@@ -23,20 +24,69 @@
 #include "gear_damping/SignalChunk.h"
 #include "gear_damping_id/stream_assembler.hpp"
 #include "gear_damping_ros/live_conversions.hpp"
+#include "gear_sim/option_status.hpp"
 
 namespace gear_damping_nodes {
+
+/// Where a node's private parameters come from: the parameter server (RosParams), or a YAML
+/// file read the way `rosparam load` types it (the shipped-configuration test). The typed reads
+/// follow roscpp's getParam: a number accepts an integer, an integer, a boolean and a string
+/// accept only their own type.
+class ParamSource {
+ public:
+  virtual ~ParamSource() = default;
+  virtual bool has(const std::string& name) const = 0;
+  virtual bool get(const std::string& name, double* v) const = 0;
+  virtual bool get(const std::string& name, int* v) const = 0;
+  virtual bool get(const std::string& name, bool* v) const = 0;
+  virtual bool get(const std::string& name, std::string* v) const = 0;
+  virtual bool get(const std::string& name, std::vector<double>* v) const = 0;
+  /// Top-level names present (first path component under the private namespace).
+  virtual std::vector<std::string> names() const = 0;
+};
+
+/// The private namespace `pnh` on the parameter server.
+class RosParams : public ParamSource {
+ public:
+  explicit RosParams(const ros::NodeHandle& pnh) : pnh_(pnh) {}
+  bool has(const std::string& name) const override { return pnh_.hasParam(name); }
+  bool get(const std::string& name, double* v) const override { return pnh_.getParam(name, *v); }
+  bool get(const std::string& name, int* v) const override { return pnh_.getParam(name, *v); }
+  bool get(const std::string& name, bool* v) const override { return pnh_.getParam(name, *v); }
+  bool get(const std::string& name, std::string* v) const override {
+    return pnh_.getParam(name, *v);
+  }
+  bool get(const std::string& name, std::vector<double>* v) const override {
+    return pnh_.getParam(name, *v);
+  }
+  std::vector<std::string> names() const override {
+    std::vector<std::string> all, out;
+    ros::param::getParamNames(all);
+    const std::string prefix = pnh_.getNamespace() + "/";
+    for (const auto& n : all) {
+      if (n.compare(0, prefix.size(), prefix) != 0) continue;
+      const std::string key = n.substr(prefix.size());
+      out.push_back(key.substr(0, key.find('/')));
+    }
+    return out;
+  }
+
+ private:
+  ros::NodeHandle pnh_;
+};
 
 /// Reads optional private parameters: absent -> the default (logged once in the summary);
 /// present with the wrong type -> ROS_FATAL naming it (never a silent fallback). Parameter names
 /// read are remembered, so unknown names (typos) in the private namespace can be rejected.
 class ParamReader {
  public:
-  explicit ParamReader(const ros::NodeHandle& pnh) : pnh_(pnh) {}
+  explicit ParamReader(const ros::NodeHandle& pnh) : src_(std::make_shared<RosParams>(pnh)) {}
+  explicit ParamReader(std::shared_ptr<const ParamSource> src) : src_(std::move(src)) {}
 
   template <class T>
   bool get(const std::string& name, T* value, const char* unit = "") {
     known_.insert(name);
-    if (pnh_.hasParam(name) && !pnh_.getParam(name, *value)) {
+    if (src_->has(name) && !src_->get(name, value)) {
       ROS_FATAL("~%s: wrong type (expected %s)", name.c_str(), typeName(*value));
       return false;
     }
@@ -47,7 +97,7 @@ class ParamReader {
   bool getDouble(const std::string& name, double* value, const char* unit = "") {
     known_.insert(name);
     std::string s;
-    if (pnh_.getParam(name, s)) {
+    if (src_->get(name, &s)) {
       if (s == ".inf" || s == "inf")
         *value = std::numeric_limits<double>::infinity();
       else if (s == "-.inf" || s == "-inf")
@@ -64,16 +114,10 @@ class ParamReader {
   void allow(const std::string& name) { known_.insert(name); }
   /// ROS_FATAL naming the first private parameter that no get()/allow() asked for.
   bool rejectUnknown() const {
-    std::vector<std::string> names;
-    ros::param::getParamNames(names);
-    const std::string prefix = pnh_.getNamespace() + "/";
-    for (const auto& n : names) {
-      if (n.compare(0, prefix.size(), prefix) != 0) continue;
-      const std::string key = n.substr(prefix.size());
-      const std::string top = key.substr(0, key.find('/'));
+    for (const auto& top : src_->names()) {
       if (known_.count(top) == 0) {
         ROS_FATAL("~%s: unknown parameter (a typo would otherwise fall back to a default)",
-                  key.c_str());
+                  top.c_str());
         return false;
       }
     }
@@ -100,7 +144,7 @@ class ParamReader {
     o << "]";
     return o.str();
   }
-  ros::NodeHandle pnh_;
+  std::shared_ptr<const ParamSource> src_;
   std::set<std::string> known_;
   std::ostringstream summary_;
 };
@@ -248,18 +292,18 @@ class ChunkIntake {
     }
     const auto status = assembler_.push(c, &why);
     switch (status) {
-      case gear_damping_id::ChunkStatus::kSuspect:
+      case gear_damping_id::ChunkStatus::Suspect:
         last_jump_ = why;
         ROS_WARN_THROTTLE(2.0, "%s", why.c_str());
         break;
-      case gear_damping_id::ChunkStatus::kRejectedNonFinite:
-      case gear_damping_id::ChunkStatus::kRejectedValue:
-      case gear_damping_id::ChunkStatus::kRejectedRate:
-      case gear_damping_id::ChunkStatus::kRejectedMalformed:
+      case gear_damping_id::ChunkStatus::RejectedNonFinite:
+      case gear_damping_id::ChunkStatus::RejectedValue:
+      case gear_damping_id::ChunkStatus::RejectedRate:
+      case gear_damping_id::ChunkStatus::RejectedMalformed:
         ROS_WARN_THROTTLE(2.0, "%s: %s", toString(status), why.c_str());
         break;
-      case gear_damping_id::ChunkStatus::kDuplicate:
-      case gear_damping_id::ChunkStatus::kLate:
+      case gear_damping_id::ChunkStatus::Duplicate:
+      case gear_damping_id::ChunkStatus::Late:
         ROS_WARN_THROTTLE(2.0, "chunk at index %lu ignored: %s",
                           static_cast<unsigned long>(msg.first_index), toString(status));
         break;
@@ -325,8 +369,8 @@ class ChunkIntake {
     s.add("resident memory [MiB]", residentMiB());
     s.add("process id", static_cast<long>(getpid()));
     const auto health = monitor_.update(k, now.toSec(), last_jump_);
-    if (health.level != gear_damping_id::LossMonitor::Level::kOk) {
-      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::kError
+    if (health.level != gear_damping_id::LossMonitor::Level::Ok) {
+      s.mergeSummary(health.level == gear_damping_id::LossMonitor::Level::Error
                          ? diagnostic_msgs::DiagnosticStatus::ERROR
                          : diagnostic_msgs::DiagnosticStatus::WARN,
                      health.message);
@@ -351,15 +395,14 @@ class ChunkIntake {
   std::string last_jump_;
 };
 
-/// A core options error ("field = value: rule", possibly "Struct.field = ...") in the node's
-/// "~field = value: rule" form.
-inline std::string paramError(const std::string& e) {
-  const size_t eq = e.find(" = "), dot = e.find('.');
-  if (dot != std::string::npos && eq != std::string::npos && dot < eq &&
-      std::isupper(static_cast<unsigned char>(e[0]))) {
-    return "~" + e.substr(dot + 1);
-  }
-  return "~" + e;
+/// A core options error in the node's "~param = value: violated `rule`" form, from the
+/// structured status (no message parsing). `rename` maps a core field to the node parameter that
+/// sets it where the names differ (wavelet_node's ~window sets StreamOptions::segment_length).
+inline std::string paramError(const gear_sim::OptionStatus& s,
+                              const std::map<std::string, std::string>& rename = {}) {
+  const auto it = rename.find(s.field);
+  const std::string& name = it == rename.end() ? s.field : it->second;
+  return "~" + name + " = " + s.value + ": violated `" + s.rule + "`";
 }
 
 }  // namespace gear_damping_nodes

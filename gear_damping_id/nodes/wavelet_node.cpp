@@ -28,6 +28,7 @@
 #include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
 
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -36,71 +37,19 @@
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
 #include "node_common.hpp"
+#include "wavelet_params.hpp"
 
 namespace gd = gear_damping_id;
 namespace nodes = gear_damping_nodes;
 
 namespace {
 
-struct NodeOptions {
-  gd::WaveletOptions wavelet;
-  gd::StreamOptions stream;
-  double window = 0.1;           // [s] > 0
-  double analysis_budget = 0.8;  // [fraction of one core] above it, windows are skipped
-  int min_window_samples = 256;  // [samples]
-  nodes::IntakeOptions intake;
-};
+using NodeOptions = nodes::WaveletNodeOptions;
+using nodes::kStreamParams;
 
 bool loadParameters(const ros::NodeHandle& pnh, NodeOptions* o) {
   nodes::ParamReader p(pnh);
-  gd::WaveletOptions& w = o->wavelet;
-  int n_scales = w.n_scales, max_modes = w.max_modes;
-  if (!p.getDouble("window", &o->window, "s") ||
-      !p.get("min_window_samples", &o->min_window_samples, "samples") ||
-      !p.getDouble("analysis_budget", &o->analysis_budget, "of one core") ||
-      !p.getDouble("f_min", &w.f_min, "Hz") || !p.getDouble("f_max", &w.f_max, "Hz") ||
-      !p.get("n_scales", &n_scales) || !p.getDouble("omega0", &w.omega0) ||
-      !p.getDouble("peak_omega0", &w.peak_omega0) || !p.getDouble("fit_omega0", &w.fit_omega0) ||
-      !p.getDouble("max_fit_omega0", &w.max_fit_omega0) ||
-      !p.getDouble("peak_prominence", &w.peak_prominence) ||
-      !p.getDouble("min_separation_hz", &w.min_separation_hz, "Hz") ||
-      !p.get("max_modes", &max_modes) || !p.getDouble("coi_factor", &w.coi_factor) ||
-      !p.getDouble("floor_factor", &w.floor_factor) || !p.getDouble("min_r2", &w.min_r2) ||
-      !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
-      !p.get("order_frequencies", &w.order_frequencies, "Hz") ||
-      !p.get("mode_frequencies", &w.mode_frequencies, "Hz") ||
-      !nodes::readIntakeParams(p, &o->intake)) {
-    return false;
-  }
-  p.allow("diagnostic_period");
-  if (!p.rejectUnknown()) return false;
-  w.n_scales = n_scales;
-  w.max_modes = max_modes;
-  w.full_scalogram = false;  // no figure here: only the rows the fits need
-  if (!(o->window > 0.0) || !std::isfinite(o->window)) {
-    ROS_FATAL("~window = %g: must be > 0 and finite [s] (the node buffers one window)", o->window);
-    return false;
-  }
-  if (!(o->analysis_budget > 0.0 && o->analysis_budget <= 1.0)) {
-    ROS_FATAL("~analysis_budget = %g: must be in (0, 1] [fraction of one core]",
-              o->analysis_budget);
-    return false;
-  }
-  if (o->min_window_samples < 64) {
-    ROS_FATAL("~min_window_samples = %d: must be >= 64 [samples]", o->min_window_samples);
-    return false;
-  }
-  o->stream.segment_length = o->window;
-  nodes::applyIntake(o->intake, &o->stream);
-  o->stream.context = 0;
-  std::string e = w.validate();
-  if (e.empty()) e = o->stream.validate();
-  if (!e.empty()) {
-    ROS_FATAL("%s", nodes::paramError(e).c_str());
-    return false;
-  }
-  ROS_INFO("wavelet_node:%s", p.summary().c_str());
-  return true;
+  return nodes::readWaveletParameters(p, o);
 }
 
 class WaveletNode {
@@ -193,10 +142,10 @@ class WaveletNode {
     p.window = c.window;
     gd::StreamOptions stream = o_.stream;
     stream.segment_length = p.window;
-    std::string e = p.wavelet.validate();
-    if (e.empty()) e = stream.validate();
-    if (!e.empty()) {
-      ROS_ERROR("reconfigure refused: %s", nodes::paramError(e).c_str());
+    gear_sim::OptionStatus e = p.wavelet.check();
+    if (e.ok()) e = stream.check();
+    if (!e.ok()) {
+      ROS_ERROR("reconfigure refused: %s", nodes::paramError(e, kStreamParams).c_str());
       p = before;
     }
     c.f_min = p.wavelet.f_min;  // what the server reports back

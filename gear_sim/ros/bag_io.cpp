@@ -223,6 +223,207 @@ std::string chunkLayoutError(const rosbag::MessageInstance& m) {
   return {};
 }
 
+// The SignalChunk topic to read: `topic` when given (it must exist and have that type), else the
+// only one in the bag. Also notes the first GearParams topic.
+bool chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
+                 BagSignalInfo* out, std::string* error) {
+  rosbag::View all(bag);
+  std::vector<std::string> chunk_topics, params_topics;
+  std::string topic_type;
+  for (const rosbag::ConnectionInfo* c : all.getConnections()) {
+    if (c->datatype == kChunkType &&
+        std::find(chunk_topics.begin(), chunk_topics.end(), c->topic) == chunk_topics.end())
+      chunk_topics.push_back(c->topic);
+    if (c->datatype == kParamsType &&
+        std::find(params_topics.begin(), params_topics.end(), c->topic) == params_topics.end())
+      params_topics.push_back(c->topic);
+    if (c->topic == topic) topic_type = c->datatype;
+  }
+  if (!params_topics.empty()) out->params_topic = params_topics.front();
+  if (!topic.empty()) {
+    if (topic_type.empty()) {
+      *error = path + ": no topic " + gear_sim::quoteForMessage(topic) + " in the bag";
+      return false;
+    }
+    if (topic_type != kChunkType) {
+      *error = path + ": topic " + gear_sim::quoteForMessage(topic) + " has type " +
+               gear_sim::quoteForMessage(topic_type) + ", not " + kChunkType;
+      return false;
+    }
+    out->topic = topic;
+  } else if (chunk_topics.size() == 1) {
+    out->topic = chunk_topics.front();
+  } else if (chunk_topics.empty()) {
+    *error = path + ": no topic of type " + std::string(kChunkType) + " in the bag";
+    return false;
+  } else {
+    std::string list;
+    for (const auto& t : chunk_topics)
+      list += (list.empty() ? "" : ", ") + gear_sim::quoteForMessage(t);
+    *error = path + ": several topics of type " + std::string(kChunkType) + " (" + list +
+             "): choose one with --topic";
+    return false;
+  }
+  return true;
+}
+
+// The last GearParams message of out->params_topic (if any) into out->params, or the reason
+// it is unusable into out->params_error.
+void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
+  if (out->params_topic.empty()) return;
+  rosbag::View pv(bag, rosbag::TopicQuery(out->params_topic));
+  gear_damping::GearParams::ConstPtr last;
+  for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
+  std::string e;
+  if (last && fromMsg(*last, &out->params, &e)) {
+    out->has_params = true;
+  } else {
+    out->params_error =
+        gear_sim::quoteForMessage(out->params_topic) + ": " + (last ? e : "no readable message");
+  }
+}
+
+// The pass over the chunks of one topic: each chunk is checked on its own and against the
+// previous ones (rate, channels, increasing indices), gaps are counted, and the totals,
+// plausibility warnings and channel flags are filled in at the end.
+class ChunkScan {
+ public:
+  ChunkScan(const std::string& path, BagSignalInfo* out) : path_(path), out_(*out) {}
+
+  bool add(const rosbag::MessageInstance& m, std::string* error) {
+    if (m.getDataType() == kChunkType) {
+      if (const std::string bad = chunkLayoutError(m); !bad.empty()) {
+        *error = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
+                 std::to_string(out_.chunks + 1) + ": corrupt " + kChunkType + " (" + bad + ")";
+        return false;
+      }
+    }
+    const auto c = m.instantiate<gear_damping::SignalChunk>();
+    const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
+                              std::to_string(out_.chunks + 1) + " (first_index " +
+                              (c ? std::to_string(c->first_index) : std::string("?")) + ")";
+    if (!c) {
+      *error = where + ": not a " + std::string(kChunkType);
+      return false;
+    }
+    if (!checkChunk(*c, where, error)) return false;
+    if (out_.chunks == 0) {
+      out_.sample_rate = c->sample_rate;
+      out_.first_index = c->first_index;
+      channels_ = channelSet(*c);
+    } else if (!checkSequence(*c, where, error)) {
+      return false;
+    }
+    next_ = c->first_index + c->dte.size();
+    out_.real_samples += static_cast<std::int64_t>(c->dte.size());
+    chunk_max_.push_back(countImplausible(*c, &out_));
+    for (double k : c->stiffness)
+      if (std::isfinite(k)) k_sum_ += k, ++k_count_;
+    ++out_.chunks;
+    return true;
+  }
+
+  bool finish(std::string* error) {
+    if (out_.chunks == 0) {
+      *error = path_ + ": topic " + gear_sim::quoteForMessage(out_.topic) + " has no messages";
+      return false;
+    }
+    if (out_.gaps > kMaxGapWarnings)
+      out_.warnings.push_back(std::to_string(out_.gaps) + " gaps in all, " +
+                              std::to_string(out_.gap_samples) + " samples missing");
+    out_.samples = static_cast<std::int64_t>(next_ - out_.first_index);
+    if (static_cast<double>(out_.gap_samples) >
+        kMaxGapRatio * static_cast<double>(out_.real_samples)) {
+      *error = largest_gap_at_ + ": gaps hold " + std::to_string(out_.gap_samples) +
+               " missing samples, more than the " + std::to_string(out_.real_samples) +
+               " present (at most " + formatNumber(kMaxGapRatio) +
+               "x): a corrupt first_index? The largest gap, of " + std::to_string(largest_gap_) +
+               " samples, ends before this message";
+      return false;
+    }
+    addPlausibilityWarnings(chunk_max_, &out_);
+    if (k_count_ > 0) out_.stiffness_mean = k_sum_ / static_cast<double>(k_count_);
+    out_.dte_velocity = channels_ & 1u;
+    out_.stiffness = channels_ & 2u;
+    out_.torque = channels_ & 4u;
+    out_.mesh_state = channels_ & 8u;
+    out_.mesh_phase = channels_ & 16u;
+    out_.damping = channels_ & 32u;
+    return true;
+  }
+
+ private:
+  // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
+  static bool checkChunk(const gear_damping::SignalChunk& c, const std::string& where,
+                         std::string* error) {
+    if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
+      *error = where + ": sample_rate " + formatNumber(c.sample_rate) + " is not a positive number";
+      return false;
+    }
+    if (c.dte.empty()) {
+      *error = where + ": no dte samples";
+      return false;
+    }
+    if (const std::string bad = channelLengthError(c); !bad.empty()) {
+      *error = where + ": channel " + bad + " has " + "a length other than dte's (" +
+               std::to_string(c.dte.size()) + ")";
+      return false;
+    }
+    if (c.first_index >= kMaxSampleIndex || c.dte.size() > kMaxSampleIndex - c.first_index) {
+      *error = where + ": sample indices beyond 2^53 (" + std::to_string(kMaxSampleIndex) +
+               "): corrupt or wrapped-around first_index";
+      return false;
+    }
+    return true;
+  }
+
+  // A later chunk against the first ones: same rate and channels, indices increasing; a gap
+  // is counted and (the first kMaxGapWarnings) warned about.
+  bool checkSequence(const gear_damping::SignalChunk& c, const std::string& where,
+                     std::string* error) {
+    if (c.sample_rate != out_.sample_rate) {
+      *error = where + ": sample_rate changed from " + formatNumber(out_.sample_rate) + " to " +
+               formatNumber(c.sample_rate) + " Hz";
+      return false;
+    }
+    if (channelSet(c) != channels_) {
+      *error = where + ": carries a different set of channels than the first chunk";
+      return false;
+    }
+    if (c.first_index < next_) {
+      *error = where + ": sample indices not increasing (the previous chunk ended at " +
+               std::to_string(next_ - 1) + "): a duplicated or out-of-order chunk";
+      return false;
+    }
+    if (c.first_index > next_) {
+      const std::uint64_t missing = c.first_index - next_;
+      ++out_.gaps;
+      if (missing > largest_gap_) {
+        largest_gap_ = missing;
+        largest_gap_at_ = where;
+      }
+      out_.gap_samples += static_cast<std::int64_t>(missing);
+      if (out_.gaps <= kMaxGapWarnings)
+        out_.warnings.push_back("gap of " + std::to_string(missing) + " samples before " +
+                                gear_sim::quoteForMessage(out_.topic) + " message " +
+                                std::to_string(out_.chunks + 1) + " (indices " +
+                                std::to_string(next_) + " to " + std::to_string(c.first_index - 1) +
+                                "): the segments there are not identifiable");
+    }
+    return true;
+  }
+
+  const std::string& path_;
+  BagSignalInfo& out_;
+  std::uint64_t next_ = 0;  // global index after the previous chunk
+  unsigned channels_ = 0;
+  double k_sum_ = 0.0;
+  long long k_count_ = 0;
+  std::uint64_t largest_gap_ = 0;
+  std::string largest_gap_at_;
+  std::vector<double> chunk_max_;  // max |dte| per chunk, for the outlier check
+};
+
 }  // namespace
 
 bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
@@ -235,165 +436,13 @@ bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalI
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
-    rosbag::View all(bag);
-    std::vector<std::string> chunk_topics, params_topics;
-    std::string topic_type;
-    for (const rosbag::ConnectionInfo* c : all.getConnections()) {
-      if (c->datatype == kChunkType &&
-          std::find(chunk_topics.begin(), chunk_topics.end(), c->topic) == chunk_topics.end())
-        chunk_topics.push_back(c->topic);
-      if (c->datatype == kParamsType &&
-          std::find(params_topics.begin(), params_topics.end(), c->topic) == params_topics.end())
-        params_topics.push_back(c->topic);
-      if (c->topic == topic) topic_type = c->datatype;
-    }
-    if (!topic.empty()) {
-      if (topic_type.empty()) {
-        *error = path + ": no topic " + gear_sim::quoteForMessage(topic) + " in the bag";
-        return false;
-      }
-      if (topic_type != kChunkType) {
-        *error = path + ": topic " + gear_sim::quoteForMessage(topic) + " has type " +
-                 gear_sim::quoteForMessage(topic_type) + ", not " + kChunkType;
-        return false;
-      }
-      out.topic = topic;
-    } else if (chunk_topics.size() == 1) {
-      out.topic = chunk_topics.front();
-    } else if (chunk_topics.empty()) {
-      *error = path + ": no topic of type " + std::string(kChunkType) + " in the bag";
-      return false;
-    } else {
-      std::string list;
-      for (const auto& t : chunk_topics)
-        list += (list.empty() ? "" : ", ") + gear_sim::quoteForMessage(t);
-      *error = path + ": several topics of type " + std::string(kChunkType) + " (" + list +
-               "): choose one with --topic";
-      return false;
-    }
-    if (!params_topics.empty()) {
-      out.params_topic = params_topics.front();
-      rosbag::View pv(bag, rosbag::TopicQuery(out.params_topic));
-      gear_damping::GearParams::ConstPtr last;
-      for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
-      std::string e;
-      if (last && fromMsg(*last, &out.params, &e)) {
-        out.has_params = true;
-      } else {
-        out.params_error =
-            gear_sim::quoteForMessage(out.params_topic) + ": " + (last ? e : "no readable message");
-      }
-    }
+    if (!chooseTopic(bag, path, topic, &out, error)) return false;
+    readBagParams(bag, &out);
+    ChunkScan scan(path, &out);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
-    std::uint64_t next = 0;  // global index after the previous chunk
-    unsigned channels = 0;
-    double k_sum = 0.0;
-    long long k_count = 0;
-    std::uint64_t largest_gap = 0;
-    std::string largest_gap_at;
-    std::vector<double> chunk_max;  // max |dte| per chunk, for the outlier check
-    for (const rosbag::MessageInstance& m : view) {
-      if (m.getDataType() == kChunkType) {
-        if (const std::string bad = chunkLayoutError(m); !bad.empty()) {
-          *error = path + ": " + gear_sim::quoteForMessage(out.topic) + " message " +
-                   std::to_string(out.chunks + 1) + ": corrupt " + kChunkType + " (" + bad + ")";
-          return false;
-        }
-      }
-      const auto c = m.instantiate<gear_damping::SignalChunk>();
-      const std::string where = path + ": " + gear_sim::quoteForMessage(out.topic) + " message " +
-                                std::to_string(out.chunks + 1) + " (first_index " +
-                                (c ? std::to_string(c->first_index) : std::string("?")) + ")";
-      if (!c) {
-        *error = where + ": not a " + std::string(kChunkType);
-        return false;
-      }
-      if (!(c->sample_rate > 0.0) || !std::isfinite(c->sample_rate)) {
-        *error =
-            where + ": sample_rate " + formatNumber(c->sample_rate) + " is not a positive number";
-        return false;
-      }
-      if (c->dte.empty()) {
-        *error = where + ": no dte samples";
-        return false;
-      }
-      if (const std::string bad = channelLengthError(*c); !bad.empty()) {
-        *error = where + ": channel " + bad + " has " + "a length other than dte's (" +
-                 std::to_string(c->dte.size()) + ")";
-        return false;
-      }
-      if (c->first_index >= kMaxSampleIndex || c->dte.size() > kMaxSampleIndex - c->first_index) {
-        *error = where + ": sample indices beyond 2^53 (" + std::to_string(kMaxSampleIndex) +
-                 "): corrupt or wrapped-around first_index";
-        return false;
-      }
-      if (out.chunks == 0) {
-        out.sample_rate = c->sample_rate;
-        out.first_index = c->first_index;
-        channels = channelSet(*c);
-      } else {
-        if (c->sample_rate != out.sample_rate) {
-          *error = where + ": sample_rate changed from " + formatNumber(out.sample_rate) + " to " +
-                   formatNumber(c->sample_rate) + " Hz";
-          return false;
-        }
-        if (channelSet(*c) != channels) {
-          *error = where + ": carries a different set of channels than the first chunk";
-          return false;
-        }
-        if (c->first_index < next) {
-          *error = where + ": sample indices not increasing (the previous chunk ended at " +
-                   std::to_string(next - 1) + "): a duplicated or out-of-order chunk";
-          return false;
-        }
-        if (c->first_index > next) {
-          const std::uint64_t missing = c->first_index - next;
-          ++out.gaps;
-          if (missing > largest_gap) {
-            largest_gap = missing;
-            largest_gap_at = where;
-          }
-          out.gap_samples += static_cast<std::int64_t>(missing);
-          if (out.gaps <= kMaxGapWarnings)
-            out.warnings.push_back(
-                "gap of " + std::to_string(missing) + " samples before " +
-                gear_sim::quoteForMessage(out.topic) + " message " +
-                std::to_string(out.chunks + 1) + " (indices " + std::to_string(next) + " to " +
-                std::to_string(c->first_index - 1) + "): the segments there are not identifiable");
-        }
-      }
-      next = c->first_index + c->dte.size();
-      out.real_samples += static_cast<std::int64_t>(c->dte.size());
-      chunk_max.push_back(countImplausible(*c, &out));
-      for (double k : c->stiffness)
-        if (std::isfinite(k)) k_sum += k, ++k_count;
-      ++out.chunks;
-    }
-    if (out.chunks == 0) {
-      *error = path + ": topic " + gear_sim::quoteForMessage(out.topic) + " has no messages";
-      return false;
-    }
-    if (out.gaps > kMaxGapWarnings)
-      out.warnings.push_back(std::to_string(out.gaps) + " gaps in all, " +
-                             std::to_string(out.gap_samples) + " samples missing");
-    out.samples = static_cast<std::int64_t>(next - out.first_index);
-    if (static_cast<double>(out.gap_samples) >
-        kMaxGapRatio * static_cast<double>(out.real_samples)) {
-      *error = largest_gap_at + ": gaps hold " + std::to_string(out.gap_samples) +
-               " missing samples, more than the " + std::to_string(out.real_samples) +
-               " present (at most " + formatNumber(kMaxGapRatio) +
-               "x): a corrupt first_index? The largest gap, of " + std::to_string(largest_gap) +
-               " samples, ends before this message";
-      return false;
-    }
-    addPlausibilityWarnings(chunk_max, &out);
-    if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
-    out.dte_velocity = channels & 1u;
-    out.stiffness = channels & 2u;
-    out.torque = channels & 4u;
-    out.mesh_state = channels & 8u;
-    out.mesh_phase = channels & 16u;
-    out.damping = channels & 32u;
+    for (const rosbag::MessageInstance& m : view)
+      if (!scan.add(m, error)) return false;
+    if (!scan.finish(error)) return false;
   } catch (const std::exception& e) {
     *error = openError(path, e);
     return false;

@@ -34,156 +34,194 @@ bool endsWith(const std::string& s, const std::string& suffix) {
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-}  // namespace
-
-int run(int argc, char** argv) {
-  CLI::App app{"Simulate a spur gear pair (Yousfi et al. 2022) and write its DTE and signals."};
+// The command line.
+struct Options {
   std::string config_path, output;
   std::optional<double> duration, sample_rate, snr;
   std::optional<unsigned long> seed;
   long chunk_size = 1000;
-  app.add_option("--config", config_path, "YAML configuration (see config/table1.yaml)")
+  bool free_response = false;
+  bool rig = false;  // rig output (docs/rig.md): what shaft encoders and a torque meter record
+  std::string edges_prefix;
+  std::optional<long> counts;
+  bool no_output = false;
+};
+
+// Each step returns an exit code: kContinue to go on, else what run() returns.
+constexpr int kContinue = -1;
+
+int parse(int argc, char** argv, Options* o) {
+  CLI::App app{"Simulate a spur gear pair (Yousfi et al. 2022) and write its DTE and signals."};
+  app.add_option("--config", o->config_path, "YAML configuration (see config/table1.yaml)")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--output", output, "output file: .csv (docs/method.md §6 columns) or .bag")
+  app.add_option("--output", o->output, "output file: .csv (docs/method.md §6 columns) or .bag")
       ->required();
-  app.add_option("--duration", duration, "override simulation.duration [s]");
-  app.add_option("--sample-rate", sample_rate, "override simulation.sample_rate [Hz]");
-  app.add_option("--noise-snr", snr, "override simulation.noise_snr_db [dB] (inf = no noise)");
-  app.add_option("--seed", seed, "override simulation.seed");
-  app.add_option("--chunk-size", chunk_size, "samples per SignalChunk in a bag (default 1000)")
+  app.add_option("--duration", o->duration, "override simulation.duration [s]");
+  app.add_option("--sample-rate", o->sample_rate, "override simulation.sample_rate [Hz]");
+  app.add_option("--noise-snr", o->snr, "override simulation.noise_snr_db [dB] (inf = no noise)");
+  app.add_option("--seed", o->seed, "override simulation.seed");
+  app.add_option("--chunk-size", o->chunk_size, "samples per SignalChunk in a bag (default 1000)")
       ->check(CLI::Range(1L, gear_sim_ros::kMaxChunkSize));
-  bool free_response = false;
-  app.add_flag("--free-response", free_response,
+  app.add_flag("--free-response", o->free_response,
                "write the free (homogeneous) response y'' + C y' + K y = 0 of the case instead: "
                "the difference of two runs, from the static deflection under the mean load and "
                "from the configured initial state (the start-up transient without the forced "
                "part; what the wavelet validation needs, docs/wavelet.md)");
-  // Rig output (docs/rig.md): what shaft encoders and a torque meter would record.
-  bool rig = false;
-  std::string edges_prefix;
-  std::optional<long> counts;
-  app.add_flag("--rig", rig,
+  app.add_flag("--rig", o->rig,
                "write the rig record instead (also when the YAML says encoder.enabled: true): "
                "CSV columns time, theta1, theta2, torque, or a bag of sensor_msgs/JointState "
                "(/rig/joint_states, joints pinion_joint, gear_joint) and "
                "geometry_msgs/WrenchStamped (/rig/torque, torque.z) messages, one per sample; "
                "the encoder section sets quantisation, zeros and torque noise");
-  app.add_option("--edges", edges_prefix,
+  app.add_option("--edges", o->edges_prefix,
                  "also write the encoders' edge times to PREFIX1.csv and PREFIX2.csv (column "
                  "time; counts per revolution from encoder.counts_per_rev1/2 or --counts-per-rev)");
-  app.add_option("--counts-per-rev", counts,
+  app.add_option("--counts-per-rev", o->counts,
                  "override encoder.counts_per_rev1 and 2 (0 = exact angles)")
       ->check(CLI::Range(0L, 1L << 40));
-  bool no_output = false;
-  app.add_flag("--quiet,-q", no_output, "no progress line and no closing note on stderr");
+  app.add_flag("--quiet,-q", o->no_output, "no progress line and no closing note on stderr");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 1;  // --help is 0; every CLI11 error is invalid input
   }
-
-  if (!endsWith(output, ".csv") && !endsWith(output, ".bag")) {
-    std::cerr << "simulate: --output " << gear_sim::quoteForMessage(output)
+  if (!endsWith(o->output, ".csv") && !endsWith(o->output, ".bag")) {
+    std::cerr << "simulate: --output " << gear_sim::quoteForMessage(o->output)
               << ": must end in .csv or .bag\n";
     return 1;
   }
-  gear_sim::SimConfig c;
+  return kContinue;
+}
+
+// The configuration and the encoder section, with the command line's overrides.
+int load(Options* o, gear_sim::SimConfig* c, gear_sim::EncoderOptions* enc) {
   std::string error;
-  if (!gear_sim::loadSimConfigFile(config_path, &c, &error)) {
+  if (!gear_sim::loadSimConfigFile(o->config_path, c, &error) ||
+      !gear_sim::loadEncoderOptionsFile(o->config_path, enc, &error)) {
     std::cerr << "simulate: " << error << "\n";
     return 1;
   }
-  gear_sim::EncoderOptions enc;
-  if (!gear_sim::loadEncoderOptionsFile(config_path, &enc, &error)) {
-    std::cerr << "simulate: " << error << "\n";
-    return 1;
-  }
-  if (counts) enc.counts_per_rev1 = enc.counts_per_rev2 = *counts;
-  rig = rig || enc.enabled;
-  if (rig && free_response) {
+  if (o->counts) enc->counts_per_rev1 = enc->counts_per_rev2 = *o->counts;
+  o->rig = o->rig || enc->enabled;
+  if (o->rig && o->free_response) {
     std::cerr << "simulate: --rig and --free-response exclude each other\n";
     return 1;
   }
-  if (!edges_prefix.empty() && (enc.counts_per_rev1 <= 0 || enc.counts_per_rev2 <= 0)) {
+  if (!o->edges_prefix.empty() && (enc->counts_per_rev1 <= 0 || enc->counts_per_rev2 <= 0)) {
     std::cerr << "simulate: --edges needs counts per revolution (encoder.counts_per_rev1/2 or "
                  "--counts-per-rev)\n";
     return 1;
   }
-  if (duration) c.simulation.duration = *duration;
-  if (sample_rate) c.simulation.sample_rate = *sample_rate;
-  if (snr) c.simulation.noise_snr_db = *snr;
-  if (seed) c.simulation.seed = *seed;
-  // Progress on a terminal for long runs: simulation (x3 for --free-response), then writing.
-  const double steps = free_response ? 4.0 : 2.0;
-  gear_sim::ProgressBar progress("simulate", steps, !no_output);
-  progress.set(0.0, "simulating " + std::to_string(c.simulation.duration) + " s");
-  gear_sim::SignalTable t;
-  if (!gear_sim::simulate(c, &t, &error)) {  // validates the overridden values too
+  if (o->duration) c->simulation.duration = *o->duration;
+  if (o->sample_rate) c->simulation.sample_rate = *o->sample_rate;
+  if (o->snr) c->simulation.noise_snr_db = *o->snr;
+  if (o->seed) c->simulation.seed = *o->seed;
+  return kContinue;
+}
+
+// The case's record, or with --free-response its free decay: eq. (4) is linear in y, so two
+// runs differing only in the initial state differ by exactly the free response. Noise, if
+// configured, is left out of the difference and added once.
+int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::ProgressBar* progress,
+                 gear_sim::SignalTable* t) {
+  std::string error;
+  progress->set(0.0, "simulating " + std::to_string(c.simulation.duration) + " s");
+  if (!gear_sim::simulate(c, t, &error)) {  // validates the overridden values too
     std::cerr << "simulate: " << error << "\n";
     return 1;
   }
-  if (free_response) {
-    // Eq. (4) is linear in y: two runs differing only in the initial state differ by exactly
-    // the free response. Noise, if configured, is left out of the difference and added once.
-    gear_sim::SimConfig quiet = c, shifted;
-    quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
-    shifted = quiet;
-    const double w0 = 2.0 * M_PI * gear_sim::naturalFrequencyHz(c.gears, c.mesh);
-    shifted.simulation.initial_dte =
-        c.simulation.initial_dte + c.gears.forceFactor() * t.torque.mean() / (w0 * w0);
-    gear_sim::SignalTable a, b;
-    progress.set(1.0, "free response");
-    if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
-      std::cerr << "simulate: " << error << "\n";
-      return 1;
-    }
-    const Eigen::VectorXd noise = t.dte - a.dte;  // the configured measurement noise (or 0)
-    t.dte = b.dte - a.dte + noise;
-    t.dte_velocity = b.dte_velocity - a.dte_velocity;
-    t.torque.setZero();  // no forcing in the free response
+  if (!o.free_response) return kContinue;
+  gear_sim::SimConfig quiet = c, shifted;
+  quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
+  shifted = quiet;
+  const double w0 = 2.0 * M_PI * gear_sim::naturalFrequencyHz(c.gears, c.mesh);
+  shifted.simulation.initial_dte =
+      c.simulation.initial_dte + c.gears.forceFactor() * t->torque.mean() / (w0 * w0);
+  gear_sim::SignalTable a, b;
+  progress->set(1.0, "free response");
+  if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
+    std::cerr << "simulate: " << error << "\n";
+    return 1;
   }
-  progress.set(steps - 1.0, "writing " + output);
-  // Written next to the target and renamed on success: no partial file that looks complete
-  // (writeSignalBag does so itself).
+  const Eigen::VectorXd noise = t->dte - a.dte;  // the configured measurement noise (or 0)
+  t->dte = b.dte - a.dte + noise;
+  t->dte_velocity = b.dte_velocity - a.dte_velocity;
+  t->torque.setZero();  // no forcing in the free response
+  return kContinue;
+}
+
+// A CSV written next to the target and renamed on success: no partial file that looks complete
+// (the bag writers do so themselves).
+template <class Write>
+bool writeCsvStaged(const std::string& output, Write&& write, std::string* error) {
+  const std::string tmp = output + ".partial";
+  const bool ok = write(tmp) && gear_sim::commitFile(tmp, output, error);
+  if (!ok) std::remove(tmp.c_str());
+  return ok;
+}
+
+// The edge files (--edges), then the record: rig or signal, CSV or bag.
+int write(const Options& o, const gear_sim::SimConfig& c, const gear_sim::EncoderOptions& enc,
+          const gear_sim::SignalTable& t) {
+  std::string error;
   const gear_sim::GearModel model = c.gearModel();
-  bool ok;
-  if (!edges_prefix.empty()) {
+  if (!o.edges_prefix.empty()) {
     for (int shaft : {1, 2}) {
       const auto e = gear_sim::encoderEdges(c, enc, t, shaft,
                                             shaft == 1 ? enc.counts_per_rev1 : enc.counts_per_rev2);
-      const std::string path = edges_prefix + std::to_string(shaft) + ".csv";
+      const std::string path = o.edges_prefix + std::to_string(shaft) + ".csv";
       if (!gear_sim::writeEdgeCsv(path, e, &error)) {
         std::cerr << "simulate: " << error << "\n";
         return 2;
       }
     }
   }
-  if (rig) {
+  const bool csv = endsWith(o.output, ".csv");
+  bool ok;
+  if (o.rig) {
     const gear_sim::SignalTable r = gear_sim::rigRecord(c, enc, t);
-    if (endsWith(output, ".csv")) {
-      const std::string tmp = output + ".partial";
-      ok = gear_sim::writeRigCsv(tmp, r, &error) && gear_sim::commitFile(tmp, output, &error);
-      if (!ok) std::remove(tmp.c_str());
-    } else {
-      ok = gear_sim_ros::writeRigBag(output, r, &model, {}, &error);
-    }
-  } else if (endsWith(output, ".csv")) {
-    const std::string tmp = output + ".partial";
-    ok = gear_sim::writeSignalCsv(tmp, t, &error) && gear_sim::commitFile(tmp, output, &error);
-    if (!ok) std::remove(tmp.c_str());
+    ok =
+        csv ? writeCsvStaged(
+                  o.output,
+                  [&](const std::string& p) { return gear_sim::writeRigCsv(p, r, &error); }, &error)
+            : gear_sim_ros::writeRigBag(o.output, r, &model, {}, &error);
   } else {
-    ok = gear_sim_ros::writeSignalBag(output, t, c.simulation.sample_rate, &model, chunk_size,
-                                      &error);
+    ok = csv ? writeCsvStaged(
+                   o.output,
+                   [&](const std::string& p) { return gear_sim::writeSignalCsv(p, t, &error); },
+                   &error)
+             : gear_sim_ros::writeSignalBag(o.output, t, c.simulation.sample_rate, &model,
+                                            o.chunk_size, &error);
   }
-  progress.finish();
   if (!ok) {
-    std::cerr << "simulate: " << (error.empty() ? output + ": cannot write" : error) << "\n";
+    std::cerr << "simulate: " << (error.empty() ? o.output + ": cannot write" : error) << "\n";
     return 2;
   }
-  if (!no_output)
+  return kContinue;
+}
+
+}  // namespace
+
+// parse -> load -> simulate -> write, each step returning an exit code.
+int run(int argc, char** argv) {
+  Options o;
+  if (const int code = parse(argc, argv, &o); code != kContinue) return code;
+  gear_sim::SimConfig c;
+  gear_sim::EncoderOptions enc;
+  if (const int code = load(&o, &c, &enc); code != kContinue) return code;
+  // Progress on a terminal for long runs: simulation (x3 for --free-response), then writing.
+  const double steps = o.free_response ? 4.0 : 2.0;
+  gear_sim::ProgressBar progress("simulate", steps, !o.no_output);
+  gear_sim::SignalTable t;
+  if (const int code = simulateCase(o, c, &progress, &t); code != kContinue) return code;
+  progress.set(steps - 1.0, "writing " + o.output);
+  const int code = write(o, c, enc, t);
+  progress.finish();
+  if (code != kContinue) return code;
+  if (!o.no_output)
     std::cerr << "simulate: " << t.size() << " samples (" << c.simulation.duration << " s at "
-              << c.simulation.sample_rate << " Hz) -> " << output << "\n";
+              << c.simulation.sample_rate << " Hz) -> " << o.output << "\n";
   return 0;
 }
 

@@ -374,9 +374,12 @@ TEST_F(Hostile, SimulationSizesBeyondTheLimitsAreRefusedNamingTheKey) {
   const Case cases[] = {
       {"simulation", "duration: 1.0e300", "more than the limit of 2e+07"},
       {"simulation", "sample_rate: 1.0e15", "more than the limit of 2e+07"},
-      {"simulation", "substeps: 1000000", "simulation.substeps = 1000000: must be in [1, 1000]"},
-      {"speed", "pinion_rpm: 1.0e12", "speed.pinion_rpm = 1e+12: gives a mesh frequency"},
-      {"damping", "ratio: 1.0e300", "damping.ratio = 1e+300: must be finite and in [0, 10]"},
+      {"simulation", "substeps: 1000000",
+       "simulation.substeps = 1000000`: violated `must be in [1, 1000]"},
+      {"speed", "pinion_rpm: 1.0e12",
+       "speed.pinion_rpm = 1e+12`: violated `gives a mesh frequency"},
+      {"damping", "ratio: 1.0e300",
+       "damping.ratio = 1e+300`: violated `must be finite and in [0, 10]"},
   };
   for (const Case& c : cases) {
     const std::string e = simConfigError(c.section + ":\n  " + c.key_value + "\n");
@@ -394,7 +397,7 @@ TEST_F(Hostile, SimulationSizesBeyondTheLimitsAreRefusedNamingTheKey) {
 
 TEST_F(Hostile, AnUnstableIntegrationIsRefusedNotWrittenAsNan) {
   gear_sim::SimConfig c = config_;
-  c.damping.model = gear_sim::DampingModel::ConstantCoefficient;
+  c.damping.model = gear_sim::DampingProfile::ConstantCoefficient;
   c.damping.coefficient = 1e12;  // [N*s/m] xi of order 1e6: RK4 at 1 MHz cannot follow
   gear_sim::SignalTable t;
   std::string e;
@@ -552,7 +555,7 @@ TEST(StreamAssemblerHostile, HugeRateWithAnAnalysedRangeIsRejectedNotUndefined) 
   c.sample_rate = 1e300;
   c.n = dte.size();
   c.dte = dte.data();
-  EXPECT_EQ(a.push(c), gear_damping_id::ChunkStatus::kRejectedMalformed);
+  EXPECT_EQ(a.push(c), gear_damping_id::ChunkStatus::RejectedMalformed);
 }
 
 TEST(ToolMain, EscapingExceptionsBecomeTheInternalErrorCode) {

@@ -118,7 +118,7 @@ void expectLoadLawAccuracy(const SimConfig& c, Formulation f, IdentificationOpti
 
 TEST(IdentificationAccuracy, LoadLawRecoversC0AndC1Within05PercentOnTheLoadDependentTruth) {
   const SimConfig c = table1Config();  // shipped default: load-dependent true damping
-  ASSERT_EQ(c.damping.model, gear_sim::DampingModel::LoadDependent);
+  ASSERT_EQ(c.damping.model, gear_sim::DampingProfile::LoadDependent);
   expectLoadLawAccuracy(c, Formulation::Known, IdentificationOptions::Refine::Auto,
                         "default known load_law");
   expectLoadLawAccuracy(c, Formulation::Known, IdentificationOptions::Refine::Never,
@@ -153,7 +153,7 @@ TEST(IdentificationAccuracy, LoadLawRecoversALoadLinearTruthUnderATrapezoidalLoa
   c.load.rise = 0.0012;
   c.load.hold = 0.0018;
   c.load.fall = 0.0011;
-  c.damping.model = gear_sim::DampingModel::LoadLinear;
+  c.damping.model = gear_sim::DampingProfile::LoadLinear;
   c.damping.c0 = 250.0;  // [N*s/m]
   c.damping.c1 = 2.5;    // [N*s/m per N*m]
   ASSERT_EQ(c.validate(), "");

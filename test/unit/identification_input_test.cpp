@@ -245,8 +245,9 @@ TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
     IdentificationOptions o;
     k.set(&o);
     const std::string e = o.validate();
-    EXPECT_EQ(e.rfind(k.field, 0), 0u)
-        << "expected a message starting with " << k.field << ": " << e;
+    EXPECT_EQ(o.check().field, k.field) << e;
+    EXPECT_NE(e.find(std::string("IdentificationOptions::") + k.field + " = "), std::string::npos)
+        << e;
     IdentificationResult r;
     std::string err;
     EXPECT_FALSE(

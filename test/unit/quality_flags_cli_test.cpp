@@ -89,7 +89,7 @@ TEST(AnalyzeQualityFlags, TableShapeGivesTheCurveAndACleanEstimate) {
   c.mesh.transition_fraction = 0.1;  // corners on the nodes j/20
   // Damping constant on each segment, as the piecewise model holds it (the shipped
   // load-dependent damping varies within a segment, which the refinement honestly flags).
-  c.damping.model = gear_sim::DampingModel::Piecewise;
+  c.damping.model = gear_sim::DampingProfile::Piecewise;
   c.damping.times = {0.0, 1e-3, 2e-3, 3e-3};
   c.damping.ratios = {0.05, 0.03, 0.07, 0.04};
   const auto [csv, params] = record(c, dir.path(), "trap");
@@ -121,7 +121,7 @@ TEST(AnalyzeQualityFlags, NoiseWithoutMotionIsNotIdentifiableAndExitsFour) {
   gear_sim::SimConfig c = baseConfig();
   c.mesh.model = gear_sim::StiffnessModel::Constant;
   c.load.profile = gear_sim::LoadProfile::Constant;
-  c.damping.model = gear_sim::DampingModel::ConstantRatio;
+  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
   // Start at the static deflection: no transient, the record is the deflection plus noise.
   const double me = c.gears.equivalentMass();
   c.simulation.initial_dte = c.gears.forceFactor() * c.load.mean * me / c.mesh.k_mean;

@@ -229,7 +229,7 @@ SimConfig transientCase(SimConfig base, double k, double T, double xi) {
   base.mesh.k_mean = k;
   base.load.profile = gear_sim::LoadProfile::Constant;
   base.load.mean = T;
-  base.damping.model = gear_sim::DampingModel::ConstantRatio;
+  base.damping.model = gear_sim::DampingProfile::ConstantRatio;
   base.damping.ratio = xi;
   return base;
 }

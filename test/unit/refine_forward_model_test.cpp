@@ -147,7 +147,7 @@ SignalTable simulateRigTable(const SimConfig& c) {
     t.damping[i] = dampingC(ti) * me;
   }
   const std::string e = gear_sim::integrateSdof(
-      coeffs, bps, 0.0, dt, n, {0.0, 0.0}, gear_sim::Integrator::RK4, 16, t.dte.data(), nullptr);
+      coeffs, bps, 0.0, dt, n, {0.0, 0.0}, gear_sim::Integrator::Rk4, 16, t.dte.data(), nullptr);
   EXPECT_TRUE(e.empty()) << e;
   (void)gm;
   return t;

@@ -31,7 +31,7 @@ TEST(Simulator, ConstantCoefficientsMatchTheClosedFormStepResponse) {
   c.mesh.k_mean = 3.2e8;
   c.load.profile = gear_sim::LoadProfile::Constant;
   c.load.mean = 100.0;
-  c.damping.model = gear_sim::DampingModel::ConstantRatio;
+  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
   c.damping.ratio = 0.05;
   const SignalTable t = run(c);
   const double me = c.gears.equivalentMass();
@@ -60,7 +60,7 @@ double observedOrder(double rpm, gear_sim::Integrator method) {
   c.simulation.integrator = method;
   c.simulation.sample_rate = 1.0e6;
   SimConfig ref = c;
-  ref.simulation.integrator = gear_sim::Integrator::RK4;
+  ref.simulation.integrator = gear_sim::Integrator::Rk4;
   ref.simulation.substeps = 64;
   const SignalTable r = run(ref);
   auto err = [&](int substeps) {
@@ -78,13 +78,13 @@ double observedOrder(double rpm, gear_sim::Integrator method) {
 }
 
 TEST(Simulator, Rk4ConvergesWithOrderFourIncludingSwitchesBetweenSamples) {
-  EXPECT_NEAR(observedOrder(3000.0, gear_sim::Integrator::RK4), 4.0, 0.3);
-  EXPECT_NEAR(observedOrder(2950.0, gear_sim::Integrator::RK4), 4.0, 0.3);
+  EXPECT_NEAR(observedOrder(3000.0, gear_sim::Integrator::Rk4), 4.0, 0.3);
+  EXPECT_NEAR(observedOrder(2950.0, gear_sim::Integrator::Rk4), 4.0, 0.3);
 }
 
 TEST(Simulator, Rk2ConvergesWithOrderTwoIncludingSwitchesBetweenSamples) {
-  EXPECT_NEAR(observedOrder(3000.0, gear_sim::Integrator::RK2), 2.0, 0.3);
-  EXPECT_NEAR(observedOrder(2950.0, gear_sim::Integrator::RK2), 2.0, 0.3);
+  EXPECT_NEAR(observedOrder(3000.0, gear_sim::Integrator::Rk2), 2.0, 0.3);
+  EXPECT_NEAR(observedOrder(2950.0, gear_sim::Integrator::Rk2), 2.0, 0.3);
 }
 
 // The simulator's fast path (block-wise load, cached piece values) and the generic driver that
@@ -108,7 +108,7 @@ TEST(Simulator, FastPathAgreesWithTheGenericIntegrator) {
     for (double b : st.cycleBreakpoints())
       if (cycle + b > 0) bps.push_back(tm.timeOfPhase(cycle + b));
   Eigen::VectorXd y(t.size()), v(t.size());
-  ASSERT_EQ(gear_sim::integrateSdof(coeffs, bps, 0.0, 1e-6, t.size(), {}, gear_sim::Integrator::RK4,
+  ASSERT_EQ(gear_sim::integrateSdof(coeffs, bps, 0.0, 1e-6, t.size(), {}, gear_sim::Integrator::Rk4,
                                     1, y.data(), v.data()),
             "");
   // Same steps, same stage times; only the sine's evaluation differs (phasor recurrence vs
@@ -227,7 +227,7 @@ Reference referenceRun(const SimConfig& c) {
             return S{x[2], x[3], (t1 - r1 * f) / g.pinion.inertia, (-t1 + r2 * f) / g.gear.inertia};
           };
           const double h = e - a;
-          if (method == gear_sim::Integrator::RK4) {
+          if (method == gear_sim::Integrator::Rk4) {
             const S k1 = rate(s, a), k2 = rate(axpy(s, 0.5 * h, k1), mid),
                     k3 = rate(axpy(s, 0.5 * h, k2), mid), k4 = rate(axpy(s, h, k3), e);
             for (int j = 0; j < 4; ++j) s[j] += h / 6 * (k1[j] + 2 * k2[j] + 2 * k3[j] + k4[j]);
@@ -291,7 +291,7 @@ TEST(Simulator, BlockAffineMapsAgreeWithTheStageWiseIntegratorForEveryModel) {
       {"trapezoid rk2",
        [](SimConfig* c) {
          c->mesh.model = gear_sim::StiffnessModel::Trapezoid;
-         c->simulation.integrator = gear_sim::Integrator::RK2;
+         c->simulation.integrator = gear_sim::Integrator::Rk2;
        }},
       {"fourier 3 substeps",
        [](SimConfig* c) {

@@ -78,7 +78,7 @@ TEST(ConfigYaml, MisspeltKeysWrongTypesAndUnknownNamesAreErrorsNamingTheKey) {
 
 TEST(ConfigYaml, YamlRoundTripKeepsEveryValue) {
   gear_sim::SimConfig c;
-  c.damping.model = gear_sim::DampingModel::Piecewise;
+  c.damping.model = gear_sim::DampingProfile::Piecewise;
   c.damping.times = {0.0, 0.004};
   c.damping.ratios = {0.02, 0.04};
   c.speed.profile = gear_sim::SpeedProfile::Ramp;

@@ -82,7 +82,7 @@ TEST(StreamAssembler, ContiguousChunksGiveTheOfflineSegmentsWithStencilContext) 
   gd::StreamAssembler a(o);
   std::vector<gd::StreamSegment> segs;
   for (size_t b = 0; b < 10000; b += 1000) {
-    EXPECT_EQ(a.push(rec.chunk(b, 1000)), gd::ChunkStatus::kAccepted);
+    EXPECT_EQ(a.push(rec.chunk(b, 1000)), gd::ChunkStatus::Accepted);
     for (auto& s : drain(&a)) segs.push_back(s);
   }
   EXPECT_EQ(segs.size(), 9u) << "the last segment waits for its context or the end";
@@ -168,13 +168,13 @@ TEST(StreamAssembler, DuplicatesAndLateChunksAreIgnoredAndCounted) {
   gd::StreamOptions o;
   o.reorder_chunks = 0;
   gd::StreamAssembler a(o);
-  EXPECT_EQ(a.push(rec.chunk(0, 1000)), gd::ChunkStatus::kAccepted);
-  EXPECT_EQ(a.push(rec.chunk(1000, 1000)), gd::ChunkStatus::kAccepted);
-  EXPECT_EQ(a.push(rec.chunk(1000, 1000)), gd::ChunkStatus::kDuplicate);
-  EXPECT_EQ(a.push(rec.chunk(3000, 1000)), gd::ChunkStatus::kHeld);  // gap at once
+  EXPECT_EQ(a.push(rec.chunk(0, 1000)), gd::ChunkStatus::Accepted);
+  EXPECT_EQ(a.push(rec.chunk(1000, 1000)), gd::ChunkStatus::Accepted);
+  EXPECT_EQ(a.push(rec.chunk(1000, 1000)), gd::ChunkStatus::Duplicate);
+  EXPECT_EQ(a.push(rec.chunk(3000, 1000)), gd::ChunkStatus::Held);  // gap at once
   EXPECT_EQ(a.counters().gaps, 1u);
-  EXPECT_EQ(a.push(rec.chunk(2000, 1000)), gd::ChunkStatus::kLate);
-  EXPECT_EQ(a.push(rec.chunk(3500, 1000)), gd::ChunkStatus::kAccepted);  // overlap trimmed
+  EXPECT_EQ(a.push(rec.chunk(2000, 1000)), gd::ChunkStatus::Late);
+  EXPECT_EQ(a.push(rec.chunk(3500, 1000)), gd::ChunkStatus::Accepted);  // overlap trimmed
   EXPECT_EQ(a.counters().overlaps, 1u);
   EXPECT_EQ(a.counters().duplicates, 1u);
   EXPECT_EQ(a.counters().late, 1u);
@@ -188,22 +188,22 @@ TEST(StreamAssembler, NonFiniteAndRateChangedAndMalformedChunksAreRejected) {
   rec.torque[2500] = std::numeric_limits<double>::infinity();
   gd::StreamAssembler a{gd::StreamOptions()};
   std::string why;
-  EXPECT_EQ(a.push(rec.chunk(0, 1000)), gd::ChunkStatus::kAccepted);
-  EXPECT_EQ(a.push(rec.chunk(1000, 1000), &why), gd::ChunkStatus::kRejectedNonFinite);
+  EXPECT_EQ(a.push(rec.chunk(0, 1000)), gd::ChunkStatus::Accepted);
+  EXPECT_EQ(a.push(rec.chunk(1000, 1000), &why), gd::ChunkStatus::RejectedNonFinite);
   EXPECT_NE(why.find("dte[500]"), std::string::npos) << why;
-  EXPECT_EQ(a.push(rec.chunk(2000, 1000), &why), gd::ChunkStatus::kRejectedNonFinite);
+  EXPECT_EQ(a.push(rec.chunk(2000, 1000), &why), gd::ChunkStatus::RejectedNonFinite);
   EXPECT_NE(why.find("torque[500]"), std::string::npos) << why;
-  EXPECT_EQ(a.push(rec.chunk(3000, 1000, 2e6), &why), gd::ChunkStatus::kRejectedRate);
+  EXPECT_EQ(a.push(rec.chunk(3000, 1000, 2e6), &why), gd::ChunkStatus::RejectedRate);
   gd::ChunkData empty;
   empty.sample_rate = kFs;
-  EXPECT_EQ(a.push(empty), gd::ChunkStatus::kRejectedMalformed);
+  EXPECT_EQ(a.push(empty), gd::ChunkStatus::RejectedMalformed);
   gd::ChunkData bad_rate = rec.chunk(3000, 10, std::numeric_limits<double>::quiet_NaN());
-  EXPECT_EQ(a.push(bad_rate), gd::ChunkStatus::kRejectedMalformed);
+  EXPECT_EQ(a.push(bad_rate), gd::ChunkStatus::RejectedMalformed);
   gd::ChunkData huge = rec.chunk(3000, 10);
   huge.first_index = std::numeric_limits<std::uint64_t>::max() - 5;
-  EXPECT_EQ(a.push(huge), gd::ChunkStatus::kRejectedMalformed);
+  EXPECT_EQ(a.push(huge), gd::ChunkStatus::RejectedMalformed);
   gd::ChunkData slow = rec.chunk(3000, 10, 1e-3);  // < 4 samples per 1 ms segment
-  EXPECT_EQ(a.push(slow), gd::ChunkStatus::kRejectedMalformed);
+  EXPECT_EQ(a.push(slow), gd::ChunkStatus::RejectedMalformed);
   EXPECT_EQ(a.counters().rejected_malformed, 4u);
   EXPECT_EQ(a.counters().rejected_nonfinite, 2u);
   EXPECT_EQ(a.counters().rejected_rate, 1u);
@@ -215,7 +215,7 @@ TEST(StreamAssembler, IndexZeroAfterLaterSamplesIsARestartWithANewEpoch) {
   gd::StreamAssembler a{gd::StreamOptions()};
   for (size_t b = 0; b < 2500; b += 500) a.push(rec.chunk(b, 500));
   std::string why;
-  EXPECT_EQ(a.push(rec.chunk(0, 500, 2e6), &why), gd::ChunkStatus::kAccepted);  // new rate ok
+  EXPECT_EQ(a.push(rec.chunk(0, 500, 2e6), &why), gd::ChunkStatus::Accepted);  // new rate ok
   EXPECT_NE(why.find("restart"), std::string::npos);
   EXPECT_EQ(a.counters().restarts, 1u);
   EXPECT_EQ(a.epoch(), 1u);
@@ -305,11 +305,11 @@ TEST(StreamAssembler, AFarFutureGlitchChunkIsDroppedAndTheStreamContinues) {
       gd::ChunkData glitch = rec.chunk(5000, 1000);
       glitch.first_index += jump;
       std::string why;
-      EXPECT_EQ(a.push(glitch, &why), gd::ChunkStatus::kSuspect);
+      EXPECT_EQ(a.push(glitch, &why), gd::ChunkStatus::Suspect);
       EXPECT_NE(why.find("implausible index jump"), std::string::npos) << why;
       if (pause) a.endOfStream();
       for (size_t b = 5000; b < 20000; b += 1000) {
-        EXPECT_EQ(a.push(rec.chunk(b, 1000)), gd::ChunkStatus::kAccepted) << b;
+        EXPECT_EQ(a.push(rec.chunk(b, 1000)), gd::ChunkStatus::Accepted) << b;
       }
       a.endOfStream();
       const auto segs = drain(&a);
@@ -348,7 +348,7 @@ TEST(StreamAssembler, AConfirmedJumpStartsANewRecord) {
     for (size_t b = 5000; b < 10000; b += 1000) {
       gd::ChunkData c = rec.chunk(b, 1000);
       c.first_index = then + b;
-      EXPECT_EQ(a.push(c), b == 5000 ? gd::ChunkStatus::kSuspect : gd::ChunkStatus::kAccepted);
+      EXPECT_EQ(a.push(c), b == 5000 ? gd::ChunkStatus::Suspect : gd::ChunkStatus::Accepted);
     }
     a.endOfStream();
     const auto segs = drain(&a);
@@ -384,20 +384,20 @@ TEST(StreamAssembler, ImplausibleValuesAreRejectedAndTheirGapAttributed) {
     c.mesh_state = state.data() + b;
     return c;
   };
-  EXPECT_EQ(a.push(chunk(0)), gd::ChunkStatus::kAccepted);
+  EXPECT_EQ(a.push(chunk(0)), gd::ChunkStatus::Accepted);
   std::string why;
   state[1500] = 7.0;
-  EXPECT_EQ(a.push(chunk(1000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_EQ(a.push(chunk(1000), &why), gd::ChunkStatus::RejectedValue);
   EXPECT_NE(why.find("mesh_state[500] = 7"), std::string::npos) << why;
   rec.dte[2100] = 1e308;
-  EXPECT_EQ(a.push(chunk(2000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_EQ(a.push(chunk(2000), &why), gd::ChunkStatus::RejectedValue);
   EXPECT_NE(why.find("max_abs_dte"), std::string::npos) << why;
   rec.torque[3999] = 100.0 * 2e6;  // the running scale is 100 N*m; the factor 1e6
-  EXPECT_EQ(a.push(chunk(3000), &why), gd::ChunkStatus::kRejectedValue);
+  EXPECT_EQ(a.push(chunk(3000), &why), gd::ChunkStatus::RejectedValue);
   EXPECT_NE(why.find("torque"), std::string::npos) << why;
   rec.torque[4999] = 100.0 * 0.5e6;  // within the factor: a plausible (if large) value
   for (size_t b = 4000; b < 8000; b += 1000)
-    EXPECT_NE(a.push(chunk(b)), gd::ChunkStatus::kRejectedValue);
+    EXPECT_NE(a.push(chunk(b)), gd::ChunkStatus::RejectedValue);
   a.endOfStream();
   const auto& k = a.counters();
   EXPECT_EQ(k.rejected_value, 3u);
@@ -432,29 +432,29 @@ TEST(LossMonitor, OneLossWarnsSustainedLossIsAnErrorAJumpWarnsUntilReset) {
   gd::LossMonitor m;
   gd::StreamCounters k;
   k.samples_accepted = 1000;
-  EXPECT_EQ(m.update(k, 0.0).level, L::kOk);
+  EXPECT_EQ(m.update(k, 0.0).level, L::Ok);
   k.samples_missing = 1000;  // a gap
-  EXPECT_EQ(m.update(k, 1.0).level, L::kWarn);
-  EXPECT_EQ(m.update(k, 2.0).level, L::kWarn);  // held
-  EXPECT_EQ(m.update(k, 1.0 + gd::LossMonitor::kHold + 0.1).level, L::kOk);
+  EXPECT_EQ(m.update(k, 1.0).level, L::Warn);
+  EXPECT_EQ(m.update(k, 2.0).level, L::Warn);  // held
+  EXPECT_EQ(m.update(k, 1.0 + gd::LossMonitor::kHold + 0.1).level, L::Ok);
   double t = 20.0;
   for (int i = 0; i < gd::LossMonitor::kSustained; ++i) {
     k.samples_late += 10;
     const auto r = m.update(k, t += 1.0);
-    EXPECT_EQ(r.level, i + 1 < gd::LossMonitor::kSustained ? L::kWarn : L::kError) << i;
-    if (r.level == L::kError) {
+    EXPECT_EQ(r.level, i + 1 < gd::LossMonitor::kSustained ? L::Warn : L::Error) << i;
+    if (r.level == L::Error) {
       EXPECT_NE(r.message.find("sustained"), std::string::npos);
     }
   }
-  EXPECT_EQ(m.update(k, t += 1.0).level, L::kWarn);  // the loss stopped: WARN while held
+  EXPECT_EQ(m.update(k, t += 1.0).level, L::Warn);  // the loss stopped: WARN while held
   k.jumps = 1;
   const auto jump = m.update(k, t += 100.0, "chunk at index 1000000000000000");
-  EXPECT_EQ(jump.level, L::kWarn);
+  EXPECT_EQ(jump.level, L::Warn);
   EXPECT_NE(jump.message.find("1000000000000000"), std::string::npos) << jump.message;
-  EXPECT_EQ(m.update(k, t += 1000.0).level, L::kWarn);  // persistent
+  EXPECT_EQ(m.update(k, t += 1000.0).level, L::Warn);  // persistent
   m.reset();
   gd::StreamCounters clean;
-  EXPECT_EQ(m.update(clean, t += 1.0).level, L::kOk);
+  EXPECT_EQ(m.update(clean, t += 1.0).level, L::Ok);
 }
 
 TEST(StreamAssembler, InvalidOptionsNameTheField) {

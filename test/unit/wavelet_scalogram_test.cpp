@@ -42,8 +42,8 @@ TEST(MorletScalogram, MatchesOneMorletCwtOverAllRowsWithShorterFftsForHighRows) 
     MorletCwt single;
     MorletScalogram grouped;
     std::string e;
-    ASSERT_TRUE(single.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, &e)) << e;
-    ASSERT_TRUE(grouped.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e)) << e;
+    ASSERT_TRUE(single.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, &e)) << e;
+    ASSERT_TRUE(grouped.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, 1, &e)) << e;
     EXPECT_GE(grouped.groups(), 2);
     EXPECT_EQ(grouped.groupLength(0), single.paddedSize());  // the lowest rows' group
     EXPECT_LT(grouped.groupLength(grouped.groups() - 1), single.paddedSize());
@@ -70,11 +70,11 @@ TEST(MorletScalogram, GivesBitIdenticalRowsForAnyThreadCount) {
   std::vector<float> one(f.size() * size_t(n));
   std::string e;
   MorletScalogram s1;
-  ASSERT_TRUE(s1.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e)) << e;
+  ASSERT_TRUE(s1.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, 1, &e)) << e;
   ASSERT_TRUE(s1.modulus(y.data(), one.data(), &e)) << e;
   for (int threads : {2, 3}) {
     MorletScalogram s;
-    ASSERT_TRUE(s.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, threads, &e)) << e;
+    ASSERT_TRUE(s.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, threads, &e)) << e;
     EXPECT_EQ(s.threads(), threads);
     std::vector<float> out(one.size());
     ASSERT_TRUE(s.modulus(y.data(), out.data(), &e)) << e;
@@ -89,7 +89,7 @@ TEST(MorletScalogram, GivesBitIdenticalRowsForAnyThreadCount) {
   EXPECT_TRUE(r1.modulus == r2.modulus);
 }
 
-// Single precision (Precision::kSingle) against double, relative to the largest |W|: float
+// Single precision (Precision::Single) against double, relative to the largest |W|: float
 // rounds the band (2^-24 = 6e-8 relative) and each FFT stage adds about that again, so a few
 // 1e-7 over the log2 N ~ 13 stages; bound 1e-6.
 constexpr double kSingleVsDoubleTol = 1e-6;
@@ -101,8 +101,8 @@ TEST(MorletScalogram, SinglePrecisionAgreesWithDoubleWithinOnePpmOfThePeak) {
     const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 60);
     std::string e;
     MorletScalogram dbl, sgl;
-    ASSERT_TRUE(dbl.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e)) << e;
-    ASSERT_TRUE(sgl.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 1, &e, Precision::kSingle))
+    ASSERT_TRUE(dbl.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, 1, &e)) << e;
+    ASSERT_TRUE(sgl.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, 1, &e, Precision::Single))
         << e;
     std::vector<double> a(f.size() * size_t(n)), b(a.size());
     ASSERT_TRUE(dbl.modulus(y.data(), a.data(), &e)) << e;
@@ -116,7 +116,7 @@ TEST(MorletScalogram, SinglePrecisionAgreesWithDoubleWithinOnePpmOfThePeak) {
     EXPECT_GT(worst, 0.0);  // it did run in float
     // Threads: bit-identical in single precision too.
     MorletScalogram sgl2;
-    ASSERT_TRUE(sgl2.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, 2, &e, Precision::kSingle))
+    ASSERT_TRUE(sgl2.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, 2, &e, Precision::Single))
         << e;
     std::vector<double> c(a.size());
     ASSERT_TRUE(sgl2.modulus(y.data(), c.data(), &e)) << e;
@@ -134,8 +134,8 @@ TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
   const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 40);
   std::string e;
   MorletCwt pruned, full;
-  ASSERT_TRUE(pruned.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, &e)) << e;
-  ASSERT_TRUE(full.configure(n, 1.0, f, 6.0, FftPlanning::kEstimate, &e)) << e;
+  ASSERT_TRUE(pruned.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, &e)) << e;
+  ASSERT_TRUE(full.configure(n, 1.0, f, 6.0, FftPlanning::Estimate, &e)) << e;
   full.setPrunedModulus(false);
   ASSERT_TRUE(pruned.setSignal(y.data(), &e) && full.setSignal(y.data(), &e)) << e;
   for (int i = 0; i < pruned.rows(); ++i) {
@@ -164,9 +164,9 @@ TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
 TEST(MorletScalogram, RefusesBadThreadCountsAndNonFiniteSamples) {
   MorletScalogram s;
   std::string e;
-  EXPECT_FALSE(s.configure(100, 1.0, {0.1, 0.2}, 6.0, FftPlanning::kEstimate, 0, &e));
+  EXPECT_FALSE(s.configure(100, 1.0, {0.1, 0.2}, 6.0, FftPlanning::Estimate, 0, &e));
   EXPECT_NE(e.find("threads = 0"), std::string::npos) << e;
-  ASSERT_TRUE(s.configure(100, 1.0, {0.1, 0.2}, 6.0, FftPlanning::kEstimate, 2, &e)) << e;
+  ASSERT_TRUE(s.configure(100, 1.0, {0.1, 0.2}, 6.0, FftPlanning::Estimate, 2, &e)) << e;
   std::vector<double> y(100, 1.0), out(200);
   y[42] = NAN;
   EXPECT_FALSE(s.modulus(y.data(), out.data(), &e));

@@ -204,7 +204,7 @@ TEST(MorletCwt, MatchesDirectConvolutionWithTheSameWaveletIncludingTheRecordEdge
     const std::vector<double> y = toneBursts(n, fs, c.cut_at_edges);
     MorletCwt cwt;
     std::string error;
-    ASSERT_TRUE(cwt.configure(n, fs, freqs, c.omega0, FftPlanning::kEstimate, &error)) << error;
+    ASSERT_TRUE(cwt.configure(n, fs, freqs, c.omega0, FftPlanning::Estimate, &error)) << error;
     std::vector<std::complex<double>> out(freqs.size() * size_t(n));
     ASSERT_TRUE(cwt.transform(y.data(), out.data(), &error)) << error;
     for (size_t i = 0; i < freqs.size(); ++i) {
@@ -231,7 +231,7 @@ TEST(MorletCwt, PureSinusoidReadsItsAmplitudeAndFrequencyOnTheRidge) {
   // the wavelet's Gaussian is exp(-25) = 1e-11).
   MorletCwt own;
   std::string error;
-  ASSERT_TRUE(own.configure(n, fs, {f}, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(own.configure(n, fs, {f}, 6.0, FftPlanning::Estimate, &error)) << error;
   ASSERT_TRUE(own.setSignal(y.data(), &error)) << error;
   const std::complex<double>* w = own.row(0);
   ASSERT_NE(w, nullptr);
@@ -252,7 +252,7 @@ TEST(MorletCwt, PureSinusoidReadsItsAmplitudeAndFrequencyOnTheRidge) {
   // of the lowest row.
   const std::vector<double> grid = logSpacedFrequencies(100.0, 8000.0, 200);
   MorletCwt cwt;
-  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
   std::vector<double> modulus(grid.size() * size_t(n));
   ASSERT_TRUE(cwt.transformModulus(y.data(), modulus.data(), &error)) << error;
   const long e2 = static_cast<long>(std::ceil(3.0 * morletConeOfInfluence(f / 1.1, 6.0) * fs));
@@ -276,8 +276,8 @@ TEST(MorletCwt, ReusesItsPlansAndBuffersAcrossRowsAndSignals) {
   std::reverse(b.begin(), b.end());
   MorletCwt reused, fresh;
   std::string error;
-  ASSERT_TRUE(reused.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
-  ASSERT_TRUE(fresh.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(reused.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
+  ASSERT_TRUE(fresh.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
   std::vector<double> first(grid.size() * size_t(n)), second(first.size()), ref(first.size());
   ASSERT_TRUE(reused.transformModulus(a.data(), first.data(), &error));
   ASSERT_TRUE(reused.transformModulus(b.data(), second.data(), &error));
@@ -301,7 +301,7 @@ TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
   const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
   std::string error;
-  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
   ASSERT_TRUE(cwt.setSignal(y.data(), &error)) << error;
   std::vector<double> fast(static_cast<size_t>(n));
   std::vector<float> fast_f(static_cast<size_t>(n));
@@ -334,16 +334,16 @@ TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
   EXPECT_EQ(cwt.row(0), nullptr);  // not configured
   EXPECT_FALSE(cwt.setSignal(nullptr, &error));
   EXPECT_NE(error.find("not configured"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, 1000.0, {600.0}, 6.0, FftPlanning::kEstimate, &error));
+  EXPECT_FALSE(cwt.configure(100, 1000.0, {600.0}, 6.0, FftPlanning::Estimate, &error));
   EXPECT_NE(error.find("frequencies[0]"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, -1.0, {10.0}, 6.0, FftPlanning::kEstimate, &error));
+  EXPECT_FALSE(cwt.configure(100, -1.0, {10.0}, 6.0, FftPlanning::Estimate, &error));
   EXPECT_NE(error.find("sample_rate"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, 1000.0, {10.0}, 0.5, FftPlanning::kEstimate, &error));
+  EXPECT_FALSE(cwt.configure(100, 1000.0, {10.0}, 0.5, FftPlanning::Estimate, &error));
   EXPECT_NE(error.find("omega0"), std::string::npos) << error;
   EXPECT_FALSE(cwt.configure(100, 1000.0, {10.0, 20.0}, std::vector<double>{6.0, 6.0, 6.0},
-                             FftPlanning::kEstimate, &error));
+                             FftPlanning::Estimate, &error));
   EXPECT_NE(error.find("omega0s"), std::string::npos) << error;
-  ASSERT_TRUE(cwt.configure(100, 1000.0, {100.0}, 6.0, FftPlanning::kEstimate, &error)) << error;
+  ASSERT_TRUE(cwt.configure(100, 1000.0, {100.0}, 6.0, FftPlanning::Estimate, &error)) << error;
   EXPECT_EQ(cwt.row(0), nullptr);  // no signal yet
   std::vector<double> y(100, 1.0);
   y[42] = NAN;

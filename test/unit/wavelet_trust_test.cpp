@@ -327,20 +327,21 @@ TEST(WaveletTrust, AFitBelowTheMinimumRSquaredGivesNoDampingRatio) {
 
 TEST(WaveletTrust, NewOptionsAreCheckedWithTheFieldNamed) {
   WaveletOptions o;
-  EXPECT_TRUE(o.check().ok);
+  EXPECT_TRUE(o.check().ok());
   o.min_r2 = 1.0;
   EXPECT_EQ(o.check().field, "min_r2");
-  EXPECT_EQ(o.check().message.rfind("WaveletOptions.min_r2 = 1: ", 0), 0u) << o.check().message;
+  EXPECT_EQ(o.check().message().rfind("`WaveletOptions::min_r2 = 1`: violated `", 0), 0u)
+      << o.check().message();
   o = WaveletOptions{};
   o.min_decay_nepers = 0.0;
   EXPECT_EQ(o.check().field, "min_decay_nepers");
   o = WaveletOptions{};
   o.order_frequencies = {100.0, -1.0};
   EXPECT_EQ(o.check().field, "order_frequencies[1]");
-  EXPECT_EQ(o.validate(), o.check().message);
+  EXPECT_EQ(o.validate(), o.check().message());
   o = WaveletOptions{};
   o.peak_prominence = 0.0;  // noise-adaptive (the default)
-  EXPECT_TRUE(o.check().ok);
+  EXPECT_TRUE(o.check().ok());
   o.peak_prominence = -0.1;
   EXPECT_EQ(o.check().field, "peak_prominence");
 }

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
 
@@ -63,7 +64,8 @@ struct EncoderFrontEndOptions {
   /// Streaming: samples buffered before the offsets are estimated (0 = the whole record, until
   /// finish()). Offline analysis uses the whole record.
   long calibration_samples = 0;
-  std::string validate() const;
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// What the front end found; written to the JSON (`input.encoder`).

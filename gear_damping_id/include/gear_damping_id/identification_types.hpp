@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "gear_damping_id/quality_warning.hpp"
+#include "gear_sim/option_status.hpp"
 
 namespace gear_damping_id {
 
@@ -94,8 +95,9 @@ struct IdentificationOptions {
   /// the known formulation can; kept for callers that check).
   bool refinable() const { return true; }
 
-  /// Empty when valid; otherwise names the field, the value and the rule broken.
-  std::string validate() const;
+  /// The first rule broken: field, value and rule (gear_sim/option_status.hpp).
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Statistics of the output-error refinement's residual r_n = y_n - yhat_n over one segment

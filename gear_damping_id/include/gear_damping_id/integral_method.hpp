@@ -170,6 +170,26 @@ class IntegralMethod {
   int columnIndex(Column c) const;
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
+  // addSegment's named steps (integral_method.cpp): each returns why the segment is not
+  // identifiable, empty when it may go on.
+  std::string checkFiniteInputs(const SignalView& s, Eigen::Index begin, Eigen::Index end,
+                                double channel_sum[4]) const;
+  std::string segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
+                           const double channel_sum[4], SegmentRecord* rec);
+  double accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int windows,
+                           SegmentRecord* rec);
+  std::string solveLocals(SegmentRecord* rec) const;
+  // finishRange's named steps (integral_method.cpp).
+  struct SharedSolution;
+  struct SegmentParams;
+  SharedSolution solveShared(size_t s_begin, size_t s_end) const;
+  std::vector<SegmentParams> segmentParams(size_t s_begin, size_t s_end, const SharedSolution& sh,
+                                           double* omega0) const;
+  SegmentEstimate segmentEstimate(const SegmentRecord& rec, const SegmentParams& p,
+                                  const SharedSolution& sh, double omega0,
+                                  std::vector<WindowEstimate>* windows) const;
+  void stiffnessEstimate(const SegmentParams& p, SegmentEstimate* e) const;
+  void sharedSummaries(const SharedSolution& sh, double omega0, IdentificationResult* res) const;
 
   IdentificationOptions options_;
   GearConstants gear_;

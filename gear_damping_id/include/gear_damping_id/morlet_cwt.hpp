@@ -47,12 +47,12 @@
 namespace gear_damping_id {
 
 /// How much time FFTW spends choosing its algorithm (see the FFTW manual).
-/// kMeasure: times candidate algorithms at plan creation, capped at 5 s per plan
+/// Measure: times candidate algorithms at plan creation, capped at 5 s per plan
 ///   (fftw_set_timelimit; an uncapped search takes minutes for N ~ 1.8e6), once per size and
 ///   process (later plans of the same size reuse FFTW's wisdom). Worth it when many rows are
 ///   transformed (a full scalogram of a long record): the inverse FFT runs once per row.
-/// kEstimate: heuristic plan, no measurement; use for a handful of rows.
-enum class FftPlanning { kEstimate, kMeasure };
+/// Estimate: heuristic plan, no measurement; use for a handful of rows.
+enum class FftPlanning { Estimate, Measure };
 
 /// Arithmetic of the per-row inverse FFTs of |W| (MorletCwt::rowModulus, MorletScalogram).
 /// The signal's FFT, the Morlet multiplier and the complex rows (row(), rowAt()) are always
@@ -60,7 +60,7 @@ enum class FftPlanning { kEstimate, kMeasure };
 /// transforms: about half the time of the FFTs and half the memory traffic; |W| agrees with
 /// kDouble within 1e-6 of the scalogram's largest |W| (wavelet_scalogram_test bounds it;
 /// measured ~1e-7), the precision fCWT works in.
-enum class Precision { kDouble, kSingle };
+enum class Precision { Double, Single };
 
 /// Smallest length >= min_length whose only prime factors are 2, 3, 5 and 7 (fast for FFTW).
 /// Returns -1 if min_length < 1 or the result would overflow.
@@ -196,8 +196,8 @@ class MorletCwt {
   double fs_ = 0.0, mean_ = 0.0;
   bool has_signal_ = false;
   bool pruned_ = true;
-  Precision precision_ = Precision::kDouble;
-  FftPlanning planning_ = FftPlanning::kMeasure;
+  Precision precision_ = Precision::Double;
+  FftPlanning planning_ = FftPlanning::Measure;
   std::vector<double> frequencies_, omega0s_;
   std::unique_ptr<Fftw> fftw_;
 };
@@ -221,7 +221,7 @@ class MorletScalogram {
   /// precision: of the rows' inverse FFTs (see Precision). False + *error on failure.
   bool configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
                  double omega0, FftPlanning planning, int threads, std::string* error,
-                 Precision precision = Precision::kDouble);
+                 Precision precision = Precision::Double);
   /// |W| of every row for signal y (n samples) into out, row-major [row][time], rows()*size()
   /// values (double or float). False + *error (a non-finite sample names its index).
   bool modulus(const double* y, double* out, std::string* error);

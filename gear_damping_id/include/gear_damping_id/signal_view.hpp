@@ -14,6 +14,7 @@
 #include <string>
 
 #include "gear_damping_id/identification_types.hpp"
+#include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
 
@@ -29,7 +30,8 @@ struct GearConstants {
   /// true for the square and constant stiffness models. Informational: the identification
   /// decides held or smooth stiffness from the samples (forward_model.hpp), not from this flag.
   bool piecewise_constant_stiffness = true;
-  std::string validate() const;
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Constants of a gear model (validated GearModel).

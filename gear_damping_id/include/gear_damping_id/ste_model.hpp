@@ -33,6 +33,7 @@
 
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/integral_method.hpp"
+#include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/ste.hpp"
 
@@ -56,7 +57,8 @@ struct SteModelOptions {
   double max_correlation = 0.999;        ///< |corr(C, theta_j)| above: ste_not_separable
   bool active() const { return offset || mesh_orders + pinion_orders + gear_orders > 0; }
   gear_sim::SteBasis basis() const;
-  std::string validate() const;
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 /// Parses "mesh:H,shaft:S" (shaft: both shafts), "pinion:S", "gear:S", "offset", "none" in any
 /// comma-separated combination; the offset is always included unless "nooffset" is given.

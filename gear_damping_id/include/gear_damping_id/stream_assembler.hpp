@@ -61,6 +61,7 @@
 #include <vector>
 
 #include "gear_damping_id/signal_view.hpp"
+#include "gear_sim/option_status.hpp"
 
 namespace gear_damping_id {
 
@@ -97,21 +98,22 @@ struct StreamOptions {
   double magnitude_factor = 1e6;
   /// [m] |dte| above this is rejected whatever the running scale (a DTE is micrometres). > 0.
   double max_abs_dte = 1.0;
-  /// Empty when valid; else names the field, the value and the rule broken.
-  std::string validate() const;
+  /// The first rule broken: field, value and rule (gear_sim/option_status.hpp).
+  gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// What happened to a chunk given to push().
 enum class ChunkStatus {
-  kAccepted,           ///< appended to the current run (possibly after trimming an overlap)
-  kHeld,               ///< ahead of the expected index: held for reordering
-  kDuplicate,          ///< every sample already accepted: ignored
-  kLate,               ///< its samples were already declared missing (a gap): ignored
-  kRejectedNonFinite,  ///< NaN/Inf in a channel: rejected
-  kRejectedRate,       ///< sample rate differs from the stream's: rejected
-  kRejectedMalformed,  ///< no samples, no dte, bad sample rate or index: rejected
-  kRejectedValue,      ///< mesh_state not 0/1, or an absurd magnitude: rejected
-  kSuspect             ///< implausible index jump: held aside until the next chunk decides
+  Accepted,           ///< appended to the current run (possibly after trimming an overlap)
+  Held,               ///< ahead of the expected index: held for reordering
+  Duplicate,          ///< every sample already accepted: ignored
+  Late,               ///< its samples were already declared missing (a gap): ignored
+  RejectedNonFinite,  ///< NaN/Inf in a channel: rejected
+  RejectedRate,       ///< sample rate differs from the stream's: rejected
+  RejectedMalformed,  ///< no samples, no dte, bad sample rate or index: rejected
+  RejectedValue,      ///< mesh_state not 0/1, or an absurd magnitude: rejected
+  Suspect             ///< implausible index jump: held aside until the next chunk decides
 };
 const char* toString(ChunkStatus s);
 
@@ -161,9 +163,9 @@ struct StreamCounters {
 /// - OK otherwise. The message names every condition that holds.
 class LossMonitor {
  public:
-  enum class Level { kOk = 0, kWarn = 1, kError = 2 };
+  enum class Level { Ok = 0, Warn = 1, Error = 2 };
   struct Report {
-    Level level = Level::kOk;
+    Level level = Level::Ok;
     std::string message;  ///< "" when OK
   };
   static constexpr double kHold = 10.0;  ///< [s] a loss keeps the status WARN this long

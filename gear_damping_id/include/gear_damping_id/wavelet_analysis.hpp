@@ -13,16 +13,9 @@
 
 #include "gear_damping_id/morlet_cwt.hpp"
 #include "gear_damping_id/quality_warning.hpp"
+#include "gear_sim/option_status.hpp"
 
 namespace gear_damping_id {
-
-/// Outcome of an option check: ok, or the offending field (e.g. "omega0", "frequencies[2]") and
-/// a message "WaveletOptions.<field> = <value>: <rule>" (the one format of every rule).
-struct WaveletStatus {
-  bool ok = true;
-  std::string field;    ///< empty when ok
-  std::string message;  ///< empty when ok
-};
 
 /// Options of analyzeWavelet. Defaults suit free decays sampled at >= 10 samples per period of
 /// the highest mode. validate() checks everything that does not depend on the data.
@@ -80,11 +73,11 @@ struct WaveletOptions {
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
   long max_scalogram_columns = 2000;
-  /// FFTW planning of the scalogram's transforms. kEstimate (default) plans instantly; kMeasure
+  /// FFTW planning of the scalogram's transforms. Estimate (default) plans instantly; Measure
   /// costs ~0.1-3 s of planning once per FFT size and process and pays off for repeated
   /// full scalograms of long records (the benchmark uses it). The damping fits' few rows
-  /// always use kEstimate.
-  FftPlanning fft_planning = FftPlanning::kEstimate;
+  /// always use Estimate.
+  FftPlanning fft_planning = FftPlanning::Estimate;
   /// Threads of the full scalogram (rows in parallel, MorletScalogram; results identical to
   /// one thread). Rule: in [1, 256].
   int threads = 1;
@@ -113,14 +106,12 @@ struct WaveletOptions {
   /// Rule: each finite and > 0.
   std::vector<double> order_frequencies;
 
-  /// Status of these options: ok, or the first rule broken with the field's name and a message
-  /// "WaveletOptions.field = value: rule".
-  WaveletStatus check() const;
-  /// check().message: empty when valid.
-  std::string validate() const;
+  /// Status of these options: ok, or the first rule broken (field, value, rule; option_status.hpp).
+  gear_sim::OptionStatus check() const;
+  std::string validate() const { return check().message(); }  ///< empty when valid
 
  private:
-  WaveletStatus checkModesAndRules() const;  ///< second half of check()
+  gear_sim::OptionStatus checkModesAndRules() const;  ///< second half of check()
 };
 
 /// One mode: frequency and damping from the decay of its wavelet envelope (paper Table 2).

@@ -71,21 +71,27 @@ double goldenSection(F&& f, double a, double b, double tol, int iterations) {
 
 }  // namespace
 
-std::string EncoderFrontEndOptions::validate() const {
+gear_sim::OptionStatus EncoderFrontEndOptions::check() const {
+  auto bad = [](const char* field, const auto& value, const char* rule) {
+    return gear_sim::violated("EncoderFrontEndOptions", field, value, rule);
+  };
   if (!(ratio_tolerance > 0.0 && ratio_tolerance < 1.0))
-    return "ratio_tolerance = " + num(ratio_tolerance) + ": must be in (0, 1)";
+    return bad("ratio_tolerance", ratio_tolerance, "must be in (0, 1)");
   if (!(reversal_allowance >= 0.0 && std::isfinite(reversal_allowance)))
-    return "reversal_allowance = " + num(reversal_allowance) + ": must be >= 0";
+    return bad("reversal_allowance", reversal_allowance, "must be finite and >= 0");
   if (!(twist_allowance >= 0.0 && std::isfinite(twist_allowance)))
-    return "twist_allowance = " + num(twist_allowance) + ": must be >= 0";
-  if (counts_per_rev1 < 0 || counts_per_rev2 < 0)
-    return "counts_per_rev: must be >= 0 (0 = not quantised)";
+    return bad("twist_allowance", twist_allowance, "must be finite and >= 0");
+  if (counts_per_rev1 < 0)
+    return bad("counts_per_rev1", counts_per_rev1, "must be >= 0 (0 = not quantised)");
+  if (counts_per_rev2 < 0)
+    return bad("counts_per_rev2", counts_per_rev2, "must be >= 0 (0 = not quantised)");
   if (!std::isnan(mesh_offset) && !std::isfinite(mesh_offset))
-    return "mesh_offset = " + num(mesh_offset) + ": must be finite (or unset to estimate)";
+    return bad("mesh_offset", mesh_offset, "must be finite (or unset to estimate)");
   if (!std::isnan(dte_offset) && !std::isfinite(dte_offset))
-    return "dte_offset = " + num(dte_offset) + ": must be finite (or unset to estimate)";
-  if (calibration_samples < 0) return "calibration_samples: must be >= 0";
-  return "";
+    return bad("dte_offset", dte_offset, "must be finite (or unset to estimate)");
+  if (calibration_samples < 0)
+    return bad("calibration_samples", calibration_samples, "must be >= 0");
+  return {};
 }
 
 DteCoefficients dteCoefficients(const gear_sim::GearPair& gp) {

@@ -133,29 +133,31 @@ bool parseStiffnessShape(const std::string& s, StiffnessShape* out) {
   return true;
 }
 
-std::string IdentificationOptions::validate() const {
-  std::ostringstream e;
-  if (!(segment_length >= 0.0)) {
-    e << "segment_length = " << segment_length
-      << ": must be >= 0 [s] (0 or .inf = the whole analysed record)";
-  } else if (!(window_length >= 0.0) || !std::isfinite(window_length)) {
-    e << "window_length = " << window_length << ": must be >= 0 [s] (0 = automatic)";
-  } else if (std::isnan(t_start) || std::isnan(t_end) || !(t_end > t_start)) {
-    e << "t_start = " << t_start << ", t_end = " << t_end << ": need t_start < t_end";
-  } else if (!(max_condition > 1.0) || max_condition > 1e7) {
-    e << "max_condition = " << max_condition << ": must be in (1, 1e7]";
-  } else if (!(time_tolerance > 0.0) || !(time_tolerance < 0.5)) {
-    e << "time_tolerance = " << time_tolerance << ": must be in (0, 0.5)";
-  } else if (!(refine_threshold >= 0.0)) {
-    e << "refine_threshold = " << refine_threshold << ": must be >= 0";
-  } else if (max_iterations < 1 || max_iterations > 1000) {
-    e << "max_iterations = " << max_iterations << ": must be in [1, 1000]";
-  } else if (StiffnessShape parsed; !parseStiffnessShape(toString(stiffness_shape), &parsed)) {
-    e << "stiffness_shape = " << toString(stiffness_shape)
-      << ": must be square, fourier:H (1 <= H <= " << StiffnessShape::kMaxHarmonics
-      << ") or table:N (3 <= N <= " << StiffnessShape::kMaxNodes << ")";
-  }
-  return e.str();
+gear_sim::OptionStatus IdentificationOptions::check() const {
+  auto bad = [](const std::string& field, const auto& value, const std::string& rule) {
+    return gear_sim::violated("IdentificationOptions", field, value, rule);
+  };
+  if (!(segment_length >= 0.0))
+    return bad("segment_length", segment_length,
+               "must be >= 0 [s] (0 or .inf = the whole analysed record)");
+  if (!(window_length >= 0.0) || !std::isfinite(window_length))
+    return bad("window_length", window_length, "must be finite and >= 0 [s] (0 = automatic)");
+  if (std::isnan(t_start)) return bad("t_start", t_start, "must be a number [s]");
+  if (!(t_end > t_start))
+    return bad("t_start", t_start, "must be < t_end = " + gear_sim::formatNumber(t_end) + " [s]");
+  if (!(max_condition > 1.0) || max_condition > 1e7)
+    return bad("max_condition", max_condition, "must be in (1, 1e7]");
+  if (!(time_tolerance > 0.0) || !(time_tolerance < 0.5))
+    return bad("time_tolerance", time_tolerance, "must be in (0, 0.5)");
+  if (!(refine_threshold >= 0.0)) return bad("refine_threshold", refine_threshold, "must be >= 0");
+  if (max_iterations < 1 || max_iterations > 1000)
+    return bad("max_iterations", max_iterations, "must be in [1, 1000]");
+  if (StiffnessShape parsed; !parseStiffnessShape(toString(stiffness_shape), &parsed))
+    return bad(
+        "stiffness_shape", toString(stiffness_shape),
+        "must be square, fourier:H (1 <= H <= " + std::to_string(StiffnessShape::kMaxHarmonics) +
+            ") or table:N (3 <= N <= " + std::to_string(StiffnessShape::kMaxNodes) + ")");
+  return {};
 }
 
 }  // namespace gear_damping_id

@@ -715,43 +715,75 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   if (s.n < 4 || rows < 4L * W || rows - 2L * W - n_local_ < 2) {
     return fail("too few samples (" + std::to_string(rows) + " in the segment)");
   }
-  // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
-  // search runs only when it is not). The quadrature stencils stay inside [begin, end).
-  const Eigen::Index c0 = begin, c1 = end;
+  // The quadrature stencils stay inside [begin, end).
   seg_lo_ = begin;
   seg_hi_ = end;
+  double channel_sum[4] = {0, 0, 0, 0};  // reused for the segment means
+  if (std::string why = checkFiniteInputs(s, begin, end, channel_sum); !why.empty())
+    return fail(why);
+  if (std::string why = segmentMeans(s, begin, end, channel_sum, &rec); !why.empty())
+    return fail(why);
+  // Windows: W near-equal spans. The damping column comes first among the locals or, for
+  // shared damping, first among the shared columns; its raw norm serves the motion check.
+  const double raw_c = accumulateWindows(s, begin, rows, W, &rec);
+  rec.rows = rows;
+  rec.windows = W;
+  est.windows = W;
+  const int cC = columnIndex(Column::DampC);
+  if (cC >= 0 && !(rec.gram(cC, cC) > 1e-20 * raw_c)) {
+    return fail("no motion: the DTE has no dynamic content to identify damping from");
+  }
+  if (std::string why = solveLocals(&rec); !why.empty()) return fail(why);
+  est.identifiable = true;
+  segments_.push_back(std::move(rec));
+  if (n_shared_ == 0 && estimate) {
+    // Fill the estimate from a finish() of this segment alone (cheap: small matrices).
+    const IdentificationResult r = finishRange(segments_.size() - 1, segments_.size());
+    return r.segments.back();
+  }
+  return segments_.back().estimate;
+}
+
+// Finite inputs on the segment (a sum is finite only if every term is; the element-wise
+// search runs only when it is not). Leaves each needed channel's sum in channel_sum (dte,
+// stiffness, torque, mesh_state).
+std::string IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index begin,
+                                              Eigen::Index end, double channel_sum[4]) const {
   const Formulation f = options_.formulation;
-  const bool use_torque = needsTorque(f, options_.model);
-  struct Channel {
-    const double* data;
-    const char* name;
-  };
-  const Channel channels[] = {{s.dte, "dte"},
-                              {needsStiffness(f) ? s.stiffness : nullptr, "stiffness"},
-                              {use_torque ? s.torque : nullptr, "torque"},
-                              {needsMeshState(f) ? s.mesh_state : nullptr, "mesh_state"}};
-  double channel_sum[4] = {0, 0, 0, 0};  // reused below for the segment means
+  const double* channels[] = {s.dte, needsStiffness(f) ? s.stiffness : nullptr,
+                              needsTorque(f, options_.model) ? s.torque : nullptr,
+                              needsMeshState(f) ? s.mesh_state : nullptr};
+  const char* names[] = {"dte", "stiffness", "torque", "mesh_state"};
   for (int c = 0; c < 4; ++c) {
-    const Channel& ch = channels[c];
-    if (ch.data == nullptr) continue;
-    channel_sum[c] = blockSum(ch.data, c0, c1);
+    if (channels[c] == nullptr) continue;
+    channel_sum[c] = blockSum(channels[c], begin, end);
     if (std::isfinite(channel_sum[c])) continue;
-    for (Eigen::Index i = c0; i < c1; ++i) {
-      if (!std::isfinite(ch.data[i])) {
+    for (Eigen::Index i = begin; i < end; ++i) {
+      if (!std::isfinite(channels[c][i])) {
         std::ostringstream m;
-        m << "NaN/Inf in input (" << ch.name << " at t = " << s.time(i) << " s)";
-        return fail(m.str());
+        m << "NaN/Inf in input (" << names[c] << " at t = " << s.time(i) << " s)";
+        return m.str();
       }
     }
   }
+  return {};
+}
+
+// Noise and signal levels, the segment means (time-weighted over the segment's intervals;
+// switches split when located), its breaks and, for a greybox shape, its basis values.
+std::string IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
+                                         const double channel_sum[4], SegmentRecord* rec) {
+  SegmentEstimate& est = rec->estimate;
+  const long rows = static_cast<long>(end - begin);
+  const Formulation f = options_.formulation;
+  const bool use_torque = needsTorque(f, options_.model);
   // Model-free noise and signal levels for the quality flags (quality_flags.hpp).
-  segmentLevels(s.dte + c0, c1 - c0, channel_sum[0], &est.noise_std, &est.signal_std);
-  // Segment means (time-weighted over the segment's intervals; switches split when located).
+  segmentLevels(s.dte + begin, end - begin, channel_sum[0], &est.noise_std, &est.signal_std);
   if (use_torque) {
-    rec.mean_torque = channel_sum[2] / static_cast<double>(rows);
-    est.mean_torque = rec.mean_torque;
+    rec->mean_torque = channel_sum[2] / static_cast<double>(rows);
+    est.mean_torque = rec->mean_torque;
   }
-  rec.duration = static_cast<double>(rows) * s.dt;
+  rec->duration = static_cast<double>(rows) * s.dt;
   // Breaks of the stiffness (held or smooth, decided from the segment's samples) or of the
   // greybox mesh state on the segment's intervals (forward_model.hpp), shared with the
   // refinement's forward model.
@@ -765,54 +797,58 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
                                       gear_.contact_ratio, begin, end, &breaks_);
   }
   if (s.stiffness) {
-    double sum = channels[1].data ? channel_sum[1] : blockSum(s.stiffness, begin, end);
+    double sum = needsStiffness(f) ? channel_sum[1] : blockSum(s.stiffness, begin, end);
     if (held_k_) {
       for (const QuadratureBreak& b : breaks_) {
         sum += (1.0 - b.th) * (s.stiffness[b.j + 1] - s.stiffness[b.j]);
       }
     }
-    rec.k_integral = sum * s.dt / gear_.equivalent_mass;
+    rec->k_integral = sum * s.dt / gear_.equivalent_mass;
   }
   if (shape_) {
     // The shape's basis functions at every sample of the segment, and their time-means.
     if (s.mesh_phase == nullptr) {
-      return fail("missing channel mesh_phase (needed by the greybox stiffness shape " +
-                  toString(options_.stiffness_shape) + ")");
+      return "missing channel mesh_phase (needed by the greybox stiffness shape " +
+             toString(options_.stiffness_shape) + ")";
     }
     basis_.resize(n_basis_, rows);
     for (Eigen::Index i = begin; i < end; ++i) {
       if (!std::isfinite(s.mesh_phase[i])) {
         std::ostringstream m;
         m << "NaN/Inf in input (mesh_phase at t = " << s.time(i) << " s)";
-        return fail(m.str());
+        return m.str();
       }
       options_.stiffness_shape.basis(s.mesh_phase[i], &basis_(0, i - begin));
     }
-    rec.basis_mean.resize(static_cast<size_t>(n_basis_));
-    for (int k = 0; k < n_basis_; ++k) rec.basis_mean[k] = basis_.row(k).mean();
+    rec->basis_mean.resize(static_cast<size_t>(n_basis_));
+    for (int k = 0; k < n_basis_; ++k) rec->basis_mean[k] = basis_.row(k).mean();
   } else if (s.mesh_state && f == Formulation::Greybox) {
-    double sum = channels[3].data ? channel_sum[3] : blockSum(s.mesh_state, begin, end);
+    double sum = needsMeshState(f) ? channel_sum[3] : blockSum(s.mesh_state, begin, end);
     for (const QuadratureBreak& b : breaks_) {
       sum += (1.0 - b.th) * (s.mesh_state[b.j + 1] - s.mesh_state[b.j]);
     }
-    rec.mean_state = sum / static_cast<double>(rows);
+    rec->mean_state = sum / static_cast<double>(rows);
     if (breaks_.empty()) {
-      return fail(
-          "mesh state constant over the segment: the stiffness levels are not "
-          "identifiable (segment shorter than a mesh period?)");
+      return "mesh state constant over the segment: the stiffness levels are not "
+             "identifiable (segment shorter than a mesh period?)";
     }
   }
-  const double fbar = legacy_fbar_;
-  // Windows: W near-equal spans. The damping column comes first among the locals or, for
-  // shared damping, first among the shared columns; its raw norm serves the motion check.
+  return {};
+}
+
+// The rows of each of the W windows, projected and added to the segment's Gram matrix; the
+// window records for the modeled response. Returns the damping column's raw squared norm.
+double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int W,
+                                         SegmentRecord* rec) {
+  const bool use_torque = needsTorque(options_.formulation, options_.model);
+  const int nc = static_cast<int>(columns_.size()) + 1;
+  const int rc = std::max(columnIndex(Column::DampC), 0);
   double raw_c = 0.0;
-  const int cC = columnIndex(Column::DampC);
-  const int nc = q + 1;
-  rec.window_records.reserve(W);
+  rec->window_records.reserve(W);
   for (int w = 0; w < W; ++w) {
     const Eigen::Index w0 = begin + (rows * w) / W, w1 = begin + (rows * (w + 1)) / W;
     const Eigen::Index L = w1 - w0;
-    windowRows(s, w0, w1, fbar);
+    windowRows(s, w0, w1, legacy_fbar_);
     WindowRecord wr;
     wr.t_start = s.time(w0);
     wr.t_end = s.time(w1 - 1);
@@ -820,90 +856,91 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
     wr.dt = s.dt;
     wr.torque_T = (use_torque && s.torque) ? s.torque[w0] : kNaN;
     double raw = 0.0;
-    const int rc = std::max(cC, 0);
+    double* mean = wr.mean.data();
+    double* slope = wr.slope.data();
     switch (nc) {
       case 2:
-        projectedGram<2>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        projectedGram<2>(rows_, L, rc, mean, slope, &raw, &rec->gram);
         break;
       case 3:
-        projectedGram<3>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        projectedGram<3>(rows_, L, rc, mean, slope, &raw, &rec->gram);
         break;
       case 4:
-        projectedGram<4>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        projectedGram<4>(rows_, L, rc, mean, slope, &raw, &rec->gram);
         break;
       case 5:
-        projectedGram<5>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        projectedGram<5>(rows_, L, rc, mean, slope, &raw, &rec->gram);
         break;
       case 6:
-        projectedGram<6>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw, &rec.gram);
+        projectedGram<6>(rows_, L, rc, mean, slope, &raw, &rec->gram);
         break;
       default:
-        projectedGram<0, kMaxColumns + 1>(rows_, L, rc, wr.mean.data(), wr.slope.data(), &raw,
-                                          &rec.gram, nc);
+        projectedGram<0, kMaxColumns + 1>(rows_, L, rc, mean, slope, &raw, &rec->gram, nc);
         break;
     }
     raw_c += raw;
-    rec.window_records.push_back(std::move(wr));
+    rec->window_records.push_back(std::move(wr));
   }
-  rec.rows = rows;
-  rec.windows = W;
-  est.windows = W;
-  if (cC >= 0 && !(rec.gram(cC, cC) > 1e-20 * raw_c)) {
-    return fail("no motion: the DTE has no dynamic content to identify damping from");
-  }
-  // Segment-local solve (final for models without shared unknowns).
-  if (n_local_ > 0) {
-    Eigen::VectorXd x;
-    double cond = 0.0;
-    const Eigen::MatrixXd Gll = rec.gram.topLeftCorner(n_local_, n_local_);
-    if (!solveEquilibrated(Gll, rec.gram.block(0, q, n_local_, 1), options_.max_condition, &x,
-                           nullptr, &cond)) {
-      est.condition = cond;
-      std::ostringstream m;
-      m << "rank deficient or ill-conditioned (condition " << cond << " > "
-        << options_.max_condition << ")";
-      return fail(m.str());
-    }
-    est.condition = cond;
-  }
-  est.identifiable = true;
-  segments_.push_back(std::move(rec));
-  if (n_shared_ == 0 && estimate) {
-    // Fill the estimate from a finish() of this segment alone (cheap: small matrices).
-    const IdentificationResult r = finishRange(segments_.size() - 1, segments_.size());
-    return r.segments.back();
-  }
-  return segments_.back().estimate;
+  return raw_c;
+}
+
+// Segment-local solve (final for models without shared unknowns): the condition number, and
+// the refusal of a rank-deficient or ill-conditioned segment.
+std::string IntegralMethod::solveLocals(SegmentRecord* rec) const {
+  if (n_local_ == 0) return {};
+  const int q = static_cast<int>(columns_.size());
+  Eigen::VectorXd x;
+  double cond = 0.0;
+  const Eigen::MatrixXd Gll = rec->gram.topLeftCorner(n_local_, n_local_);
+  const bool ok = solveEquilibrated(Gll, rec->gram.block(0, q, n_local_, 1), options_.max_condition,
+                                    &x, nullptr, &cond);
+  rec->estimate.condition = cond;
+  if (ok) return {};
+  std::ostringstream m;
+  m << "rank deficient or ill-conditioned (condition " << cond << " > " << options_.max_condition
+    << ")";
+  return m.str();
 }
 
 IdentificationResult IntegralMethod::finish() const { return finishRange(0, segments_.size()); }
 
-IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) const {
-  IdentificationResult res;
-  res.formulation = options_.formulation;
-  res.model = options_.model;
-  res.stiffness_shape = options_.stiffness_shape;
-  res.equivalent_mass = gear_.equivalent_mass;
-  res.window_length = window_length_;
-  const int q = static_cast<int>(columns_.size());
-  const int nl = n_local_, ns = n_shared_;
-  const double me = gear_.equivalent_mass;
-
-  // Shared unknowns: eliminate each segment's locals (Schur complement) and accumulate.
-  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
-  double rss_total = 0.0;
-  long dof_total = 0;
+// The shared unknowns of segments [s_begin, s_end): each segment's locals eliminated (Schur
+// complement), the reduced system accumulated and solved; per segment the inverse of its local
+// block (for the back-substitution).
+struct IntegralMethod::SharedSolution {
   struct Local {
     Eigen::MatrixXd Gll_inv;
     bool ok = false;
   };
-  std::vector<Local> locals(s_end - s_begin);
+  std::vector<Local> locals;  // per segment of the range
+  Eigen::VectorXd g;          // shared unknowns
+  Eigen::MatrixXd Ainv;       // inverse of the reduced normal matrix
+  bool ok = true;
+  double cond = 1.0;
+  std::string reason;    // why not ok
+  long dof = 0;          // residual degrees of freedom over the identifiable segments
+  double sigma2 = kNaN;  // residual variance of the shared problem (ns > 0 and ok)
+};
+
+// One segment's unknowns (locals, then shared) and their covariance; empty if not identified.
+struct IntegralMethod::SegmentParams {
+  Eigen::VectorXd theta;  // q
+  Eigen::MatrixXd cov;    // q x q
+};
+
+IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_t s_end) const {
+  const int q = static_cast<int>(columns_.size());
+  const int nl = n_local_, ns = n_shared_;
+  SharedSolution sh;
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
+  double rss_total = 0.0;
+  sh.locals.resize(s_end - s_begin);
   for (size_t i = s_begin; i < s_end; ++i) {
     const SegmentRecord& rec = segments_[i];
     if (!rec.estimate.identifiable) continue;
     const Eigen::MatrixXd& G = rec.gram;
-    Local& L = locals[i - s_begin];
+    SharedSolution::Local& L = sh.locals[i - s_begin];
     Eigen::VectorXd xl;
     double cond = 0.0;
     if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl, &L.Gll_inv,
@@ -915,53 +952,51 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
     A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv * Gsl.transpose();
     rhs += G.block(nl, q, ns, 1) - Gsl * xl;
     rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
-    dof_total += rec.rows - 2L * rec.windows - nl;
+    sh.dof += rec.rows - 2L * rec.windows - nl;
   }
-  Eigen::VectorXd g = Eigen::VectorXd::Zero(ns);
-  Eigen::MatrixXd Ainv = Eigen::MatrixXd::Zero(ns, ns);
-  bool shared_ok = true;
-  double shared_cond = 1.0;
-  std::string shared_reason;
+  sh.g = Eigen::VectorXd::Zero(ns);
+  sh.Ainv = Eigen::MatrixXd::Zero(ns, ns);
   if (ns > 0) {
-    dof_total -= ns;
-    if (dof_total < 1) {
-      shared_ok = false;
-      shared_reason = "too few samples over the identifiable segments";
-    } else if (!solveEquilibrated(A, rhs, options_.max_condition, &g, &Ainv, &shared_cond)) {
-      shared_ok = false;
+    sh.dof -= ns;
+    if (sh.dof < 1) {
+      sh.ok = false;
+      sh.reason = "too few samples over the identifiable segments";
+    } else if (!solveEquilibrated(A, rhs, options_.max_condition, &sh.g, &sh.Ainv, &sh.cond)) {
+      sh.ok = false;
       std::ostringstream m;
-      m << "rank deficient or ill-conditioned (condition " << shared_cond << ")";
-      shared_reason = m.str();
+      m << "rank deficient or ill-conditioned (condition " << sh.cond << ")";
+      sh.reason = m.str();
     } else {
-      rss_total -= rhs.dot(g);
+      rss_total -= rhs.dot(sh.g);
     }
   }
-  const double sigma2_shared =
-      (ns > 0 && shared_ok) ? std::max(rss_total, 0.0) / static_cast<double>(dof_total) : kNaN;
+  sh.sigma2 = (ns > 0 && sh.ok) ? std::max(rss_total, 0.0) / static_cast<double>(sh.dof) : kNaN;
+  return sh;
+}
 
-  // omega0 = sqrt(mean K): from the data (known) or the identified stiffness.
+// Per-segment parameters and covariances by back-substitution of the shared unknowns, and
+// omega0 = sqrt(mean K): from the data (known) or the identified stiffness.
+std::vector<IntegralMethod::SegmentParams> IntegralMethod::segmentParams(size_t s_begin,
+                                                                         size_t s_end,
+                                                                         const SharedSolution& sh,
+                                                                         double* omega0) const {
+  const int q = static_cast<int>(columns_.size());
+  const int nl = n_local_, ns = n_shared_;
   double k_int = 0.0, dur = 0.0;
-  std::vector<double> seg_kmean(s_end - s_begin, kNaN);
-
-  // Per-segment parameters and covariances.
-  struct Params {
-    Eigen::VectorXd theta;  // q
-    Eigen::MatrixXd cov;    // q x q
-  };
-  std::vector<Params> params(s_end - s_begin);
+  std::vector<SegmentParams> params(s_end - s_begin);
   for (size_t i = s_begin; i < s_end; ++i) {
     const SegmentRecord& rec = segments_[i];
-    const Local& L = locals[i - s_begin];
-    if (!rec.estimate.identifiable || !L.ok || (ns > 0 && !shared_ok)) continue;
+    const SharedSolution::Local& L = sh.locals[i - s_begin];
+    if (!rec.estimate.identifiable || !L.ok || (ns > 0 && !sh.ok)) continue;
     const Eigen::MatrixXd& G = rec.gram;
-    Params& p = params[i - s_begin];
+    SegmentParams& p = params[i - s_begin];
     p.theta.resize(q);
     p.cov = Eigen::MatrixXd::Zero(q, q);
     const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
-    const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * g);
+    const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * sh.g);
     p.theta.head(nl) = xl;
-    p.theta.tail(ns) = g;
-    double sigma2 = sigma2_shared;
+    p.theta.tail(ns) = sh.g;
+    double sigma2 = sh.sigma2;
     if (ns == 0) {
       // The residual sum from the Gram matrix cancels to rounding when the fit is near exact:
       // floor it at the rounding level instead of reporting a zero standard error.
@@ -969,10 +1004,10 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
       sigma2 = rss / static_cast<double>(rec.rows - 2L * rec.windows - nl);
     }
     const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
-    p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * Ainv * B.transpose());
-    p.cov.block(0, nl, nl, ns) = -sigma2 * B * Ainv;
+    p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * sh.Ainv * B.transpose());
+    p.cov.block(0, nl, nl, ns) = -sigma2 * B * sh.Ainv;
     p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
-    p.cov.bottomRightCorner(ns, ns) = sigma2 * Ainv;
+    p.cov.bottomRightCorner(ns, ns) = sigma2 * sh.Ainv;
     // Mean normalised stiffness over the segment.
     double kmean = kNaN;
     const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
@@ -984,144 +1019,182 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
       kmean = 0.0;
       for (int k = 0; k < n_basis_; ++k) kmean += p.theta[cB + k] * rec.basis_mean[k];
     }
-    seg_kmean[i - s_begin] = kmean;
     if (std::isfinite(kmean)) k_int += kmean * rec.duration, dur += rec.duration;
   }
-  const double omega0 =
-      dur > 0.0 && k_int > 0.0 ? std::sqrt(k_int / dur) : std::sqrt(gear_.mean_stiffness / me);
-  res.omega0 = omega0;
+  *omega0 = dur > 0.0 && k_int > 0.0 ? std::sqrt(k_int / dur)
+                                     : std::sqrt(gear_.mean_stiffness / gear_.equivalent_mass);
+  return params;
+}
 
-  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
+namespace {
+// C, its standard deviation, c and xi of an estimate.
+void fillC(SegmentEstimate* e, double C, double var, double me, double omega0) {
+  e->C = C;
+  e->C_std = std::sqrt(std::max(var, 0.0));
+  e->c = coefficientFromC(C, me);
+  e->xi = ratioFromC(C, omega0);
+}
+}  // namespace
+
+// The stiffness of an identified segment: k_min/k_max of the two-level model, or the
+// identified curve of a greybox shape and its extremes over a mesh cycle (for the tables).
+void IntegralMethod::stiffnessEstimate(const SegmentParams& p, SegmentEstimate* e) const {
+  const double me = gear_.equivalent_mass;
   const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
-  auto fillC = [&](SegmentEstimate* e, double C, double var) {
-    e->C = C;
-    e->C_std = std::sqrt(std::max(var, 0.0));
-    e->c = coefficientFromC(C, me);
-    e->xi = ratioFromC(C, omega0);
-  };
-  for (size_t i = s_begin; i < s_end; ++i) {
-    const SegmentRecord& rec = segments_[i];
-    SegmentEstimate e = rec.estimate;
-    const Params& p = params[i - s_begin];
-    if (e.identifiable && p.theta.size() == 0) {
-      e.identifiable = false;
-      e.reason = (ns > 0 && !shared_ok) ? shared_reason : "rank deficient";
-    }
-    if (e.identifiable) {
-      if (cL >= 0) {  // load law: C at the segment's mean torque
-        const double T = rec.mean_torque;
-        const double var = p.cov(cC, cC) + T * T * p.cov(cL, cL) + 2.0 * T * p.cov(cC, cL);
-        fillC(&e, p.theta[cC] + p.theta[cL] * T, var);
-      } else {
-        fillC(&e, p.theta[cC], p.cov(cC, cC));
-      }
-      if (cK0 >= 0) {
-        const double k0 = p.theta[cK0];
-        if (cDK >= 0) {
-          const double dk = p.theta[cDK];
-          e.k_min = me * k0;
-          e.k_max = me * (k0 + dk);
-          e.k_min_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
-          e.k_max_std = me * std::sqrt(std::max(
-                                 p.cov(cK0, cK0) + p.cov(cDK, cDK) + 2.0 * p.cov(cK0, cDK), 0.0));
-        } else {
-          e.k_min = e.k_max = me * k0;
-          e.k_min_std = e.k_max_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
-        }
-      }
-      if (const int cB = columnIndex(Column::StiffBasis); cB >= 0) {
-        // The identified curve, and its extremes over a mesh cycle (for the tables).
-        e.stiffness_curve.resize(n_basis_);
-        e.stiffness_curve_std.resize(n_basis_);
-        for (int k = 0; k < n_basis_; ++k) {
-          e.stiffness_curve[k] = me * p.theta[cB + k];
-          e.stiffness_curve_std[k] = me * std::sqrt(std::max(p.cov(cB + k, cB + k), 0.0));
-        }
-        constexpr int kGrid = 720;
-        std::vector<double> b(n_basis_);
-        e.k_min = std::numeric_limits<double>::infinity();
-        e.k_max = -e.k_min;
-        for (int g = 0; g < kGrid; ++g) {
-          options_.stiffness_shape.basis(static_cast<double>(g) / kGrid, b.data());
-          double k = 0.0;
-          for (int j = 0; j < n_basis_; ++j) k += e.stiffness_curve[j] * b[j];
-          e.k_min = std::min(e.k_min, k), e.k_max = std::max(e.k_max, k);
-        }
-      }
-      const int cF = columnIndex(Column::ForceConst);
-      if (cF >= 0) {
-        e.forcing = p.theta[cF];
-      } else if (options_.formulation == Formulation::Legacy) {
-        e.forcing = legacy_fbar_;
-      }
-      // RMS residual of the integral equations at the estimate (shared unknowns included).
-      {
-        const Eigen::MatrixXd& G = rec.gram;
-        const double rss = G(q, q) - 2.0 * p.theta.dot(G.col(q).head(q)) +
-                           p.theta.dot(G.topLeftCorner(q, q) * p.theta);
-        e.residual_rms = std::sqrt(std::max(rss, kRssFloor * G(q, q)) /
-                                   static_cast<double>(std::max(rec.rows, 1L)));
-      }
-      // Windows: nuisance estimates for the modeled response.
-      for (const WindowRecord& w : rec.window_records) {
-        double m = w.mean[q], sl = w.slope[q];
-        for (int c = 0; c < q; ++c) m -= p.theta[c] * w.mean[c], sl -= p.theta[c] * w.slope[c];
-        const double half = 0.5 * static_cast<double>(w.rows - 1);
-        WindowEstimate we;
-        we.t_start = w.t_start;
-        we.t_end = w.t_end;
-        we.alpha = sl / w.dt;
-        we.y_T = m - sl * half;
-        double CT = p.theta[cC];
-        if (cL >= 0) CT += p.theta[cL] * w.torque_T;
-        we.velocity = we.alpha - CT * we.y_T;
-        res.windows.push_back(we);
-      }
+  if (cK0 >= 0) {
+    const double k0 = p.theta[cK0];
+    if (cDK >= 0) {
+      const double dk = p.theta[cDK];
+      e->k_min = me * k0;
+      e->k_max = me * (k0 + dk);
+      e->k_min_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
+      e->k_max_std =
+          me * std::sqrt(std::max(p.cov(cK0, cK0) + p.cov(cDK, cDK) + 2.0 * p.cov(cK0, cDK), 0.0));
     } else {
-      e.C = e.C_std = e.c = e.xi = kNaN;
-      e.k_min = e.k_max = e.k_min_std = e.k_max_std = kNaN;
+      e->k_min = e->k_max = me * k0;
+      e->k_min_std = e->k_max_std = me * std::sqrt(std::max(p.cov(cK0, cK0), 0.0));
     }
-    res.segments.push_back(e);
   }
-  // Shared summaries.
+  if (const int cB = columnIndex(Column::StiffBasis); cB >= 0) {
+    e->stiffness_curve.resize(n_basis_);
+    e->stiffness_curve_std.resize(n_basis_);
+    for (int k = 0; k < n_basis_; ++k) {
+      e->stiffness_curve[k] = me * p.theta[cB + k];
+      e->stiffness_curve_std[k] = me * std::sqrt(std::max(p.cov(cB + k, cB + k), 0.0));
+    }
+    constexpr int kGrid = 720;
+    std::vector<double> b(n_basis_);
+    e->k_min = std::numeric_limits<double>::infinity();
+    e->k_max = -e->k_min;
+    for (int g = 0; g < kGrid; ++g) {
+      options_.stiffness_shape.basis(static_cast<double>(g) / kGrid, b.data());
+      double k = 0.0;
+      for (int j = 0; j < n_basis_; ++j) k += e->stiffness_curve[j] * b[j];
+      e->k_min = std::min(e->k_min, k), e->k_max = std::max(e->k_max, k);
+    }
+  }
+}
+
+// One segment's estimate from its parameters; its windows' nuisance estimates (for the modeled
+// response) appended to `windows`.
+SegmentEstimate IntegralMethod::segmentEstimate(const SegmentRecord& rec, const SegmentParams& p,
+                                                const SharedSolution& sh, double omega0,
+                                                std::vector<WindowEstimate>* windows) const {
+  const int q = static_cast<int>(columns_.size());
+  const double me = gear_.equivalent_mass;
+  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
+  SegmentEstimate e = rec.estimate;
+  if (e.identifiable && p.theta.size() == 0) {
+    e.identifiable = false;
+    e.reason = (n_shared_ > 0 && !sh.ok) ? sh.reason : "rank deficient";
+  }
+  if (!e.identifiable) {
+    e.C = e.C_std = e.c = e.xi = kNaN;
+    e.k_min = e.k_max = e.k_min_std = e.k_max_std = kNaN;
+    return e;
+  }
+  if (cL >= 0) {  // load law: C at the segment's mean torque
+    const double T = rec.mean_torque;
+    const double var = p.cov(cC, cC) + T * T * p.cov(cL, cL) + 2.0 * T * p.cov(cC, cL);
+    fillC(&e, p.theta[cC] + p.theta[cL] * T, var, me, omega0);
+  } else {
+    fillC(&e, p.theta[cC], p.cov(cC, cC), me, omega0);
+  }
+  stiffnessEstimate(p, &e);
+  const int cF = columnIndex(Column::ForceConst);
+  if (cF >= 0) {
+    e.forcing = p.theta[cF];
+  } else if (options_.formulation == Formulation::Legacy) {
+    e.forcing = legacy_fbar_;
+  }
+  // RMS residual of the integral equations at the estimate (shared unknowns included).
+  const Eigen::MatrixXd& G = rec.gram;
+  const double rss =
+      G(q, q) - 2.0 * p.theta.dot(G.col(q).head(q)) + p.theta.dot(G.topLeftCorner(q, q) * p.theta);
+  e.residual_rms =
+      std::sqrt(std::max(rss, kRssFloor * G(q, q)) / static_cast<double>(std::max(rec.rows, 1L)));
+  // Windows: nuisance estimates for the modeled response.
+  for (const WindowRecord& w : rec.window_records) {
+    double m = w.mean[q], sl = w.slope[q];
+    for (int c = 0; c < q; ++c) m -= p.theta[c] * w.mean[c], sl -= p.theta[c] * w.slope[c];
+    const double half = 0.5 * static_cast<double>(w.rows - 1);
+    WindowEstimate we;
+    we.t_start = w.t_start;
+    we.t_end = w.t_end;
+    we.alpha = sl / w.dt;
+    we.y_T = m - sl * half;
+    double CT = p.theta[cC];
+    if (cL >= 0) CT += p.theta[cL] * w.torque_T;
+    we.velocity = we.alpha - CT * we.y_T;
+    windows->push_back(we);
+  }
+  return e;
+}
+
+// The constant model's and the load law's estimates from the shared unknowns.
+void IntegralMethod::sharedSummaries(const SharedSolution& sh, double omega0,
+                                     IdentificationResult* res) const {
+  const int nl = n_local_;
+  const double me = gear_.equivalent_mass;
+  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
+  const int cK0 = columnIndex(Column::StiffK0);
   if (options_.model == DampingModel::Constant) {
     SegmentEstimate c;
-    if (!res.segments.empty()) {
-      c.t_start = res.segments.front().t_start;
-      c.t_end = res.segments.back().t_end;
+    if (!res->segments.empty()) {
+      c.t_start = res->segments.front().t_start;
+      c.t_end = res->segments.back().t_end;
     }
-    c.identifiable = shared_ok && dof_total > 0;
-    c.reason = shared_reason;
-    c.condition = shared_cond;
+    c.identifiable = sh.ok && sh.dof > 0;
+    c.reason = sh.reason;
+    c.condition = sh.cond;
     for (const auto& r : segments_) c.samples += r.rows, c.windows += r.windows;
     if (c.identifiable && cC >= nl) {
-      fillC(&c, g[cC - nl], sigma2_shared * Ainv(cC - nl, cC - nl));
+      fillC(&c, sh.g[cC - nl], sh.sigma2 * sh.Ainv(cC - nl, cC - nl), me, omega0);
       if (cK0 >= nl) {
-        c.k_min = c.k_max = me * g[cK0 - nl];
+        c.k_min = c.k_max = me * sh.g[cK0 - nl];
         c.k_min_std = c.k_max_std =
-            me * std::sqrt(std::max(sigma2_shared * Ainv(cK0 - nl, cK0 - nl), 0.0));
+            me * std::sqrt(std::max(sh.sigma2 * sh.Ainv(cK0 - nl, cK0 - nl), 0.0));
       }
     } else {
       c.identifiable = false;
       if (c.reason.empty()) c.reason = "no identifiable segment";
     }
-    res.constant = c;
+    res->constant = c;
   }
   if (options_.model == DampingModel::LoadLaw) {
     LoadLawEstimate l;
-    l.identifiable = shared_ok && dof_total > 0;
-    l.reason = shared_reason;
+    l.identifiable = sh.ok && sh.dof > 0;
+    l.reason = sh.reason;
     if (l.identifiable) {
       const int a = cC - nl, b = cL - nl;
-      l.c0 = coefficientFromC(g[a], me);
-      l.c1 = coefficientFromC(g[b], me);
-      l.c0_std = coefficientFromC(std::sqrt(std::max(sigma2_shared * Ainv(a, a), 0.0)), me);
-      l.c1_std = coefficientFromC(std::sqrt(std::max(sigma2_shared * Ainv(b, b), 0.0)), me);
+      l.c0 = coefficientFromC(sh.g[a], me);
+      l.c1 = coefficientFromC(sh.g[b], me);
+      l.c0_std = coefficientFromC(std::sqrt(std::max(sh.sigma2 * sh.Ainv(a, a), 0.0)), me);
+      l.c1_std = coefficientFromC(std::sqrt(std::max(sh.sigma2 * sh.Ainv(b, b), 0.0)), me);
     } else if (l.reason.empty()) {
       l.reason = "no identifiable segment";
     }
-    res.load_law = l;
+    res->load_law = l;
   }
+}
+
+// The estimates of segments [s_begin, s_end): shared unknowns, per-segment parameters, each
+// segment's estimate, then the shared models' summaries.
+IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) const {
+  IdentificationResult res;
+  res.formulation = options_.formulation;
+  res.model = options_.model;
+  res.stiffness_shape = options_.stiffness_shape;
+  res.equivalent_mass = gear_.equivalent_mass;
+  res.window_length = window_length_;
+  const SharedSolution sh = solveShared(s_begin, s_end);
+  double omega0 = kNaN;
+  const std::vector<SegmentParams> params = segmentParams(s_begin, s_end, sh, &omega0);
+  res.omega0 = omega0;
+  for (size_t i = s_begin; i < s_end; ++i)
+    res.segments.push_back(
+        segmentEstimate(segments_[i], params[i - s_begin], sh, omega0, &res.windows));
+  sharedSummaries(sh, omega0, &res);
   if (unlocated_switches_ > 0)
     res.warnings.push_back(switchesUnlocatedWarning(unlocated_switches_));
   return res;

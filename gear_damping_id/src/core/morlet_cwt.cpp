@@ -50,16 +50,16 @@ std::mutex& plannerMutex() {
 }
 
 // FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
-// so call it with plannerMutex() held: kMeasure planning is capped at kMeasureTimeLimitS
+// so call it with plannerMutex() held: Measure planning is capped at kMeasureTimeLimitS
 // (an unlimited FFTW_MEASURE search for N = 1764000 = 2^5 3^2 5^3 7^2 takes > 5 minutes on the
 // reference machine; capped at 5 s its plan is within 7 % of the estimate's speed or better).
 unsigned fftwFlags(FftPlanning planning) {
-  fftw_set_timelimit(planning == FftPlanning::kMeasure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
-  return planning == FftPlanning::kMeasure ? FFTW_MEASURE : FFTW_ESTIMATE;
+  fftw_set_timelimit(planning == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
+  return planning == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE;
 }
 
 // FFTW's double and single-precision interfaces behind one name, for the code templated on
-// the real type R of the inverse FFTs (Precision::kDouble: double, kSingle: float).
+// the real type R of the inverse FFTs (Precision::Double: double, kSingle: float).
 template <typename R>
 struct FftwApi;
 template <>
@@ -264,7 +264,7 @@ struct MorletCwt::Fftw {
   fftw_complex* batch = nullptr;  // one chunk of batches
   std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
   std::map<long, fftw_plan> batch_plans;
-  // Precision::kSingle: the band rounded to float (in_f, zero outside the band), the float
+  // Precision::Single: the band rounded to float (in_f, zero outside the band), the float
   // inverse FFT (c2c_f into out_f) and the float batches of the pruned path.
   fftwf_complex* in_f = nullptr;
   fftwf_complex* out_f = nullptr;
@@ -636,7 +636,7 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
   if (!fillRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)])) {
     return false;
   }
-  if (precision_ == Precision::kSingle) {
+  if (precision_ == Precision::Single) {
     if (pruned_ && prunedRow<float>(out)) return true;
     if (!fullRowSingle()) return false;
     modulusOfFloats(reinterpret_cast<const float*>(fftw_->out_f), n_, out);
@@ -660,8 +660,8 @@ bool MorletCwt::fullRowSingle() {
     {
       std::lock_guard<std::mutex> lock(plannerMutex());
       const unsigned flags = fftwFlags(planning_);
-      fftwf_set_timelimit(planning_ == FftPlanning::kMeasure ? kMeasureTimeLimitS
-                                                             : FFTW_NO_TIMELIMIT);
+      fftwf_set_timelimit(planning_ == FftPlanning::Measure ? kMeasureTimeLimitS
+                                                            : FFTW_NO_TIMELIMIT);
       f.c2c_f = fftwf_plan_dft_1d(static_cast<int>(n_fft_), f.in_f, f.out_f, FFTW_BACKWARD, flags);
     }
     if (!f.c2c_f) return false;

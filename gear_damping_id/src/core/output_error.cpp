@@ -1075,7 +1075,7 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   out->modeled.resize(n);
   const int substeps = substepsFor(r.omega0, s.dt);
   const std::string e =
-      gear_sim::integrateSdof(coeffs, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::RK4,
+      gear_sim::integrateSdof(coeffs, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4,
                               substeps, out->modeled.data(), nullptr);
   if (!e.empty()) {
     *error = "modeled response: " + e;

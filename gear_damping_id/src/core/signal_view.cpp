@@ -8,18 +8,19 @@
 
 namespace gear_damping_id {
 
-std::string GearConstants::validate() const {
-  std::ostringstream e;
-  if (!(equivalent_mass > 0.0) || !std::isfinite(equivalent_mass)) {
-    e << "equivalent_mass = " << equivalent_mass << ": must be > 0 [kg]";
-  } else if (!(force_factor > 0.0) || !std::isfinite(force_factor)) {
-    e << "force_factor = " << force_factor << ": must be > 0 [1/(kg*m)]";
-  } else if (!(contact_ratio > 1.0 && contact_ratio <= 2.0)) {
-    e << "contact_ratio = " << contact_ratio << ": must be in (1, 2]";
-  } else if (!(mean_stiffness > 0.0) || !std::isfinite(mean_stiffness)) {
-    e << "mean_stiffness = " << mean_stiffness << ": must be > 0 [N/m]";
-  }
-  return e.str();
+gear_sim::OptionStatus GearConstants::check() const {
+  auto bad = [](const char* field, double value, const char* rule) {
+    return gear_sim::violated("GearConstants", field, value, rule);
+  };
+  if (!(equivalent_mass > 0.0) || !std::isfinite(equivalent_mass))
+    return bad("equivalent_mass", equivalent_mass, "must be finite and > 0 [kg]");
+  if (!(force_factor > 0.0) || !std::isfinite(force_factor))
+    return bad("force_factor", force_factor, "must be finite and > 0 [1/(kg*m)]");
+  if (!(contact_ratio > 1.0 && contact_ratio <= 2.0))
+    return bad("contact_ratio", contact_ratio, "must be in (1, 2]");
+  if (!(mean_stiffness > 0.0) || !std::isfinite(mean_stiffness))
+    return bad("mean_stiffness", mean_stiffness, "must be finite and > 0 [N/m]");
+  return {};
 }
 
 GearConstants gearConstants(const gear_sim::GearModel& model) {

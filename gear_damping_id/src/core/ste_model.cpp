@@ -22,13 +22,24 @@ gear_sim::SteBasis SteModelOptions::basis() const {
   return b;
 }
 
-std::string SteModelOptions::validate() const {
-  for (int v : {mesh_orders, pinion_orders, gear_orders})
-    if (v < 0 || v > 32) return "STE orders must be in [0, 32] (got " + std::to_string(v) + ")";
-  if (!active()) return "the STE model has no term (give mesh:H, shaft:S or keep the offset)";
+gear_sim::OptionStatus SteModelOptions::check() const {
+  auto bad = [](const char* field, const auto& value, const std::string& rule) {
+    return gear_sim::violated("SteModelOptions", field, value, rule);
+  };
+  if (mesh_orders < 0 || mesh_orders > 32)
+    return bad("mesh_orders", mesh_orders, "must be in [0, 32]");
+  if (pinion_orders < 0 || pinion_orders > 32)
+    return bad("pinion_orders", pinion_orders, "must be in [0, 32]");
+  if (gear_orders < 0 || gear_orders > 32)
+    return bad("gear_orders", gear_orders, "must be in [0, 32]");
+  if (!active())
+    return bad("offset", offset,
+               "the STE model needs a term (give mesh:H, shaft:S or keep the offset)");
   if ((pinion_orders > 0 || gear_orders > 0) && (pinion_teeth < 1 || gear_teeth < 1))
-    return "shaft-order STE terms need the tooth counts Z1, Z2 (from --params)";
-  if (max_iterations < 1) return "max_iterations must be >= 1";
+    return bad(pinion_teeth < 1 ? "pinion_teeth" : "gear_teeth",
+               pinion_teeth < 1 ? pinion_teeth : gear_teeth,
+               "shaft-order STE terms need the tooth counts Z1, Z2 (from --params)");
+  if (max_iterations < 1) return bad("max_iterations", max_iterations, "must be >= 1");
   return {};
 }
 

@@ -39,47 +39,46 @@ void pointChannels(const Copy& c, View* v) {
 
 const char* toString(ChunkStatus s) {
   switch (s) {
-    case ChunkStatus::kAccepted:
+    case ChunkStatus::Accepted:
       return "accepted";
-    case ChunkStatus::kHeld:
+    case ChunkStatus::Held:
       return "held for reordering";
-    case ChunkStatus::kDuplicate:
+    case ChunkStatus::Duplicate:
       return "duplicate";
-    case ChunkStatus::kLate:
+    case ChunkStatus::Late:
       return "late (after its gap)";
-    case ChunkStatus::kRejectedNonFinite:
+    case ChunkStatus::RejectedNonFinite:
       return "rejected: NaN/Inf";
-    case ChunkStatus::kRejectedRate:
+    case ChunkStatus::RejectedRate:
       return "rejected: sample rate changed";
-    case ChunkStatus::kRejectedMalformed:
+    case ChunkStatus::RejectedMalformed:
       return "rejected: malformed";
-    case ChunkStatus::kRejectedValue:
+    case ChunkStatus::RejectedValue:
       return "rejected: implausible value";
-    case ChunkStatus::kSuspect:
+    case ChunkStatus::Suspect:
       return "implausible index jump (held until the next chunk)";
   }
   return "?";
 }
 
-std::string StreamOptions::validate() const {
-  std::ostringstream e;
-  if (!(segment_length >= 0.0)) {
-    e << "segment_length = " << segment_length << ": must be >= 0 [s] (0 or .inf = whole run)";
-  } else if (std::isnan(t_start) || std::isnan(t_end) || !(t_end > t_start)) {
-    e << "t_start = " << t_start << ", t_end = " << t_end << ": need t_start < t_end [s]";
-  } else if (reorder_chunks < 0 || reorder_chunks > 100000) {
-    e << "reorder_chunks = " << reorder_chunks << ": must be in [0, 100000]";
-  } else if (context < 0 || context > 1000) {
-    e << "context = " << context << ": must be in [0, 1000] [samples]";
-  } else if (!(max_jump > 0.0)) {
-    e << "max_jump = " << max_jump << ": must be > 0 [s] (.inf: no jump rule)";
-  } else if (!(magnitude_factor == 0.0 ||
-               (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor)))) {
-    e << "magnitude_factor = " << magnitude_factor << ": must be 0 (off) or finite >= 10";
-  } else if (!(max_abs_dte > 0.0)) {
-    e << "max_abs_dte = " << max_abs_dte << ": must be > 0 [m]";
-  }
-  return e.str();
+gear_sim::OptionStatus StreamOptions::check() const {
+  auto bad = [](const std::string& field, const auto& value, const std::string& rule) {
+    return gear_sim::violated("StreamOptions", field, value, rule);
+  };
+  if (!(segment_length >= 0.0))
+    return bad("segment_length", segment_length, "must be >= 0 [s] (0 or .inf = whole run)");
+  if (std::isnan(t_start)) return bad("t_start", t_start, "must be a number [s]");
+  if (!(t_end > t_start))
+    return bad("t_start", t_start, "must be < t_end = " + gear_sim::formatNumber(t_end) + " [s]");
+  if (reorder_chunks < 0 || reorder_chunks > 100000)
+    return bad("reorder_chunks", reorder_chunks, "must be in [0, 100000]");
+  if (context < 0 || context > 1000)
+    return bad("context", context, "must be in [0, 1000] [samples]");
+  if (!(max_jump > 0.0)) return bad("max_jump", max_jump, "must be > 0 [s] (.inf: no jump rule)");
+  if (!(magnitude_factor == 0.0 || (magnitude_factor >= 10.0 && std::isfinite(magnitude_factor))))
+    return bad("magnitude_factor", magnitude_factor, "must be 0 (off) or finite >= 10");
+  if (!(max_abs_dte > 0.0)) return bad("max_abs_dte", max_abs_dte, "must be > 0 [m]");
+  return {};
 }
 
 SignalView StreamSegment::view() const {
@@ -273,7 +272,7 @@ void StreamAssembler::dropSuspect() {
   ChunkData c;
   c.first_index = suspect_first_;
   c.n = suspect_.dte.size();
-  reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_jump);
+  reject(ChunkStatus::RejectedValue, c, &counters_.rejected_jump);
   counters_.samples_suspect_dropped += c.n;
   suspect_ = Held();
 }
@@ -323,7 +322,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
       << (short_segments ? ", fewer than 4 samples per segment" : "")
       << (rate_too_high ? ", sample rate above 1e12 Hz" : "");
     why = m.str();
-    return ChunkStatus::kRejectedMalformed;
+    return ChunkStatus::RejectedMalformed;
   }
   counters_.samples_received += c.n;
   const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
@@ -339,12 +338,12 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
         m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
           << "] = " << ch.first[i];
         why = m.str();
-        return reject(ChunkStatus::kRejectedNonFinite, c, &counters_.rejected_nonfinite);
+        return reject(ChunkStatus::RejectedNonFinite, c, &counters_.rejected_nonfinite);
       }
     }
   }
   if (implausibleValue(c, &why)) {
-    return reject(ChunkStatus::kRejectedValue, c, &counters_.rejected_value);
+    return reject(ChunkStatus::RejectedValue, c, &counters_.rejected_value);
   }
   decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
   if (seen_any_ && c.first_index == 0 && next_index_ > 0) {
@@ -365,7 +364,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
       << " Hz, stream at " << rate_ << " Hz";
     why = m.str();
-    return reject(ChunkStatus::kRejectedRate, c, &counters_.rejected_rate);
+    return reject(ChunkStatus::RejectedRate, c, &counters_.rejected_rate);
   }
   if (isJump(c)) {
     ++counters_.jumps;
@@ -377,7 +376,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     have_suspect_ = true;
     suspect_first_ = c.first_index;
     suspect_ = Held::copyOf(c);
-    return ChunkStatus::kSuspect;
+    return ChunkStatus::Suspect;
   }
   if (!seen_any_) {
     seen_any_ = true;
@@ -390,24 +389,24 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     if (inRecentGap(c.first_index, end)) {
       ++counters_.late;
       counters_.samples_late += c.n;
-      return ChunkStatus::kLate;
+      return ChunkStatus::Late;
     }
     ++counters_.duplicates;
     counters_.samples_duplicate += c.n;
-    return ChunkStatus::kDuplicate;
+    return ChunkStatus::Duplicate;
   }
   if (c.first_index <= next_index_) {
     if (c.first_index < next_index_) ++counters_.overlaps;
     if (!held_.empty()) ++counters_.out_of_order;  // it filled the hole before the held chunks
     append(c, static_cast<size_t>(next_index_ - c.first_index));
     releaseHeld(false);
-    return ChunkStatus::kAccepted;
+    return ChunkStatus::Accepted;
   }
   // Ahead of the expected index: hold it, waiting for the missing samples.
   if (held_.count(c.first_index) != 0) {
     ++counters_.duplicates;
     counters_.samples_duplicate += c.n;
-    return ChunkStatus::kDuplicate;
+    return ChunkStatus::Duplicate;
   }
   held_[c.first_index] = Held::copyOf(c);
   const unsigned long gaps_before = counters_.gaps;
@@ -418,7 +417,7 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
       << " samples missing from index " << recent_gaps_.back().first;
     why = m.str();
   }
-  return ChunkStatus::kHeld;
+  return ChunkStatus::Held;
 }
 
 void StreamAssembler::releaseHeld(bool force) {
@@ -570,19 +569,19 @@ LossMonitor::Report LossMonitor::update(const StreamCounters& k, double now,
   if (loss) have_loss_ = true, last_loss_ = now;
   streak_ = loss ? streak_ + 1 : 0;
   if (streak_ >= kSustained) {
-    raise(Level::kError, "sustained loss: samples lost in each of the last " +
-                             std::to_string(kSustained) + " reports");
+    raise(Level::Error, "sustained loss: samples lost in each of the last " +
+                            std::to_string(kSustained) + " reports");
   } else if (have_loss_ && now - last_loss_ < kHold) {
-    raise(Level::kWarn, "samples lost (gap, rejected or late) in the last " +
-                            std::to_string(static_cast<int>(kHold)) + " s");
+    raise(Level::Warn, "samples lost (gap, rejected or late) in the last " +
+                           std::to_string(static_cast<int>(kHold)) + " s");
   }
   if (k.jumps > 0) {
-    raise(Level::kWarn, "implausible index jumps since start/reset: " + std::to_string(k.jumps) +
-                            (last_jump.empty() ? "" : " (last: " + last_jump + ")"));
+    raise(Level::Warn, "implausible index jumps since start/reset: " + std::to_string(k.jumps) +
+                           (last_jump.empty() ? "" : " (last: " + last_jump + ")"));
   }
   const unsigned long events = k.duplicates + k.restarts + k.channel_changes;
   if (events != last_events_) {
-    raise(Level::kWarn, "stream events (duplicates/restarts/channel changes) since last report");
+    raise(Level::Warn, "stream events (duplicates/restarts/channel changes) since last report");
   }
   last_events_ = events;
   return r;

@@ -67,14 +67,11 @@ constexpr double kSharedDecayTol = 0.15;
 constexpr double kMaxModalOverlap = 0.3;
 
 // ------------------------------------------------------------------------------------------
-// Option checks: one helper writes every violation as "WaveletOptions.field = value: rule".
+// Option checks: every violation is a gear_sim::OptionStatus of WaveletOptions.
 
-WaveletStatus violated(const std::string& field, double value, const std::string& rule) {
-  WaveletStatus s;
-  s.ok = false;
-  s.field = field;
-  s.message = "WaveletOptions." + field + " = " + num(value) + ": " + rule;
-  return s;
+template <class T>
+gear_sim::OptionStatus violated(const std::string& field, const T& value, const std::string& rule) {
+  return gear_sim::violated("WaveletOptions", field, value, rule);
 }
 
 struct Peak {
@@ -373,7 +370,7 @@ bool frequencyGrid(Analysis* a) {
 // the time-averaged scalogram.
 bool spectraAndNoise(Analysis* a) {
   // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::kEstimate, a->error) ||
+  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate, a->error) ||
       !a->scal.setSignal(a->y, a->error)) {
     return false;
   }
@@ -759,7 +756,7 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   MorletCwt own;
   MorletCwt* fit = &a->scal;
   if (!reuse) {
-    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::kEstimate, a->error) ||
+    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate, a->error) ||
         !own.setSignal(a->y, a->error)) {
       return false;
     }
@@ -793,7 +790,7 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
 // ------------------------------------------------------------------------------------------
 // Options
 
-WaveletStatus WaveletOptions::check() const {
+gear_sim::OptionStatus WaveletOptions::check() const {
   if (!std::isfinite(f_min) || f_min < 0.0)
     return violated("f_min", f_min, "must be >= 0 (0 = auto)");
   if (!std::isfinite(f_max) || f_max < 0.0)
@@ -827,7 +824,7 @@ WaveletStatus WaveletOptions::check() const {
   return checkModesAndRules();
 }
 
-WaveletStatus WaveletOptions::checkModesAndRules() const {
+gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
   for (size_t i = 0; i < mode_frequencies.size(); ++i) {
     const double f = mode_frequencies[i];
     if (!std::isfinite(f) || f <= 0.0) {
@@ -876,10 +873,8 @@ WaveletStatus WaveletOptions::checkModesAndRules() const {
     return violated("max_scalogram_columns", static_cast<double>(max_scalogram_columns),
                     "must be >= 0 (0 = every sample)");
   }
-  return WaveletStatus{};
+  return {};
 }
-
-std::string WaveletOptions::validate() const { return check().message; }
 
 // ------------------------------------------------------------------------------------------
 // Analysis: a short loop over the named steps above.
@@ -888,7 +883,7 @@ bool analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOp
                     WaveletResult* result, std::string* error) {
   if (!result) return setError(error, "analyzeWavelet: null result"), false;
   *result = WaveletResult{};
-  if (const WaveletStatus s = options.check(); !s.ok) return setError(error, s.message), false;
+  if (const auto s = options.check(); !s.ok()) return setError(error, s.message()), false;
   Analysis a{y, n, sample_rate, options, *result, error, {}, MorletCwt{}};
   if (!checkInput(a) || !frequencyGrid(&a) || !spectraAndNoise(&a)) return false;
   if (options.full_scalogram && !fullScalogram(&a)) return false;

@@ -311,7 +311,7 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
   if (!freqs.empty()) {
     MorletCwt cwt;
     std::string e;
-    if (!cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::kEstimate, &e) ||
+    if (!cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::Estimate, &e) ||
         !cwt.setSignal(y, &e)) {
       *error = "wavelet envelopes: " + e;
       return false;

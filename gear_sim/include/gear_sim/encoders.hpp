@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
 
@@ -25,15 +26,16 @@ namespace gear_sim {
 
 /// YAML section `encoder` (config/rig_example.yaml).
 struct EncoderOptions {
-  bool enabled = false;       ///< write theta1, theta2 as encoder angles (rig output)
-  long counts_per_rev1 = 0;   ///< pinion encoder counts per revolution (0 = exact angle)
-  long counts_per_rev2 = 0;   ///< gear encoder counts per revolution (0 = exact angle)
-  double zero1 = 0.0;         ///< [rad] pinion encoder reading at the rigid zero
-  double zero2 = 0.0;         ///< [rad] gear encoder reading at the rigid zero
-  double torque_noise = 0.0;  ///< [N*m] white noise std on the torque output
-  double edge_clock = 0.0;    ///< [Hz] counter clock of edge times (0 = exact times)
-  unsigned long seed = 7;     ///< torque-noise generator seed
-  std::string validate() const;
+  bool enabled = false;        ///< write theta1, theta2 as encoder angles (rig output)
+  long counts_per_rev1 = 0;    ///< pinion encoder counts per revolution (0 = exact angle)
+  long counts_per_rev2 = 0;    ///< gear encoder counts per revolution (0 = exact angle)
+  double zero1 = 0.0;          ///< [rad] pinion encoder reading at the rigid zero
+  double zero2 = 0.0;          ///< [rad] gear encoder reading at the rigid zero
+  double torque_noise = 0.0;   ///< [N*m] white noise std on the torque output
+  double edge_clock = 0.0;     ///< [Hz] counter clock of edge times (0 = exact times)
+  unsigned long seed = 7;      ///< torque-noise generator seed
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Angles of the (noise-free) simulated record `sim` (time, dte, and dte_velocity for the edge

@@ -4,6 +4,8 @@
 
 #include <string>
 
+#include "gear_sim/option_status.hpp"
+
 namespace gear_sim {
 
 /// One wheel of the pair.
@@ -28,9 +30,10 @@ struct GearPair {
   /// Gear ratio Z2/Z1 [-].
   double ratio() const { return static_cast<double>(gear.teeth) / pinion.teeth; }
 
-  /// Empty when valid; otherwise a message naming the offending field, its value and the rule,
-  /// e.g. "pinion.inertia = -1: must be > 0".
-  std::string validate() const;
+  /// The first rule broken, e.g. field "pinion.inertia", value "-1", rule "must be finite and > 0
+  /// [kg*m^2]"; message() "`GearPair::pinion.inertia = -1`: violated `must be ...`".
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 }  // namespace gear_sim

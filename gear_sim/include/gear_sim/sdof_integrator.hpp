@@ -18,8 +18,8 @@
 namespace gear_sim {
 
 enum class Integrator {
-  RK2,  ///< explicit midpoint rule, order 2 (the paper's "second-order Runge-Kutta")
-  RK4   ///< classical fourth-order Runge-Kutta (default)
+  Rk2,  ///< explicit midpoint rule, order 2 (the paper's "second-order Runge-Kutta")
+  Rk4   ///< classical fourth-order Runge-Kutta (default)
 };
 
 /// Coefficients of eq. (4) at one instant: C [1/s], K [1/s^2], F [m/s^2].
@@ -88,7 +88,7 @@ template <class It, class CoeffFn>
 SdofState advanceSdof(const CoeffFn& coeffs, SdofState s, double t_begin, double t_end,
                       int substeps, It& bp, It bp_end, Integrator method) {
   forEachStep(t_begin, t_end, substeps, bp, bp_end, [&](double a, double e, double mid) {
-    if (method == Integrator::RK4) {
+    if (method == Integrator::Rk4) {
       s = rk4Step(s, e - a, coeffs(a, mid), coeffs(mid, mid), coeffs(e, mid));
     } else {
       s = rk2Step(s, e - a, coeffs(a, mid), coeffs(mid, mid));

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "gear_sim/gear_pair.hpp"
+#include "gear_sim/option_status.hpp"
 #include "gear_sim/sdof_integrator.hpp"
 #include "gear_sim/ste.hpp"
 
@@ -32,7 +33,8 @@ struct MeshOptions {
   std::vector<double> fourier_cos;    ///< [N/m] a_h, h = 1.. (fourier model)
   std::vector<double> fourier_sin;    ///< [N/m] b_h, h = 1.. (fourier model)
   double initial_phase = 0.0;         ///< [mesh cycles] mesh phase at t = 0, in [0, 1)
-  std::string validate() const;
+  OptionStatus check() const;         ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class SpeedProfile {
@@ -45,7 +47,8 @@ struct SpeedOptions {
   double pinion_rpm = 3000.0;  ///< [rev/min] (initial) pinion speed, > 0
   double end_rpm = 3000.0;     ///< [rev/min] ramp: final speed, > 0
   double ramp_time = 0.01;     ///< [s] ramp: duration of the linear change, > 0
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class LoadProfile {
@@ -76,10 +79,16 @@ struct LoadOptions {
   double fall = 0.001;         ///< [s] trapezoid (the rest of the period stays at `low`)
   std::vector<double> times;   ///< [s] table, strictly increasing
   std::vector<double> values;  ///< [N*m] table
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
-enum class DampingModel {
+/// How the simulated (true) damping varies over the run, like SpeedProfile and LoadProfile: a
+/// law and its parametrisation (YAML damping.model). The one DampingModel of the package is
+/// gear_damping_id::DampingModel, the model the identification fits (piecewise, constant,
+/// load_law); ConstantRatio/ConstantCoefficient are its `constant`, LoadDependent/LoadLinear
+/// (both c linear in T1) its `load_law`, Piecewise its `piecewise` on aligned segments.
+enum class DampingProfile {
   ConstantRatio,        ///< xi = ratio
   ConstantCoefficient,  ///< c = coefficient
   Piecewise,            ///< xi = ratios[i] for times[i] <= t < times[i+1] (times[0] = 0)
@@ -90,7 +99,7 @@ enum class DampingModel {
 /// Damping ratio convention: xi = c / (2 sqrt(k_mean * Me)), k_mean the time-mean stiffness of
 /// the mesh model; T1_mean is the time-mean of the load over the simulated duration.
 struct DampingOptions {
-  DampingModel model = DampingModel::LoadDependent;
+  DampingProfile model = DampingProfile::LoadDependent;
   double ratio = 0.05;            ///< [-]
   double coefficient = 0.0;       ///< [N*s/m] constant coefficient model
   double load_sensitivity = 0.6;  ///< [-] beta of the load-dependent model
@@ -98,7 +107,8 @@ struct DampingOptions {
   std::vector<double> ratios;     ///< [-] piecewise: one per segment
   double c0 = 0.0;                ///< [N*s/m] load_linear
   double c1 = 0.0;                ///< [N*s/m per N*m] load_linear
-  std::string validate() const;
+  OptionStatus check() const;     ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class DynamicsModel {
@@ -118,14 +128,15 @@ constexpr double kMaxDampingRatio = 10.0;
 struct SimulationOptions {
   double duration = 0.01;      ///< [s] > 0; samples n = 0..round(duration*fs)-1 at t = n/fs
   double sample_rate = 1.0e6;  ///< [Hz] output rate, >= 20x the natural frequency
-  Integrator integrator = Integrator::RK4;
+  Integrator integrator = Integrator::Rk4;
   int substeps = 1;  ///< integration steps per output sample, >= 1
   DynamicsModel dynamics = DynamicsModel::Reduced;
   double initial_dte = 0.0;                                       ///< [m] y(0)
   double initial_velocity = 0.0;                                  ///< [m/s] y'(0)
   double noise_snr_db = std::numeric_limits<double>::infinity();  ///< [dB]; inf = no noise
   unsigned long seed = 1;                                         ///< noise generator seed
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// The gear model alone (what `analyze --params` needs): gears, mesh and speed.
@@ -133,7 +144,8 @@ struct GearModel {
   GearPair gears;
   MeshOptions mesh;
   SpeedOptions speed;
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 struct SimConfig {
@@ -146,10 +158,11 @@ struct SimConfig {
   SteOptions ste;  ///< static transmission error (YAML section `ste`, docs/ste.md); none by default
 
   GearModel gearModel() const { return {gears, mesh, speed}; }
-  /// Empty when valid; else names the YAML key (e.g. "mesh.contact_ratio"), value and rule,
-  /// including cross-section rules (sample rate >= 20x the natural frequency, mesh frequency
+  /// The first rule broken; its field is the YAML key (e.g. "mesh.contact_ratio"). Covers
+  /// cross-section rules too (sample rate >= 20x the natural frequency, mesh frequency
   /// <= sample rate, load period >= sample step) and the size limits above.
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// YAML names of the enums ("square", "trapezoid", "fourier", "constant"; "constant", "ramp";

@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "gear_sim/option_status.hpp"
+
 namespace gear_sim {
 
 /// How the damping force acts when an STE is present.
@@ -33,7 +35,8 @@ struct SteOptions {
   std::vector<double> gear_cos, gear_sin;      ///< [m] shaft orders s = 1.. of the gear angle
   SteDamping damping = SteDamping::Relative;
   bool active() const;
-  std::string validate() const;
+  OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
+  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// The harmonic structure of an STE model: how many mesh orders and pinion/gear shaft orders.

@@ -28,15 +28,21 @@ double quantise(double theta, long counts) {
 
 }  // namespace
 
-std::string EncoderOptions::validate() const {
-  if (counts_per_rev1 < 0 || counts_per_rev2 < 0)
-    return "encoder.counts_per_rev1/2: must be >= 0 (0 = exact angles)";
-  if (!(std::isfinite(zero1) && std::isfinite(zero2))) return "encoder.zero1/2: must be finite";
+OptionStatus EncoderOptions::check() const {
+  auto bad = [](const char* key, auto value, const char* rule) {
+    return violated("EncoderOptions", key, value, rule);
+  };
+  if (counts_per_rev1 < 0)
+    return bad("counts_per_rev1", counts_per_rev1, "must be >= 0 (0 = exact angles)");
+  if (counts_per_rev2 < 0)
+    return bad("counts_per_rev2", counts_per_rev2, "must be >= 0 (0 = exact angles)");
+  if (!std::isfinite(zero1)) return bad("zero1", zero1, "must be finite [rad]");
+  if (!std::isfinite(zero2)) return bad("zero2", zero2, "must be finite [rad]");
   if (!(torque_noise >= 0.0 && std::isfinite(torque_noise)))
-    return "encoder.torque_noise = " + formatNumber(torque_noise) + ": must be >= 0";
+    return bad("torque_noise", torque_noise, "must be finite and >= 0 [N*m]");
   if (!(edge_clock >= 0.0 && std::isfinite(edge_clock)))
-    return "encoder.edge_clock = " + formatNumber(edge_clock) + ": must be >= 0 (0 = exact)";
-  return "";
+    return bad("edge_clock", edge_clock, "must be finite and >= 0 [Hz] (0 = exact)");
+  return {};
 }
 
 void encoderAngles(const SimConfig& c, const EncoderOptions& enc, const SignalTable& sim,

@@ -1,7 +1,6 @@
 #include "gear_sim/gear_pair.hpp"
 
 #include <cmath>
-#include <sstream>
 
 namespace gear_sim {
 
@@ -16,22 +15,20 @@ double GearPair::forceFactor() const {
 }
 
 namespace {
-std::string checkGear(const Gear& g, const char* name) {
-  std::ostringstream os;
-  if (g.teeth < 1) {
-    os << name << ".teeth = " << g.teeth << ": must be a positive integer";
-  } else if (!(std::isfinite(g.inertia) && g.inertia > 0.0)) {
-    os << name << ".inertia = " << g.inertia << ": must be finite and > 0 [kg*m^2]";
-  } else if (!(std::isfinite(g.base_radius) && g.base_radius > 0.0)) {
-    os << name << ".base_radius = " << g.base_radius << ": must be finite and > 0 [m]";
-  }
-  return os.str();
+OptionStatus checkGear(const Gear& g, const std::string& name) {
+  if (g.teeth < 1)
+    return violated("GearPair", name + ".teeth", g.teeth, "must be a positive integer");
+  if (!(std::isfinite(g.inertia) && g.inertia > 0.0))
+    return violated("GearPair", name + ".inertia", g.inertia, "must be finite and > 0 [kg*m^2]");
+  if (!(std::isfinite(g.base_radius) && g.base_radius > 0.0))
+    return violated("GearPair", name + ".base_radius", g.base_radius, "must be finite and > 0 [m]");
+  return {};
 }
 }  // namespace
 
-std::string GearPair::validate() const {
-  std::string e = checkGear(pinion, "pinion");
-  if (e.empty()) e = checkGear(gear, "gear");
+OptionStatus GearPair::check() const {
+  OptionStatus e = checkGear(pinion, "pinion");
+  if (e.ok()) e = checkGear(gear, "gear");
   return e;
 }
 

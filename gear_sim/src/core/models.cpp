@@ -316,23 +316,23 @@ double LoadTorque::mean(double duration) const {
 DampingLaw::DampingLaw(const DampingOptions& o, double k_mean, double me, double t1_mean) {
   const double critical = 2.0 * std::sqrt(k_mean * me);  // c = xi * critical
   switch (o.model) {
-    case DampingModel::ConstantRatio:
+    case DampingProfile::ConstantRatio:
       pieces_ = {{0.0, o.ratio * critical, 0.0}};
       break;
-    case DampingModel::ConstantCoefficient:
+    case DampingProfile::ConstantCoefficient:
       pieces_ = {{0.0, o.coefficient, 0.0}};
       break;
-    case DampingModel::Piecewise:
+    case DampingProfile::Piecewise:
       for (size_t i = 0; i < o.times.size(); ++i)
         pieces_.push_back({o.times[i], o.ratios[i] * critical, 0.0});
       break;
-    case DampingModel::LoadDependent: {
+    case DampingProfile::LoadDependent: {
       // xi = r (1 + beta (T1/Tm - 1)) = r (1 - beta) + (r beta / Tm) T1
       const double r = o.ratio, beta = o.load_sensitivity;
       pieces_ = {{0.0, critical * r * (1.0 - beta), critical * r * beta / t1_mean}};
       break;
     }
-    case DampingModel::LoadLinear:
+    case DampingProfile::LoadLinear:
       pieces_ = {{0.0, o.c0, o.c1}};
       break;
   }

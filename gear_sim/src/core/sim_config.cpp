@@ -10,20 +10,15 @@
 namespace gear_sim {
 namespace {
 
-// "key = value: rule" in the style every validate() of the package uses.
+// Every rule of the simulator configuration names its YAML key path (a SimConfig member path).
 template <class T>
-std::string bad(const std::string& key, const T& value, const std::string& rule) {
-  std::ostringstream os;
-  if constexpr (std::is_floating_point_v<T>)
-    os << key << " = " << formatNumber(value) << ": " << rule;
-  else
-    os << key << " = " << value << ": " << rule;
-  return os.str();
+OptionStatus bad(const std::string& key, const T& value, const std::string& rule) {
+  return violated("SimConfig", key, value, rule);
 }
 
 bool positive(double x) { return std::isfinite(x) && x > 0.0; }
 
-std::string checkIncreasing(const std::vector<double>& v, const std::string& key) {
+OptionStatus checkIncreasing(const std::vector<double>& v, const std::string& key) {
   for (size_t i = 0; i < v.size(); ++i) {
     if (!std::isfinite(v[i]))
       return bad(key + "[" + std::to_string(i) + "]", v[i], "must be finite");
@@ -35,7 +30,7 @@ std::string checkIncreasing(const std::vector<double>& v, const std::string& key
 
 }  // namespace
 
-std::string MeshOptions::validate() const {
+OptionStatus MeshOptions::check() const {
   if (!(contact_ratio > 1.0 && contact_ratio <= 2.0))
     return bad("mesh.contact_ratio", contact_ratio, "must be in (1, 2]");
   if (!(initial_phase >= 0.0 && initial_phase < 1.0))
@@ -78,7 +73,7 @@ std::string MeshOptions::validate() const {
   return {};
 }
 
-std::string SpeedOptions::validate() const {
+OptionStatus SpeedOptions::check() const {
   if (!positive(pinion_rpm))
     return bad("speed.pinion_rpm", pinion_rpm, "must be finite and > 0 [rpm]");
   if (profile == SpeedProfile::Ramp) {
@@ -89,7 +84,7 @@ std::string SpeedOptions::validate() const {
   return {};
 }
 
-std::string LoadOptions::validate() const {
+OptionStatus LoadOptions::check() const {
   auto finite = [](double x) { return std::isfinite(x); };
   switch (profile) {
     case LoadProfile::Constant:
@@ -127,7 +122,7 @@ std::string LoadOptions::validate() const {
       if (times.size() < 1) return bad("load.times", "[]", "needs at least one point");
       if (times.size() != values.size())
         return bad("load.values", values.size(), "must have as many entries as load.times");
-      if (auto e = checkIncreasing(times, "load.times"); !e.empty()) return e;
+      if (auto e = checkIncreasing(times, "load.times"); !e.ok()) return e;
       for (size_t i = 0; i < values.size(); ++i)
         if (!finite(values[i]))
           return bad("load.values[" + std::to_string(i) + "]", values[i], "must be finite [N*m]");
@@ -137,36 +132,36 @@ std::string LoadOptions::validate() const {
   return {};
 }
 
-std::string DampingOptions::validate() const {
+OptionStatus DampingOptions::check() const {
   auto nonneg = [](double x) { return std::isfinite(x) && x >= 0.0; };
   const std::string ratio_rule =
       "must be finite and in [0, " + formatNumber(kMaxDampingRatio) + "]";
   auto ratioOk = [](double x) { return std::isfinite(x) && x >= 0.0 && x <= kMaxDampingRatio; };
   switch (model) {
-    case DampingModel::ConstantRatio:
+    case DampingProfile::ConstantRatio:
       if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       break;
-    case DampingModel::ConstantCoefficient:
+    case DampingProfile::ConstantCoefficient:
       if (!nonneg(coefficient))
         return bad("damping.coefficient", coefficient, "must be finite and >= 0 [N*s/m]");
       break;
-    case DampingModel::Piecewise:
+    case DampingProfile::Piecewise:
       if (times.empty()) return bad("damping.times", "[]", "needs at least one segment start");
       if (times.size() != ratios.size())
         return bad("damping.ratios", ratios.size(), "must have as many entries as damping.times");
       if (times[0] != 0.0)
         return bad("damping.times[0]", times[0], "must be 0 (first segment starts at t = 0)");
-      if (auto e = checkIncreasing(times, "damping.times"); !e.empty()) return e;
+      if (auto e = checkIncreasing(times, "damping.times"); !e.ok()) return e;
       for (size_t i = 0; i < ratios.size(); ++i)
         if (!ratioOk(ratios[i]))
           return bad("damping.ratios[" + std::to_string(i) + "]", ratios[i], ratio_rule);
       break;
-    case DampingModel::LoadDependent:
+    case DampingProfile::LoadDependent:
       if (!ratioOk(ratio)) return bad("damping.ratio", ratio, ratio_rule);
       if (!std::isfinite(load_sensitivity))
         return bad("damping.load_sensitivity", load_sensitivity, "must be finite");
       break;
-    case DampingModel::LoadLinear:
+    case DampingProfile::LoadLinear:
       if (!std::isfinite(c0)) return bad("damping.c0", c0, "must be finite [N*s/m]");
       if (!std::isfinite(c1)) return bad("damping.c1", c1, "must be finite [N*s/m per N*m]");
       break;
@@ -174,7 +169,7 @@ std::string DampingOptions::validate() const {
   return {};
 }
 
-std::string SimulationOptions::validate() const {
+OptionStatus SimulationOptions::check() const {
   if (!positive(duration))
     return bad("simulation.duration", duration, "must be finite and > 0 [s]");
   if (!positive(sample_rate))
@@ -199,18 +194,18 @@ std::string SimulationOptions::validate() const {
   return {};
 }
 
-std::string GearModel::validate() const {
-  if (auto e = gears.validate(); !e.empty()) return e;
-  if (auto e = mesh.validate(); !e.empty()) return e;
-  return speed.validate();
+OptionStatus GearModel::check() const {
+  if (auto e = gears.check(); !e.ok()) return e;
+  if (auto e = mesh.check(); !e.ok()) return e;
+  return speed.check();
 }
 
-std::string SimConfig::validate() const {
-  if (auto e = gearModel().validate(); !e.empty()) return e;
-  if (auto e = load.validate(); !e.empty()) return e;
-  if (auto e = damping.validate(); !e.empty()) return e;
-  if (auto e = simulation.validate(); !e.empty()) return e;
-  if (auto e = ste.validate(); !e.empty()) return e;
+OptionStatus SimConfig::check() const {
+  if (auto e = gearModel().check(); !e.ok()) return e;
+  if (auto e = load.check(); !e.ok()) return e;
+  if (auto e = damping.check(); !e.ok()) return e;
+  if (auto e = simulation.check(); !e.ok()) return e;
+  if (auto e = ste.check(); !e.ok()) return e;
   const double max_rpm = speed.profile == SpeedProfile::Ramp
                              ? std::max(speed.pinion_rpm, speed.end_rpm)
                              : speed.pinion_rpm;
@@ -264,8 +259,8 @@ const std::pair<const char*, LoadProfile> kLoad[] = {
     {"trapezoid", LoadProfile::Trapezoid}, {"table", LoadProfile::Table}};
 const std::pair<const char*, DynamicsModel> kDynamics[] = {{"reduced", DynamicsModel::Reduced},
                                                            {"torsional", DynamicsModel::Torsional}};
-const std::pair<const char*, Integrator> kIntegrator[] = {{"rk2", Integrator::RK2},
-                                                          {"rk4", Integrator::RK4}};
+const std::pair<const char*, Integrator> kIntegrator[] = {{"rk2", Integrator::Rk2},
+                                                          {"rk4", Integrator::Rk4}};
 }  // namespace
 
 std::string toString(StiffnessModel m) { return nameOf(m, kStiffness); }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -86,7 +87,7 @@ inline AffineStep affineStep(Integrator method, double h, int substeps, double K
         c1{ca + cb * t1, K1, 0.0};
     const SdofCoefficients f0{c0.C, K0, ff * t0}, fm{cm.C, Km, ff * tm}, f1{c1.C, K1, ff * t1};
     SdofState e1, e2, g;
-    if (method == Integrator::RK4) {
+    if (method == Integrator::Rk4) {
       e1 = rk4Step({1.0, 0.0}, h, c0, cm, c1);
       e2 = rk4Step({0.0, 1.0}, h, c0, cm, c1);
       g = rk4Step({0.0, 0.0}, h, f0, fm, f1);
@@ -232,6 +233,367 @@ void affineRk4BlockVaryingK(Eigen::Index n, double h, const double* Kh, double c
                           out->g2.data() + offset);
 }
 
+// One simulate() run of a validated configuration: the model, its breakpoints, the output table
+// and the integration state carried from block to block. simulate() is a short loop over its
+// named steps.
+//
+// Eq. (4) for every stiffness model, load profile and both dynamics. K, the load and the
+// damping law's (a, b) are tabulated between breakpoints on the half-step grid (the load in
+// blocks from fillUniform: phasor recurrence for the sine, no sin() per stage; the stiffness
+// from MeshStiffness::fillPiece: constant, a linear ramp or a rotated Fourier series). Eq. (4)
+// is linear, so one RK step is the affine map s' = M s + g, M and g independent of the state:
+// a first pass computes them for a whole block (independent iterations the CPU pipelines;
+// closed forms of rk4Step for RK4 with one substep, else the very same rkStep applied to the
+// basis states and to the forcing), and the sequential pass is then a 2x2 multiply-add per
+// sample instead of RK4's long dependent chain. Same method, same stages; results agree with
+// the stage-wise RK to rounding. Intervals that contain a breakpoint take the generic split
+// path.
+//
+// Torsional dynamics, eq. (1): the DTE y = R1 th1 - R2 th2 obeys eq. (4) exactly, and RK
+// commutes with the linear change of variables, so the stage-wise RK of the 4-state system
+// gives this y (to rounding). The other combination q = R2 J1 th1 + R1 J2 th2 has
+// q'' = (R2 - R1) T1 (the mesh force cancels): integrated with the same RK steps below, and
+// (th1, th2) recovered from (y, q).
+class Simulation {
+ public:
+  static constexpr Eigen::Index kBlock = 2048;
+
+  Simulation(const SimConfig& cfg, SignalTable* out)
+      : cfg_(cfg),
+        so_(cfg.simulation),
+        o_(*out),
+        n_samples_(std::llround(so_.duration * so_.sample_rate)),
+        fs_(so_.sample_rate),
+        dt_(1.0 / fs_),
+        t_last_(static_cast<double>(n_samples_ - 1) / fs_),
+        stiffness_(cfg.mesh),
+        ste_(cfg.ste, cfg.gears.pinion.teeth, cfg.gears.gear.teeth),
+        m_(so_.substeps),
+        h_(dt_ / m_),
+        pc_(stiffness_.piecewiseConstant()),
+        fast_(so_.integrator == Integrator::Rk4 && m_ == 1),
+        torsional_(so_.dynamics == DynamicsModel::Torsional),
+        maps_(static_cast<size_t>(kBlock)) {}
+
+  Eigen::Index samples() const { return n_samples_; }
+
+  /// The model (false: the damping law cannot be built for this load), its breakpoints, the
+  /// output columns and the initial state.
+  bool setUp(std::string* error) {
+    if (!buildModel(error)) return false;
+    collectBreakpoints();
+    allocateColumns();
+    fillSampledColumns();
+    initialState();
+    return true;
+  }
+
+  /// Samples n0 + 1 .. n1 (n1 - n0 <= kBlock).
+  void integrateBlock(Eigen::Index n0, Eigen::Index n1) {
+    model_->load.fillUniform(o_.time[n0], 0.5 * h_, 2 * m_ * (n1 - n0) + 1, T_.data());
+    affineMaps(n0, n1);
+    const auto bp_block = bp_;
+    recurrence(n0, n1);
+    if (torsional_) rigidCombination(n0, n1, bp_block);
+    while (bp_ != bps_.cend() && *bp_ <= o_.time[n1]) ++bp_;
+  }
+
+  /// The last sample's columns, the divergence check and the measurement noise.
+  bool finish(std::string* error) {
+    sampleColumns(n_samples_ - 1);
+    if (!checkFinite(error)) return false;
+    if (std::isfinite(so_.noise_snr_db)) addNoise(&o_.dte, so_.noise_snr_db, so_.seed);
+    return true;
+  }
+
+ private:
+  bool buildModel(std::string* error) {
+    LoadTorque load(cfg_.load);
+    const double t1_mean = load.mean(so_.duration);
+    if (cfg_.damping.model == DampingProfile::LoadDependent && !(std::abs(t1_mean) > 0.0)) {
+      if (error)
+        *error = "damping.model = load_dependent: needs a non-zero time-mean load (load.* gives 0)";
+      return false;
+    }
+    const double me = cfg_.gears.equivalentMass();
+    model_.emplace(Model{
+        stiffness_, MeshTiming(cfg_.speed, cfg_.gears.pinion.teeth, cfg_.mesh.initial_phase), load,
+        DampingLaw(cfg_.damping, stiffness_.mean(), me, t1_mean), me, cfg_.gears.forceFactor()});
+    if (ste_.active()) {
+      model_->ste = &ste_;
+      model_->ste_relative = cfg_.ste.damping == SteDamping::Relative;
+    }
+    return true;
+  }
+
+  // Every instant where a coefficient jumps or kinks: stiffness switches (from the mesh
+  // phase's closed-form inverse), load kinks/steps, damping segment starts.
+  void collectBreakpoints() {
+    const Model& model = *model_;
+    bps_ = model.load.breakpoints(t_last_);
+    for (double t : model.damping.breakpoints(t_last_)) bps_.push_back(t);
+    const double u_first = model.timing.phase(0.0), u_last = model.timing.phase(t_last_);
+    if (!stiffness_.cycleBreakpoints().empty()) {
+      for (double cycle = std::floor(u_first); cycle <= std::ceil(u_last); cycle += 1.0)
+        for (double b : stiffness_.cycleBreakpoints()) {
+          const double u = cycle + b;
+          if (u > u_first && u < u_last) bps_.push_back(model.timing.timeOfPhase(u));
+        }
+    }
+    std::sort(bps_.begin(), bps_.end());
+    bp_ = bps_.cbegin();
+  }
+
+  void allocateColumns() {
+    for (Eigen::VectorXd* c : {&o_.time, &o_.dte, &o_.dte_velocity, &o_.stiffness, &o_.torque,
+                               &o_.mesh_state, &o_.mesh_phase, &o_.damping})
+      resize(*c, n_samples_);
+    if (torsional_) {
+      resize(o_.theta1, n_samples_);
+      resize(o_.theta2, n_samples_);
+    } else {
+      o_.theta1.resize(0);
+      o_.theta2.resize(0);
+    }
+    const size_t grid = static_cast<size_t>(2 * m_ * kBlock + 1);
+    T_.resize(grid);
+    U_.resize(pc_ ? 0 : grid);
+    Kh_.resize(pc_ ? 0 : grid);
+  }
+
+  // Sampled columns (value holding from each sample's instant on).
+  void fillSampledColumns() {
+    model_->load.fillUniform(0.0, dt_, n_samples_, o_.torque.data());
+    for (Eigen::Index n = 0; n < n_samples_; ++n) {
+      o_.time[n] = static_cast<double>(n) / fs_;
+      o_.mesh_phase[n] = model_->timing.phase(o_.time[n]);
+    }
+  }
+
+  // Stiffness, mesh state and damping of sample n: the values holding from t_n on. The pieces
+  // between breakpoints are filled at once in affineMaps; this is the per-sample definition.
+  void sampleColumns(Eigen::Index n) {
+    const double u = o_.mesh_phase[n];
+    o_.stiffness[n] = stiffness_.at(u + kPhaseNudge);
+    o_.mesh_state[n] = stiffness_.state(u + kPhaseNudge);
+    o_.damping[n] = model_->damping.at(o_.time[n] + 1e-6 * dt_, o_.torque[n]);
+  }
+
+  void initialState() {
+    const Model& model = *model_;
+    s_ = {so_.initial_dte, so_.initial_velocity};
+    o_.dte[0] = s_.y;
+    o_.dte_velocity[0] = s_.v;
+    ff_ = model.ff;
+    inv_me_ = 1.0 / model.me;
+    du_ = model.timing.linear() ? model.timing.meshFrequency(0.0) * 0.5 * h_ : 0.0;
+    // Torsional: q, q' and the reconstruction of (th1, th2).
+    const GearPair& g = cfg_.gears;
+    r1_ = g.pinion.base_radius, r2_ = g.gear.base_radius;
+    j1_ = g.pinion.inertia, j2_ = g.gear.inertia;
+    q_gain_ = r2_ - r1_, det_ = r1_ * r1_ * j2_ + r2_ * r2_ * j1_;
+    q_ = {r2_ * j1_ * so_.initial_dte / r1_, r2_ * j1_ * so_.initial_velocity / r1_};
+    if (torsional_) {
+      o_.theta1[0] = (r1_ * j2_ * o_.dte[0] + r2_ * q_.y) / det_;
+      o_.theta2[0] = (r1_ * q_.y - r2_ * j1_ * o_.dte[0]) / det_;
+    }
+  }
+
+  // Pass 1: pieces of constant (a, b) and smooth K between breakpoints; affine maps of their
+  // steps. An interval holding a breakpoint is marked split (integrated stage-wise in pass 2).
+  void affineMaps(Eigen::Index n0, Eigen::Index n1) {
+    auto bp_scan = bp_;
+    const auto bp_end = bps_.cend();
+    Eigen::Index n = n0;
+    while (n < n1) {
+      while (bp_scan != bp_end && *bp_scan <= o_.time[n]) ++bp_scan;
+      // Intervals [n, n_end) contain no breakpoint; interval n_end (if < n1) contains one.
+      Eigen::Index n_end = n1;
+      if (bp_scan != bp_end && *bp_scan < o_.time[n1]) {
+        n_end = std::max(n, static_cast<Eigen::Index>(std::floor(*bp_scan * fs_)));
+        while (n_end > n && o_.time[n_end] >= *bp_scan) --n_end;
+        while (n_end + 1 <= n1 && o_.time[n_end + 1] < *bp_scan) ++n_end;
+        // now t[n_end] < bp < t[n_end + 1] or bp == t[n_end + 1] handled by the <= above
+      }
+      // An STE forcing (docs/ste.md) is evaluated at every stage: every interval takes the
+      // generic path, whose coefficients (Model::sdof) carry it. The torsional model's rigid
+      // combination q does not see the mesh force, so it needs nothing more.
+      if (model_->ste) n_end = n;
+      if (n_end > n) smoothPiece(n0, n, n_end);
+      if (n_end < n1) {
+        maps_.split[n_end - n0] = 1;
+        sampleColumns(n_end);
+      }
+      n = n_end + 1;
+    }
+  }
+
+  // Affine maps of the intervals [n, n_end) of block n0, which hold no breakpoint, and their
+  // stiffness, mesh state and damping columns.
+  void smoothPiece(Eigen::Index n0, Eigen::Index n, Eigen::Index n_end) {
+    const Model& model = *model_;
+    const double mid = o_.time[n] + 0.5 * dt_;
+    double ca, cb;
+    model.damping.coefficients(mid, &ca, &cb);
+    for (Eigen::Index i = n; i < n_end; ++i) o_.damping[i] = ca + cb * o_.torque[i];
+    ca *= inv_me_;
+    cb *= inv_me_;
+    const Eigen::Index j0 = 2 * m_ * (n - n0);
+    const double* Tp = T_.data() + j0;
+    double k_phys = 0.0;
+    if (pc_ || stiffness_.constantOnPiece(model.timing.phase(mid), &k_phys)) {
+      if (pc_) k_phys = model.k(mid, mid);
+      const double K = k_phys * inv_me_;
+      const double state = stiffness_.state(model.timing.phase(mid));
+      for (Eigen::Index i = n; i < n_end; ++i) {
+        o_.stiffness[i] = k_phys;
+        o_.mesh_state[i] = state;
+      }
+      if (fast_) {
+        affineRk4Block(n_end - n, h_, K, ca, cb, ff_, Tp, &maps_, n - n0);
+      } else {
+        for (Eigen::Index i = n; i < n_end; ++i)
+          maps_.set(i - n0, affineStep(so_.integrator, h_, m_, K, nullptr, ca, cb, ff_,
+                                       Tp + 2 * m_ * (i - n)));
+      }
+      return;
+    }
+    const Eigen::Index cnt = 2 * m_ * (n_end - n) + 1;
+    const double t_piece = o_.time[n0];
+    for (Eigen::Index j = 0; j < cnt; ++j)
+      U_[j] = model.timing.phase(t_piece + static_cast<double>(j0 + j) * (0.5 * h_));
+    double* Kp = Kh_.data() + j0;
+    stiffness_.fillPiece(model.timing.phase(mid), U_.data(), cnt, du_, Kp);
+    for (Eigen::Index i = n; i < n_end; ++i) {
+      o_.stiffness[i] = Kp[2 * m_ * (i - n)];
+      o_.mesh_state[i] = stiffness_.state(o_.mesh_phase[i] + kPhaseNudge);
+    }
+    for (Eigen::Index j = 0; j < cnt; ++j) Kp[j] *= inv_me_;
+    if (fast_) {
+      affineRk4BlockVaryingK(n_end - n, h_, Kp, ca, cb, ff_, Tp, &maps_, n - n0);
+    } else {
+      for (Eigen::Index i = n; i < n_end; ++i)
+        maps_.set(i - n0, affineStep(so_.integrator, h_, m_, 0.0, Kp + 2 * m_ * (i - n), ca, cb,
+                                     ff_, Tp + 2 * m_ * (i - n)));
+    }
+  }
+
+  // Pass 2: the sequential recurrence (split intervals stage-wise across their breakpoints).
+  void recurrence(Eigen::Index n0, Eigen::Index n1) {
+    const Model& model = *model_;
+    auto coeffs = [&model](double t, double t_ref) { return model.sdof(t, t_ref); };
+    const double* __restrict m11 = maps_.m11.data();
+    const double* __restrict m12 = maps_.m12.data();
+    const double* __restrict m21 = maps_.m21.data();
+    const double* __restrict m22 = maps_.m22.data();
+    const double* __restrict g1 = maps_.g1.data();
+    const double* __restrict g2 = maps_.g2.data();
+    const char* __restrict split = maps_.split.data();
+    double* __restrict y = o_.dte.data() + n0 + 1;
+    double* __restrict v = o_.dte_velocity.data() + n0 + 1;
+    double sy = s_.y, sv = s_.v;
+    for (Eigen::Index j = 0; j < n1 - n0; ++j) {
+      if (split[j]) {
+        const SdofState a = advanceSdof(coeffs, {sy, sv}, o_.time[n0 + j], o_.time[n0 + j + 1], m_,
+                                        bp_, bps_.cend(), so_.integrator);
+        sy = a.y;
+        sv = a.v;
+      } else {
+        const double ny = m11[j] * sy + m12[j] * sv + g1[j];
+        sv = m21[j] * sy + m22[j] * sv + g2[j];
+        sy = ny;
+      }
+      y[j] = sy;
+      v[j] = sv;
+    }
+    s_ = {sy, sv};
+  }
+
+  // One RK step of the rigid combination q'' = g.
+  void qStep(double hs, double g0, double gm, double g1) {
+    if (so_.integrator == Integrator::Rk4) {
+      q_ = {q_.y + hs * q_.v + hs * hs / 6.0 * (g0 + 2.0 * gm),
+            q_.v + hs / 6.0 * (g0 + 4.0 * gm + g1)};
+    } else {
+      q_ = {q_.y + hs * (q_.v + 0.5 * hs * g0), q_.v + hs * gm};
+    }
+  }
+
+  // Torsional: q over the block with the same RK steps, and (th1, th2) from (y, q).
+  void rigidCombination(Eigen::Index n0, Eigen::Index n1, std::vector<double>::const_iterator bq) {
+    const Model& model = *model_;
+    const auto bp_end = bps_.cend();
+    const double q_gain = q_gain_, h = h_;
+    const int m = m_;
+    const double* __restrict y = o_.dte.data();
+    double* __restrict th1 = o_.theta1.data();
+    double* __restrict th2 = o_.theta2.data();
+    const double a1 = r1_ * j2_ / det_, b1 = r2_ / det_, a2 = -r2_ * j1_ / det_, b2 = r1_ / det_;
+    const double h6 = h * h / 6.0, hs6 = h / 6.0;
+    double qy = q_.y, qv = q_.v;
+    for (Eigen::Index i = n0; i < n1; ++i) {
+      const double* Ti = T_.data() + 2 * m * (i - n0);
+      if (fast_ && !maps_.split[i - n0]) {
+        const double g0 = q_gain * Ti[0], gm = q_gain * Ti[1], g1 = q_gain * Ti[2];
+        qy = qy + h * qv + h6 * (g0 + 2.0 * gm);
+        qv = qv + hs6 * (g0 + 4.0 * gm + g1);
+      } else {
+        q_ = {qy, qv};
+        if (maps_.split[i - n0]) {
+          forEachStep(o_.time[i], o_.time[i + 1], m, bq, bp_end,
+                      [&](double a, double e, double md) {
+                        qStep(e - a, q_gain * model.load.at(a), q_gain * model.load.at(md),
+                              q_gain * model.load.at(e));
+                      });
+        } else {
+          for (int k = 0; k < m; ++k)
+            qStep(h, q_gain * Ti[2 * k], q_gain * Ti[2 * k + 1], q_gain * Ti[2 * k + 2]);
+        }
+        qy = q_.y;
+        qv = q_.v;
+      }
+      th1[i + 1] = a1 * y[i + 1] + b1 * qy;
+      th2[i + 1] = a2 * y[i + 1] + b2 * qy;
+    }
+    q_ = {qy, qv};
+  }
+
+  // An unstable integration (a damping or stiffness far beyond the step's stability region)
+  // ends in Inf/NaN: refused, never written as a record.
+  bool checkFinite(std::string* error) const {
+    for (Eigen::Index n = 0; n < n_samples_; ++n)
+      if (!std::isfinite(o_.dte[n]) || !std::isfinite(o_.dte_velocity[n]) ||
+          !(std::abs(o_.dte[n]) <= kMaxFiniteDte)) {
+        if (error)
+          *error = "the integration diverged at t = " + formatNumber(o_.time[n]) +
+                   " s (|dte| beyond 1 m or not finite): the time step 1/(simulation.sample_rate "
+                   "x simulation.substeps) is too long for this damping and stiffness; raise "
+                   "simulation.substeps or simulation.sample_rate";
+        return false;
+      }
+    return true;
+  }
+
+  const SimConfig& cfg_;
+  const SimulationOptions& so_;
+  SignalTable& o_;
+  const Eigen::Index n_samples_;
+  const double fs_, dt_, t_last_;
+  const MeshStiffness stiffness_;
+  const StaticTransmissionError ste_;
+  const int m_;
+  const double h_;
+  const bool pc_, fast_, torsional_;
+  std::optional<Model> model_;
+  std::vector<double> bps_;
+  std::vector<double>::const_iterator bp_;
+  std::vector<double> T_, U_, Kh_;
+  AffineBlock maps_;
+  SdofState s_, q_;
+  double ff_ = 0.0, inv_me_ = 0.0, du_ = 0.0;
+  double r1_ = 0.0, r2_ = 0.0, j1_ = 0.0, j2_ = 0.0, q_gain_ = 0.0, det_ = 0.0;
+};
+
 }  // namespace
 
 bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
@@ -239,278 +601,12 @@ bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
     if (error) *error = e;
     return false;
   }
-  const SimulationOptions& so = cfg.simulation;
-  const Eigen::Index n_samples = std::llround(so.duration * so.sample_rate);
-  const double fs = so.sample_rate, dt = 1.0 / fs;
-  const double t_last = static_cast<double>(n_samples - 1) / fs;
-
-  LoadTorque load(cfg.load);
-  const double t1_mean = load.mean(so.duration);
-  if (cfg.damping.model == DampingModel::LoadDependent && !(std::abs(t1_mean) > 0.0)) {
-    if (error)
-      *error = "damping.model = load_dependent: needs a non-zero time-mean load (load.* gives 0)";
-    return false;
-  }
-  const MeshStiffness stiffness(cfg.mesh);
-  const double me = cfg.gears.equivalentMass();
-  Model model{stiffness, MeshTiming(cfg.speed, cfg.gears.pinion.teeth, cfg.mesh.initial_phase),
-              load,      DampingLaw(cfg.damping, stiffness.mean(), me, t1_mean),
-              me,        cfg.gears.forceFactor()};
-  const StaticTransmissionError ste(cfg.ste, cfg.gears.pinion.teeth, cfg.gears.gear.teeth);
-  if (ste.active()) {
-    model.ste = &ste;
-    model.ste_relative = cfg.ste.damping == SteDamping::Relative;
-  }
-
-  // Every instant where a coefficient jumps or kinks: stiffness switches (from the mesh
-  // phase's closed-form inverse), load kinks/steps, damping segment starts.
-  std::vector<double> bps = model.load.breakpoints(t_last);
-  for (double t : model.damping.breakpoints(t_last)) bps.push_back(t);
-  const double u_first = model.timing.phase(0.0), u_last = model.timing.phase(t_last);
-  if (!stiffness.cycleBreakpoints().empty()) {
-    for (double cycle = std::floor(u_first); cycle <= std::ceil(u_last); cycle += 1.0)
-      for (double b : stiffness.cycleBreakpoints()) {
-        const double u = cycle + b;
-        if (u > u_first && u < u_last) bps.push_back(model.timing.timeOfPhase(u));
-      }
-  }
-  std::sort(bps.begin(), bps.end());
-
-  SignalTable& o = *out;
-  for (Eigen::VectorXd* c : {&o.time, &o.dte, &o.dte_velocity, &o.stiffness, &o.torque,
-                             &o.mesh_state, &o.mesh_phase, &o.damping})
-    resize(*c, n_samples);
-  const bool torsional = so.dynamics == DynamicsModel::Torsional;
-  if (torsional) {
-    resize(o.theta1, n_samples);
-    resize(o.theta2, n_samples);
-  } else {
-    o.theta1.resize(0);
-    o.theta2.resize(0);
-  }
-
-  // Sampled columns (value holding from each sample's instant on).
-  model.load.fillUniform(0.0, dt, n_samples, o.torque.data());
-  for (Eigen::Index n = 0; n < n_samples; ++n) {
-    o.time[n] = static_cast<double>(n) / fs;
-    o.mesh_phase[n] = model.timing.phase(o.time[n]);
-  }
-  // Stiffness, mesh state and damping of sample n: the values holding from t_n on. The pieces
-  // between breakpoints are filled at once below; this is the per-sample definition.
-  auto sampleColumns = [&](Eigen::Index n) {
-    const double u = o.mesh_phase[n];
-    o.stiffness[n] = stiffness.at(u + kPhaseNudge);
-    o.mesh_state[n] = stiffness.state(u + kPhaseNudge);
-    o.damping[n] = model.damping.at(o.time[n] + 1e-6 * dt, o.torque[n]);
-  };
-
-  const int m = so.substeps;
-  auto bp = bps.cbegin();
-  const auto bp_end = bps.cend();
-  auto coeffs = [&model](double t, double t_ref) { return model.sdof(t, t_ref); };
-
-  // Eq. (4) for every stiffness model, load profile and both dynamics. K, the load and the
-  // damping law's (a, b) are tabulated between breakpoints on the half-step grid (the load in
-  // blocks from fillUniform: phasor recurrence for the sine, no sin() per stage; the stiffness
-  // from MeshStiffness::fillPiece: constant, a linear ramp or a rotated Fourier series). Eq. (4)
-  // is linear, so one RK step is the affine map s' = M s + g, M and g independent of the state:
-  // a first pass computes them for a whole block (independent iterations the CPU pipelines;
-  // closed forms of rk4Step for RK4 with one substep, else the very same rkStep applied to the
-  // basis states and to the forcing), and the sequential pass is then a 2x2 multiply-add per
-  // sample instead of RK4's long dependent chain. Same method, same stages; results agree with
-  // the stage-wise RK to rounding. Intervals that contain a breakpoint take the generic split
-  // path.
-  //
-  // Torsional dynamics, eq. (1): the DTE y = R1 th1 - R2 th2 obeys eq. (4) exactly, and RK
-  // commutes with the linear change of variables, so the stage-wise RK of the 4-state system
-  // gives this y (to rounding). The other combination q = R2 J1 th1 + R1 J2 th2 has
-  // q'' = (R2 - R1) T1 (the mesh force cancels): integrated with the same RK steps below, and
-  // (th1, th2) recovered from (y, q).
-  const bool pc = stiffness.piecewiseConstant();
-  constexpr Eigen::Index kBlock = 2048;
-  const double h = dt / m;
-  const size_t grid = static_cast<size_t>(2 * m * kBlock + 1);
-  std::vector<double> T(grid), U(pc ? 0 : grid), Kh(pc ? 0 : grid);
-  AffineBlock maps(static_cast<size_t>(kBlock));
-  SdofState s{so.initial_dte, so.initial_velocity};
-  o.dte[0] = s.y;
-  o.dte_velocity[0] = s.v;
-  const double ff = model.ff, inv_me = 1.0 / me;
-  const double du = model.timing.linear() ? model.timing.meshFrequency(0.0) * 0.5 * h : 0.0;
-  // Torsional: q, q' and the reconstruction of (th1, th2).
-  const GearPair& g = cfg.gears;
-  const double r1 = g.pinion.base_radius, r2 = g.gear.base_radius;
-  const double j1 = g.pinion.inertia, j2 = g.gear.inertia;
-  const double q_gain = r2 - r1, det = r1 * r1 * j2 + r2 * r2 * j1;
-  SdofState q{r2 * j1 * so.initial_dte / r1, r2 * j1 * so.initial_velocity / r1};
-  auto qStep = [&](double hs, double g0, double gm, double g1) {
-    if (so.integrator == Integrator::RK4) {
-      q = {q.y + hs * q.v + hs * hs / 6.0 * (g0 + 2.0 * gm), q.v + hs / 6.0 * (g0 + 4.0 * gm + g1)};
-    } else {
-      q = {q.y + hs * (q.v + 0.5 * hs * g0), q.v + hs * gm};
-    }
-  };
-  auto writeAngles = [&](Eigen::Index n) {
-    o.theta1[n] = (r1 * j2 * o.dte[n] + r2 * q.y) / det;
-    o.theta2[n] = (r1 * q.y - r2 * j1 * o.dte[n]) / det;
-  };
-  if (torsional) writeAngles(0);
-
-  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += kBlock) {
-    const Eigen::Index n1 = std::min(n_samples - 1, n0 + kBlock);
-    model.load.fillUniform(o.time[n0], 0.5 * h, 2 * m * (n1 - n0) + 1, T.data());
-    // Pass 1: pieces of constant (a, b) and smooth K between breakpoints; affine maps of their
-    // steps.
-    auto bp_scan = bp;
-    Eigen::Index n = n0;
-    while (n < n1) {
-      while (bp_scan != bp_end && *bp_scan <= o.time[n]) ++bp_scan;
-      // Intervals [n, n_end) contain no breakpoint; interval n_end (if < n1) contains one.
-      Eigen::Index n_end = n1;
-      if (bp_scan != bp_end && *bp_scan < o.time[n1]) {
-        n_end = std::max(n, static_cast<Eigen::Index>(std::floor(*bp_scan * fs)));
-        while (n_end > n && o.time[n_end] >= *bp_scan) --n_end;
-        while (n_end + 1 <= n1 && o.time[n_end + 1] < *bp_scan) ++n_end;
-        // now t[n_end] < bp < t[n_end + 1] or bp == t[n_end + 1] handled by the <= above
-      }
-      // An STE forcing (docs/ste.md) is evaluated at every stage: every interval takes the
-      // generic path, whose coefficients (Model::sdof) carry it. The torsional model's rigid
-      // combination q does not see the mesh force, so it needs nothing more.
-      if (model.ste) n_end = n;
-      if (n_end > n) {
-        const double mid = o.time[n] + 0.5 * dt;
-        double ca, cb;
-        model.damping.coefficients(mid, &ca, &cb);
-        for (Eigen::Index i = n; i < n_end; ++i) o.damping[i] = ca + cb * o.torque[i];
-        ca *= inv_me;
-        cb *= inv_me;
-        const Eigen::Index j0 = 2 * m * (n - n0);
-        const double* Tp = T.data() + j0;
-        double k_phys = 0.0;
-        if (pc || stiffness.constantOnPiece(model.timing.phase(mid), &k_phys)) {
-          if (pc) k_phys = model.k(mid, mid);
-          const double K = k_phys * inv_me;
-          const double state = stiffness.state(model.timing.phase(mid));
-          for (Eigen::Index i = n; i < n_end; ++i) {
-            o.stiffness[i] = k_phys;
-            o.mesh_state[i] = state;
-          }
-          if (so.integrator == Integrator::RK4 && m == 1) {
-            affineRk4Block(n_end - n, h, K, ca, cb, ff, Tp, &maps, n - n0);
-          } else {
-            for (Eigen::Index i = n; i < n_end; ++i)
-              maps.set(i - n0, affineStep(so.integrator, h, m, K, nullptr, ca, cb, ff,
-                                          Tp + 2 * m * (i - n)));
-          }
-        } else {
-          const Eigen::Index cnt = 2 * m * (n_end - n) + 1;
-          const double t_piece = o.time[n0];
-          for (Eigen::Index j = 0; j < cnt; ++j)
-            U[j] = model.timing.phase(t_piece + static_cast<double>(j0 + j) * (0.5 * h));
-          double* Kp = Kh.data() + j0;
-          stiffness.fillPiece(model.timing.phase(mid), U.data(), cnt, du, Kp);
-          for (Eigen::Index i = n; i < n_end; ++i) {
-            o.stiffness[i] = Kp[2 * m * (i - n)];
-            o.mesh_state[i] = stiffness.state(o.mesh_phase[i] + kPhaseNudge);
-          }
-          for (Eigen::Index j = 0; j < cnt; ++j) Kp[j] *= inv_me;
-          if (so.integrator == Integrator::RK4 && m == 1) {
-            affineRk4BlockVaryingK(n_end - n, h, Kp, ca, cb, ff, Tp, &maps, n - n0);
-          } else {
-            for (Eigen::Index i = n; i < n_end; ++i)
-              maps.set(i - n0, affineStep(so.integrator, h, m, 0.0, Kp + 2 * m * (i - n), ca, cb,
-                                          ff, Tp + 2 * m * (i - n)));
-          }
-        }
-      }
-      if (n_end < n1) {
-        maps.split[n_end - n0] = 1;
-        sampleColumns(n_end);
-      }
-      n = n_end + 1;
-    }
-    // Pass 2: the sequential recurrence.
-    const auto bp_block = bp;
-    {
-      const double* __restrict m11 = maps.m11.data();
-      const double* __restrict m12 = maps.m12.data();
-      const double* __restrict m21 = maps.m21.data();
-      const double* __restrict m22 = maps.m22.data();
-      const double* __restrict g1 = maps.g1.data();
-      const double* __restrict g2 = maps.g2.data();
-      const char* __restrict split = maps.split.data();
-      double* __restrict y = o.dte.data() + n0 + 1;
-      double* __restrict v = o.dte_velocity.data() + n0 + 1;
-      double sy = s.y, sv = s.v;
-      for (Eigen::Index j = 0; j < n1 - n0; ++j) {
-        if (split[j]) {
-          const SdofState a = advanceSdof(coeffs, {sy, sv}, o.time[n0 + j], o.time[n0 + j + 1], m,
-                                          bp, bp_end, so.integrator);
-          sy = a.y;
-          sv = a.v;
-        } else {
-          const double ny = m11[j] * sy + m12[j] * sv + g1[j];
-          sv = m21[j] * sy + m22[j] * sv + g2[j];
-          sy = ny;
-        }
-        y[j] = sy;
-        v[j] = sv;
-      }
-      s = {sy, sv};
-    }
-    if (torsional) {
-      auto bq = bp_block;
-      const double* __restrict y = o.dte.data();
-      double* __restrict th1 = o.theta1.data();
-      double* __restrict th2 = o.theta2.data();
-      const double a1 = r1 * j2 / det, b1 = r2 / det, a2 = -r2 * j1 / det, b2 = r1 / det;
-      const bool fast = so.integrator == Integrator::RK4 && m == 1;
-      const double h6 = h * h / 6.0, hs6 = h / 6.0;
-      double qy = q.y, qv = q.v;
-      for (Eigen::Index i = n0; i < n1; ++i) {
-        const double* Ti = T.data() + 2 * m * (i - n0);
-        if (fast && !maps.split[i - n0]) {
-          const double g0 = q_gain * Ti[0], gm = q_gain * Ti[1], g1 = q_gain * Ti[2];
-          qy = qy + h * qv + h6 * (g0 + 2.0 * gm);
-          qv = qv + hs6 * (g0 + 4.0 * gm + g1);
-        } else {
-          q = {qy, qv};
-          if (maps.split[i - n0]) {
-            forEachStep(o.time[i], o.time[i + 1], m, bq, bp_end,
-                        [&](double a, double e, double md) {
-                          qStep(e - a, q_gain * model.load.at(a), q_gain * model.load.at(md),
-                                q_gain * model.load.at(e));
-                        });
-          } else {
-            for (int k = 0; k < m; ++k)
-              qStep(h, q_gain * Ti[2 * k], q_gain * Ti[2 * k + 1], q_gain * Ti[2 * k + 2]);
-          }
-          qy = q.y;
-          qv = q.v;
-        }
-        th1[i + 1] = a1 * y[i + 1] + b1 * qy;
-        th2[i + 1] = a2 * y[i + 1] + b2 * qy;
-      }
-      q = {qy, qv};
-    }
-    while (bp != bp_end && *bp <= o.time[n1]) ++bp;
-  }
-  sampleColumns(n_samples - 1);
-
-  // An unstable integration (a damping or stiffness far beyond the step's stability region)
-  // ends in Inf/NaN: refused, never written as a record.
-  for (Eigen::Index n = 0; n < n_samples; ++n)
-    if (!std::isfinite(o.dte[n]) || !std::isfinite(o.dte_velocity[n]) ||
-        !(std::abs(o.dte[n]) <= kMaxFiniteDte)) {
-      if (error)
-        *error = "the integration diverged at t = " + formatNumber(o.time[n]) +
-                 " s (|dte| beyond 1 m or not finite): the time step 1/(simulation.sample_rate "
-                 "x simulation.substeps) is too long for this damping and stiffness; raise "
-                 "simulation.substeps or simulation.sample_rate";
-      return false;
-    }
-  if (std::isfinite(so.noise_snr_db)) addNoise(&o.dte, so.noise_snr_db, so.seed);
-  return true;
+  Simulation run(cfg, out);
+  if (!run.setUp(error)) return false;
+  constexpr Eigen::Index kBlock = Simulation::kBlock;
+  for (Eigen::Index n0 = 0; n0 + 1 < run.samples(); n0 += kBlock)
+    run.integrateBlock(n0, std::min(run.samples() - 1, n0 + kBlock));
+  return run.finish(error);
 }
 
 }  // namespace gear_sim

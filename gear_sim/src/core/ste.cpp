@@ -13,17 +13,22 @@ bool SteOptions::active() const {
          !pinion_sin.empty() || !gear_cos.empty() || !gear_sin.empty();
 }
 
-std::string SteOptions::validate() const {
-  if (!std::isfinite(offset)) return "ste.offset: must be finite [m]";
+OptionStatus SteOptions::check() const {
+  if (!std::isfinite(offset))
+    return violated("SimConfig", "ste.offset", offset, "must be finite [m]");
   const std::pair<const char*, const std::vector<double>*> lists[] = {
       {"ste.mesh_cos", &mesh_cos},     {"ste.mesh_sin", &mesh_sin}, {"ste.pinion_cos", &pinion_cos},
       {"ste.pinion_sin", &pinion_sin}, {"ste.gear_cos", &gear_cos}, {"ste.gear_sin", &gear_sin}};
   for (const auto& [name, v] : lists) {
-    if (v->size() > 64) return std::string(name) + ": at most 64 orders";
-    for (double x : *v)
+    if (v->size() > 64)
+      return violated("SimConfig", std::string(name) + ".size()", v->size(), "at most 64 orders");
+    for (size_t i = 0; i < v->size(); ++i) {
+      const double x = (*v)[i];
       if (!std::isfinite(x) || std::abs(x) > 1e-3)
-        return std::string(name) + ": " + formatNumber(x) +
-               " is not a finite amplitude within 1 mm (STE amplitudes are micrometres) [m]";
+        return violated(
+            "SimConfig", std::string(name) + "[" + std::to_string(i) + "]", x,
+            "must be a finite amplitude within 1 mm (STE amplitudes are micrometres) [m]");
+    }
   }
   return {};
 }

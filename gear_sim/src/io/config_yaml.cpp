@@ -6,6 +6,8 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <variant>
+#include <vector>
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -55,7 +57,7 @@ class Section {
   bool present() const { return node_ && node_.IsMap(); }
 
   // Every key of the section must be in `known`.
-  void allow(std::initializer_list<const char*> known) {
+  void allow(const std::vector<std::string>& known) {
     if (!present() || !ok()) return;
     std::set<std::string> k(known.begin(), known.end());
     for (const auto& kv : node_) {
@@ -63,7 +65,7 @@ class Section {
       if (!keyName(kv.first, name_ + ".", &key, error_)) return;
       if (!k.count(key)) {
         std::string list;
-        for (const char* s : known) list += std::string(list.empty() ? "" : ", ") + s;
+        for (const std::string& s : known) list += (list.empty() ? "" : ", ") + s;
         fail(name_ + "." + keyForMessage(key), "unknown key (known: " + list + ")");
         return;
       }
@@ -110,34 +112,213 @@ class Section {
   const YAML::Node node_;
 };
 
+// The plain (number, integer, list) keys of a section and the members they set: the one key
+// list that loadSimConfig reads and toYaml writes. Enum-valued and special keys are handled by
+// their section's reader and writer.
+template <class S>
+struct Key {
+  const char* name;
+  std::variant<double S::*, std::vector<double> S::*, int S::*, unsigned long S::*> member;
+};
+
+const Key<Gear> kGearKeys[] = {
+    {"teeth", &Gear::teeth}, {"inertia", &Gear::inertia}, {"base_radius", &Gear::base_radius}};
+const Key<MeshOptions> kMeshKeys[] = {{"k_max", &MeshOptions::k_max},
+                                      {"k_min", &MeshOptions::k_min},
+                                      {"contact_ratio", &MeshOptions::contact_ratio},
+                                      {"transition_fraction", &MeshOptions::transition_fraction},
+                                      {"k_mean", &MeshOptions::k_mean},
+                                      {"fourier_cos", &MeshOptions::fourier_cos},
+                                      {"fourier_sin", &MeshOptions::fourier_sin},
+                                      {"initial_phase", &MeshOptions::initial_phase}};
+const Key<SpeedOptions> kSpeedKeys[] = {{"pinion_rpm", &SpeedOptions::pinion_rpm},
+                                        {"end_rpm", &SpeedOptions::end_rpm},
+                                        {"ramp_time", &SpeedOptions::ramp_time}};
+const Key<LoadOptions> kLoadKeys[] = {
+    {"mean", &LoadOptions::mean},           {"amplitude", &LoadOptions::amplitude},
+    {"frequency", &LoadOptions::frequency}, {"phase", &LoadOptions::phase},
+    {"initial", &LoadOptions::initial},     {"final", &LoadOptions::final_value},
+    {"step_time", &LoadOptions::step_time}, {"ramp_start", &LoadOptions::ramp_start},
+    {"ramp_end", &LoadOptions::ramp_end},   {"low", &LoadOptions::low},
+    {"high", &LoadOptions::high},           {"period", &LoadOptions::period},
+    {"rise", &LoadOptions::rise},           {"hold", &LoadOptions::hold},
+    {"fall", &LoadOptions::fall},           {"times", &LoadOptions::times},
+    {"values", &LoadOptions::values}};
+const Key<DampingOptions> kDampingKeys[] = {{"load_sensitivity", &DampingOptions::load_sensitivity},
+                                            {"times", &DampingOptions::times},
+                                            {"ratios", &DampingOptions::ratios},
+                                            {"c0", &DampingOptions::c0},
+                                            {"c1", &DampingOptions::c1}};
+const Key<SimulationOptions> kSimulationKeys[] = {
+    {"duration", &SimulationOptions::duration},
+    {"sample_rate", &SimulationOptions::sample_rate},
+    {"substeps", &SimulationOptions::substeps},
+    {"initial_dte", &SimulationOptions::initial_dte},
+    {"initial_velocity", &SimulationOptions::initial_velocity},
+    {"noise_snr_db", &SimulationOptions::noise_snr_db},
+    {"seed", &SimulationOptions::seed}};
+const Key<SteOptions> kSteKeys[] = {
+    {"offset", &SteOptions::offset},         {"mesh_cos", &SteOptions::mesh_cos},
+    {"mesh_sin", &SteOptions::mesh_sin},     {"pinion_cos", &SteOptions::pinion_cos},
+    {"pinion_sin", &SteOptions::pinion_sin}, {"gear_cos", &SteOptions::gear_cos},
+    {"gear_sin", &SteOptions::gear_sin}};
+
+// `before`, the names of `keys`, then `after`: a section's allowed keys.
+template <class S, size_t N>
+std::vector<std::string> keyNames(std::initializer_list<const char*> before,
+                                  const Key<S> (&keys)[N],
+                                  std::initializer_list<const char*> after = {}) {
+  std::vector<std::string> out(before.begin(), before.end());
+  for (const Key<S>& k : keys) out.push_back(k.name);
+  out.insert(out.end(), after.begin(), after.end());
+  return out;
+}
+
+template <class S>
+void readKey(Section& s, const Key<S>& k, S* out) {
+  std::visit([&](auto m) { s.get(k.name, &(out->*m)); }, k.member);
+}
+
+template <class S, size_t N>
+void readKeys(Section& s, const Key<S> (&keys)[N], S* out) {
+  for (const Key<S>& k : keys) readKey(s, k, out);
+}
+
+template <class S, size_t N>
+void writeKeys(const Key<S> (&keys)[N], const S& in, YAML::Node node) {
+  for (const Key<S>& k : keys) std::visit([&](auto m) { node[k.name] = in.*m; }, k.member);
+}
+
 void readGear(Section& s, Gear* g) {
-  s.allow({"teeth", "inertia", "base_radius"});
-  s.get("teeth", &g->teeth);
-  s.get("inertia", &g->inertia);
-  s.get("base_radius", &g->base_radius);
+  s.allow(keyNames({}, kGearKeys));
+  readKeys(s, kGearKeys, g);
 }
 
 void readMesh(Section& s, MeshOptions* m) {
-  s.allow({"stiffness_model", "k_max", "k_min", "contact_ratio", "transition_fraction", "k_mean",
-           "fourier_cos", "fourier_sin", "initial_phase"});
+  s.allow(keyNames({"stiffness_model"}, kMeshKeys));
   s.getEnum("stiffness_model", &m->model, "square, trapezoid, fourier, constant");
-  s.get("k_max", &m->k_max);
-  s.get("k_min", &m->k_min);
-  s.get("contact_ratio", &m->contact_ratio);
-  s.get("transition_fraction", &m->transition_fraction);
-  s.get("k_mean", &m->k_mean);
-  s.get("fourier_cos", &m->fourier_cos);
-  s.get("fourier_sin", &m->fourier_sin);
-  s.get("initial_phase", &m->initial_phase);
+  readKeys(s, kMeshKeys, m);
 }
 
 void readSpeed(Section& s, SpeedOptions* o) {
-  s.allow({"profile", "pinion_rpm", "end_rpm", "ramp_time"});
+  s.allow(keyNames({"profile"}, kSpeedKeys));
   s.getEnum("profile", &o->profile, "constant, ramp");
-  s.get("pinion_rpm", &o->pinion_rpm);
-  o->end_rpm = o->pinion_rpm;
-  s.get("end_rpm", &o->end_rpm);
-  s.get("ramp_time", &o->ramp_time);
+  readKeys(s, kSpeedKeys, o);
+  if (!s.has("end_rpm")) o->end_rpm = o->pinion_rpm;  // a constant speed unless given
+}
+
+// load.profile csv: a CSV file with columns time [s] and torque [N*m] becomes a piecewise-linear
+// table; `base_dir` resolves a relative load.file.
+void readLoadCsv(Section& l, const std::string& base_dir, const std::string* err, LoadOptions* o) {
+  std::string file;
+  l.get("file", &file);
+  if (err->empty() && file.empty()) l.fail("load.file", "required with load.profile = csv");
+  if (!err->empty()) return;
+  const std::string path = (!file.empty() && file[0] == '/') ? file : base_dir + "/" + file;
+  SignalTable t;
+  std::string e;
+  if (!readTorqueCsv(path, &t, &e)) {
+    // The path comes from the file: quoted in the message (the reader's starts with it).
+    if (e.compare(0, path.size(), path) == 0) e = quoteForMessage(path) + e.substr(path.size());
+    l.fail("load.file", e);
+    return;
+  }
+  o->profile = LoadProfile::Table;
+  o->times.assign(t.time.data(), t.time.data() + t.time.size());
+  o->values.assign(t.torque.data(), t.torque.data() + t.torque.size());
+}
+
+void readLoad(const YAML::Node& root, const std::string& base_dir, std::string* err,
+              LoadOptions* o) {
+  Section l(root, "load", err);
+  l.allow(keyNames({"profile"}, kLoadKeys, {"file"}));
+  std::string profile = "sine";
+  l.get("profile", &profile);
+  if (profile == "csv") {
+    readLoadCsv(l, base_dir, err, o);
+  } else if (err->empty() && !parse(profile, &o->profile)) {
+    l.fail("load.profile", "unknown name " + quoteForMessage(profile) +
+                               " (one of: constant, sine, step, ramp, trapezoid, table, csv)");
+  }
+  for (const Key<LoadOptions>& k : kLoadKeys)  // csv: times and values come from the file
+    if (profile != "csv" || std::holds_alternative<double LoadOptions::*>(k.member))
+      readKey(l, k, o);
+}
+
+void readDamping(const YAML::Node& root, std::string* err, DampingOptions* o) {
+  Section d(root, "damping", err);
+  d.allow(keyNames({"model", "ratio", "coefficient"}, kDampingKeys));
+  std::string model = "load_dependent";
+  d.get("model", &model);
+  if (model == "constant") {
+    if (d.has("ratio") && d.has("coefficient"))
+      d.fail("damping.coefficient", "give either damping.ratio or damping.coefficient, not both");
+    o->model =
+        d.has("coefficient") ? DampingProfile::ConstantCoefficient : DampingProfile::ConstantRatio;
+  } else if (model == "piecewise") {
+    o->model = DampingProfile::Piecewise;
+  } else if (model == "load_dependent") {
+    o->model = DampingProfile::LoadDependent;
+  } else if (model == "load_linear") {
+    o->model = DampingProfile::LoadLinear;
+  } else {
+    d.fail("damping.model", "unknown name " + quoteForMessage(model) +
+                                " (one of: constant, piecewise, load_dependent, load_linear)");
+  }
+  d.get("ratio", &o->ratio);
+  d.get("coefficient", &o->coefficient);
+  readKeys(d, kDampingKeys, o);
+}
+
+void readSimulation(const YAML::Node& root, std::string* err, SimulationOptions* o) {
+  Section s(root, "simulation", err);
+  s.allow(keyNames({"integrator", "dynamics"}, kSimulationKeys));
+  s.getEnum("integrator", &o->integrator, "rk2, rk4");
+  s.getEnum("dynamics", &o->dynamics, "reduced, torsional");
+  readKeys(s, kSimulationKeys, o);
+}
+
+// Static transmission error (docs/ste.md): absent = none.
+void readSte(const YAML::Node& root, std::string* err, SteOptions* o) {
+  Section st(root, "ste", err);
+  st.allow(keyNames({}, kSteKeys, {"damping"}));
+  readKeys(st, kSteKeys, o);
+  std::string ste_damping = "relative";
+  st.get("damping", &ste_damping);
+  if (ste_damping == "relative") {
+    o->damping = SteDamping::Relative;
+  } else if (ste_damping == "dte") {
+    o->damping = SteDamping::Dte;
+  } else {
+    st.fail("ste.damping",
+            "unknown name " + quoteForMessage(ste_damping) + " (one of: relative, dte)");
+  }
+}
+
+// `encoder` is read by loadEncoderOptions (encoder_yaml.hpp).
+void checkSections(const YAML::Node& root, std::string* err) {
+  const std::set<std::string> sections{"pinion",  "gear",       "mesh", "speed",  "load",
+                                       "damping", "simulation", "ste",  "encoder"};
+  for (const auto& kv : root) {
+    std::string key;
+    if (!keyName(kv.first, "", &key, err)) return;
+    if (!sections.count(key)) {
+      *err = keyForMessage(key) +
+             ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
+             "ste, encoder)";
+      return;
+    }
+  }
+}
+
+// pinion, gear, mesh and speed into `m`.
+void readGearModel(const YAML::Node& root, std::string* err, GearModel* m) {
+  Section p(root, "pinion", err), g(root, "gear", err), me(root, "mesh", err),
+      sp(root, "speed", err);
+  readGear(p, &m->gears.pinion);
+  readGear(g, &m->gears.gear);
+  readMesh(me, &m->mesh);
+  readSpeed(sp, &m->speed);
 }
 
 std::string dirOf(const std::string& path) {
@@ -154,14 +335,7 @@ static bool loadGearModelImpl(const YAML::Node& root, GearModel* out, std::strin
     if (err.empty() && !root[sec])
       err = std::string(sec) + ": missing section (pinion, gear, mesh and speed are required)";
   GearModel m;
-  if (err.empty()) {
-    Section p(root, "pinion", &err), g(root, "gear", &err), me(root, "mesh", &err),
-        sp(root, "speed", &err);
-    readGear(p, &m.gears.pinion);
-    readGear(g, &m.gears.gear);
-    readMesh(me, &m.mesh);
-    readSpeed(sp, &m.speed);
-  }
+  if (err.empty()) readGearModel(root, &err, &m);
   if (err.empty()) err = m.validate();
   if (!err.empty()) {
     if (error) *error = err;
@@ -176,140 +350,17 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
   std::string err;
   SimConfig c;
   if (!root || !root.IsMap()) err = "the configuration must be a YAML mapping of sections";
+  if (err.empty()) checkSections(root, &err);
   if (err.empty()) {
-    // `encoder` is read by loadEncoderOptions (encoder_yaml.hpp).
-    const std::set<std::string> sections{"pinion",  "gear",       "mesh", "speed",  "load",
-                                         "damping", "simulation", "ste",  "encoder"};
-    for (const auto& kv : root) {
-      std::string key;
-      if (!keyName(kv.first, "", &key, &err)) break;
-      if (!sections.count(key)) {
-        err = keyForMessage(key) +
-              ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
-              "ste, encoder)";
-        break;
-      }
-    }
-  }
-  if (err.empty()) {
-    Section p(root, "pinion", &err), g(root, "gear", &err), me(root, "mesh", &err),
-        sp(root, "speed", &err);
-    readGear(p, &c.gears.pinion);
-    readGear(g, &c.gears.gear);
-    readMesh(me, &c.mesh);
-    readSpeed(sp, &c.speed);
-
-    Section l(root, "load", &err);
-    l.allow({"profile", "mean", "amplitude", "frequency", "phase", "initial", "final", "step_time",
-             "ramp_start", "ramp_end", "low", "high", "period", "rise", "hold", "fall", "times",
-             "values", "file"});
-    std::string profile = "sine";
-    l.get("profile", &profile);
-    if (profile == "csv") {
-      // A CSV file with columns time [s] and torque [N*m] becomes a piecewise-linear table.
-      std::string file;
-      l.get("file", &file);
-      if (err.empty() && file.empty()) l.fail("load.file", "required with load.profile = csv");
-      if (err.empty()) {
-        const std::string path = (!file.empty() && file[0] == '/') ? file : base_dir + "/" + file;
-        SignalTable t;
-        std::string e;
-        if (!readTorqueCsv(path, &t, &e)) {
-          // The path comes from the file: quoted in the message (the reader's starts with it).
-          if (e.compare(0, path.size(), path) == 0)
-            e = quoteForMessage(path) + e.substr(path.size());
-          l.fail("load.file", e);
-        } else {
-          c.load.profile = LoadProfile::Table;
-          c.load.times.assign(t.time.data(), t.time.data() + t.time.size());
-          c.load.values.assign(t.torque.data(), t.torque.data() + t.torque.size());
-        }
-      }
-    } else if (err.empty() && !parse(profile, &c.load.profile)) {
-      l.fail("load.profile", "unknown name " + quoteForMessage(profile) +
-                                 " (one of: constant, sine, step, ramp, trapezoid, table, csv)");
-    }
-    l.get("mean", &c.load.mean);
-    l.get("amplitude", &c.load.amplitude);
-    l.get("frequency", &c.load.frequency);
-    l.get("phase", &c.load.phase);
-    l.get("initial", &c.load.initial);
-    l.get("final", &c.load.final_value);
-    l.get("step_time", &c.load.step_time);
-    l.get("ramp_start", &c.load.ramp_start);
-    l.get("ramp_end", &c.load.ramp_end);
-    l.get("low", &c.load.low);
-    l.get("high", &c.load.high);
-    l.get("period", &c.load.period);
-    l.get("rise", &c.load.rise);
-    l.get("hold", &c.load.hold);
-    l.get("fall", &c.load.fall);
-    if (profile != "csv") {
-      l.get("times", &c.load.times);
-      l.get("values", &c.load.values);
-    }
-
-    Section d(root, "damping", &err);
-    d.allow({"model", "ratio", "coefficient", "load_sensitivity", "times", "ratios", "c0", "c1"});
-    std::string model = "load_dependent";
-    d.get("model", &model);
-    if (model == "constant") {
-      if (d.has("ratio") && d.has("coefficient"))
-        d.fail("damping.coefficient", "give either damping.ratio or damping.coefficient, not both");
-      c.damping.model =
-          d.has("coefficient") ? DampingModel::ConstantCoefficient : DampingModel::ConstantRatio;
-    } else if (model == "piecewise") {
-      c.damping.model = DampingModel::Piecewise;
-    } else if (model == "load_dependent") {
-      c.damping.model = DampingModel::LoadDependent;
-    } else if (model == "load_linear") {
-      c.damping.model = DampingModel::LoadLinear;
-    } else {
-      d.fail("damping.model", "unknown name " + quoteForMessage(model) +
-                                  " (one of: constant, piecewise, load_dependent, load_linear)");
-    }
-    d.get("ratio", &c.damping.ratio);
-    d.get("coefficient", &c.damping.coefficient);
-    d.get("load_sensitivity", &c.damping.load_sensitivity);
-    d.get("times", &c.damping.times);
-    d.get("ratios", &c.damping.ratios);
-    d.get("c0", &c.damping.c0);
-    d.get("c1", &c.damping.c1);
-
-    Section s(root, "simulation", &err);
-    s.allow({"duration", "sample_rate", "integrator", "substeps", "dynamics", "initial_dte",
-             "initial_velocity", "noise_snr_db", "seed"});
-    s.get("duration", &c.simulation.duration);
-    s.get("sample_rate", &c.simulation.sample_rate);
-    s.getEnum("integrator", &c.simulation.integrator, "rk2, rk4");
-    s.get("substeps", &c.simulation.substeps);
-    s.getEnum("dynamics", &c.simulation.dynamics, "reduced, torsional");
-    s.get("initial_dte", &c.simulation.initial_dte);
-    s.get("initial_velocity", &c.simulation.initial_velocity);
-    s.get("noise_snr_db", &c.simulation.noise_snr_db);
-    s.get("seed", &c.simulation.seed);
-
-    // Static transmission error (docs/ste.md): absent = none.
-    Section st(root, "ste", &err);
-    st.allow({"offset", "mesh_cos", "mesh_sin", "pinion_cos", "pinion_sin", "gear_cos", "gear_sin",
-              "damping"});
-    st.get("offset", &c.ste.offset);
-    st.get("mesh_cos", &c.ste.mesh_cos);
-    st.get("mesh_sin", &c.ste.mesh_sin);
-    st.get("pinion_cos", &c.ste.pinion_cos);
-    st.get("pinion_sin", &c.ste.pinion_sin);
-    st.get("gear_cos", &c.ste.gear_cos);
-    st.get("gear_sin", &c.ste.gear_sin);
-    std::string ste_damping = "relative";
-    st.get("damping", &ste_damping);
-    if (ste_damping == "relative") {
-      c.ste.damping = SteDamping::Relative;
-    } else if (ste_damping == "dte") {
-      c.ste.damping = SteDamping::Dte;
-    } else {
-      st.fail("ste.damping",
-              "unknown name " + quoteForMessage(ste_damping) + " (one of: relative, dte)");
-    }
+    GearModel m = c.gearModel();
+    readGearModel(root, &err, &m);
+    c.gears = m.gears;
+    c.mesh = m.mesh;
+    c.speed = m.speed;
+    readLoad(root, base_dir, &err, &c.load);
+    readDamping(root, &err, &c.damping);
+    readSimulation(root, &err, &c.simulation);
+    readSte(root, &err, &c.ste);
   }
   if (err.empty()) err = c.validate();
   if (!err.empty()) {
@@ -384,81 +435,32 @@ bool loadGearModelFile(const std::string& path, GearModel* out, std::string* err
 
 YAML::Node toYaml(const SimConfig& c) {
   YAML::Node n;
-  for (auto [name, g] : {std::pair{"pinion", &c.gears.pinion}, std::pair{"gear", &c.gears.gear}}) {
-    n[name]["teeth"] = g->teeth;
-    n[name]["inertia"] = g->inertia;
-    n[name]["base_radius"] = g->base_radius;
-  }
-  auto& m = c.mesh;
-  n["mesh"]["stiffness_model"] = toString(m.model);
-  n["mesh"]["k_max"] = m.k_max;
-  n["mesh"]["k_min"] = m.k_min;
-  n["mesh"]["contact_ratio"] = m.contact_ratio;
-  n["mesh"]["transition_fraction"] = m.transition_fraction;
-  n["mesh"]["k_mean"] = m.k_mean;
-  n["mesh"]["fourier_cos"] = m.fourier_cos;
-  n["mesh"]["fourier_sin"] = m.fourier_sin;
-  n["mesh"]["initial_phase"] = m.initial_phase;
+  writeKeys(kGearKeys, c.gears.pinion, n["pinion"]);
+  writeKeys(kGearKeys, c.gears.gear, n["gear"]);
+  n["mesh"]["stiffness_model"] = toString(c.mesh.model);
+  writeKeys(kMeshKeys, c.mesh, n["mesh"]);
   n["speed"]["profile"] = toString(c.speed.profile);
-  n["speed"]["pinion_rpm"] = c.speed.pinion_rpm;
-  n["speed"]["end_rpm"] = c.speed.end_rpm;
-  n["speed"]["ramp_time"] = c.speed.ramp_time;
-  auto& l = c.load;
-  n["load"]["profile"] = toString(l.profile);
-  for (auto [k, v] : {std::pair{"mean", l.mean},
-                      {"amplitude", l.amplitude},
-                      {"frequency", l.frequency},
-                      {"phase", l.phase},
-                      {"initial", l.initial},
-                      {"final", l.final_value},
-                      {"step_time", l.step_time},
-                      {"ramp_start", l.ramp_start},
-                      {"ramp_end", l.ramp_end},
-                      {"low", l.low},
-                      {"high", l.high},
-                      {"period", l.period},
-                      {"rise", l.rise},
-                      {"hold", l.hold},
-                      {"fall", l.fall}})
-    n["load"][k] = v;
-  n["load"]["times"] = l.times;
-  n["load"]["values"] = l.values;
-  auto& d = c.damping;
-  const char* model = d.model == DampingModel::Piecewise       ? "piecewise"
-                      : d.model == DampingModel::LoadDependent ? "load_dependent"
-                      : d.model == DampingModel::LoadLinear    ? "load_linear"
-                                                               : "constant";
+  writeKeys(kSpeedKeys, c.speed, n["speed"]);
+  n["load"]["profile"] = toString(c.load.profile);
+  writeKeys(kLoadKeys, c.load, n["load"]);
+  const DampingOptions& d = c.damping;
+  const char* model = d.model == DampingProfile::Piecewise       ? "piecewise"
+                      : d.model == DampingProfile::LoadDependent ? "load_dependent"
+                      : d.model == DampingProfile::LoadLinear    ? "load_linear"
+                                                                 : "constant";
   n["damping"]["model"] = model;
-  if (d.model == DampingModel::ConstantCoefficient) {
+  if (d.model == DampingProfile::ConstantCoefficient) {
     n["damping"]["coefficient"] = d.coefficient;
   } else {
     n["damping"]["ratio"] = d.ratio;
   }
-  n["damping"]["load_sensitivity"] = d.load_sensitivity;
-  n["damping"]["times"] = d.times;
-  n["damping"]["ratios"] = d.ratios;
-  n["damping"]["c0"] = d.c0;
-  n["damping"]["c1"] = d.c1;
-  auto& s = c.simulation;
-  n["simulation"]["duration"] = s.duration;
-  n["simulation"]["sample_rate"] = s.sample_rate;
-  n["simulation"]["integrator"] = toString(s.integrator);
-  n["simulation"]["substeps"] = s.substeps;
-  n["simulation"]["dynamics"] = toString(s.dynamics);
-  n["simulation"]["initial_dte"] = s.initial_dte;
-  n["simulation"]["initial_velocity"] = s.initial_velocity;
-  n["simulation"]["noise_snr_db"] = s.noise_snr_db;
-  n["simulation"]["seed"] = s.seed;
+  writeKeys(kDampingKeys, d, n["damping"]);
+  n["simulation"]["integrator"] = toString(c.simulation.integrator);
+  n["simulation"]["dynamics"] = toString(c.simulation.dynamics);
+  writeKeys(kSimulationKeys, c.simulation, n["simulation"]);
   if (c.ste.active()) {
-    auto& e = c.ste;
-    n["ste"]["offset"] = e.offset;
-    n["ste"]["mesh_cos"] = e.mesh_cos;
-    n["ste"]["mesh_sin"] = e.mesh_sin;
-    n["ste"]["pinion_cos"] = e.pinion_cos;
-    n["ste"]["pinion_sin"] = e.pinion_sin;
-    n["ste"]["gear_cos"] = e.gear_cos;
-    n["ste"]["gear_sin"] = e.gear_sin;
-    n["ste"]["damping"] = e.damping == SteDamping::Relative ? "relative" : "dte";
+    writeKeys(kSteKeys, c.ste, n["ste"]);
+    n["ste"]["damping"] = c.ste.damping == SteDamping::Relative ? "relative" : "dte";
   }
   return n;
 }

@@ -33,7 +33,7 @@ std::string trim(const std::string& s) {
   return s.substr(a, b - a + 1);
 }
 
-enum class LineRead { kOk, kEnd, kTooLong };
+enum class LineRead { Ok, End, TooLong };
 
 // std::getline with a length limit: a file without newlines (/dev/zero, binary garbage) is
 // refused after kMaxCsvLineBytes instead of being read into memory whole.
@@ -41,10 +41,10 @@ LineRead readLine(std::istream& f, std::vector<char>& buf, std::string* line) {
   f.getline(buf.data(), static_cast<std::streamsize>(buf.size()));
   const std::streamsize n = f.gcount();
   if (f.fail() && !f.eof() && !f.bad() && n + 1 >= static_cast<std::streamsize>(buf.size()))
-    return LineRead::kTooLong;
-  if (f.bad() || (n == 0 && f.eof())) return LineRead::kEnd;
+    return LineRead::TooLong;
+  if (f.bad() || (n == 0 && f.eof())) return LineRead::End;
   line->assign(buf.data(), static_cast<size_t>(f.eof() ? n : n - 1));
-  return LineRead::kOk;
+  return LineRead::Ok;
 }
 
 }  // namespace
@@ -109,18 +109,18 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
   std::string line;
   long line_no = 0;
   std::vector<char> buf(kMaxCsvLineBytes + 1);
-  LineRead got = LineRead::kEnd;
+  LineRead got = LineRead::End;
   auto tooLong = [&]() {
     return fail("line " + std::to_string(line_no + 1) + ": longer than " +
                 std::to_string(kMaxCsvLineBytes) + " bytes (not a signal CSV?)");
   };
   // Header: the first non-empty line (a UTF-8 byte-order mark before it is skipped).
-  while ((got = readLine(f, buf, &line)) == LineRead::kOk) {
+  while ((got = readLine(f, buf, &line)) == LineRead::Ok) {
     ++line_no;
     if (line_no == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
     if (!trim(line).empty()) break;
   }
-  if (got == LineRead::kTooLong) return tooLong();
+  if (got == LineRead::TooLong) return tooLong();
   if (trim(line).empty()) return fail("empty file (no header row)");
   const auto& names = signalColumnNames();
   std::vector<int> map;  // field -> canonical column
@@ -155,7 +155,7 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
   }
   std::vector<std::vector<double>> data(names.size());
   std::vector<long> row_line;  // file line of each data row, for messages
-  while ((got = readLine(f, buf, &line)) == LineRead::kOk) {
+  while ((got = readLine(f, buf, &line)) == LineRead::Ok) {
     ++line_no;
     if (trim(line).empty()) continue;
     row_line.push_back(line_no);
@@ -189,7 +189,7 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
       }
     }
   }
-  if (got == LineRead::kTooLong) return tooLong();
+  if (got == LineRead::TooLong) return tooLong();
   const std::vector<double>& time = data[0];
   if (time.size() < 2) return fail("fewer than two data rows");
   for (size_t i = 1; i < time.size(); ++i)

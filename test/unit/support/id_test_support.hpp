@@ -50,7 +50,7 @@ inline std::vector<double> piecewiseRatios(int segments) {
 /// Makes `c`'s true damping piecewise constant on segments of `segment_length` [s] from t = 0.
 inline void setPiecewiseTruth(SimConfig* c, double segment_length) {
   const int n = static_cast<int>(std::lround(c->simulation.duration / segment_length));
-  c->damping.model = gear_sim::DampingModel::Piecewise;
+  c->damping.model = gear_sim::DampingProfile::Piecewise;
   c->damping.times.clear();
   for (int i = 0; i < n; ++i) c->damping.times.push_back(i * segment_length);
   c->damping.ratios = piecewiseRatios(n);
