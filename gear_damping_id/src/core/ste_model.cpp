@@ -159,14 +159,24 @@ void fillTerms(const gear_sim::SteBasis& basis, SteResult* ste) {
 
 // The output-error refinement of a separable joint result (as the segment driver refines the
 // plain identification): the noise-robust estimator of C and the STE, and its standard errors.
-// Below-noise segments are flagged before (they are not refined), every flag again after.
+// Segments the integral fit finds below the noise are refined too: the output error's standard
+// error is several times smaller (16-bit encoders, docs/rig.md: all 300 segments significant
+// after the refinement, 142 of them below the noise by the integral fit alone). Only a segment
+// whose integral C is not positive (no stable start for the forward model) keeps the integral
+// fit's flags. Every flag is applied again after the refinement.
 void refineWithSte(const SignalView& view,
                    const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                    const GearConstants& gear, const IdentificationOptions& options,
                    const gear_sim::SteBasis& basis, bool relative, IdentificationResult* res,
                    SteResult* st) {
-  applyQualityFlags(options, res);
-  if (!st->separable || !wantsRefinement(options, *res)) return;
+  IdentificationResult flagged = *res;
+  applyQualityFlags(options, &flagged);
+  if (!st->separable || !wantsRefinement(options, flagged)) {
+    *res = std::move(flagged);
+    return;
+  }
+  for (size_t i = 0; i < res->segments.size(); ++i)
+    if (!(res->segments[i].C > 0.0)) res->segments[i] = flagged.segments[i];
   SteRefinement sr;
   sr.basis = basis;
   sr.relative = relative;
