@@ -67,6 +67,10 @@ double wrenchAxis(const geometry_msgs::WrenchStamped& w, char axis) {
 }  // namespace
 
 bool isRigBag(const std::string& path, const RigBagTopics& topics) {
+  // rosbag trusts the lengths in the file: a corrupt bag is not opened here (the signal-bag
+  // reader then refuses it with the reason).
+  std::string structure_error;
+  if (!checkBagStructure(path, &structure_error)) return false;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);

@@ -25,7 +25,8 @@ bool writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
                  const gear_sim::GearModel* params, const RigBagTopics& topics, std::string* error);
 
 /// Whether the bag at `path` holds sensor_msgs/JointState messages on `topics.joints` (a rig bag,
-/// for `analyze --input`). False for an unreadable file (the caller's reader reports why).
+/// for `analyze --input`). False for an unreadable or corrupt file (checked record by record
+/// first; the caller's reader reports why).
 bool isRigBag(const std::string& path, const RigBagTopics& topics);
 
 /// Reads a rig bag: per JointState message on `topics.joints` the positions of the joints named
