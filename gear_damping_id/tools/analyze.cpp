@@ -57,6 +57,7 @@
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
+#include "gear_sim_ros/rig_bag_io.hpp"
 
 namespace gd = gear_damping_id;
 using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
@@ -570,14 +571,17 @@ int Analysis::checkOptions() {
 
 int Analysis::load() {
   // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
-  if (is_bag) {
+  // A bag of JointState (+ torque) messages is a rig record (docs/rig.md).
+  const gear_sim_ros::RigBagTopics rig_topics;
+  const bool rig_bag = is_bag && topic.empty() && gear_sim_ros::isRigBag(input, rig_topics);
+  if (is_bag && !rig_bag) {
     if (!gear_sim_ros::scanSignalBag(input, topic, &bag_info, &error))
       return fail(kExitInput, error);
     for (const auto& w : bag_info.warnings) warn(input + ": " + w);
     streaming = bag_info.samples > max_in_memory;
     if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
       return fail(kExitInput, error);
-  } else if (gd::isRigInput(input, rig_opts)) {
+  } else if (rig_bag || gd::isRigInput(input, rig_opts)) {
     // A rig record: the encoder front end first, with the gear parameters (required).
     if (params.empty())
       return fail(kExitUsage, "--params GEAR.yaml is required for a rig record (encoder input)");
@@ -593,8 +597,19 @@ int Analysis::load() {
     }
     if (mesh_offset) rig_opts.front_end.mesh_offset = *mesh_offset;
     if (dte_offset) rig_opts.front_end.dte_offset = *dte_offset;
-    if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error))
+    if (!ste_spec.empty()) {  // the offsets are estimated with the STE modelled (docs/ste.md)
+      rig_opts.front_end.model_ste = true;
+      rig_opts.front_end.ste = ste_options;
+    }
+    if (rig_bag) {
+      gear_sim::SignalTable rig;
+      if (!gear_sim_ros::readRigBag(input, rig_topics, &rig, &error) ||
+          !gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report, &error))
+        return fail(kExitInput, error);
+      bag_info.topic = rig_topics.joints;
+    } else if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error)) {
       return fail(kExitInput, error);
+    }
     rig_input = true;
   } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
                                       /*allow_non_finite=*/true)) {

@@ -2,8 +2,15 @@
 
 #include <geometry_msgs/WrenchStamped.h>
 #include <rosbag/bag.h>
+#include <rosbag/view.h>
 #include <sensor_msgs/JointState.h>
+#include <std_msgs/Float64.h>
 
+#include <algorithm>
+#include <map>
+#include <vector>
+
+#include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace gear_sim_ros {
@@ -41,6 +48,105 @@ bool writeRigBag(const std::string& path, const gear_sim::SignalTable& t,
         }
       },
       error);
+}
+
+namespace {
+
+constexpr const char* kJointStateType = "sensor_msgs/JointState";
+
+// Index of `name` in the JointState's names, -1 when absent.
+int jointIndex(const sensor_msgs::JointState& js, const std::string& name) {
+  const auto it = std::find(js.name.begin(), js.name.end(), name);
+  return it == js.name.end() ? -1 : static_cast<int>(it - js.name.begin());
+}
+
+double wrenchAxis(const geometry_msgs::WrenchStamped& w, char axis) {
+  return axis == 'x' ? w.wrench.torque.x : axis == 'y' ? w.wrench.torque.y : w.wrench.torque.z;
+}
+
+}  // namespace
+
+bool isRigBag(const std::string& path, const RigBagTopics& topics) {
+  // rosbag trusts the lengths in the file: a corrupt bag is not opened here (the signal-bag
+  // reader then refuses it with the reason).
+  std::string structure_error;
+  if (!checkBagStructure(path, &structure_error)) return false;
+  try {
+    rosbag::Bag bag;
+    bag.open(path, rosbag::bagmode::Read);
+    rosbag::View all(bag);
+    for (const rosbag::ConnectionInfo* c : all.getConnections())
+      if (c->topic == topics.joints && c->datatype == kJointStateType) return true;
+  } catch (const std::exception&) {
+  }
+  return false;
+}
+
+bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig,
+                std::string* error) {
+  if (!checkBagStructure(path, error)) return false;
+  std::vector<ros::Time> stamps;
+  std::vector<double> th1, th2, tq;
+  try {
+    rosbag::Bag bag;
+    bag.open(path, rosbag::bagmode::Read);
+    std::map<ros::Time, double> torque;  // by stamp
+    rosbag::View tv(bag, rosbag::TopicQuery(topics.torque));
+    for (const rosbag::MessageInstance& m : tv) {
+      if (const auto w = m.instantiate<geometry_msgs::WrenchStamped>()) {
+        torque[w->header.stamp] = wrenchAxis(*w, topics.axis);
+      } else if (const auto f = m.instantiate<std_msgs::Float64>()) {
+        torque[m.getTime()] = f->data;  // no header: the bag's receipt time
+      }
+    }
+    rosbag::View jv(bag, rosbag::TopicQuery(topics.joints));
+    for (const rosbag::MessageInstance& m : jv) {
+      const auto js = m.instantiate<sensor_msgs::JointState>();
+      if (!js) continue;
+      const int i1 = jointIndex(*js, topics.joint1), i2 = jointIndex(*js, topics.joint2);
+      if (i1 < 0 || i2 < 0 || static_cast<size_t>(std::max(i1, i2)) >= js->position.size()) {
+        *error = path + ": a JointState message lacks the position of " + topics.joint1 + " or " +
+                 topics.joint2;
+        return false;
+      }
+      const ros::Time stamp = js->header.stamp.isZero() ? m.getTime() : js->header.stamp;
+      const auto t = torque.find(stamp);
+      if (t == torque.end()) {
+        *error = path + ": no torque on " + topics.torque + " with the stamp " +
+                 std::to_string(stamp.toSec()) + " s of a JointState message";
+        return false;
+      }
+      if (!stamps.empty() && !(stamp > stamps.back())) {
+        *error = path + ": the JointState stamps do not increase";
+        return false;
+      }
+      stamps.push_back(stamp);
+      th1.push_back(js->position[static_cast<size_t>(i1)]);
+      th2.push_back(js->position[static_cast<size_t>(i2)]);
+      tq.push_back(t->second);
+    }
+  } catch (const std::exception& e) {
+    *error = path + ": cannot read the rig bag (" + e.what() + ")";
+    return false;
+  }
+  if (stamps.empty()) {
+    *error = path + ": no JointState message on " + topics.joints;
+    return false;
+  }
+  const Eigen::Index n = static_cast<Eigen::Index>(stamps.size());
+  *rig = gear_sim::SignalTable{};
+  rig->time.resize(n);
+  rig->theta1.resize(n);
+  rig->theta2.resize(n);
+  rig->torque.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const size_t k = static_cast<size_t>(i);
+    rig->time[i] = (stamps[k] - stamps.front()).toSec();
+    rig->theta1[i] = th1[k];
+    rig->theta2[i] = th2[k];
+    rig->torque[i] = tq[k];
+  }
+  return true;
 }
 
 }  // namespace gear_sim_ros

@@ -16,6 +16,7 @@
 #include "gear_sim/encoders.hpp"
 #include "gear_sim/rig_csv.hpp"
 #include "id_test_support.hpp"
+#include "rig_test_support.hpp"
 
 namespace {
 
@@ -34,26 +35,7 @@ Chain frontEnd(const SignalTable& rig, const SimConfig& c, gd::EncoderFrontEndOp
   return ch;
 }
 
-gear_sim::EncoderOptions encoder(long counts, unsigned long seed = 7) {
-  gear_sim::EncoderOptions enc;
-  enc.enabled = true;
-  enc.counts_per_rev1 = enc.counts_per_rev2 = counts;
-  enc.zero1 = 1.234;  // arbitrary encoder zeros
-  enc.zero2 = -0.567;
-  enc.seed = seed;
-  return enc;
-}
-
 class EncoderChain : public PiecewiseDefaultCase {};
-
-// The mesh offset the front end must find: the simulated initial phase seen through the encoder
-// zeros (u = Z1 Theta / 2 pi + u0 with Theta the inertia-weighted encoder angle).
-double expectedMeshOffset(const SimConfig& c, const gear_sim::EncoderOptions& enc) {
-  const gd::DteCoefficients k = gd::dteCoefficients(c.gears);
-  const double u = c.mesh.initial_phase -
-                   c.gears.pinion.teeth * (k.w1 * enc.zero1 + k.w2 * enc.zero2) / (2 * M_PI);
-  return u - std::floor(u);
-}
 
 TEST_F(EncoderChain, NoiseFreeUniformGivesCWithinBar) {
   const SimConfig& c = *config_;

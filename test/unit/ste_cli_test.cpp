@@ -29,12 +29,12 @@ TEST(SteCli, AnalyzeWritesTheSteSpectrumAndTheReportDrawsIt) {
           "-q --config " + kSte + " --duration 0.02 --output " + (res / "signal.csv").string(), dir)
           .code,
       0);
-  const gear_test::ToolRun a =
-      gear_test::runTool("analyze",
-                         "-q --input " + (res / "signal.csv").string() + " --params " + kSte +
-                             " --ste mesh:3,shaft:1 --output " + (res / "result.json").string() +
-                             " --csv-out " + (res / "tables").string(),
-                         dir);
+  const gear_test::ToolRun a = gear_test::runTool(
+      "analyze",
+      "-q --input " + (res / "signal.csv").string() + " --params " + kSte +
+          " --ste mesh:3,shaft:1 --refine never --output " + (res / "result.json").string() +
+          " --csv-out " + (res / "tables").string(),
+      dir);
   ASSERT_EQ(a.code, 0) << a.err;
   const auto doc = nlohmann::json::parse(gear_test::readText(res / "result.json"));
   const auto& ste = doc["identification"]["ste"];
@@ -46,7 +46,9 @@ TEST(SteCli, AnalyzeWritesTheSteSpectrumAndTheReportDrawsIt) {
   EXPECT_EQ(ste["shaft"][0]["shaft"], "pinion");
   EXPECT_EQ(ste["shaft"][1]["shaft"], "gear");
   // The shipped spectrum (config/ste_example.yaml), within 0.5 % (the load-dependent true damping
-  // varies inside each 1 ms segment here, so the piecewise model is only nearly exact).
+  // varies inside each 1 ms segment here, so the piecewise model is only nearly exact). The
+  // integral fit: the output-error refinement, which Auto runs on this model error, moves the
+  // shaft orders by up to 2.2 % under the same misspecification (docs/ste.md).
   EXPECT_NEAR(ste["offset"]["value"].get<double>(), 3.0e-6, 1.5e-8);
   EXPECT_NEAR(ste["mesh"][0]["cos"].get<double>(), 1.0e-6, 5e-9);
   EXPECT_NEAR(ste["mesh"][0]["sin"].get<double>(), -0.4e-6, 5e-9);

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "gear_damping_id/ste_model.hpp"
 #include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
@@ -61,6 +62,13 @@ struct EncoderFrontEndOptions {
   bool refine_offset = true;
   /// [m] the DTE constant y0; NaN = estimate it (mean force balance).
   double dte_offset = std::numeric_limits<double>::quiet_NaN();
+  /// Model the static transmission error in the offset estimates (docs/ste.md): the mesh
+  /// offset minimises the residual of the joint damping/STE fit (`ste`; tooth counts from the
+  /// gear model), and the DTE offset is the force balance's (the rest is the STE's order-0
+  /// term). Without it the estimate ignores an STE the record holds (measured: up to 0.036 mesh
+  /// cycles off on the tested STE cases).
+  bool model_ste = false;
+  SteModelOptions ste;
   /// Streaming: samples buffered before the offsets are estimated (0 = the whole record, until
   /// finish()). Offline analysis uses the whole record.
   long calibration_samples = 0;

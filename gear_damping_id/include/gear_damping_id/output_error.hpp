@@ -41,8 +41,23 @@
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/signal_view.hpp"
+#include "gear_sim/ste.hpp"
 
 namespace gear_damping_id {
+
+/// The static transmission error e(t) = sum_j theta_j b_j(mesh phase) (ste_model.hpp) in the
+/// refinement: the model becomes y'' + C (y' - e') + K (y - e) = F (`relative`) or
+/// y'' + C y' + K (y - e) = F, the coefficients theta are unknowns shared by all segments (one
+/// joint problem, the segment-local unknowns eliminated as for shared damping), started from
+/// `theta`. The basis is evaluated at the local cubic of the mesh phase, e' with the phase rate
+/// from the chord of the mesh phase over up to +-16 samples.
+struct SteRefinement {
+  static constexpr int kMaxTerms = 25;  ///< offset + 12 harmonic pairs
+  gear_sim::SteBasis basis;
+  bool relative = true;           ///< damping on y' - e' (else on y')
+  std::vector<double> theta;      ///< in: start values [m]; out: the refined coefficients
+  std::vector<double> theta_std;  ///< out [m]: sigma^2 (J^T J)^-1, pooled innovation variance
+};
 
 /// Refines `result` (an IntegralMethod result for the same `signal`, `ranges` and `options`) in
 /// place: C, C_std, c, xi (and the greybox k levels) of every identifiable segment, the constant
@@ -55,11 +70,13 @@ namespace gear_damping_id {
 /// Returns false with `*error` when the iteration diverges (the integral estimate is then kept).
 /// `reference_integration` (for tests): step every sample interval with the generic RK4 of the
 /// state and sensitivities instead of the closed-form affine maps (same numbers to rounding).
+/// `ste` (null: no STE): identify the STE coefficients jointly (SteRefinement); the square
+/// stiffness (known or greybox) and piecewise or constant damping only.
 bool refineOutputError(const SignalView& signal,
                        const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                        const GearConstants& gear, const IdentificationOptions& options,
                        IdentificationResult* result, std::string* error,
-                       bool reference_integration = false);
+                       bool reference_integration = false, SteRefinement* ste = nullptr);
 
 /// Whether options.refine asks for refinement of this result (Auto: the median relative standard
 /// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.

@@ -29,6 +29,13 @@ bool loadRigInput(const std::string& csv, const RigInputOptions& options,
                   const gear_sim::GearModel& model, gear_sim::SignalTable* out,
                   EncoderFrontEndReport* report, std::string* error);
 
+/// A rig table already read (time, theta1, theta2, torque; e.g. from a rig bag) through the
+/// front end; `name` prefixes the error.
+bool rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
+                           const RigInputOptions& options, const gear_sim::GearModel& model,
+                           gear_sim::SignalTable* out, EncoderFrontEndReport* report,
+                           std::string* error);
+
 /// The report as JSON (`input.encoder` of the result).
 nlohmann::json toJson(const EncoderFrontEndReport& report);
 

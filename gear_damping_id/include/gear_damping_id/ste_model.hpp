@@ -81,6 +81,7 @@ struct SteResult {
   bool separable = false;
   int iterations = 0;
   double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations
+  bool refined = false;        ///< theta, theta_std from the output-error refinement
   long rows = 0;
 };
 

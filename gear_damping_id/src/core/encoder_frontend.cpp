@@ -33,13 +33,9 @@ double thirdDifferenceNoise(const std::vector<double>& y) {
   return std::sqrt(s / static_cast<double>(y.size() - 3) / 20.0);
 }
 
-// Mean squared residual per sample of `table` under `options` (integral equations, or the
-// output-error residual when `refined`), over the segments that have one; inf when none.
-double meanSquaredResidual(const gear_sim::SignalTable& table, const GearConstants& gear,
-                           const IdentificationOptions& options, bool refined) {
-  IdentificationResult r;
-  std::string e;
-  if (!identify(table, gear, options, &r, &e)) return std::numeric_limits<double>::infinity();
+// Sample-weighted mean square of the segments' integral (or, `refined`, output-error) residual
+// RMS over the segments that have one; inf when none.
+double segmentResidual(const IdentificationResult& r, bool refined) {
   double sum = 0.0;
   long used = 0;
   for (const auto& seg : r.segments) {
@@ -50,6 +46,31 @@ double meanSquaredResidual(const gear_sim::SignalTable& table, const GearConstan
     used += seg.samples;
   }
   return used > 0 ? sum / static_cast<double>(used) : std::numeric_limits<double>::infinity();
+}
+double refinedResidual(const IdentificationResult& r) { return segmentResidual(r, true); }
+
+// Mean squared residual per sample of `table` under `options` (integral equations, or the
+// output-error residual when `refined`), over the segments that have one; inf when none.
+double meanSquaredResidual(const gear_sim::SignalTable& table, const GearConstants& gear,
+                           const IdentificationOptions& options, bool refined) {
+  IdentificationResult r;
+  std::string e;
+  if (!identify(table, gear, options, &r, &e)) return std::numeric_limits<double>::infinity();
+  return refined ? refinedResidual(r) : segmentResidual(r, false);
+}
+
+// The same for the joint damping/STE identification (integral residual, or the output-error
+// residual when `refined`).
+double meanSquaredResidualSte(const gear_sim::SignalTable& table, const GearConstants& gear,
+                              const IdentificationOptions& options, const SteModelOptions& ste,
+                              bool refined) {
+  IdentificationResult r;
+  SteResult s;
+  std::string e;
+  const double inf = std::numeric_limits<double>::infinity();
+  if (!identifyWithSte(table, gear, options, ste, &r, &s, &e)) return inf;
+  if (!refined) return std::isfinite(s.residual_rms) ? s.residual_rms * s.residual_rms : inf;
+  return refinedResidual(r);
 }
 
 // Golden-section search for a minimum of f on [a, b] until the bracket is below `tol` or after
@@ -290,18 +311,26 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
   const double duration = static_cast<double>(m) * dt;
   io.segment_length = std::min(1e-3, duration);
   // Residual of the known integral method at (u0, y0): the sum over segments of RSS.
+  SteModelOptions ste = o_.ste;
+  ste.pinion_teeth = model_.gears.pinion.teeth;
+  ste.gear_teeth = model_.gears.gear.teeth;
+  auto residual = [&](const gear_sim::SignalTable& c, const IdentificationOptions& opt,
+                      bool refined) {
+    return o_.model_ste ? meanSquaredResidualSte(c, gear, opt, ste, refined)
+                        : meanSquaredResidual(c, gear, opt, refined);
+  };
   auto rss = [&](double y0) {
     gear_sim::SignalTable c = t;
     c.dte.array() -= y0;
-    return meanSquaredResidual(c, gear, io, false);
+    return residual(c, io, false);
   };
   // y0 enters the known equations linearly (through int int K y0), so the RSS minimised over
   // the other unknowns is a quadratic in y0: three evaluations give its minimum exactly.
   double y0_best = 0.0;
   auto profileY0 = [&](double* rss_min) {
     const double y_fb = forceBalanceOffset();
-    if (!need_y0) {
-      y0_best = o_.dte_offset - y_shift;
+    if (!need_y0 || o_.model_ste) {  // given, or the STE's order-0 term takes the rest
+      y0_best = need_y0 ? y_fb : o_.dte_offset - y_shift;
       *rss_min = rss(y0_best);
       return;
     }
@@ -368,7 +397,7 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
           fill(u);
           gear_sim::SignalTable c = t;
           c.dte.array() -= y0_keep;
-          return meanSquaredResidual(c, gear, ro, true);
+          return residual(c, ro, true);
         };
         // With coarse encoders the integral stage can miss by several samples: the bracket spans
         // at least +-0.01 mesh cycles.

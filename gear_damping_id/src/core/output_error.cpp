@@ -19,10 +19,13 @@ using Index = Eigen::Index;
 
 // Roles of the unknowns of one segment's output-error problem.
 // Basis: one unknown of a greybox fourier/table stiffness shape (K = sum theta_k b_k(phase)).
-enum class Role { Y0, V0, Theta0, Theta1, K0, DK, Basis };
+// Ste: one coefficient of the static transmission error (shared by the record).
+enum class Role { Y0, V0, Theta0, Theta1, K0, DK, Basis, Ste };
 
 constexpr int kMaxBasis = 2 * StiffnessShape::kMaxHarmonics + 1;  // >= StiffnessShape::kMaxNodes
-constexpr int kMaxParams = 4 + kMaxBasis;  // y0, v0, theta0, theta1, K0/dK or the shape's basis
+constexpr int kMaxSte = SteRefinement::kMaxTerms;
+// y0, v0, theta0, theta1, K0/dK or the shape's basis, the STE coefficients
+constexpr int kMaxParams = 4 + kMaxBasis + kMaxSte;
 constexpr int kMaxState = 2 + 2 * kMaxParams;
 // Largest order of the autoregressive noise model fitted to the residuals: enough for the
 // correlation of anti-aliasing filters and encoder interpolation, small against a segment.
@@ -43,6 +46,8 @@ struct Params {
   double t_ref = 0;
   int nb = 0, basis_first = 0;  // shape: basis unknowns are parameters basis_first..+nb
   double basis[kMaxBasis] = {0};
+  int nste = 0, ste_first = 0;  // STE: coefficients are parameters ste_first..+nste
+  double ste[kMaxSte] = {0};
 
   // The value of unknown k.
   double* slot(int k) {
@@ -59,6 +64,8 @@ struct Params {
         return &K0;
       case Role::DK:
         return &dK;
+      case Role::Ste:
+        return &ste[k - ste_first];
       case Role::Basis:
         break;
     }
@@ -71,8 +78,11 @@ class SegmentSimulator {
  public:
   // `fast`: closed-form per-step affine maps where they apply (see run()).
   // `shape`: the greybox fourier/table stiffness shape (null: square levels or known K).
-  SegmentSimulator(const ForwardModel& fm, bool fast, const StiffnessShape* shape)
-      : fm_(fm), fast_(fast), shape_(shape) {}
+  // `ste`: the STE forcing K e (+ C e' in the relative form) and its coefficients' sensitivities
+  // (null: none); always the generic RK4 step.
+  SegmentSimulator(const ForwardModel& fm, bool fast, const StiffnessShape* shape,
+                   const SteRefinement* ste = nullptr)
+      : fm_(fm), fast_(fast), shape_(shape), ste_(ste) {}
 
   // Integrates over samples [b, e) from (p.y0, p.v0). Calls visit(n, z) for each sample with the
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
@@ -99,7 +109,7 @@ class SegmentSimulator {
       runShape(b, e, p, substeps, visit, z, D);
       return;
     }
-    bool fast = fast_ && !smooth && substeps == 1;
+    bool fast = fast_ && !smooth && substeps == 1 && ste_ == nullptr;
     for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
     AffineMap maps[kMaxMaps];
     int n_maps = 0;
@@ -147,6 +157,10 @@ class SegmentSimulator {
           st.T[0] = fm_.torque(j, ua, b, e);
           st.T[1] = fm_.torque(j, um, b, e);
           st.T[2] = fm_.torque(j, ub, b, e);
+          if (ste_ != nullptr) {
+            const double u3[3] = {ua, um, ub};
+            for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
+          }
           if (smooth) {
             st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
             st.K[1] = fm_.knownStiffness(j, um, right, b, e);
@@ -165,7 +179,26 @@ class SegmentSimulator {
   struct Stage {
     double K[3], T[3];               // at the step's start, midpoint and end
     const double* B[3] = {0, 0, 0};  // shape: the basis values there
+    // STE: basis values and time derivatives there (E, dE of stage q in ste_buf_[q])
+    const double* E[3] = {0, 0, 0};
+    const double* dE[3] = {0, 0, 0};
   };
+
+  // The STE basis and its time derivative at u of interval j into stage q of `st`: the mesh
+  // phase is the local cubic of its samples, its rate the chord over up to 16 samples on either
+  // side within the segment (the rigid rotation: smooth; the chord averages encoder noise).
+  void steStage(Index j, double u, Index b, Index e, int q, Stage* st) const {
+    const double* ph = fm_.signal().mesh_phase;
+    const double phase = fm_.cubic(ph, j, u, b, e);
+    const Index lo = std::max<Index>(b, j - 16), hi = std::min<Index>(e - 1, j + 17);
+    const double rate = (ph[hi] - ph[lo]) / (static_cast<double>(hi - lo) * fm_.signal().dt);
+    double* E = ste_buf_[q];
+    double* dE = ste_buf_[q] + kMaxSte;
+    ste_->basis.eval(phase, E, dE);
+    for (int k = 0; k < ste_->basis.size(); ++k) dE[k] *= rate;
+    st->E[q] = E;
+    st->dE[q] = dE;
+  }
 
   // Greybox fourier/table shape: K(t) = sum_k theta_k b_k(u(t)) with the mesh phase u(t) the
   // local cubic of the mesh_phase samples; each interval split where u crosses a table node
@@ -268,40 +301,52 @@ class SegmentSimulator {
   // One RK4 step of length hs with the coefficients at the stage times.
   void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
     double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
-    deriv(z, D, p, st.K[0], sv, st.T[0], st.B[0], k1);
+    deriv(z, D, p, st.K[0], sv, st.T[0], st.B[0], st.E[0], st.dE[0], k1);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
-    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], k2);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], st.E[1], st.dE[1], k2);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k2[i];
-    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], k3);
+    deriv(tmp, D, p, st.K[1], sv, st.T[1], st.B[1], st.E[1], st.dE[1], k3);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
-    deriv(tmp, D, p, st.K[2], sv, st.T[2], st.B[2], k4);
+    deriv(tmp, D, p, st.K[2], sv, st.T[2], st.B[2], st.E[2], st.dE[2], k4);
     for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
   }
 
+  // y'' = F - C (y' - e'_r) - K (y - e): e the STE (0 without), e'_r its rate in the relative
+  // damping form (0 in the dte form or without an STE).
   void deriv(const double* z, int D, const Params& p, double K, double sv, double T1,
-             const double* B, double* dz) const {
+             const double* B, const double* E, const double* dE, double* dz) const {
     const double C = p.theta0 + p.theta1 * (T1 - p.t_ref);
     const double F = fm_.gear().force_factor * T1;
     const double y = z[0], v = z[1];
+    double e = 0.0, de = 0.0;
+    if (E != nullptr) {
+      for (int j = 0; j < p.nste; ++j) e += p.ste[j] * E[j], de += p.ste[j] * dE[j];
+      if (!ste_->relative) de = 0.0;
+    }
+    const double vr = v - de, yr = y - e;
     dz[0] = v;
-    dz[1] = F - C * v - K * y;
+    dz[1] = F - C * vr - K * yr;
     for (int k = 0, i = 2; i < D; ++k, i += 2) {
       double forcing = 0.0;
       switch (p.role[k]) {
         case Role::Theta0:
-          forcing = -v;
+          forcing = -vr;
           break;
         case Role::Theta1:
-          forcing = -(T1 - p.t_ref) * v;
+          forcing = -(T1 - p.t_ref) * vr;
           break;
         case Role::K0:
-          forcing = -y;
+          forcing = -yr;
           break;
         case Role::DK:
-          forcing = -sv * y;
+          forcing = -sv * yr;
           break;
         case Role::Basis:
           forcing = -B[k - p.basis_first] * y;
+          break;
+        case Role::Ste:
+          forcing = K * E[k - p.ste_first];
+          if (ste_->relative) forcing += C * dE[k - p.ste_first];
           break;
         default:
           break;
@@ -314,6 +359,8 @@ class SegmentSimulator {
   const ForwardModel& fm_;
   bool fast_;
   const StiffnessShape* shape_;
+  const SteRefinement* ste_;
+  mutable double ste_buf_[3][2 * kMaxSte];  // steStage: E and dE of the three stages
 };
 
 // Substeps per sample so that omega * h_step <= 0.1 (RK4 error well below the bars).
@@ -404,107 +451,42 @@ bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult&
   return rel[rel.size() / 2] > o.refine_threshold;
 }
 
-bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
-                       const GearConstants& gear, const IdentificationOptions& o,
-                       IdentificationResult* res, std::string* error, bool reference_integration) {
-  if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return true;
-  if (ranges.size() != res->segments.size()) {
-    *error = "refinement: segment ranges do not match the result";
-    return false;
-  }
-  const double me = gear.equivalent_mass;
-  const bool grey = o.formulation == Formulation::Greybox;
-  const bool load = o.model == DampingModel::LoadLaw;
-  const bool piecewise = o.model == DampingModel::Piecewise;
-  const ForwardModel fm(s, gear, o.formulation, ranges);
-  // Greybox fourier/table shape: its basis unknowns replace the square levels.
-  const bool shape = grey && o.stiffness_shape.kind != StiffnessShape::Kind::Square;
-  const int nb = shape ? o.stiffness_shape.unknowns() : 0;
-  if (shape && s.mesh_phase == nullptr) {
-    *error = "refinement: the stiffness shape " + toString(o.stiffness_shape) +
-             " needs the mesh_phase channel";
-    return false;
-  }
-  const SegmentSimulator sim(fm, !reference_integration, shape ? &o.stiffness_shape : nullptr);
-  const int substeps = substepsFor(res->omega0, s.dt);
+namespace {
 
-  // Unknowns: per segment locals [y0, v0, (theta0 if piecewise), (K0, dK if greybox)];
-  // shared [theta0 (constant, load_law), theta1 (load_law)].
-  std::vector<Role> local_roles = {Role::Y0, Role::V0};
-  if (piecewise) local_roles.push_back(Role::Theta0);
-  const int basis_first = static_cast<int>(local_roles.size());
-  if (shape) {
-    for (int k = 0; k < nb; ++k) local_roles.push_back(Role::Basis);
-  } else if (grey) {
-    local_roles.push_back(Role::K0), local_roles.push_back(Role::DK);
-  }
-  std::vector<Role> shared_roles;
-  if (!piecewise) shared_roles.push_back(Role::Theta0);
-  if (load) shared_roles.push_back(Role::Theta1);
-  const int nl = static_cast<int>(local_roles.size()), ns = static_cast<int>(shared_roles.size());
-  const int m = nl + ns;
+// The output-error refinement of one result (refineOutputError), in named steps: the unknowns
+// and their start values, the prewhitened normal equations of a segment, the Gauss-Newton
+// iteration per problem and noise round, the covariances, and the result.
+class Refinement {
+ public:
+  Refinement(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
+             const GearConstants& gear, const IdentificationOptions& o, IdentificationResult* res,
+             bool reference_integration, SteRefinement* ste)
+      : s_(s),
+        ranges_(ranges),
+        o_(o),
+        res_(res),
+        ste_(ste),
+        me_(gear.equivalent_mass),
+        grey_(o.formulation == Formulation::Greybox),
+        load_(o.model == DampingModel::LoadLaw),
+        piecewise_(o.model == DampingModel::Piecewise),
+        shape_(grey_ && o.stiffness_shape.kind != StiffnessShape::Kind::Square),
+        nb_(shape_ ? o.stiffness_shape.unknowns() : 0),
+        nseg_(ranges.size()),
+        fm_(s, gear, o.formulation, ranges),
+        sim_(fm_, !reference_integration && ste == nullptr, shape_ ? &o.stiffness_shape : nullptr,
+             ste),
+        substeps_(substepsFor(res->omega0, s.dt)) {}
 
-  const size_t nseg = ranges.size();
-  std::vector<char> active(nseg, 0);
-  std::vector<Eigen::VectorXd> loc(nseg, Eigen::VectorXd::Zero(nl));
-  Eigen::VectorXd sh = Eigen::VectorXd::Zero(ns);
-  // Keep the integral method's estimates beside the refined ones.
-  auto keepIntegral = [](SegmentEstimate* e) {
-    if (!e->refined) e->C_integral = e->C, e->C_integral_std = e->C_std;
-  };
-  for (auto& e : res->segments) keepIntegral(&e);
-  if (res->constant) keepIntegral(&*res->constant);
-  // Start values from the integral method.
-  if (!piecewise) {
-    if (load && res->load_law && res->load_law->identifiable) {
-      sh[0] = res->load_law->c0 / me;
-      sh[1] = res->load_law->c1 / me;
-    } else if (!load && res->constant && res->constant->identifiable) {
-      sh[0] = res->constant->C;
-    } else {
-      *error = "refinement: no identifiable shared estimate to start from";
-      return false;
-    }
-  }
-  for (size_t i = 0; i < nseg; ++i) {
-    const SegmentEstimate& e = res->segments[i];
-    if (!e.identifiable) continue;
-    active[i] = 1;
-    Eigen::VectorXd& x = loc[i];
-    // Initial state: the integral method's first window of the segment.
-    x[0] = s.dte[ranges[i].first];
-    for (const WindowEstimate& w : res->windows) {
-      if (std::abs(w.t_start - e.t_start) <= 0.5 * s.dt) {
-        x[0] = w.y_T, x[1] = w.velocity;
-        break;
-      }
-    }
-    int k = 2;
-    if (piecewise) x[k++] = e.C;
-    if (shape) {
-      if (static_cast<int>(e.stiffness_curve.size()) != nb) {
-        *error = "refinement: no stiffness curve to start from";
-        return false;
-      }
-      for (int b = 0; b < nb; ++b) x[k++] = e.stiffness_curve[b] / me;
-    } else if (grey) {
-      x[k++] = e.k_min / me;
-      x[k++] = (e.k_max - e.k_min) / me;
-    }
+  bool run(std::string* error) {
+    setUnknowns();
+    if (!startValues(error) || !iterate(error) || !covariances(error)) return false;
+    fillSegments();
+    fillShared();
+    return true;
   }
 
-  auto makeParams = [&](const Eigen::VectorXd& x, const Eigen::VectorXd& g) {
-    Params p;
-    p.m = m;
-    for (int k = 0; k < nl; ++k) p.role[k] = local_roles[k];
-    for (int k = 0; k < ns; ++k) p.role[nl + k] = shared_roles[k];
-    p.nb = nb;
-    p.basis_first = basis_first;
-    for (int k = 0; k < nl; ++k) *p.slot(k) = x[k];
-    for (int k = 0; k < ns; ++k) *p.slot(nl + k) = g[k];
-    return p;
-  };
-
+ private:
   // Normal equations of one segment at (x, g) for the prewhitened output error: with the
   // residual r_n = y_n - yhat_n and the sensitivities J_n = dyhat_n/dp filtered alike,
   // e_n = r_n + sum a_k r_{n-k} (from the segment's (p+1)-th sample on),
@@ -519,8 +501,128 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     double acov[kMaxArOrder + 1] = {0};  // sum_n r_n r_{n-k} within the segment
     double wlag1 = 0;                    // sum_n e_n e_{n-1}
   };
+  using Set = std::vector<size_t>;
+  using Locals = std::vector<Eigen::VectorXd>;
+
+  // Unknowns: per segment locals [y0, v0, (theta0 if piecewise), (K0, dK if greybox) or the
+  // shape's basis]; shared [theta0 (constant, load_law), theta1 (load_law), the STE].
+  void setUnknowns() {
+    local_roles_ = {Role::Y0, Role::V0};
+    if (piecewise_) local_roles_.push_back(Role::Theta0);
+    basis_first_ = static_cast<int>(local_roles_.size());
+    if (shape_) {
+      for (int k = 0; k < nb_; ++k) local_roles_.push_back(Role::Basis);
+    } else if (grey_) {
+      local_roles_.push_back(Role::K0), local_roles_.push_back(Role::DK);
+    }
+    if (!piecewise_) shared_roles_.push_back(Role::Theta0);
+    if (load_) shared_roles_.push_back(Role::Theta1);
+    ste_shared_ = static_cast<int>(shared_roles_.size());
+    nste_ = ste_ != nullptr ? ste_->basis.size() : 0;
+    for (int k = 0; k < nste_; ++k) shared_roles_.push_back(Role::Ste);
+    nl_ = static_cast<int>(local_roles_.size()), ns_ = static_cast<int>(shared_roles_.size());
+    m_ = nl_ + ns_;
+  }
+
+  // Start values from the integral method; keeps its estimates beside the refined ones.
+  bool startValues(std::string* error) {
+    active_.assign(nseg_, 0);
+    loc_.assign(nseg_, Eigen::VectorXd::Zero(nl_));
+    sh_ = Eigen::VectorXd::Zero(ns_);
+    auto keepIntegral = [](SegmentEstimate* e) {
+      if (!e->refined) e->C_integral = e->C, e->C_integral_std = e->C_std;
+    };
+    for (auto& e : res_->segments) keepIntegral(&e);
+    if (res_->constant) keepIntegral(&*res_->constant);
+    if (!piecewise_) {
+      if (load_ && res_->load_law && res_->load_law->identifiable) {
+        sh_[0] = res_->load_law->c0 / me_;
+        sh_[1] = res_->load_law->c1 / me_;
+      } else if (!load_ && res_->constant && res_->constant->identifiable) {
+        sh_[0] = res_->constant->C;
+      } else {
+        *error = "refinement: no identifiable shared estimate to start from";
+        return false;
+      }
+    }
+    for (int k = 0; k < nste_; ++k) sh_[ste_shared_ + k] = ste_->theta[k];
+    for (size_t i = 0; i < nseg_; ++i) {
+      const SegmentEstimate& e = res_->segments[i];
+      if (!e.identifiable) continue;
+      active_[i] = 1;
+      Eigen::VectorXd& x = loc_[i];
+      // Initial state: the integral method's first window of the segment.
+      x[0] = s_.dte[ranges_[i].first];
+      for (const WindowEstimate& w : res_->windows) {
+        if (std::abs(w.t_start - e.t_start) <= 0.5 * s_.dt) {
+          x[0] = w.y_T, x[1] = w.velocity;
+          break;
+        }
+      }
+      int k = 2;
+      if (piecewise_) x[k++] = e.C;
+      if (shape_) {
+        if (static_cast<int>(e.stiffness_curve.size()) != nb_) {
+          *error = "refinement: no stiffness curve to start from";
+          return false;
+        }
+        for (int b = 0; b < nb_; ++b) x[k++] = e.stiffness_curve[b] / me_;
+      } else if (grey_) {
+        x[k++] = e.k_min / me_;
+        x[k++] = (e.k_max - e.k_min) / me_;
+      }
+    }
+    return true;
+  }
+
+  Params makeParams(const Eigen::VectorXd& x, const Eigen::VectorXd& g) const {
+    Params p;
+    p.m = m_;
+    for (int k = 0; k < nl_; ++k) p.role[k] = local_roles_[k];
+    for (int k = 0; k < ns_; ++k) p.role[nl_ + k] = shared_roles_[k];
+    auto set = [&](Role r, double v) {
+      switch (r) {
+        case Role::Y0:
+          p.y0 = v;
+          break;
+        case Role::V0:
+          p.v0 = v;
+          break;
+        case Role::Theta0:
+          p.theta0 = v;
+          break;
+        case Role::Theta1:
+          p.theta1 = v;
+          break;
+        case Role::K0:
+          p.K0 = v;
+          break;
+        case Role::DK:
+          p.dK = v;
+          break;
+        case Role::Basis:
+        case Role::Ste:
+          break;
+      }
+    };
+    for (int k = 0; k < nl_; ++k) set(local_roles_[k], x[k]);
+    p.nb = nb_;
+    p.basis_first = basis_first_;
+    for (int k = 0; k < nb_; ++k) p.basis[k] = x[basis_first_ + k];
+    for (int k = 0; k < ns_; ++k) set(shared_roles_[k], g[k]);
+    p.nste = nste_;
+    p.ste_first = nl_ + ste_shared_;
+    for (int k = 0; k < nste_; ++k) p.ste[k] = g[ste_shared_ + k];
+    return p;
+  }
+
+  Normal evaluate(size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
+                  const NoiseModel& nm) const {
+    return evaluateAt(i, makeParams(x, g), nm);
+  }
+
   // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
-  auto evaluateAt = [&](size_t i, const Params& p, const NoiseModel& nm) {
+  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
     const int m = p.m;
     Normal out;
     out.N = Eigen::MatrixXd::Zero(m, m);
@@ -532,9 +634,9 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     double cost = 0.0, raw = 0.0, wlag = 0.0, wprev = 0.0;
     long count = 0, rows = 0;
     const int P = nm.p;
-    sim.run(ranges[i].first, ranges[i].second, p, substeps, [&](Index n, const double* z) {
+    sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, [&](Index n, const double* z) {
       double cur[kMaxParams + 1] = {0};
-      cur[0] = s.dte[n] - z[0];
+      cur[0] = s_.dte[n] - z[0];
       for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
       const double r = cur[0];
       raw += r * r;
@@ -578,17 +680,16 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     out.samples = count;
     out.wlag1 = wlag;
     return out;
-  };
-  auto evaluate = [&](size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
-                      const NoiseModel& nm) { return evaluateAt(i, makeParams(x, g), nm); };
+  }
 
   // Gauss-Newton step of a set of segments: locals eliminated per segment (Schur complement).
-  auto solveStep = [&](const std::vector<size_t>& set, const std::vector<Normal>& normals,
-                       std::vector<Eigen::VectorXd>* dl, Eigen::VectorXd* dg,
-                       Eigen::MatrixXd* shared_inv, std::vector<Eigen::MatrixXd>* local_inv) {
+  void solveStep(const Set& set, const std::vector<Normal>& normals, Locals* dl,
+                 Eigen::VectorXd* dg, Eigen::MatrixXd* shared_inv,
+                 std::vector<Eigen::MatrixXd>* local_inv) const {
+    const int nl = nl_, ns = ns_;
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
-    std::vector<Eigen::MatrixXd> Nll_inv(nseg);
+    std::vector<Eigen::MatrixXd> Nll_inv(nseg_);
     for (size_t i : set) {
       const Normal& nm = normals[i];
       Nll_inv[i] = nm.N.topLeftCorner(nl, nl).ldlt().solve(Eigen::MatrixXd::Identity(nl, nl));
@@ -607,44 +708,44 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     if (local_inv) {
       for (size_t i : set) (*local_inv)[i] = Nll_inv[i];
     }
-  };
+  }
 
-  // Gauss-Newton with step halving on the segments of `set` (one segment for the piecewise
-  // model, whose segments are independent problems; all for shared damping). Returns the
-  // iterations; *converged false when the iteration limit stopped it.
-  std::vector<Normal> normals(nseg);
-  // Converged when the damping (and stiffness) unknowns move by less than 1e-10 relative.
-  constexpr double kConvergenceTol = 1e-10;
-  auto relativeChange = [&](const std::vector<size_t>& set, const std::vector<Eigen::VectorXd>& dl,
-                            const Eigen::VectorXd& dg, double step) {
+  // Largest relative move of the damping (and stiffness, STE) unknowns by `step` * (dl, dg).
+  double relativeChange(const Set& set, const Locals& dl, const Eigen::VectorXd& dg,
+                        double step) const {
     double rel = 0.0;
-    for (int k = 0; k < ns; ++k) {
-      const double to = sh[k] + step * dg[k];
+    for (int k = 0; k < ns_; ++k) {
+      const double to = sh_[k] + step * dg[k];
       rel = std::max(rel, std::abs(step * dg[k]) / std::max(std::abs(to), 1e-300));
     }
     for (size_t i : set) {
-      for (int k = 2; k < nl; ++k) {
-        const double to = loc[i][k] + step * dl[i][k];
+      for (int k = 2; k < nl_; ++k) {
+        const double to = loc_[i][k] + step * dl[i][k];
         rel = std::max(rel, std::abs(step * dl[i][k]) / std::max(std::abs(to), 1e-300));
       }
     }
     return rel;
-  };
-  auto gaussNewton = [&](const std::vector<size_t>& set, const NoiseModel& nm, bool* converged,
-                         bool* finite) {
+  }
+
+  // Gauss-Newton with step halving on the segments of `set` (one segment for the piecewise
+  // model, whose segments are independent problems; all for shared unknowns). Returns the
+  // iterations; *converged false when the iteration limit stopped it. Converged when the
+  // damping (and stiffness) unknowns move by less than 1e-10 relative.
+  int gaussNewton(const Set& set, const NoiseModel& nm, bool* converged, bool* finite) {
+    constexpr double kConvergenceTol = 1e-10;
     double cost = 0.0;
     for (size_t i : set) {
-      normals[i] = evaluate(i, loc[i], sh, nm);
-      cost += normals[i].cost;
+      normals_[i] = evaluate(i, loc_[i], sh_, nm);
+      cost += normals_[i].cost;
     }
     *finite = std::isfinite(cost);
     *converged = false;
     if (!*finite) return 0;
     int it = 0;
-    for (; it < o.max_iterations && !*converged; ++it) {
-      std::vector<Eigen::VectorXd> dl(nseg);
+    for (; it < o_.max_iterations && !*converged; ++it) {
+      Locals dl(nseg_);
       Eigen::VectorXd dg;
-      solveStep(set, normals, &dl, &dg, nullptr, nullptr);
+      solveStep(set, normals_, &dl, &dg, nullptr, nullptr);
       if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
         *converged = true;  // the full step would move nothing: no need to evaluate it
         break;
@@ -652,12 +753,12 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
       double step = 1.0;
       bool accepted = false;
       for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
-        std::vector<Eigen::VectorXd> x1(nseg);
-        const Eigen::VectorXd g1 = sh + step * dg;
-        std::vector<Normal> n1(nseg);
+        Locals x1(nseg_);
+        const Eigen::VectorXd g1 = sh_ + step * dg;
+        std::vector<Normal> n1(nseg_);
         double c1 = 0.0;
         for (size_t i : set) {
-          x1[i] = loc[i] + step * dl[i];
+          x1[i] = loc_[i] + step * dl[i];
           n1[i] = evaluate(i, x1[i], g1, nm);
           c1 += n1[i].cost;
         }
@@ -666,98 +767,102 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
           *converged =
               relativeChange(set, dl, dg, step) < kConvergenceTol || c1 >= cost * (1.0 - 1e-14);
           for (size_t i : set) {
-            loc[i] = x1[i];
-            normals[i] = std::move(n1[i]);
+            loc_[i] = x1[i];
+            normals_[i] = std::move(n1[i]);
           }
-          sh = g1;
+          sh_ = g1;
           cost = c1;
         }
       }
       if (!accepted) *converged = true;  // no descent left: at the minimum to rounding
     }
     return it;
-  };
+  }
 
-  std::vector<std::vector<size_t>> problems;
-  for (size_t i = 0; i < nseg; ++i) {
-    if (!active[i]) continue;
-    if (piecewise || problems.empty()) problems.emplace_back();
-    problems.back().push_back(i);
-  }
-  if (problems.empty()) {
-    *error = "refinement: no identifiable segment";
-    return false;
-  }
-  std::vector<char> converged(nseg, 1);
-  int iterations = 0;
   // AR model fitted to the pooled residual autocovariances of a set of segments.
-  auto pooledFit = [&](const std::vector<size_t>& set) {
+  NoiseModel pooledFit(const Set& set) const {
     double acov[kMaxArOrder + 1] = {0}, count = 0.0;
     for (size_t i : set) {
-      for (int k = 0; k <= kMaxArOrder; ++k) acov[k] += normals[i].acov[k];
-      count += static_cast<double>(normals[i].samples);
+      for (int k = 0; k <= kMaxArOrder; ++k) acov[k] += normals_[i].acov[k];
+      count += static_cast<double>(normals_[i].samples);
     }
     for (int k = 0; k <= kMaxArOrder; ++k) acov[k] /= count;
     return fitNoiseModel(acov, count);
-  };
-  // Per problem (a segment of the piecewise model, which therefore gives the same result
-  // refined alone, as live; all segments for shared damping): round 0 assumes white noise; then
-  // the AR model of its residuals and the prewhitened problem, refitted until the noise model
-  // settles.
-  std::vector<NoiseModel> noise_of(nseg);
-  for (const auto& set : problems) {
-    NoiseModel noise;
-    for (int round = 0; round < kMaxNoiseRounds; ++round) {
-      bool conv = false, finite = true;
-      iterations += gaussNewton(set, noise, &conv, &finite);
-      if (!finite) {
-        *error = "refinement: the model response is not finite at the " +
-                 std::string(round == 0 ? "integral-method estimate" : "white-noise estimate");
-        return false;
-      }
-      for (size_t i : set) converged[i] = conv;
-      const NoiseModel next = pooledFit(set);
-      if (maxChange(next, noise) < kArChangeTol || round + 1 == kMaxNoiseRounds) break;
-      noise = next;
-    }
-    for (size_t i : set) noise_of[i] = noise;
   }
 
-  // Covariances at the solution.
-  std::vector<Eigen::MatrixXd> Nll_inv(nseg);
-  std::vector<Eigen::MatrixXd> Ainv_of(nseg);
-  {
-    std::vector<Eigen::VectorXd> dl(nseg);
-    Eigen::VectorXd dg;
-    for (const auto& set : problems) {
-      Eigen::MatrixXd Ainv;
-      solveStep(set, normals, &dl, &dg, &Ainv, &Nll_inv);
-      for (size_t i : set) Ainv_of[i] = Ainv;
+  // Per problem (a segment of the piecewise model, which therefore gives the same result
+  // refined alone, as live; all segments for shared unknowns): round 0 assumes white noise;
+  // then the AR model of its residuals and the prewhitened problem, refitted until the noise
+  // model settles.
+  bool iterate(std::string* error) {
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      if ((piecewise_ && ns_ == 0) || problems_.empty()) problems_.emplace_back();
+      problems_.back().push_back(i);
     }
+    if (problems_.empty()) {
+      *error = "refinement: no identifiable segment";
+      return false;
+    }
+    normals_.assign(nseg_, Normal{});
+    converged_.assign(nseg_, 1);
+    noise_of_.assign(nseg_, NoiseModel{});
+    for (const auto& set : problems_) {
+      NoiseModel noise;
+      for (int round = 0; round < kMaxNoiseRounds; ++round) {
+        bool conv = false, finite = true;
+        iterations_ += gaussNewton(set, noise, &conv, &finite);
+        if (!finite) {
+          *error = "refinement: the model response is not finite at the " +
+                   std::string(round == 0 ? "integral-method estimate" : "white-noise estimate");
+          return false;
+        }
+        for (size_t i : set) converged_[i] = conv;
+        const NoiseModel next = pooledFit(set);
+        if (maxChange(next, noise) < kArChangeTol || round + 1 == kMaxNoiseRounds) break;
+        noise = next;
+      }
+      for (size_t i : set) noise_of_[i] = noise;
+    }
+    return true;
   }
-  long n_total = 0, rows_total = 0;
-  int n_active = 0;
-  double raw_total = 0.0, cost_total = 0.0;
-  for (size_t i = 0; i < nseg; ++i) {
-    if (!active[i]) continue;
-    n_total += normals[i].samples, rows_total += normals[i].rows, ++n_active;
-    raw_total += normals[i].raw, cost_total += normals[i].cost;
+
+  // Covariances at the solution and the pooled noise statistics.
+  bool covariances(std::string* error) {
+    Nll_inv_.assign(nseg_, Eigen::MatrixXd());
+    Ainv_of_.assign(nseg_, Eigen::MatrixXd());
+    Locals dl(nseg_);
+    Eigen::VectorXd dg;
+    for (const auto& set : problems_) {
+      Eigen::MatrixXd Ainv;
+      solveStep(set, normals_, &dl, &dg, &Ainv, &Nll_inv_);
+      for (size_t i : set) Ainv_of_[i] = Ainv;
+    }
+    long n_total = 0, rows_total = 0;
+    int n_active = 0;
+    double raw_total = 0.0, cost_total = 0.0;
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      n_total += normals_[i].samples, rows_total += normals_[i].rows, ++n_active;
+      raw_total += normals_[i].raw, cost_total += normals_[i].cost;
+    }
+    const long unknowns = static_cast<long>(n_active) * nl_ + ns_;
+    if (rows_total - unknowns < 1) {
+      *error = "refinement: too few samples for the unknowns";
+      return false;
+    }
+    // Innovation variance (white noise: the residual variance) for the covariance.
+    sigma2_pooled_ = cost_total / static_cast<double>(rows_total - unknowns);
+    res_->noise_std = std::sqrt(raw_total / static_cast<double>(n_total - unknowns));
+    res_->noise_innovation_std = std::sqrt(sigma2_pooled_);
+    Set all;
+    for (const auto& set : problems_) all.insert(all.end(), set.begin(), set.end());
+    const NoiseModel record_noise = pooledFit(all);
+    res_->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
+    res_->estimator = "output_error";
+    res_->iterations = iterations_;
+    return true;
   }
-  const long unknowns = static_cast<long>(n_active) * nl + ns;
-  if (rows_total - unknowns < 1) {
-    *error = "refinement: too few samples for the unknowns";
-    return false;
-  }
-  // Innovation variance (white noise: the residual variance) for the covariance.
-  const double sigma2_pooled = cost_total / static_cast<double>(rows_total - unknowns);
-  res->noise_std = std::sqrt(raw_total / static_cast<double>(n_total - unknowns));
-  res->noise_innovation_std = std::sqrt(sigma2_pooled);
-  std::vector<size_t> all;
-  for (const auto& set : problems) all.insert(all.end(), set.begin(), set.end());
-  const NoiseModel record_noise = pooledFit(all);
-  res->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
-  res->estimator = "output_error";
-  res->iterations = iterations;
 
   // Within-segment variation of the damping with the load (piecewise model): the converged
   // constant-C problem plus the unknown C1 of C(t) = C0 + C1 (T1(t) - mean T1), evaluated once
@@ -767,21 +872,21 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
   // C(t) is linear in the load over the segment (constant C included), whereas the constant-C
   // fit weights C(t) by the response's sensitivity to it. Skipped when the torque is unknown or
   // does not vary in the segment (C1 not identifiable: the constant-C fit is then the same).
-  auto variationTest = [&](size_t i, double sigma2, SegmentEstimate* e) {
-    const Index b = ranges[i].first, en = ranges[i].second;
-    if (s.torque == nullptr || en - b < 2) return;
+  void variationTest(size_t i, double sigma2, SegmentEstimate* e) const {
+    const Index b = ranges_[i].first, en = ranges_[i].second;
+    if (s_.torque == nullptr || en - b < 2) return;
     double mean_t = 0.0, var_t = 0.0;
-    for (Index n = b; n < en; ++n) mean_t += s.torque[n];
+    for (Index n = b; n < en; ++n) mean_t += s_.torque[n];
     mean_t /= static_cast<double>(en - b);
-    for (Index n = b; n < en; ++n) var_t += (s.torque[n] - mean_t) * (s.torque[n] - mean_t);
+    for (Index n = b; n < en; ++n) var_t += (s_.torque[n] - mean_t) * (s_.torque[n] - mean_t);
     if (!(std::sqrt(var_t / static_cast<double>(en - b)) > 1e-9 * std::abs(mean_t))) return;
-    Params p = makeParams(loc[i], sh);
+    Params p = makeParams(loc_[i], sh_);
     if (p.m + 1 > kMaxParams) return;
     p.role[p.m] = Role::Theta1;
     p.theta1 = 0.0;
     p.t_ref = mean_t;
     ++p.m;
-    Normal aug = evaluateAt(i, p, noise_of[i]);
+    Normal aug = evaluateAt(i, p, noise_of_[i]);
     const int last = p.m - 1;
     // C1 identifiable: its sensitivity not (nearly) a combination of the others'.
     const Eigen::MatrixXd Nrr = aug.N.topLeftCorner(last, last);
@@ -805,12 +910,12 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
         return n.cost / static_cast<double>(std::max<long>(n.rows - p.m, 1));
       };
       bool moved = false;
-      for (int it = 0; it < o.max_iterations; ++it) {
+      for (int it = 0; it < o_.max_iterations; ++it) {
         const double se0 = std::sqrt(std::max(sigma2Of(aug) * inv(2, 2), 0.0));
         if (std::abs(d[2]) <= std::max(kEnlargedTol * se0, 1e-10 * std::abs(p.theta0))) break;
         Params q = p;
         for (int k = 0; k < p.m; ++k) *q.slot(k) += d[k];
-        const Normal next = evaluateAt(i, q, noise_of[i]);
+        const Normal next = evaluateAt(i, q, noise_of_[i]);
         if (!(next.cost < aug.cost)) {
           if (moved) d.setZero();  // no descent left: p is the enlarged fit to rounding
           break;
@@ -823,101 +928,186 @@ bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, I
     }
     e->C_mean_load = p.theta0 + d[2];
     e->C_mean_load_std = std::sqrt(std::max(s2 * inv(2, 2), 0.0));
-  };
+  }
 
-  const double omega0 = res->omega0;
-  auto fillC = [&](SegmentEstimate* e, double C, double var) {
+  void fillC(SegmentEstimate* e, double C, double var) const {
     e->C = C;
     e->C_std = std::sqrt(std::max(var, 0.0));
-    e->c = coefficientFromC(C, me);
-    e->xi = ratioFromC(C, omega0);
+    e->c = coefficientFromC(C, me_);
+    e->xi = ratioFromC(C, res_->omega0);
     e->refined = true;
-  };
-  const std::string not_converged = "output-error refinement stopped after the iteration limit (" +
-                                    std::to_string(o.max_iterations) +
-                                    ") without converging to 1e-10";
-  res->windows.clear();
-  bool all_converged = true;
-  for (size_t i = 0; i < nseg; ++i) {
-    if (!active[i]) continue;
-    SegmentEstimate& e = res->segments[i];
-    const Eigen::VectorXd& x = loc[i];
-    const Normal& nm = normals[i];
-    const double sigma2 = piecewise ? nm.cost / static_cast<double>(nm.rows - nl) : sigma2_pooled;
-    const Eigen::MatrixXd& Ainv = Ainv_of[i];
-    // Covariance of this segment's unknowns [locals, shared].
-    const Eigen::MatrixXd Nsl = nm.N.block(nl, 0, ns, nl);
-    const Eigen::MatrixXd B = Nll_inv[i] * Nsl.transpose();
-    const Eigen::MatrixXd cov_ll = sigma2 * (Nll_inv[i] + B * Ainv * B.transpose());
-    const Eigen::MatrixXd cov_ss = sigma2 * Ainv;
-    int k = 2;
-    if (piecewise) {
-      // The constant-C fit is a weighted mean of C(t) over the segment; the reported C is the
-      // damping at the segment's mean load where the load varies (variationTest).
-      e.C_weighted = x[k];
-      e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
-      variationTest(i, sigma2, &e);
-      if (std::isfinite(e.C_mean_load))
-        fillC(&e, e.C_mean_load, e.C_mean_load_std * e.C_mean_load_std);
-      else
-        fillC(&e, x[k], cov_ll(k, k));
-      ++k;
-    } else if (load) {
-      const double T = e.mean_torque;
-      fillC(&e, sh[0] + sh[1] * T, cov_ss(0, 0) + T * T * cov_ss(1, 1) + 2 * T * cov_ss(0, 1));
-    } else {
-      fillC(&e, sh[0], cov_ss(0, 0));
-    }
-    if (shape) {
+  }
+
+  std::string notConverged() const {
+    return "output-error refinement stopped after the iteration limit (" +
+           std::to_string(o_.max_iterations) + ") without converging to 1e-10";
+  }
+
+  // The stiffness unknowns of segment i (greybox levels or shape) into e.
+  void fillStiffness(size_t i, const Eigen::MatrixXd& cov_ll, int k, SegmentEstimate* e) const {
+    const Eigen::VectorXd& x = loc_[i];
+    if (shape_) {
       // The refined curve and its extremes over a mesh cycle.
-      e.stiffness_curve.resize(nb);
-      e.stiffness_curve_std.resize(nb);
-      for (int b = 0; b < nb; ++b) {
-        e.stiffness_curve[b] = me * x[basis_first + b];
-        e.stiffness_curve_std[b] =
-            me * std::sqrt(std::max(cov_ll(basis_first + b, basis_first + b), 0.0));
+      e->stiffness_curve.resize(nb_);
+      e->stiffness_curve_std.resize(nb_);
+      for (int b = 0; b < nb_; ++b) {
+        e->stiffness_curve[b] = me_ * x[basis_first_ + b];
+        e->stiffness_curve_std[b] =
+            me_ * std::sqrt(std::max(cov_ll(basis_first_ + b, basis_first_ + b), 0.0));
       }
-      curveExtremes(o.stiffness_shape, e.stiffness_curve, &e.k_min, &e.k_max);
-      e.k_min_std = e.k_max_std = kNaN;
-    } else if (grey) {
+      curveExtremes(o_.stiffness_shape, e->stiffness_curve, &e->k_min, &e->k_max);
+      e->k_min_std = e->k_max_std = kNaN;
+    } else if (grey_) {
       const int a = k, b = k + 1;
-      e.k_min = me * x[a];
-      e.k_max = me * (x[a] + x[b]);
-      e.k_min_std = me * std::sqrt(std::max(cov_ll(a, a), 0.0));
-      e.k_max_std = me * std::sqrt(std::max(cov_ll(a, a) + cov_ll(b, b) + 2 * cov_ll(a, b), 0.0));
+      e->k_min = me_ * x[a];
+      e->k_max = me_ * (x[a] + x[b]);
+      e->k_min_std = me_ * std::sqrt(std::max(cov_ll(a, a), 0.0));
+      e->k_max_std = me_ * std::sqrt(std::max(cov_ll(a, a) + cov_ll(b, b) + 2 * cov_ll(a, b), 0.0));
     }
-    ResidualStatistics& rs = e.residuals;
-    rs.rms = std::sqrt(nm.raw / static_cast<double>(nm.samples));
-    rs.lag1 = nm.raw > 0.0 ? nm.acov[1] / nm.raw : kNaN;
-    rs.whitened_lag1 = nm.cost > 0.0 ? nm.wlag1 / nm.cost : kNaN;
-    rs.innovation_std = std::sqrt(nm.cost / static_cast<double>(nm.rows));
-    rs.ar.assign(noise_of[i].a, noise_of[i].a + noise_of[i].p);
-    if (!converged[i]) {
-      all_converged = false;
-      e.warnings.push_back({quality_code::kRefineNotConverged, not_converged});
+  }
+
+  // Every refined segment: C, the stiffness, the residual statistics and its refined state.
+  void fillSegments() {
+    res_->windows.clear();
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      SegmentEstimate& e = res_->segments[i];
+      const Eigen::VectorXd& x = loc_[i];
+      const Normal& nm = normals_[i];
+      const double sigma2 =
+          piecewise_ ? nm.cost / static_cast<double>(nm.rows - nl_) : sigma2_pooled_;
+      const Eigen::MatrixXd& Ainv = Ainv_of_[i];
+      // Covariance of this segment's unknowns [locals, shared].
+      const Eigen::MatrixXd Nsl = nm.N.block(nl_, 0, ns_, nl_);
+      const Eigen::MatrixXd B = Nll_inv_[i] * Nsl.transpose();
+      const Eigen::MatrixXd cov_ll = sigma2 * (Nll_inv_[i] + B * Ainv * B.transpose());
+      const Eigen::MatrixXd cov_ss = sigma2 * Ainv;
+      int k = 2;
+      if (piecewise_) {
+        // The constant-C fit is a weighted mean of C(t) over the segment; the reported C is the
+        // damping at the segment's mean load where the load varies (variationTest).
+        e.C_weighted = x[k];
+        e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
+        variationTest(i, sigma2, &e);
+        if (std::isfinite(e.C_mean_load))
+          fillC(&e, e.C_mean_load, e.C_mean_load_std * e.C_mean_load_std);
+        else
+          fillC(&e, x[k], cov_ll(k, k));
+        ++k;
+      } else if (load_) {
+        const double T = e.mean_torque;
+        fillC(&e, sh_[0] + sh_[1] * T, cov_ss(0, 0) + T * T * cov_ss(1, 1) + 2 * T * cov_ss(0, 1));
+      } else {
+        fillC(&e, sh_[0], cov_ss(0, 0));
+      }
+      fillStiffness(i, cov_ll, k, &e);
+      ResidualStatistics& rs = e.residuals;
+      rs.rms = std::sqrt(nm.raw / static_cast<double>(nm.samples));
+      rs.lag1 = nm.raw > 0.0 ? nm.acov[1] / nm.raw : kNaN;
+      rs.whitened_lag1 = nm.cost > 0.0 ? nm.wlag1 / nm.cost : kNaN;
+      rs.innovation_std = std::sqrt(nm.cost / static_cast<double>(nm.rows));
+      rs.ar.assign(noise_of_[i].a, noise_of_[i].a + noise_of_[i].p);
+      if (!converged_[i]) {
+        all_converged_ = false;
+        e.warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
+      }
+      WindowEstimate w;
+      w.t_start = e.t_start;
+      w.t_end = e.t_end;
+      w.y_T = x[0];
+      w.velocity = x[1];
+      w.alpha = kNaN;
+      res_->windows.push_back(w);
     }
-    WindowEstimate w;
-    w.t_start = e.t_start;
-    w.t_end = e.t_end;
-    w.y_T = x[0];
-    w.velocity = x[1];
-    w.alpha = kNaN;
-    res->windows.push_back(w);
   }
-  if (res->constant && !piecewise && !load) {
-    fillC(&*res->constant, sh[0], sigma2_pooled * Ainv_of[problems[0][0]](0, 0));
-    if (!all_converged)
-      res->constant->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
+
+  // The shared estimates: constant C, the load law, the STE; the run's convergence warning.
+  void fillShared() {
+    const Eigen::MatrixXd& Ainv = Ainv_of_[problems_[0][0]];
+    if (res_->constant && !piecewise_ && !load_) {
+      fillC(&*res_->constant, sh_[0], sigma2_pooled_ * Ainv(0, 0));
+      if (!all_converged_)
+        res_->constant->warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
+    }
+    if (res_->load_law && load_) {
+      res_->load_law->c0 = me_ * sh_[0];
+      res_->load_law->c1 = me_ * sh_[1];
+      res_->load_law->c0_std = me_ * std::sqrt(std::max(sigma2_pooled_ * Ainv(0, 0), 0.0));
+      res_->load_law->c1_std = me_ * std::sqrt(std::max(sigma2_pooled_ * Ainv(1, 1), 0.0));
+    }
+    if (ste_ != nullptr) {
+      ste_->theta.resize(nste_);
+      ste_->theta_std.resize(nste_);
+      for (int k = 0; k < nste_; ++k) {
+        const int a = ste_shared_ + k;
+        ste_->theta[k] = sh_[a];
+        ste_->theta_std[k] = std::sqrt(std::max(sigma2_pooled_ * Ainv(a, a), 0.0));
+      }
+    }
+    if (!all_converged_)
+      res_->warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
   }
-  if (res->load_law && load) {
-    const Eigen::MatrixXd& Ainv = Ainv_of[problems[0][0]];
-    res->load_law->c0 = me * sh[0];
-    res->load_law->c1 = me * sh[1];
-    res->load_law->c0_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(0, 0), 0.0));
-    res->load_law->c1_std = me * std::sqrt(std::max(sigma2_pooled * Ainv(1, 1), 0.0));
+
+  const SignalView& s_;
+  const std::vector<std::pair<Index, Index>>& ranges_;
+  const IdentificationOptions& o_;
+  IdentificationResult* res_;
+  SteRefinement* ste_;
+  const double me_;
+  const bool grey_, load_, piecewise_, shape_;
+  const int nb_;
+  const size_t nseg_;
+  const ForwardModel fm_;
+  const SegmentSimulator sim_;
+  const int substeps_;
+  std::vector<Role> local_roles_, shared_roles_;
+  int basis_first_ = 0, ste_shared_ = 0, nste_ = 0, nl_ = 0, ns_ = 0, m_ = 0;
+  std::vector<char> active_, converged_;
+  Locals loc_;
+  Eigen::VectorXd sh_;
+  std::vector<Normal> normals_;
+  std::vector<Set> problems_;
+  std::vector<NoiseModel> noise_of_;
+  int iterations_ = 0;
+  std::vector<Eigen::MatrixXd> Nll_inv_, Ainv_of_;
+  double sigma2_pooled_ = 0.0;
+  bool all_converged_ = true;
+};
+
+}  // namespace
+
+bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
+                       const GearConstants& gear, const IdentificationOptions& o,
+                       IdentificationResult* res, std::string* error, bool reference_integration,
+                       SteRefinement* ste) {
+  if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return true;
+  if (ranges.size() != res->segments.size()) {
+    *error = "refinement: segment ranges do not match the result";
+    return false;
   }
-  if (!all_converged) res->warnings.push_back({quality_code::kRefineNotConverged, not_converged});
-  return true;
+  const bool shape = o.formulation == Formulation::Greybox &&
+                     o.stiffness_shape.kind != StiffnessShape::Kind::Square;
+  if (shape && s.mesh_phase == nullptr) {
+    *error = "refinement: the stiffness shape " + toString(o.stiffness_shape) +
+             " needs the mesh_phase channel";
+    return false;
+  }
+  if (ste != nullptr) {
+    if (shape || o.model == DampingModel::LoadLaw || s.mesh_phase == nullptr) {
+      *error =
+          "refinement: the STE needs the mesh_phase channel, the square stiffness and "
+          "piecewise or constant damping";
+      return false;
+    }
+    if (ste->basis.size() > SteRefinement::kMaxTerms ||
+        static_cast<int>(ste->theta.size()) != ste->basis.size()) {
+      *error = "refinement: at most " + std::to_string(SteRefinement::kMaxTerms) +
+               " STE coefficients, with start values";
+      return false;
+    }
+  }
+  Refinement r(s, ranges, gear, o, res, reference_integration, ste);
+  return r.run(error);
 }
 
 // ----------------------------------------------------------------------------------------------

@@ -39,12 +39,21 @@ bool loadRigInput(const std::string& csv, const RigInputOptions& o,
   } else if (!gear_sim::readRigCsv(csv, &rig, error)) {
     return false;
   }
+  if (!rigTableToSignalTable(rig, csv, o, model, out, report, error)) return false;
+  if (report) report->resampling = resampling;
+  return true;
+}
+
+bool rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
+                           const RigInputOptions& o, const gear_sim::GearModel& model,
+                           gear_sim::SignalTable* out, EncoderFrontEndReport* report,
+                           std::string* error) {
   std::string e;
   if (!encoderToSignalTable(rig, model, o.front_end, out, report, &e)) {
-    *error = csv + ": " + e;
+    *error = name + ": " + e;
     return false;
   }
-  if (report) report->resampling = resampling;
+  if (report) report->resampling = "none (uniform input at the output rate)";
   return true;
 }
 

@@ -51,6 +51,7 @@ nlohmann::json steJson(const SteResult& s) {
   j["separable"] = s.separable;
   j["iterations"] = s.iterations;
   j["residual_rms"] = num(s.residual_rms);
+  j["refined"] = s.refined;
   return j;
 }
 

@@ -24,4 +24,17 @@ struct RigBagTopics {
 bool writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
                  const gear_sim::GearModel* params, const RigBagTopics& topics, std::string* error);
 
+/// Whether the bag at `path` holds sensor_msgs/JointState messages on `topics.joints` (a rig bag,
+/// for `analyze --input`). False for an unreadable or corrupt file (checked record by record
+/// first; the caller's reader reports why).
+bool isRigBag(const std::string& path, const RigBagTopics& topics);
+
+/// Reads a rig bag: per JointState message on `topics.joints` the positions of the joints named
+/// `joint1`, `joint2`, and the torque with the same stamp on `topics.torque`
+/// (geometry_msgs/WrenchStamped, component `axis`, or std_msgs/Float64); time = stamp minus the
+/// first JointState stamp. Stamps must increase. False with `*error` naming the bag and the
+/// reason (a missing joint or torque, a corrupt file).
+bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig,
+                std::string* error);
+
 }  // namespace gear_sim_ros
