@@ -97,6 +97,16 @@ SdofState advanceSdof(const CoeffFn& coeffs, SdofState s, double t_begin, double
   return s;
 }
 
+/// The argument errors of integrateSdof and integrateSdofAffine (empty when none).
+inline std::string sdofArgumentsError(double dt, Eigen::Index n_samples, SdofState initial,
+                                      int substeps) {
+  if (!(dt > 0.0)) return "dt = " + std::to_string(dt) + ": must be > 0 [s]";
+  if (substeps < 1) return "substeps = " + std::to_string(substeps) + ": must be >= 1";
+  if (n_samples < 1) return "n_samples must be >= 1";
+  if (!std::isfinite(initial.y) || !std::isfinite(initial.v)) return "initial state is not finite";
+  return {};
+}
+
 /// One RK4 step of eq. (4) as the affine map s' = M s + g of the state (M, g independent of it).
 struct AffineStep {
   double m11 = 1, m12 = 0, m21 = 0, m22 = 1, g1 = 0, g2 = 0;
@@ -171,10 +181,7 @@ std::string integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
                                 std::vector<double> breakpoints, double t0, double dt,
                                 Eigen::Index n_samples, SdofState initial, Integrator method,
                                 int substeps, double* y_out, double* v_out) {
-  if (!(dt > 0.0)) return "dt = " + std::to_string(dt) + ": must be > 0 [s]";
-  if (substeps < 1) return "substeps = " + std::to_string(substeps) + ": must be >= 1";
-  if (n_samples < 1) return "n_samples must be >= 1";
-  if (!std::isfinite(initial.y) || !std::isfinite(initial.v)) return "initial state is not finite";
+  if (std::string e = sdofArgumentsError(dt, n_samples, initial, substeps); !e.empty()) return e;
   std::sort(breakpoints.begin(), breakpoints.end());
   const auto bp_end = breakpoints.cend();
   auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
@@ -237,10 +244,7 @@ template <class CoeffFn>
 std::string integrateSdof(const CoeffFn& coeffs, std::vector<double> breakpoints, double t0,
                           double dt, Eigen::Index n_samples, SdofState initial, Integrator method,
                           int substeps, double* y_out, double* v_out) {
-  if (!(dt > 0.0)) return "dt = " + std::to_string(dt) + ": must be > 0 [s]";
-  if (substeps < 1) return "substeps = " + std::to_string(substeps) + ": must be >= 1";
-  if (n_samples < 1) return "n_samples must be >= 1";
-  if (!std::isfinite(initial.y) || !std::isfinite(initial.v)) return "initial state is not finite";
+  if (std::string e = sdofArgumentsError(dt, n_samples, initial, substeps); !e.empty()) return e;
   std::sort(breakpoints.begin(), breakpoints.end());
   auto bp = breakpoints.cbegin();
   SdofState s = initial;
