@@ -1224,19 +1224,23 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
     }
     return lo;
   };
-  auto coeffs = [&](double t, double t_ref) {
-    const double uref = (t_ref - s.t0) / s.dt;
-    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
-    const double u = std::clamp((t - s.t0) / s.dt - static_cast<double>(j), 0.0, 1.0);
-    const SegmentEstimate& e = seg[segmentAt(t_ref)];
-    const Index lo = sampleOf(e.t_start), hi = std::max(sampleOf(e.t_end), lo);
+  std::vector<char> held(seg.size());
+  for (size_t i = 0; i < seg.size(); ++i) held[i] = !fm.smoothStiffness(ranges[i].first);
+  const double inv_me = 1.0 / me;
+  // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
+  // after the interval's break.
+  auto coeffsAt = [&](Index j, double u, bool right, size_t si) {
+    const SegmentEstimate& e = seg[si];
+    const Index lo = ranges[si].first, hi = ranges[si].second;
     const double T1 = fm.torque(j, u, lo, hi);
-    const bool right = uref - static_cast<double>(j) >= fm.heldSplit(j);
     gear_sim::SdofCoefficients c;
     c.C = load ? th0 + th1 * T1 : e.C;
     switch (f) {
       case Formulation::Known:
-        c.K = fm.knownStiffness(j, u, right, lo, hi);
+        // A held channel's value directly (knownStiffness's first case, without its search of
+        // the segment's smoothness per look-up).
+        c.K = held[si] ? (right && j + 1 < s.n ? s.stiffness[j + 1] : s.stiffness[j]) * inv_me
+                       : fm.knownStiffness(j, u, right, lo, hi);
         c.F = gear.force_factor * T1;
         break;
       case Formulation::Greybox: {
@@ -1259,14 +1263,39 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
     }
     return c;
   };
+  // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
+  auto coeffs = [&](double t, double t_ref) {
+    const double uref = (t_ref - s.t0) / s.dt;
+    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
+    const double u = std::clamp((t - s.t0) / s.dt - static_cast<double>(j), 0.0, 1.0);
+    const bool right = uref - static_cast<double>(j) >= fm.heldSplit(j);
+    return coeffsAt(j, u, right, segmentAt(t_ref));
+  };
+  const int substeps = substepsFor(r.omega0, s.dt);
+  // The fast path's look-up of an interval without a breakpoint inside, at the exact stage
+  // coordinates u = k / (2 substeps) (the midpoint and the ends take the precomputed stencils):
+  // cursors over the segments and the breaks instead of a search per look-up (intervals come in
+  // ascending order).
+  size_t si = 0, bi = 0;
+  const std::vector<QuadratureBreak>& brk = fm.breaks();
+  const double u_first_mid = 0.5 / substeps;
+  std::vector<double> u_stage(static_cast<size_t>(2 * substeps + 1));
+  for (int k = 0; k < 2 * substeps; ++k) u_stage[static_cast<size_t>(k)] = k * (0.5 / substeps);
+  u_stage.back() = 1.0;
+  auto stage = [&](Index i, int k) {
+    const Index j = begin + i;
+    while (si + 1 < seg.size() && ranges[si + 1].first <= j) ++si;
+    while (bi < brk.size() && brk[bi].j < j) ++bi;
+    const double split = bi < brk.size() && brk[bi].j == j ? brk[bi].th : 1.0;
+    return coeffsAt(j, u_stage[static_cast<size_t>(k)], u_first_mid >= split, si);
+  };
   const Index n = end - begin;
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
-  const int substeps = substepsFor(r.omega0, s.dt);
-  const std::string e =
-      gear_sim::integrateSdof(coeffs, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4,
-                              substeps, out->modeled.data(), nullptr);
+  const std::string e = gear_sim::integrateSdofAffine(coeffs, stage, bps, s.time(begin), s.dt, n,
+                                                      init, gear_sim::Integrator::Rk4, substeps,
+                                                      out->modeled.data(), nullptr);
   if (!e.empty()) {
     *error = "modeled response: " + e;
     return false;

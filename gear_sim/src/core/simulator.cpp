@@ -66,13 +66,6 @@ struct Model {
   }
 };
 
-// One output interval of the linear eq. (4) as an affine map of the state:
-// (y, v)' = [m11 m12; m21 m22] (y, v) + (g1, g2). `split` marks an interval that contains a
-// breakpoint (integrated by the generic driver instead).
-struct AffineStep {
-  double m11 = 1, m12 = 0, m21 = 0, m22 = 1, g1 = 0, g2 = 0;
-};
-
 // The affine map of `substeps` RK steps of length h with C = ca + cb*T and F = ff*T at the
 // stage loads T[0], T[1], ... (half-step grid) and K constant, or K = Kh[0], Kh[1], ... on the
 // same grid when Kh is given. Built by applying the RK step itself to the basis states (no
@@ -97,13 +90,7 @@ inline AffineStep affineStep(Integrator method, double h, int substeps, double K
       g = rk2Step({0.0, 0.0}, h, f0, fm);
     }
     // Compose with what came before: new = E (old), E = [e1 e2], plus g.
-    const AffineStep p = a;
-    a.m11 = e1.y * p.m11 + e2.y * p.m21;
-    a.m12 = e1.y * p.m12 + e2.y * p.m22;
-    a.m21 = e1.v * p.m11 + e2.v * p.m21;
-    a.m22 = e1.v * p.m12 + e2.v * p.m22;
-    a.g1 = e1.y * p.g1 + e2.y * p.g2 + g.y;
-    a.g2 = e1.v * p.g1 + e2.v * p.g2 + g.v;
+    a = composeAffine({e1.y, e2.y, e1.v, e2.v, g.y, g.v}, a);
   }
   return a;
 }
@@ -193,29 +180,13 @@ void affineRk4KernelVaryingK(Eigen::Index n, double h, double ca, double cb, dou
                              const double* __restrict ke, const double* __restrict kmid,
                              double* __restrict m11, double* __restrict m12, double* __restrict m21,
                              double* __restrict m22, double* __restrict g1, double* __restrict g2) {
-  constexpr double k3 = 1.0 / 3.0, k6 = 1.0 / 6.0, k12 = 1.0 / 12.0, k24 = 1.0 / 24.0;
   const double h2 = h * h, hca = h * ca, hcb = h * cb, h2ff = h2 * ff, inv_h = 1.0 / h;
   for (Eigen::Index i = 0; i < n; ++i) {
     const double T0 = te[i], Tm = tm[i], T1 = te[i + 1];
-    const double a = hca + hcb * T0, b = hca + hcb * Tm, c = hca + hcb * T1;
-    const double k0 = h2 * ke[i], km = h2 * kmid[i], k1 = h2 * ke[i + 1];
-    const double f0 = h2ff * T0, fm = h2ff * Tm, f1 = h2ff * T1;
-    m11[i] = 1.0 - km * k3 + k0 * (km * k24 - k6) + b * (k0 * k12 + km * k12 - b * k0 * k24);
-    m12[i] = h * (1.0 - km * k6 + b * (b * k12 + km * k24 - k3) +
-                  a * (b * (k12 - b * k24) + km * k24 - k6));
-    g1[i] = fm * k3 + f0 * (k6 - km * k24) + b * (b * f0 * k24 - f0 * k12 - fm * k12);
-    m21[i] = inv_h *
-             (b * (b * (c * k0 * k24 - k0 * k12) - c * km * k12 + k0 * (k6 - k1 * k24) + km * k6) +
-              c * (km * k6 - k0 * km * k24) + k0 * (km * k12 - k6) + k1 * (km * k12 - k6) -
-              2.0 * km * k3);
-    m22[i] = 1.0 - km * k3 +
-             a * (b * (b * (c * k24 - k12) - k1 * k24 + k6) - c * km * k24 + km * k12 - k6) +
-             b * (b * (k6 - c * k12) + c * (k6 - km * k24) + k1 * k12 + km * k12 - 2.0 * k3) +
-             c * (km * k12 - k6) + k1 * (km * k24 - k6);
-    g2[i] = inv_h *
-            (b * (b * (f0 * k12 - c * f0 * k24) + c * fm * k12 + f0 * (k1 * k24 - k6) - fm * k6) +
-             c * (f0 * km * k24 - fm * k6) + f0 * (k6 - km * k12) + f1 * k6 - fm * k1 * k12 +
-             2.0 * fm * k3);
+    const AffineStep s =
+        rk4AffineScaled(h, inv_h, hca + hcb * T0, hca + hcb * Tm, hca + hcb * T1, h2 * ke[i],
+                        h2 * kmid[i], h2 * ke[i + 1], h2ff * T0, h2ff * Tm, h2ff * T1);
+    m11[i] = s.m11, m12[i] = s.m12, m21[i] = s.m21, m22[i] = s.m22, g1[i] = s.g1, g2[i] = s.g2;
   }
 }
 
