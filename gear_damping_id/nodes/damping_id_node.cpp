@@ -80,11 +80,18 @@ class DampingIdNode {
   DampingIdNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, NodeOptions o)
       : o_(std::move(o)), intake_(o_.stream), updater_(nh, pnh), refine_(o_.refine_budget) {
     damping_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingTopic, 1, true);
-    segment_pub_ = nh.advertise<gear_damping::DampingArray>(topics::kDampingSegmentTopic, 100);
-    series_pub_ = nh.advertise<gear_damping::DampingSample>(topics::kDampingSeriesTopic, 1000);
+    // Outgoing queues of the per-segment topics: 10000 messages (10 s of 1-ms segments, a few
+    // MB) per subscriber. roscpp drops a slow subscriber's oldest outgoing messages beyond its
+    // queue without telling the publisher: a 30-min soak at 1 MHz with 100 lost 52 of 1.8e6
+    // segments to a tester stalled for up to 5 s by other load.
+    constexpr uint32_t kSegmentQueue = 10000;
+    segment_pub_ =
+        nh.advertise<gear_damping::DampingArray>(topics::kDampingSegmentTopic, kSegmentQueue);
+    series_pub_ =
+        nh.advertise<gear_damping::DampingSample>(topics::kDampingSeriesTopic, kSegmentQueue);
     response_pub_ = nh.advertise<gear_damping::ModeledResponse>(topics::kModeledResponseTopic, 100);
-    c_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingCTopic, 100);
-    xi_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingXiTopic, 100);
+    c_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingCTopic, kSegmentQueue);
+    xi_pub_ = nh.advertise<std_msgs::Float64>(topics::kDampingXiTopic, kSegmentQueue);
     reset_srv_ = pnh.advertiseService("reset", &DampingIdNode::onReset, this);
     get_srv_ = pnh.advertiseService("get_damping", &DampingIdNode::onGet, this);
     updater_.setHardwareID("damping_id");
