@@ -81,7 +81,10 @@ bin="$ASAN_WS/devel/lib/gear_damping"
 # The statistical tests (the same estimate over 30-50 noise seeds, to check coverage) repeat code
 # paths the other tests already take once; under ASan at -O1 they cost minutes each (the encoder
 # coverage tests alone took 710 s), so the sanitized run leaves them to the Release run.
-asan_filter="-*Coverage*:*CoverTheTruth*:*OverSeeds:*OverFiftySeeds"
+# The SteRig accuracy tests (three rig cases end to end, minutes in Release on a loaded machine)
+# likewise: their code paths run sanitized in SteModel.*, encoder_frontend_test, rig_cli_test
+# and the rig fuzz target.
+asan_filter="-*Coverage*:*CoverTheTruth*:*OverSeeds:*OverFiftySeeds:SteRig.*"
 # Unit tests and fuzz targets are single-threaded: GEAR_JOBS of them run at once.
 throttle() { while [ "$(jobs -rp | wc -l)" -ge "$GEAR_JOBS" ]; do wait -n; done; }
 

@@ -449,8 +449,8 @@ Coverage steCoverage(long counts, int seeds, bool given_mesh_offset,
 }
 
 TEST(SteRig, Encoder20BitCoverage) {
+  // (The integral method alone covers 79.7 % here: docs/rig.md. Not re-measured in every run.)
   const Coverage cv = steCoverage(1L << 20, 30, false);
-  steCoverage(1L << 20, 30, false, IdentificationOptions::Refine::Never);  // for comparison
   EXPECT_GE(cv.inside, 0.9 * cv.reported);
   EXPECT_GE(cv.reported, cv.total * 9 / 10);
 }
