@@ -5,8 +5,8 @@
 #   space, no source tree on ROS_PACKAGE_PATH), in the background on the current ROS master
 #   (ROS_MASTER_URI); its pid goes to DIR/launch.pid, its output to DIR/launch.log.
 #   - With BUILD_DIR (the catkin build directory of the workspace under test, already built):
-#     `DESTDIR=DIR/root cmake --build BUILD_DIR --target install`, i.e. the install rules of the
-#     build being tested (already up to date: seconds), into DIR/root/<its install prefix>.
+#     `DESTDIR=DIR/root cmake --install BUILD_DIR`, i.e. the install rules of the build being
+#     tested (already built; nothing is rebuilt), into DIR/root/<its install prefix>.
 #   - Without: a workspace DIR (DIR/src/gear_damping -> this checkout) and `catkin_make install`
 #     into DIR/install, without tests and benchmarks, with ccache when it is there (a full build).
 # install_space.sh DIR --stop   stops that launch (SIGINT, as Ctrl-C).
@@ -37,17 +37,16 @@ install="$dir/install"
 if [ -n "$build_dir" ]; then
   # DESTDIR, not --prefix: catkin's workspace files (setup.bash, ...) have absolute destinations.
   prefix=$(sed -n 's/^CMAKE_INSTALL_PREFIX:PATH=//p' "$build_dir/CMakeCache.txt")
-  # `--target install`, as `make install`: brings the build up to date first (nothing to compile
-  # in a built tree, but a generated file that went missing, e.g. a dynamic_reconfigure header,
-  # is made again) and then installs.
-  if ! "${clean_env[@]}" "DESTDIR=$dir/root" cmake --build "$build_dir" --target install -- -j2 \
-      >"$dir/build.log" 2>&1
+  # `cmake --install`: the install rules only, nothing is built. (`--target install` first
+  # brings the build up to date: under `make -j2 run_tests` it ran make in the build tree while
+  # other rostests launched its nodes, and a node caught mid-relink "failed to launch".)
+  if ! "${clean_env[@]}" "DESTDIR=$dir/root" cmake --install "$build_dir" >"$dir/build.log" 2>&1
   then
     tail -n 60 "$dir/build.log"
     exit 1
   fi
   install="$dir/root$prefix"
-  echo "[install_space] DESTDIR=$dir/root cmake --build $build_dir --target install: $(($(date +%s) - start)) s"
+  echo "[install_space] DESTDIR=$dir/root cmake --install $build_dir: $(($(date +%s) - start)) s"
 else
   mkdir -p "$dir/src"
   ln -sfn "$repo" "$dir/src/gear_damping"
