@@ -37,10 +37,13 @@ install="$dir/install"
 if [ -n "$build_dir" ]; then
   # DESTDIR, not --prefix: catkin's workspace files (setup.bash, ...) have absolute destinations.
   prefix=$(sed -n 's/^CMAKE_INSTALL_PREFIX:PATH=//p' "$build_dir/CMakeCache.txt")
-  # `cmake --install`: the install rules only, nothing is built. (`--target install` first
-  # brings the build up to date: under `make -j2 run_tests` it ran make in the build tree while
-  # other rostests launched its nodes, and a node caught mid-relink "failed to launch".)
-  if ! "${clean_env[@]}" "DESTDIR=$dir/root" cmake --install "$build_dir" >"$dir/build.log" 2>&1
+  # `cmake --install`: the install rules only. (`--target install` first brings the whole build
+  # up to date: under `make -j2 run_tests` it relinked the nodes while other rostests launched
+  # them, and a node caught mid-relink "failed to launch".) Only the dynamic_reconfigure files
+  # are made first: catkin_make's re-configure (for run_tests) can leave them missing in devel/,
+  # and making them touches no node binary.
+  if ! { "${clean_env[@]}" cmake --build "$build_dir" --target gear_damping_gencfg &&
+         "${clean_env[@]}" "DESTDIR=$dir/root" cmake --install "$build_dir"; } >"$dir/build.log" 2>&1
   then
     tail -n 60 "$dir/build.log"
     exit 1
