@@ -20,7 +20,7 @@ foreach(src IN LISTS GEAR_UNIT_TESTS)
         <gtest/gtest.h> <Eigen/Core> <Eigen/Dense> <nlohmann/json.hpp>
         <algorithm> <cmath> <cstdio> <filesystem> <fstream> <functional> <iostream> <limits>
         <map> <memory> <random> <sstream> <string> <vector>
-        "gear_sim/simulator.hpp" "gear_sim/config_yaml.hpp" "gear_damping_id/integral_method.hpp")
+        <gear_sim/simulator.hpp> <gear_sim/config_yaml.hpp> <gear_damping_id/integral_method.hpp>)
     else()
       target_precompile_headers(${name} REUSE_FROM ${GEAR_TEST_PCH_FIRST})
     endif()
