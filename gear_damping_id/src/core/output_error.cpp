@@ -580,39 +580,12 @@ class Refinement {
     p.m = m_;
     for (int k = 0; k < nl_; ++k) p.role[k] = local_roles_[k];
     for (int k = 0; k < ns_; ++k) p.role[nl_ + k] = shared_roles_[k];
-    auto set = [&](Role r, double v) {
-      switch (r) {
-        case Role::Y0:
-          p.y0 = v;
-          break;
-        case Role::V0:
-          p.v0 = v;
-          break;
-        case Role::Theta0:
-          p.theta0 = v;
-          break;
-        case Role::Theta1:
-          p.theta1 = v;
-          break;
-        case Role::K0:
-          p.K0 = v;
-          break;
-        case Role::DK:
-          p.dK = v;
-          break;
-        case Role::Basis:
-        case Role::Ste:
-          break;
-      }
-    };
-    for (int k = 0; k < nl_; ++k) set(local_roles_[k], x[k]);
     p.nb = nb_;
     p.basis_first = basis_first_;
-    for (int k = 0; k < nb_; ++k) p.basis[k] = x[basis_first_ + k];
-    for (int k = 0; k < ns_; ++k) set(shared_roles_[k], g[k]);
     p.nste = nste_;
     p.ste_first = nl_ + ste_shared_;
-    for (int k = 0; k < nste_; ++k) p.ste[k] = g[ste_shared_ + k];
+    for (int k = 0; k < nl_; ++k) *p.slot(k) = x[k];
+    for (int k = 0; k < ns_; ++k) *p.slot(nl_ + k) = g[k];
     return p;
   }
 
