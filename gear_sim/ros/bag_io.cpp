@@ -186,43 +186,6 @@ class ChunkReader {
   std::thread thread_;  // last: started once the members above exist
 };
 
-// ROS deserialises a float64[] by resizing the vector to the length it reads and only then
-// checking that the bytes are there: a corrupt length in a SignalChunk allocated (and zeroed) up
-// to 32 GB (found by fuzz_bag). The serialized layout is checked first: every array's length
-// must fit in the message's bytes. Returns the problem, empty when none.
-std::string chunkLayoutError(const rosbag::MessageInstance& m) {
-  const std::uint32_t n = m.size();
-  std::vector<std::uint8_t> buf(n);
-  ros::serialization::OStream out(buf.data(), n);
-  m.write(out);
-  std::uint64_t k = 0;
-  auto skip = [&](std::uint64_t bytes) {
-    if (bytes > n - k) return false;
-    k += bytes;
-    return true;
-  };
-  auto array = [&](std::uint64_t element, const char* name) -> std::string {
-    if (n - k < 4) return std::string("cut before the length of ") + name;
-    std::uint32_t len;
-    std::memcpy(&len, buf.data() + k, 4);
-    k += 4;
-    if (!skip(element * len))
-      return std::string(name) + " claims " + std::to_string(len) + " elements in a message of " +
-             std::to_string(n) + " bytes";
-    return {};
-  };
-  // std_msgs/Header: seq, stamp, frame_id; then sample_rate, first_index.
-  if (!skip(12)) return "cut in its header";
-  if (std::string e = array(1, "header.frame_id"); !e.empty()) return e;
-  if (!skip(16)) return "cut before sample_rate and first_index";
-  const std::pair<std::uint64_t, const char*> arrays[] = {
-      {8, "dte"},        {8, "dte_velocity"}, {8, "stiffness"}, {8, "torque"},
-      {1, "mesh_state"}, {8, "mesh_phase"},   {8, "damping"}};
-  for (const auto& [size, name] : arrays)
-    if (std::string e = array(size, name); !e.empty()) return e;
-  return {};
-}
-
 // The SignalChunk topic to read: `topic` when given (it must exist and have that type), else the
 // only one in the bag. Also notes the first GearParams topic.
 bool chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
@@ -292,7 +255,7 @@ class ChunkScan {
 
   bool add(const rosbag::MessageInstance& m, std::string* error) {
     if (m.getDataType() == kChunkType) {
-      if (const std::string bad = chunkLayoutError(m); !bad.empty()) {
+      if (const std::string bad = messageLayoutError(m); !bad.empty()) {
         *error = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
                  std::to_string(out_.chunks + 1) + ": corrupt " + kChunkType + " (" + bad + ")";
         return false;
@@ -425,6 +388,81 @@ class ChunkScan {
 };
 
 }  // namespace
+
+// ROS deserialises an array or a string by resizing it to the length it reads and only then
+// checking that the bytes are there: a corrupt length in a SignalChunk allocated (and zeroed) up
+// to 32 GB, one in a rig bag's JointState 4 GB (both found by fuzz_bag). The serialized layout
+// is walked first: every length must fit in the message's bytes.
+namespace {
+
+class LayoutWalk {
+ public:
+  explicit LayoutWalk(const rosbag::MessageInstance& m) : n_(m.size()), buf_(n_) {
+    ros::serialization::OStream out(buf_.data(), n_);
+    m.write(out);
+  }
+  bool skip(std::uint64_t bytes) {
+    if (bytes > n_ - k_) return false;
+    k_ += bytes;
+    return true;
+  }
+  // An array of `len` elements of `element` bytes (a string: element 1).
+  std::string array(std::uint64_t element, const char* name) {
+    std::uint32_t len = 0;
+    if (std::string e = length(name, &len); !e.empty()) return e;
+    return skip(element * len) ? std::string() : claims(name, len);
+  }
+  // string[]: a count, then each string's length and bytes.
+  std::string strings(const char* name) {
+    std::uint32_t len = 0;
+    if (std::string e = length(name, &len); !e.empty()) return e;
+    if (len > n_ - k_) return claims(name, len);  // every string takes 4 bytes at least
+    for (std::uint32_t i = 0; i < len; ++i)
+      if (std::string e = array(1, name); !e.empty()) return e;
+    return {};
+  }
+  // std_msgs/Header: seq, stamp, frame_id.
+  std::string header() { return skip(12) ? array(1, "header.frame_id") : "cut in its header"; }
+
+ private:
+  std::string length(const char* name, std::uint32_t* len) {
+    if (n_ - k_ < 4) return std::string("cut before the length of ") + name;
+    std::memcpy(len, buf_.data() + k_, 4);
+    k_ += 4;
+    return {};
+  }
+  std::string claims(const char* name, std::uint32_t len) const {
+    return std::string(name) + " claims " + std::to_string(len) + " elements in a message of " +
+           std::to_string(n_) + " bytes";
+  }
+  std::uint32_t n_;
+  std::vector<std::uint8_t> buf_;
+  std::uint64_t k_ = 0;
+};
+
+}  // namespace
+
+std::string messageLayoutError(const rosbag::MessageInstance& m) {
+  const std::string& type = m.getDataType();
+  LayoutWalk w(m);
+  if (type == kChunkType) {
+    if (std::string e = w.header(); !e.empty()) return e;
+    if (!w.skip(16)) return "cut before sample_rate and first_index";
+    const std::pair<std::uint64_t, const char*> arrays[] = {
+        {8, "dte"},        {8, "dte_velocity"}, {8, "stiffness"}, {8, "torque"},
+        {1, "mesh_state"}, {8, "mesh_phase"},   {8, "damping"}};
+    for (const auto& [size, name] : arrays)
+      if (std::string e = w.array(size, name); !e.empty()) return e;
+  } else if (type == "sensor_msgs/JointState") {
+    if (std::string e = w.header(); !e.empty()) return e;
+    if (std::string e = w.strings("name"); !e.empty()) return e;
+    for (const char* name : {"position", "velocity", "effort"})
+      if (std::string e = w.array(8, name); !e.empty()) return e;
+  } else if (type == "geometry_msgs/WrenchStamped") {
+    return w.header();  // then six float64
+  }
+  return {};
+}
 
 bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
                    std::string* error) {

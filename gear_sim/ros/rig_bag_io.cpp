@@ -10,6 +10,7 @@
 #include <map>
 #include <vector>
 
+#include "gear_sim/message_text.hpp"
 #include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 
@@ -64,6 +65,15 @@ double wrenchAxis(const geometry_msgs::WrenchStamped& w, char axis) {
   return axis == 'x' ? w.wrench.torque.x : axis == 'y' ? w.wrench.torque.y : w.wrench.torque.z;
 }
 
+// False with `*error` when message `m` claims arrays longer than its bytes (messageLayoutError).
+bool layoutFits(const std::string& path, const rosbag::MessageInstance& m, std::string* error) {
+  const std::string bad = messageLayoutError(m);
+  if (bad.empty()) return true;
+  *error = path + ": " + gear_sim::quoteForMessage(m.getTopic()) + ": corrupt " +
+           gear_sim::quoteForMessage(m.getDataType()) + " (" + bad + ")";
+  return false;
+}
+
 }  // namespace
 
 bool isRigBag(const std::string& path, const RigBagTopics& topics) {
@@ -93,6 +103,7 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
     std::map<ros::Time, double> torque;  // by stamp
     rosbag::View tv(bag, rosbag::TopicQuery(topics.torque));
     for (const rosbag::MessageInstance& m : tv) {
+      if (!layoutFits(path, m, error)) return false;
       if (const auto w = m.instantiate<geometry_msgs::WrenchStamped>()) {
         torque[w->header.stamp] = wrenchAxis(*w, topics.axis);
       } else if (const auto f = m.instantiate<std_msgs::Float64>()) {
@@ -101,6 +112,7 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
     }
     rosbag::View jv(bag, rosbag::TopicQuery(topics.joints));
     for (const rosbag::MessageInstance& m : jv) {
+      if (!layoutFits(path, m, error)) return false;
       const auto js = m.instantiate<sensor_msgs::JointState>();
       if (!js) continue;
       const int i1 = jointIndex(*js, topics.joint1), i2 = jointIndex(*js, topics.joint2);

@@ -4,8 +4,10 @@
 // message naming the key, option or index. The tools' exit codes: simulate 0-3, convert 0-4,
 // analyze 0-5 (README "Exit codes").
 #include <gear_damping/SignalChunk.h>
+#include <geometry_msgs/WrenchStamped.h>
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/JointState.h>
 
 #include <cmath>
 #include <cstdint>
@@ -27,6 +29,7 @@
 #include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "gear_sim_ros/rig_bag_io.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -288,6 +291,50 @@ TEST_F(Hostile, ChunkArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
   EXPECT_TRUE(has(e, "dte claims 2147483647 elements")) << e;
   EXPECT_TRUE(has(e, "message 1")) << e;
   EXPECT_EQ(run("analyze", "--input " + path("array_overflow.bag")).code, 2);
+}
+
+// A rig bag whose JointState position length claims 2^31 - 1 values: ROS's deserialiser resized
+// the vector (16 GB; 4 GB in the fuzz_bag finding) before checking the bytes; readRigBag checks
+// the layout first and `analyze --input` refuses the file as invalid input.
+TEST_F(Hostile, RigBagArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
+  const gear_sim_ros::RigBagTopics topics;
+  const std::string good = path("rig_good.bag");
+  {
+    rosbag::Bag bag;
+    bag.open(good, rosbag::bagmode::Write);
+    for (int k = 0; k < 3; ++k) {
+      const ros::Time t(1.0 + 1e-3 * k);
+      sensor_msgs::JointState js;
+      js.header.stamp = t;
+      js.name = {topics.joint1, topics.joint2};
+      js.position = {0.125 + k, 0.25 + k};
+      bag.write(topics.joints, t, js);
+      geometry_msgs::WrenchStamped w;
+      w.header.stamp = t;
+      w.wrench.torque.z = 100.0;
+      bag.write(topics.torque, t, w);
+    }
+  }
+  gear_sim::SignalTable rig;
+  std::string e;
+  ASSERT_TRUE(gear_sim_ros::readRigBag(good, topics, &rig, &e)) << e;
+  ASSERT_EQ(rig.size(), 3);
+  // The first JointState's position: length 2, then 0.125 and 0.25.
+  std::string pattern(20, '\0');
+  pattern[0] = 2;
+  const double p0 = 0.125, p1 = 0.25;
+  std::memcpy(&pattern[4], &p0, 8);
+  std::memcpy(&pattern[12], &p1, 8);
+  std::string b = readBytes(good);
+  putLe32(&b, find(b, pattern), 0x7FFFFFFF);
+  writeBytes(path("rig_overflow.bag"), b);
+  ASSERT_TRUE(gear_sim_ros::isRigBag(path("rig_overflow.bag"), topics));
+  EXPECT_FALSE(gear_sim_ros::readRigBag(path("rig_overflow.bag"), topics, &rig, &e));
+  EXPECT_TRUE(has(e, "position claims 2147483647 elements")) << e;
+  const ToolRun r = run("analyze", "--input " + path("rig_overflow.bag") + " --params " +
+                                       std::string(GEAR_SOURCE_DIR) + "/config/rig_example.yaml");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_TRUE(has(r.err, "position claims")) << r.err;
 }
 
 // A compressed chunk is decompressed and its records checked the same way.

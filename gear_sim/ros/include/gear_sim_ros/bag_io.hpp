@@ -14,6 +14,10 @@
 #include "gear_sim/sim_config.hpp"
 
 namespace rosbag {
+class MessageInstance;
+}
+
+namespace rosbag {
 class Bag;
 }
 namespace ros {
@@ -129,5 +133,10 @@ bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& table,
                     const gear_sim::GearModel* params, long chunk_size, std::string* error,
                     const std::string& topic = "/gear/signal",
                     const std::string& params_topic = "/gear/params");
+
+/// Where a serialized SignalChunk, sensor_msgs/JointState or geometry_msgs/WrenchStamped in a bag
+/// claims an array or string longer than its bytes (ROS would allocate the claimed length before
+/// noticing): the problem, empty when the layout fits (and for other types).
+std::string messageLayoutError(const rosbag::MessageInstance& m);
 
 }  // namespace gear_sim_ros
