@@ -84,7 +84,14 @@ bin="$ASAN_WS/devel/lib/gear_damping"
 # The SteRig accuracy tests (three rig cases end to end, minutes in Release on a loaded machine)
 # likewise: their code paths run sanitized in SteModel.*, encoder_frontend_test, rig_cli_test
 # and the rig fuzz target.
+# Three end-to-end cases cost 49-125 s each sanitized (measured in CI's sanitizer stage) and
+# repeat paths that run sanitized elsewhere: the unrepresentable-shape greybox case (other
+# greybox_shape cases and quality_flags cover the shape refinement), the rig bag with STE (the
+# rig bag without STE in rig_cli_test, SteModel.* and the rig fuzz target), and edge times at
+# 5000 counts/rev (encoder_frontend's other cases and the rig fuzz target parse edge times).
 asan_filter="-*Coverage*:*CoverTheTruth*:*OverSeeds:*OverFiftySeeds:SteRig.*"
+asan_filter+=":*UnrepresentableShapeIsRightOrFlagged:*RigBagWithSteIdentifiesTheSpectrum"
+asan_filter+=":*EdgeTimesGiveTheUniformC"
 # Unit tests and fuzz targets are single-threaded: GEAR_JOBS of them run at once.
 throttle() { while [ "$(jobs -rp | wc -l)" -ge "$GEAR_JOBS" ]; do wait -n; done; }
 
