@@ -656,9 +656,9 @@ void generalRows(const WindowPass& p, const RowColumns& c, const Eigen::MatrixXd
 //
 // Two passes, for speed: (1) per-interval increments of the integrals (independent across
 // intervals, so they vectorise), the interior with the interior rule, then the record's edges
-// with one-sided rules, then a fix-up of the rare intervals that contain a switch (the steps
-// may overwrite an interval: the last one is right there); (2) the prefix sums that make the
-// cumulative single and double integrals, writing the rows.
+// with one-sided rules, then a fix-up of the rare intervals next to a switch (recomputed in full:
+// its values replace the earlier steps'); (2) the prefix sums that make the cumulative single
+// and double integrals, writing the rows.
 void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1,
                                 double fbar) {
   const Eigen::Index L = w1 - w0;
