@@ -89,24 +89,73 @@ def blank_code(text: str) -> str:
     return "".join(out)
 
 
+OPERATOR = re.compile(
+    r"((?:[\w~]+\s*::\s*)*operator\s*(?:\(\s*\)|\[\s*\]|[^\s\w(]+|[\w:<>*& ]+?))\s*\("
+)
+
+
+def strip_templates(head: str) -> str:
+    """The header without its 'template <...>' prefixes (nested angle brackets included)."""
+    while True:
+        m = re.match(r"\s*template\s*<", head)
+        if not m:
+            return head
+        depth, i = 1, m.end()
+        while i < len(head) and depth:
+            depth += {"<": 1, ">": -1}.get(head[i], 0)
+            i += 1
+        head = head[i:]
+
+
 def function_name(header: str):
     """The qualified name of a function definition's header, or None when it is not one."""
-    head = " ".join(header.split())
+    head = strip_templates(" ".join(header.split()))
     if not head or "(" not in head:
         return None
     first = head.split()[0].split("(")[0]
     if first in CONTROL or first in ("namespace", "extern"):
         return None
-    before = head[: head.index("(")]
-    if CLASS_KEYS.search(before) or "=" in before.replace("operator=", "").replace("==", ""):
-        return None
-    m = re.search(r"((?:[\w~]+\s*::\s*)*(?:operator\s*\S+?|~?\w+))\s*$", before)
-    if not m:
-        # operator() and friends: the '(' found is the operator's own.
-        m = re.search(r"((?:\w+\s*::\s*)*operator\s*\(\s*\))", head)
+    m = OPERATOR.search(head)
+    if m:
+        before, name = head[: m.start()], m.group(1)
+    else:
+        before = head[: head.index("(")]
+        m = re.search(r"((?:[\w~]+\s*::\s*)*~?\w+)\s*$", before)
         if not m:
             return None
-    return re.sub(r"\s+", "", m.group(1))
+        before, name = before[: m.start()], m.group(1)
+    if CLASS_KEYS.search(before) or "=" in before:
+        return None
+    return re.sub(r"\s*::\s*", "::", " ".join(name.split()))
+
+
+def has_init_list(header: str) -> bool:
+    """Whether a function header ends in a constructor's member initialiser list: a ':' (not
+    '::') after the parameter list's closing parenthesis."""
+    depth, closed = 0, False
+    for i, c in enumerate(header):
+        if c == "(":
+            depth += 1
+        elif c == ")":
+            depth -= 1
+            closed = closed or depth == 0
+        elif c == ":" and closed and depth == 0:
+            if header[i + 1 : i + 2] != ":" and header[i - 1 : i] != ":":
+                return True
+    return False
+
+
+def matching_brace(code: str, i: int) -> int:
+    """The index of the '}' that closes the '{' at i (len(code) when there is none)."""
+    depth = 0
+    for j in range(i, len(code)):
+        if code[j] == "{":
+            depth += 1
+        elif code[j] == "}":
+            depth -= 1
+            if depth == 0:
+                return j
+    return len(code)
 
 
 def functions(path: pathlib.Path):
@@ -115,27 +164,32 @@ def functions(path: pathlib.Path):
     stack = []  # scope kinds: 'ns', 'class', 'func', 'block'
     open_func = None
     header_start = 0
-    for i, c in enumerate(code):
+    i = 0
+    while i < len(code):
+        c = code[i]
         if c == "{":
             kind = "block"
             if not stack or stack[-1] in ("ns", "class"):
                 header = code[header_start:i]
                 words = header.split()
-                if words and words[0] in ("namespace", "extern", "inline") and (
-                    "namespace" in words[:2] or words[0] == "extern"
-                ):
+                name = function_name(header) if words else None
+                if words and (words[0] == "namespace" or words[:2] == ["inline", "namespace"]
+                              or words[0] == "extern"):
                     kind = "ns"
-                elif not words:
-                    kind = "block"
-                else:
-                    name = function_name(header)
-                    if name is not None:
-                        kind = "func"
-                        offset = len(header) - len(header.lstrip())
-                        first = code.count("\n", 0, header_start + offset) + 1
-                        open_func = (name, first, len(stack))
-                    elif CLASS_KEYS.search(header.split("(")[0]):
-                        kind = "class"
+                elif name is not None and has_init_list(header) and re.search(
+                    r"[\w>]\s*$", header
+                ):
+                    # A member's brace initialiser (x_{0}) inside the initialiser list: still
+                    # the header.
+                    i = matching_brace(code, i) + 1
+                    continue
+                elif name is not None:
+                    kind = "func"
+                    offset = len(header) - len(header.lstrip())
+                    first = code.count("\n", 0, header_start + offset) + 1
+                    open_func = (name, first, len(stack))
+                elif words and CLASS_KEYS.search(strip_templates(header).split("(")[0]):
+                    kind = "class"
             stack.append(kind)
             header_start = i + 1
         elif c == "}":
@@ -147,6 +201,7 @@ def functions(path: pathlib.Path):
             header_start = i + 1
         elif c == ";" or (c == ":" and stack and stack[-1] == "class" and _access_label(code, i)):
             header_start = i + 1
+        i += 1
 
 
 def _access_label(code: str, i: int) -> bool:
