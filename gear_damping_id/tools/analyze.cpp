@@ -325,6 +325,19 @@ class Analysis {
   int write();
 
  private:
+  // parse's steps: the command-line options, group by group (in the order --help lists them).
+  void declareInputOptions(CLI::App& app);
+  void declareIdentificationOptions(CLI::App& app);
+  void declareOutputOptions(CLI::App& app);
+  void declareSteOptions(CLI::App& app);
+  void declareWaveletOptions(CLI::App& app);
+  void declareTerminalOptions(CLI::App& app);
+  // load's steps, each returning kContinue or the exit code.
+  int readRecord();
+  int readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_topics);
+  int readGearParameters();
+  int checkRecord();
+  int checkAnalysedRange();
   // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
@@ -380,11 +393,9 @@ class Analysis {
   size_t wavelet_n = 0;
 };
 
-int Analysis::parse(int argc, char** argv) {
-  CLI::App app{
-      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
-      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
-      "the damping with Morlet wavelets."};
+// The record, the gear parameters, the topic and the result file; rig records (docs/rig.md):
+// encoder angles or edge times through the encoder front end.
+void Analysis::declareInputOptions(CLI::App& app) {
   app.add_option(
          "--input", input,
          "signal record: CSV with the docs/method.md §6 columns, or a bag of SignalChunk messages")
@@ -394,7 +405,6 @@ int Analysis::parse(int argc, char** argv) {
                  "gear parameters: the simulator's YAML (pinion, gear, mesh, speed sections); "
                  "default for a bag: its GearParams message; none: wavelet validation only")
       ->check(CLI::ExistingFile);
-  // Rig records (docs/rig.md): encoder angles or edge times through the encoder front end.
   app.add_option("--edges1", rig_opts.edges1,
                  "rig: edge-time file of the pinion encoder (column time); --input is then the "
                  "torque file (time, torque) whose time column is the analysis grid")
@@ -419,6 +429,10 @@ int Analysis::parse(int argc, char** argv) {
                  "rig: relative tolerance of the rotation ratio against Z2/Z1 (default 1e-3)");
   app.add_option("--topic", topic, "bag input: the SignalChunk topic (default: the only one)");
   app.add_option("--output", output, "write the result JSON (docs/method.md §6) to this file");
+}
+
+// The identification runs (formulations x models) and their options.
+void Analysis::declareIdentificationOptions(CLI::App& app) {
   app.add_option("--formulation", formulations,
                  "known | greybox | paper | legacy (repeat for several; default known)")
       ->check(CLI::IsMember(gd::formulationNames()))
@@ -460,12 +474,20 @@ int Analysis::parse(int argc, char** argv) {
                  "identify this many segments in parallel, and compute the wavelet scalogram's "
                  "rows on this many threads (same results as 1; default 1)")
       ->check(CLI::Range(1, 256));
+}
+
+// The output directories and bags.
+void Analysis::declareOutputOptions(CLI::App& app) {
   app.add_option("--csv-out", csv_out,
                  "write segments.csv, summary.csv, response_<run>.csv and the wavelet tables "
                  "into this directory");
   app.add_option("--bag-out", bag_out,
                  "write the results as gear_damping messages (DampingArray, ModeledResponse, "
                  "WaveletModes) to this bag");
+}
+
+// The static transmission error identified jointly (docs/ste.md).
+void Analysis::declareSteOptions(CLI::App& app) {
   app.add_option("--ste", ste_spec,
                  "identify the static transmission error jointly with the damping (docs/ste.md): "
                  "comma-separated mesh:H, shaft:S (or pinion:S, gear:S), nooffset; known and "
@@ -474,6 +496,10 @@ int Analysis::parse(int argc, char** argv) {
                  "with --ste: damping on the deflection rate y' - e' (relative, default) or on "
                  "y' alone (dte)")
       ->check(CLI::IsMember({"relative", "dte"}));
+}
+
+// The Morlet wavelet validation (docs/method.md §5).
+void Analysis::declareWaveletOptions(CLI::App& app) {
   app.add_flag("--wavelet", wavelet, "also run the Morlet wavelet validation (docs/method.md §5)");
   app.add_option("--f-min", wopt.f_min,
                  "wavelet: lowest frequency [Hz] (default 10 cycles per record)");
@@ -503,7 +529,10 @@ int Analysis::parse(int argc, char** argv) {
                  "wavelet: analyse at most this many samples from the start of the analysed "
                  "record (default 2^18 = 262144: a free decay of a 10 kHz mode lasts milliseconds)")
       ->check(CLI::PositiveNumber);
-  // Output of the run on the terminal (docs/method.md §6 "Trust fields").
+}
+
+// The output of the run on the terminal (docs/method.md §6 "Trust fields").
+void Analysis::declareTerminalOptions(CLI::App& app) {
   app.add_flag("--quiet,-q", quiet,
                "no progress line on stderr (warnings and errors are still printed)");
   auto* summary_opt = app.add_flag(
@@ -513,6 +542,19 @@ int Analysis::parse(int argc, char** argv) {
           std::to_string(gd::kSummaryAboveSegments) + " segments)");
   app.add_flag("--table,--no-summary", table_mode, "print one line per segment, however many")
       ->excludes(summary_opt);
+}
+
+int Analysis::parse(int argc, char** argv) {
+  CLI::App app{
+      "Identify the mesh damping of a spur gear pair from its dynamic transmission error "
+      "(integral method, Yousfi et al. 2022), re-simulate the modeled response, and validate "
+      "the damping with Morlet wavelets."};
+  declareInputOptions(app);
+  declareIdentificationOptions(app);
+  declareOutputOptions(app);
+  declareSteOptions(app);
+  declareWaveletOptions(app);
+  declareTerminalOptions(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -569,9 +611,9 @@ int Analysis::checkOptions() {
   return kContinue;
 }
 
-int Analysis::load() {
-  // Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
-  // A bag of JointState (+ torque) messages is a rig record (docs/rig.md).
+// Input: a CSV is read whole; a bag is scanned (validated) first, then read whole or streamed.
+// A bag of JointState (+ torque) messages is a rig record (docs/rig.md).
+int Analysis::readRecord() {
   const gear_sim_ros::RigBagTopics rig_topics;
   const bool rig_bag = is_bag && topic.empty() && gear_sim_ros::isRigBag(input, rig_topics);
   if (is_bag && !rig_bag) {
@@ -582,42 +624,50 @@ int Analysis::load() {
     if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
       return fail(kExitInput, error);
   } else if (rig_bag || gd::isRigInput(input, rig_opts)) {
-    // A rig record: the encoder front end first, with the gear parameters (required).
-    if (params.empty())
-      return fail(kExitUsage, "--params GEAR.yaml is required for a rig record (encoder input)");
-    gear_sim::GearModel rig_model;
-    if (!gear_sim::loadGearModelFile(params, &rig_model, &error)) return fail(kExitInput, error);
-    if (!edge_counts.empty()) {
-      rig_opts.edge_counts1 = edge_counts.front();
-      rig_opts.edge_counts2 = edge_counts.back();
-    }
-    if (!counts_per_rev.empty()) {
-      rig_opts.front_end.counts_per_rev1 = counts_per_rev.front();
-      rig_opts.front_end.counts_per_rev2 = counts_per_rev.back();
-    }
-    if (mesh_offset) rig_opts.front_end.mesh_offset = *mesh_offset;
-    if (dte_offset) rig_opts.front_end.dte_offset = *dte_offset;
-    if (!ste_spec.empty()) {  // the offsets are estimated with the STE modelled (docs/ste.md)
-      rig_opts.front_end.model_ste = true;
-      rig_opts.front_end.ste = ste_options;
-    }
-    if (rig_bag) {
-      gear_sim::SignalTable rig;
-      if (!gear_sim_ros::readRigBag(input, rig_topics, &rig, &error) ||
-          !gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report, &error))
-        return fail(kExitInput, error);
-      bag_info.topic = rig_topics.joints;
-    } else if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error)) {
-      return fail(kExitInput, error);
-    }
-    rig_input = true;
+    return readRigRecord(rig_bag, rig_topics);
   } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
                                       /*allow_non_finite=*/true)) {
     // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
     return fail(kExitInput, error);
   }
+  return kContinue;
+}
 
-  // Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
+// A rig record: the encoder front end first, with the gear parameters (required).
+int Analysis::readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_topics) {
+  if (params.empty())
+    return fail(kExitUsage, "--params GEAR.yaml is required for a rig record (encoder input)");
+  gear_sim::GearModel rig_model;
+  if (!gear_sim::loadGearModelFile(params, &rig_model, &error)) return fail(kExitInput, error);
+  if (!edge_counts.empty()) {
+    rig_opts.edge_counts1 = edge_counts.front();
+    rig_opts.edge_counts2 = edge_counts.back();
+  }
+  if (!counts_per_rev.empty()) {
+    rig_opts.front_end.counts_per_rev1 = counts_per_rev.front();
+    rig_opts.front_end.counts_per_rev2 = counts_per_rev.back();
+  }
+  if (mesh_offset) rig_opts.front_end.mesh_offset = *mesh_offset;
+  if (dte_offset) rig_opts.front_end.dte_offset = *dte_offset;
+  if (!ste_spec.empty()) {  // the offsets are estimated with the STE modelled (docs/ste.md)
+    rig_opts.front_end.model_ste = true;
+    rig_opts.front_end.ste = ste_options;
+  }
+  if (rig_bag) {
+    gear_sim::SignalTable rig;
+    if (!gear_sim_ros::readRigBag(input, rig_topics, &rig, &error) ||
+        !gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report, &error))
+      return fail(kExitInput, error);
+    bag_info.topic = rig_topics.joints;
+  } else if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error)) {
+    return fail(kExitInput, error);
+  }
+  rig_input = true;
+  return kContinue;
+}
+
+// Gear parameters: --params, else the bag's GearParams; none: the wavelet validation alone.
+int Analysis::readGearParameters() {
   params_source = params;
   if (!params.empty()) {
     if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
@@ -659,8 +709,11 @@ int Analysis::load() {
     if (const std::string e = gear.validate(); !e.empty())
       return fail(kExitInput, params_source + ": " + e);
   }
+  return kContinue;
+}
 
-  // Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
+// Record-level checks: time axis and columns (tables), sample rate, analysed range, length.
+int Analysis::checkRecord() {
   sample_rate = streaming ? bag_info.sample_rate
                           : static_cast<double>(table.size() - 1) /
                                 (table.time[table.size() - 1] - table.time[0]);
@@ -686,8 +739,24 @@ int Analysis::load() {
           !e.empty())
         return fail(kExitInput, input + ": " + e);
   }
+  if (const int rc = checkAnalysedRange(); rc != kContinue) return rc;
+  if (identification) {
+    std::string rate_warning;
+    if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
+      return fail(kExitInput, input + ": " + e);
+    if (!rate_warning.empty()) warn(input + ": " + rate_warning);
+    for (const auto& o : runs_options)
+      if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
+        return fail(kExitInput, input + ": " + e);
+  }
+  return kContinue;
+}
+
+// The analysed segments and their duration; an error says which numbers leave nothing: the
+// range, the step, the segment.
+int Analysis::checkAnalysedRange() {
   analysed = gd::segmentRanges(whole, runs_options.front());
-  if (analysed.empty()) {  // say which numbers leave nothing: the range, the step, the segment
+  if (analysed.empty()) {
     using gear_sim::formatNumber;
     const auto& o = runs_options.front();
     if (o.segment_length > 0.0 && o.segment_length * sample_rate < 1.0)
@@ -704,16 +773,14 @@ int Analysis::load() {
                     " s = " + formatNumber(o.segment_length * sample_rate) + " samples)");
   }
   duration = static_cast<double>(analysed.back().second - analysed.front().first) * whole.dt;
-  if (identification) {
-    std::string rate_warning;
-    if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
-      return fail(kExitInput, input + ": " + e);
-    if (!rate_warning.empty()) warn(input + ": " + rate_warning);
-    for (const auto& o : runs_options)
-      if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
-        return fail(kExitInput, input + ": " + e);
-  }
+  return kContinue;
+}
 
+int Analysis::load() {
+  for (int (Analysis::*step)() :
+       {&Analysis::readRecord, &Analysis::readGearParameters, &Analysis::checkRecord}) {
+    if (const int rc = (this->*step)(); rc != kContinue) return rc;
+  }
   return kContinue;
 }
 

@@ -253,14 +253,35 @@ std::unique_ptr<char[]> decompress(const std::string& compression, std::string* 
   return out;
 }
 
-void walk(std::ifstream* f, std::uint64_t file_size) {
-  static const char kVersion[] = "#ROSBAG V2.0\n";
-  const std::uint64_t version_len = sizeof(kVersion) - 1;
-  FileSource src(f);
-  std::string b;
-  if (!src.read(0, version_len, &b) || b != kVersion) {
+// The structure check of a whole bag: the version line, then every top-level record in order
+// (bag header first, chunks with the records inside them, index data against the chunk before
+// it, chunk infos, connections), then the cross-references (index_pos, chunk_pos).
+class BagWalker {
+ public:
+  BagWalker(std::ifstream* f, std::uint64_t file_size) : src_(f), file_size_(file_size) {}
+
+  void walk() {
+    checkVersion();
+    for (std::uint64_t pos = kVersionLength; pos < file_size_;) {
+      const Record r = src_.next(pos, file_size_, "file");
+      starts_.push_back(r.start);
+      if (starts_.size() == 1 && r.op != kBagHeader)
+        throw Corrupt{"the first record is not the bag header", r.start};
+      record(r);
+      pos = r.data_pos + r.data_len;
+    }
+    checkReferences();
+  }
+
+ private:
+  static constexpr char kVersion[] = "#ROSBAG V2.0\n";
+  static constexpr std::uint64_t kVersionLength = sizeof(kVersion) - 1;
+
+  void checkVersion() {
+    std::string b;
+    if (src_.read(0, kVersionLength, &b) && b == kVersion) return;
     std::string line;
-    src.read(0, std::min<std::uint64_t>(file_size, 64), &line);
+    src_.read(0, std::min<std::uint64_t>(file_size_, 64), &line);
     line = line.substr(0, line.find('\n'));
     if (line.rfind("#ROSBAG V", 0) == 0)
       throw Corrupt{
@@ -268,97 +289,26 @@ void walk(std::ifstream* f, std::uint64_t file_size) {
           0};
     throw Corrupt{"no '#ROSBAG V2.0' line: not a bag", 0};
   }
-  std::uint64_t index_pos = 0;
-  std::vector<std::uint64_t> starts;                                   // top-level record starts
-  std::map<std::uint64_t, std::vector<std::uint32_t>> chunk_messages;  // chunk start -> offsets
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> chunk_refs;     // chunk info: (at, pos)
-  std::optional<std::uint64_t> last_chunk;
-  for (std::uint64_t pos = version_len; pos < file_size;) {
-    const Record r = src.next(pos, file_size, "file");
-    starts.push_back(r.start);
-    if (starts.size() == 1 && r.op != kBagHeader)
-      throw Corrupt{"the first record is not the bag header", r.start};
+
+  void record(const Record& r) {
     switch (r.op) {
       case kBagHeader:
-        if (starts.size() != 1) throw Corrupt{"a second bag header record", r.start};
-        index_pos = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
+        if (starts_.size() != 1) throw Corrupt{"a second bag header record", r.start};
+        index_pos_ = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
         field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
         field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
         break;
-      case kChunk: {
-        const auto c = r.fields.find("compression");
-        if (c == r.fields.end()) throw Corrupt{"chunk record without 'compression'", r.start};
-        const std::uint32_t size = field<std::uint32_t>(r.fields, "size", r.start, "chunk record");
-        if (c->second == "none") {
-          if (size != r.data_len)
-            throw Corrupt{"an uncompressed chunk of " + std::to_string(r.data_len) +
-                              " bytes whose header says " + std::to_string(size),
-                          r.start};
-          chunk_messages[r.start] =
-              checkChunkRecords(&src, r.data_pos, r.data_len, r.data_pos, true);
-        } else if (c->second == "bz2" || c->second == "lz4") {
-          if (size > kMaxBagChunkBytes || r.data_len > kMaxBagChunkBytes)
-            throw Corrupt{"a compressed chunk of " + std::to_string(size) + " bytes", r.start};
-          std::string packed;
-          if (!src.read(r.data_pos, r.data_len, &packed))
-            throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
-          const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
-          MemorySource mem(bytes.get(), size);
-          chunk_messages[r.start] = checkChunkRecords(&mem, 0, size, r.start, false);
-        } else {
-          throw Corrupt{
-              "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
-              r.start};
-        }
-        last_chunk = r.start;
+      case kChunk:
+        chunk(r);
         break;
-      }
-      case kIndexData: {
-        if (field<std::uint32_t>(r.fields, "ver", r.start, "index data record") != 1)
-          throw Corrupt{"index data record of a version other than 1", r.start};
-        field<std::uint32_t>(r.fields, "conn", r.start, "index data record");
-        const std::uint32_t count =
-            field<std::uint32_t>(r.fields, "count", r.start, "index data record");
-        if (!last_chunk) throw Corrupt{"an index data record before any chunk", r.start};
-        if (std::uint64_t{count} * 12 != r.data_len)
-          throw Corrupt{"an index data record of " + std::to_string(count) + " entries in " +
-                            std::to_string(r.data_len) + " bytes (12 each)",
-                        r.start};
-        const auto& messages = chunk_messages[*last_chunk];
-        const std::uint64_t block = 12 * 4096;
-        for (std::uint64_t k = 0; k < r.data_len; k += block) {
-          const std::uint64_t n = std::min<std::uint64_t>(block, r.data_len - k);
-          if (!src.read(r.data_pos + k, n, &b))
-            throw Corrupt{"an index cut by the end of the file", r.data_pos + k, true};
-          for (std::uint64_t e = 0; e < n; e += 12) {
-            const std::uint32_t offset = le32(b.data() + e + 8);
-            if (!std::binary_search(messages.begin(), messages.end(), offset))
-              throw Corrupt{"an index entry pointing at chunk offset " + std::to_string(offset) +
-                                ", not a message of the chunk at byte " +
-                                std::to_string(*last_chunk),
-                            r.data_pos + k + e};
-          }
-        }
+      case kIndexData:
+        indexData(r);
         break;
-      }
-      case kChunkInfo: {
-        if (field<std::uint32_t>(r.fields, "ver", r.start, "chunk info record") != 1)
-          throw Corrupt{"chunk info record of a version other than 1", r.start};
-        const std::uint64_t chunk_pos =
-            field<std::uint64_t>(r.fields, "chunk_pos", r.start, "chunk info record");
-        field<std::uint64_t>(r.fields, "start_time", r.start, "chunk info record");
-        field<std::uint64_t>(r.fields, "end_time", r.start, "chunk info record");
-        const std::uint32_t count =
-            field<std::uint32_t>(r.fields, "count", r.start, "chunk info record");
-        if (std::uint64_t{count} * 8 != r.data_len)
-          throw Corrupt{"a chunk info record of " + std::to_string(count) + " entries in " +
-                            std::to_string(r.data_len) + " bytes (8 each)",
-                        r.start};
-        chunk_refs.emplace_back(r.start, chunk_pos);
+      case kChunkInfo:
+        chunkInfo(r);
         break;
-      }
       case kConnection:
-        src.checkConnection(r);
+        src_.checkConnection(r);
         break;
       case kMessageData:
         field<std::uint32_t>(r.fields, "conn", r.start, "message data record");
@@ -367,18 +317,106 @@ void walk(std::ifstream* f, std::uint64_t file_size) {
       default:
         throw Corrupt{"unknown op code " + std::to_string(r.op), r.start};
     }
-    pos = r.data_pos + r.data_len;
   }
-  if (starts.empty()) throw Corrupt{"no bag header record", version_len, true};
-  if (index_pos == 0)
-    throw Corrupt{"unindexed (index_pos 0): the recording did not finish", version_len, true};
-  if (!std::binary_search(starts.begin(), starts.end(), index_pos))
-    throw Corrupt{"index_pos " + std::to_string(index_pos) + " is not the start of a record",
-                  version_len, index_pos >= file_size};
-  for (const auto& [at, chunk_pos] : chunk_refs)
-    if (chunk_messages.find(chunk_pos) == chunk_messages.end())
-      throw Corrupt{"chunk_pos " + std::to_string(chunk_pos) + " is not a chunk record", at};
-}
+
+  // A chunk: its records (read in place, or decompressed), whose message offsets the index data
+  // records after it are checked against.
+  void chunk(const Record& r) {
+    const auto c = r.fields.find("compression");
+    if (c == r.fields.end()) throw Corrupt{"chunk record without 'compression'", r.start};
+    const std::uint32_t size = field<std::uint32_t>(r.fields, "size", r.start, "chunk record");
+    if (c->second == "none") {
+      if (size != r.data_len)
+        throw Corrupt{"an uncompressed chunk of " + std::to_string(r.data_len) +
+                          " bytes whose header says " + std::to_string(size),
+                      r.start};
+      chunk_messages_[r.start] = checkChunkRecords(&src_, r.data_pos, r.data_len, r.data_pos, true);
+    } else if (c->second == "bz2" || c->second == "lz4") {
+      if (size > kMaxBagChunkBytes || r.data_len > kMaxBagChunkBytes)
+        throw Corrupt{"a compressed chunk of " + std::to_string(size) + " bytes", r.start};
+      std::string packed;
+      if (!src_.read(r.data_pos, r.data_len, &packed))
+        throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
+      const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
+      MemorySource mem(bytes.get(), size);
+      chunk_messages_[r.start] = checkChunkRecords(&mem, 0, size, r.start, false);
+    } else {
+      throw Corrupt{
+          "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
+          r.start};
+    }
+    last_chunk_ = r.start;
+  }
+
+  // An index data record: every entry points at a message of the chunk before it (read in
+  // blocks: a corrupt count claims no memory).
+  void indexData(const Record& r) {
+    if (field<std::uint32_t>(r.fields, "ver", r.start, "index data record") != 1)
+      throw Corrupt{"index data record of a version other than 1", r.start};
+    field<std::uint32_t>(r.fields, "conn", r.start, "index data record");
+    const std::uint32_t count =
+        field<std::uint32_t>(r.fields, "count", r.start, "index data record");
+    if (!last_chunk_) throw Corrupt{"an index data record before any chunk", r.start};
+    if (std::uint64_t{count} * 12 != r.data_len)
+      throw Corrupt{"an index data record of " + std::to_string(count) + " entries in " +
+                        std::to_string(r.data_len) + " bytes (12 each)",
+                    r.start};
+    const auto& messages = chunk_messages_[*last_chunk_];
+    const std::uint64_t block = 12 * 4096;
+    std::string b;
+    for (std::uint64_t k = 0; k < r.data_len; k += block) {
+      const std::uint64_t n = std::min<std::uint64_t>(block, r.data_len - k);
+      if (!src_.read(r.data_pos + k, n, &b))
+        throw Corrupt{"an index cut by the end of the file", r.data_pos + k, true};
+      for (std::uint64_t e = 0; e < n; e += 12) {
+        const std::uint32_t offset = le32(b.data() + e + 8);
+        if (!std::binary_search(messages.begin(), messages.end(), offset))
+          throw Corrupt{"an index entry pointing at chunk offset " + std::to_string(offset) +
+                            ", not a message of the chunk at byte " + std::to_string(*last_chunk_),
+                        r.data_pos + k + e};
+      }
+    }
+  }
+
+  void chunkInfo(const Record& r) {
+    if (field<std::uint32_t>(r.fields, "ver", r.start, "chunk info record") != 1)
+      throw Corrupt{"chunk info record of a version other than 1", r.start};
+    const std::uint64_t chunk_pos =
+        field<std::uint64_t>(r.fields, "chunk_pos", r.start, "chunk info record");
+    field<std::uint64_t>(r.fields, "start_time", r.start, "chunk info record");
+    field<std::uint64_t>(r.fields, "end_time", r.start, "chunk info record");
+    const std::uint32_t count =
+        field<std::uint32_t>(r.fields, "count", r.start, "chunk info record");
+    if (std::uint64_t{count} * 8 != r.data_len)
+      throw Corrupt{"a chunk info record of " + std::to_string(count) + " entries in " +
+                        std::to_string(r.data_len) + " bytes (8 each)",
+                    r.start};
+    chunk_refs_.emplace_back(r.start, chunk_pos);
+  }
+
+  // index_pos at a record, every chunk info at a chunk.
+  void checkReferences() const {
+    if (starts_.empty()) throw Corrupt{"no bag header record", kVersionLength, true};
+    if (index_pos_ == 0)
+      throw Corrupt{"unindexed (index_pos 0): the recording did not finish", kVersionLength, true};
+    if (!std::binary_search(starts_.begin(), starts_.end(), index_pos_))
+      throw Corrupt{"index_pos " + std::to_string(index_pos_) + " is not the start of a record",
+                    kVersionLength, index_pos_ >= file_size_};
+    for (const auto& [at, chunk_pos] : chunk_refs_)
+      if (chunk_messages_.find(chunk_pos) == chunk_messages_.end())
+        throw Corrupt{"chunk_pos " + std::to_string(chunk_pos) + " is not a chunk record", at};
+  }
+
+  FileSource src_;
+  const std::uint64_t file_size_;
+  std::uint64_t index_pos_ = 0;
+  std::vector<std::uint64_t> starts_;                                   // top-level record starts
+  std::map<std::uint64_t, std::vector<std::uint32_t>> chunk_messages_;  // chunk start -> offsets
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> chunk_refs_;     // chunk info: (at, pos)
+  std::optional<std::uint64_t> last_chunk_;
+};
+
+void walk(std::ifstream* f, std::uint64_t file_size) { BagWalker(f, file_size).walk(); }
 
 }  // namespace
 

@@ -105,6 +105,9 @@ double defaultWindowLength(const SignalView& signal, const GearConstants& gear);
 /// unknowns and returns the result. Memory: one segment's rows plus a few numbers per window.
 class IntegralMethod {
  public:
+  /// Most columns of the least-squares rows (unknowns of one problem).
+  static constexpr int kMaxColumns = 2 + 2 * StiffnessShape::kMaxHarmonics + 1;
+
   /// `options` and `gear` must be valid (validate()); window_length 0 is resolved by the caller
   /// (defaultWindowLength) or, if still 0 at the first segment, from that segment's data.
   IntegralMethod(const IdentificationOptions& options, const GearConstants& gear);
@@ -146,7 +149,6 @@ class IntegralMethod {
   // StiffBasis: the greybox fourier/table shape's unknowns, StiffnessShape::unknowns() adjacent
   // columns; every other kind appears at most once.
   enum class Column { DampC, DampLoad, StiffK0, StiffDK, ForceConst, StiffBasis };
-  static constexpr int kMaxColumns = 2 + 2 * StiffnessShape::kMaxHarmonics + 1;
   struct WindowRecord {
     double t_start = 0, t_end = 0, dt = 0;  // [s]
     Eigen::Index rows = 0;

@@ -246,6 +246,12 @@ class StreamAssembler {
 
   static unsigned channelMask(const ChunkData& c);
   ChunkStatus reject(ChunkStatus status, const ChunkData& c, unsigned long* counter);
+  // push's named steps (stream_assembler.cpp).
+  bool malformed(const ChunkData& c, std::string* why);
+  bool allFinite(const ChunkData& c, std::string* why) const;
+  void startOver(std::string* why);
+  ChunkStatus holdSuspect(const ChunkData& c, std::string* why);
+  ChunkStatus place(const ChunkData& c, std::string* why);
   bool implausibleValue(const ChunkData& c, std::string* why) const;
   void updateScales(const ChunkData& c);
   bool isJump(const ChunkData& c) const;

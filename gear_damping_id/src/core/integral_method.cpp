@@ -339,272 +339,352 @@ void heldStiffnessIncrements(const double* __restrict__ yb, const double* __rest
   }
 }
 
+// One window's row computation (IntegralMethod::windowRows) in named steps over the state they
+// share: the window, the step, the gear constants, which integrals the formulation needs, the
+// channels, and the per-interval increment arrays over the L - 1 intervals j = w0 + i (columns
+// of the scratch matrix inc): ay, my (y), ag, mg (K y - F or -F), as, ms (s y), dS (load law:
+// (T1 - T_c) dy). The steps are internal functions called once: they compile inline into
+// windowRows, as the one function they were.
+struct WindowPass {
+  WindowPass(const CubicRules& rules_in, Eigen::Index lo, Eigen::Index hi,
+             const std::vector<QuadratureBreak>& breaks_in, const SignalView& s, Eigen::Index w0_in,
+             Eigen::Index w1, const GearConstants& gear, const IdentificationOptions& o,
+             bool held_k, Eigen::MatrixXd* inc)
+      : rules(rules_in),
+        breaks(breaks_in),
+        seg_lo(lo),
+        seg_hi(hi),
+        w0(w0_in),
+        L(w1 - w0_in),
+        ni(L - 1),
+        h(s.dt),
+        h2(h * h),
+        inv_me(1.0 / gear.equivalent_mass),
+        ff(gear.force_factor),
+        f(o.formulation),
+        known(f == Formulation::Known),
+        grey(f == Formulation::Greybox),
+        use_force(known || grey),
+        load(o.model == DampingModel::LoadLaw),
+        split_k(known && held_k),
+        y(s.dte),
+        k(s.stiffness),
+        T(s.torque),
+        st(s.mesh_state),
+        T_c((load && T) ? T[w0] : 0.0),
+        ay(&(*inc)(0, 0)),
+        my(&(*inc)(0, 1)),
+        ag(&(*inc)(0, 2)),
+        mg(&(*inc)(0, 3)),
+        as(&(*inc)(0, 4)),
+        ms(&(*inc)(0, 5)),
+        dS(&(*inc)(0, 6)) {
+    // The segment's edges use one-sided rules, so a segment reads no sample outside itself
+    // (streamed segments give the whole-record estimates, and a NaN next door does not leak in).
+    i_hi = ni;
+    while (i_lo < ni && rule(w0 + i_lo).offset() != -1) ++i_lo;
+    while (i_hi > i_lo && rule(w0 + i_hi - 1).offset() != -1) --i_hi;
+  }
+  const CubicIntervalRule& rule(Eigen::Index j) const {
+    return rules.forInterval(j, seg_lo, seg_hi);
+  }
+
+  const CubicRules& rules;
+  const std::vector<QuadratureBreak>& breaks;  // the segment's (see addSegment)
+  const Eigen::Index seg_lo, seg_hi;           // the segment's samples
+  const Eigen::Index w0, L, ni;                // window start, rows, intervals
+  const double h, h2, inv_me, ff;
+  const Formulation f;
+  const bool known, grey, use_force, load, split_k;
+  const double *const y, *const k, *const T, *const st;
+  const double T_c;  // load law: T1 at the window start
+  double *const ay, *const my, *const ag, *const mg, *const as, *const ms, *const dS;
+  Eigen::Index i_lo = 0, i_hi = 0;  // [i_lo, i_hi): the intervals of the interior rule
+};
+
+// Pass 1, the interior intervals [i_lo, i_hi) with the interior rule (independent across
+// intervals, so they vectorise).
+void interiorIncrements(const WindowPass& p) {
+  const double h = p.h, h2 = p.h2, inv_me = p.inv_me, ff = p.ff;
+  const auto& wa = p.rules.interior.area();
+  const auto& wm = p.rules.interior.moment();
+  const double a0 = h * wa[0], a1 = h * wa[1], a2 = h * wa[2], a3 = h * wa[3];
+  const double m0 = h2 * wm[0], m1 = h2 * wm[1], m2 = h2 * wm[2], m3 = h2 * wm[3];
+  const Eigen::Index w0 = p.w0, i_lo = p.i_lo, i_hi = p.i_hi;
+  double *const ay = p.ay, *const my = p.my, *const ag = p.ag, *const mg = p.mg;
+  const double* yb = p.y + w0 - 1;
+  if (p.split_k) {
+    // K held on the interval (a switch inside is fixed up by breakIncrements): the hot path.
+    const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
+    heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
+                            ag, mg);
+  } else {
+    for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+      ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
+      my[i] = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    }
+  }
+  if (p.known) {
+    const double* Tb = p.T + w0 - 1;
+    if (!p.split_k) {
+      const double* kk = p.k + w0 - 1;
+      const double* yy = p.y + w0 - 1;
+      for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+        double g[4];
+        for (int c = 0; c < 4; ++c) g[c] = kk[i + c] * inv_me * yy[i + c] - ff * Tb[i + c];
+        ag[i] = a0 * g[0] + a1 * g[1] + a2 * g[2] + a3 * g[3];
+        mg[i] = m0 * g[0] + m1 * g[1] + m2 * g[2] + m3 * g[3];
+      }
+    }
+  } else if (p.grey) {
+    const double* Tb = p.T + w0 - 1;
+    const double* sb = p.st + w0;
+    double *const as = p.as, *const ms = p.ms;
+    for (Eigen::Index i = i_lo; i < i_hi; ++i) {
+      const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
+      ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
+      mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
+      as[i] = sb[i] * ay[i];
+      ms[i] = sb[i] * my[i];
+    }
+  }
+}
+
+// Interval i at an edge of the record (a one-sided rule), generic.
+void edgeIncrements(const WindowPass& p, Eigen::Index i) {
+  const double *y = p.y, *k = p.k, *T = p.T;
+  const double h = p.h, h2 = p.h2, inv_me = p.inv_me, ff = p.ff;
+  const Eigen::Index j = p.w0 + i;
+  const CubicIntervalRule& rule = p.rule(j);
+  const Eigen::Index b = j + rule.offset();
+  const auto& wa = rule.area();
+  const auto& wm = rule.moment();
+  double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0;
+  for (int c = 0; c < 4; ++c) {
+    sa += wa[c] * y[b + c], sm += wm[c] * y[b + c];
+    if (p.use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
+    if (p.known && !p.split_k) {
+      ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
+    }
+  }
+  p.ay[i] = h * sa, p.my[i] = h2 * sm;
+  if (p.known) {
+    if (p.split_k) ga = k[j] * inv_me * sa, gm = k[j] * inv_me * sm;
+    p.ag[i] = h * (ga - fa), p.mg[i] = h2 * (gm - fm);
+  } else if (p.grey) {
+    p.ag[i] = -h * fa, p.mg[i] = -h2 * fm;
+    p.as[i] = p.st[j] * p.ay[i], p.ms[i] = p.st[j] * p.my[i];
+  }
+}
+
+// Interval j next to a break (a switch of a held channel, a jump or kink of a smooth stiffness:
+// quadrature.hpp): every stencil on one side of it, an interval holding one split there, each
+// part with its own held value. Recomputed in full (all increments).
+void breakIncrements(const WindowPass& p, Eigen::Index j) {
+  const double *y = p.y, *k = p.k, *T = p.T, *st = p.st;
+  const double h = p.h, h2 = p.h2, inv_me = p.inv_me, ff = p.ff;
+  const Eigen::Index i = j - p.w0;
+  QuadratureBreak near[5];
+  int nn = 0;
+  auto it = std::lower_bound(p.breaks.begin(), p.breaks.end(), j - 2,
+                             [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
+  for (; it != p.breaks.end() && it->j <= j + 2 && nn < 5; ++it) near[nn++] = *it;
+  IntervalPart parts[2];
+  const int np = p.rules.parts(j, p.seg_lo, p.seg_hi, near, nn, parts);
+  double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0, xa = 0, xm = 0;
+  for (int n = 0; n < np; ++n) {
+    const IntervalPart& P = parts[n];
+    const auto wa = P.rule->area(P.u0, P.u1);
+    const auto wm = P.rule->moment(P.u0, P.u1);
+    const Eigen::Index b = j + P.rule->offset();
+    double pa = 0, pm = 0;
+    for (int c = 0; c < 4; ++c) {
+      pa += wa[c] * y[b + c], pm += wm[c] * y[b + c];
+      if (p.use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
+      if (p.known && !p.split_k) {
+        ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
+      }
+    }
+    sa += pa, sm += pm;
+    if (p.split_k) {
+      const double K = (P.right ? k[j + 1] : k[j]) * inv_me;
+      ga += K * pa, gm += K * pm;
+    }
+    if (p.grey) {
+      const double sv = P.right ? st[j + 1] : st[j];
+      xa += sv * pa, xm += sv * pm;
+    }
+  }
+  p.ay[i] = h * sa, p.my[i] = h2 * sm;
+  if (p.known) {
+    p.ag[i] = h * (ga - fa), p.mg[i] = h2 * (gm - fm);
+  } else if (p.grey) {
+    p.ag[i] = -h * fa, p.mg[i] = -h2 * fm;
+    p.as[i] = h * xa, p.ms[i] = h2 * xm;
+  }
+}
+
+// The intervals around the segment's breaks whose neighbourhood meets this window's intervals.
+void nearBreakIncrements(const WindowPass& p) {
+  auto it = std::lower_bound(p.breaks.begin(), p.breaks.end(), p.w0 - 1,
+                             [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
+  for (; it != p.breaks.end() && it->j <= p.w0 + p.ni; ++it) {
+    for (Eigen::Index j = it->j - 1; j <= it->j + 1; ++j) {
+      if (j >= p.w0 && j < p.w0 + p.ni) breakIncrements(p, j);
+    }
+  }
+}
+
+// Load law: the increments of the integral of (T1 - T_c) dy (trapezoidal).
+void loadIncrements(const WindowPass& p) {
+  const double *y = p.y, *T = p.T, T_c = p.T_c;
+  for (Eigen::Index i = 0; i < p.ni; ++i) {
+    const Eigen::Index j = p.w0 + i;
+    p.dS[i] = 0.5 * ((T[j] - T_c) + (T[j + 1] - T_c)) * (y[j + 1] - y[j]);
+  }
+}
+
+// Greybox shape: area/moment increments of b_k(u) y for every one of the nb basis functions
+// (basis: values, one column per sample of the segment), the product interpolated by the
+// interval's cubic rule (columns 2k: area, 2k + 1: moment of *basis_inc).
+void basisIncrements(const WindowPass& p, const Eigen::MatrixXd& basis, int nb,
+                     Eigen::MatrixXd* basis_inc) {
+  if (basis_inc->rows() < p.L || basis_inc->cols() < 2 * nb) {
+    basis_inc->resize(std::max<Eigen::Index>(p.L, 1), 2 * nb);
+  }
+  for (Eigen::Index i = 0; i < p.ni; ++i) {
+    const Eigen::Index j = p.w0 + i;
+    const CubicIntervalRule& rule = p.rule(j);
+    const Eigen::Index b = j + rule.offset();
+    const auto& wa = rule.area();
+    const auto& wm = rule.moment();
+    for (int k = 0; k < nb; ++k) {
+      double sa = 0.0, sm = 0.0;
+      for (int c = 0; c < 4; ++c) {
+        const double g = basis(k, b + c - p.seg_lo) * p.y[b + c];
+        sa += wa[c] * g, sm += wm[c] * g;
+      }
+      (*basis_inc)(i, 2 * k) = p.h * sa;
+      (*basis_inc)(i, 2 * k + 1) = p.h2 * sm;
+    }
+  }
+}
+
+// Pass 2 of the hot path (known, piecewise/constant: one column): prefix sums -> rows
+// [-P, y + IIKy - IIF] in colC, colb.
+void knownRows(const WindowPass& p, double* colC, double* colb) {
+  const double h = p.h, *y = p.y;
+  const double *ay = p.ay, *ag = p.ag, *mg = p.mg;
+  const Eigen::Index w0 = p.w0, L = p.L;
+  double P = 0.0, G = 0.0, Q = 0.0;
+  colC[0] = 0.0;
+  colb[0] = y[w0];
+  // Two rows per step: each running sum advances by the pair's total, so its add chain is
+  // half as long (the sums are latency-bound); the odd row is formed off the chain.
+  Eigen::Index r = 1;
+  for (; r + 1 < L; r += 2) {
+    const double i1 = h * G + mg[r - 1];
+    const double G1 = G + ag[r - 1];
+    const double i2 = h * G1 + mg[r];
+    colC[r] = -(P + ay[r - 1]);
+    colb[r] = y[w0 + r] + (Q + i1);
+    Q += i1 + i2;
+    G += ag[r - 1] + ag[r];
+    P += ay[r - 1] + ay[r];
+    colC[r + 1] = -P;
+    colb[r + 1] = y[w0 + r + 1] + Q;
+  }
+  for (; r < L; ++r) {
+    Q += h * G + mg[r - 1];
+    G += ag[r - 1];
+    P += ay[r - 1];
+    colC[r] = -P;
+    colb[r] = y[w0 + r] + Q;
+  }
+}
+
+// Where each kind of column stands in the rows (-1: not a column of this problem).
+struct RowColumns {
+  int C, L, K0, DK, F, B;  // damping, load law, stiffness K0 and dK, force, shape basis
+  int b;                   // the right-hand side
+};
+
+// Pass 2, generic: prefix sums -> rows, every column (the nb shape basis columns from
+// basis_inc); fbar: the legacy formulation's known mean forcing (NaN: a column).
+void generalRows(const WindowPass& p, const RowColumns& c, const Eigen::MatrixXd& basis_inc, int nb,
+                 double fbar, Eigen::MatrixXd* rows) {
+  const double h = p.h;
+  const bool need_iiy = !p.known;
+  double* colb = &(*rows)(0, c.b);
+  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0, Dr = 0.0;
+  double Gb[IntegralMethod::kMaxColumns] = {}, Qb[IntegralMethod::kMaxColumns] = {};
+  for (Eigen::Index r = 0; r < p.L; ++r) {
+    if (nb > 0) {
+      for (int k = 0; k < nb; ++k) {
+        if (r > 0) {
+          Qb[k] += h * Gb[k] + basis_inc(r - 1, 2 * k + 1);
+          Gb[k] += basis_inc(r - 1, 2 * k);
+        }
+        (*rows)(r, c.B + k) = -Qb[k];
+      }
+    }
+    if (r > 0) {
+      const Eigen::Index i = r - 1;
+      if (need_iiy) Qy += h * Gy + p.my[i], Gy += p.ay[i];
+      if (p.use_force) Qkf += h * Gkf + p.mg[i], Gkf += p.ag[i];
+      if (p.grey) Qs += h * Gs + p.ms[i], Gs += p.as[i];
+      if (p.load) Dr += h * (Sr + 0.5 * p.dS[i]), Sr += p.dS[i];
+      P += p.ay[i];
+    }
+    const double tau = static_cast<double>(r) * h;
+    double bval = p.y[p.w0 + r];
+    if (p.use_force) bval += Qkf;  // known: + IIKy - IIF; greybox: - IIF
+    if (p.f == Formulation::Legacy && !std::isnan(fbar)) bval -= fbar * 0.5 * tau * tau;
+    colb[r] = bval;
+    if (c.C >= 0) (*rows)(r, c.C) = -P;
+    if (c.L >= 0) (*rows)(r, c.L) = -(p.T_c * P + Dr);
+    if (c.K0 >= 0) (*rows)(r, c.K0) = -Qy;
+    if (c.DK >= 0) (*rows)(r, c.DK) = -Qs;
+    if (c.F >= 0) (*rows)(r, c.F) = 0.5 * tau * tau;
+  }
+}
+
 }  // namespace
 
 // Row values of one window [w0, w1): for each row r (sample w0 + r) the q column values and b,
 // stored column-major in rows_ (rows_(r, c)). Cumulative integrals restart at w0.
 //
-// Three passes, for speed: (1) per-interval increments of the integrals (independent across
-// intervals, so they vectorise), with a fix-up of the rare intervals that contain a switch;
-// (2) the prefix sums that make the cumulative single and double integrals, writing the rows.
+// Two passes, for speed: (1) per-interval increments of the integrals (independent across
+// intervals, so they vectorise), the interior with the interior rule, then the record's edges
+// with one-sided rules, then a fix-up of the rare intervals next to a switch (recomputed in full:
+// its values replace the earlier steps'); (2) the prefix sums that make the cumulative single
+// and double integrals, writing the rows.
 void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1,
                                 double fbar) {
   const Eigen::Index L = w1 - w0;
   const int q = static_cast<int>(columns_.size());
   if (rows_.rows() < L || rows_.cols() != q + 1) rows_.resize(std::max<Eigen::Index>(L, 1), q + 1);
   if (inc_.rows() < L || inc_.cols() < 7) inc_.resize(std::max<Eigen::Index>(L, 1), 7);
-  const double h = s.dt, h2 = h * h;
-  const double inv_me = 1.0 / gear_.equivalent_mass, ff = gear_.force_factor;
-  const Formulation f = options_.formulation;
-  const bool known = f == Formulation::Known, grey = f == Formulation::Greybox;
-  const bool use_force = known || grey;
-  const bool load = options_.model == DampingModel::LoadLaw;
-  const bool need_iiy = !known;
-  const bool split_k = known && held_k_;
-  const double* y = s.dte;
-  const double* k = s.stiffness;
-  const double* T = s.torque;
-  const double* st = s.mesh_state;
-  const double T_c = (load && T) ? T[w0] : 0.0;
-
-  // Increment arrays over the L - 1 intervals j = w0 + i: ay, my (y), ag, mg (K y - F or -F),
-  // as, ms (s y), dS (load law: (T1 - T_c) dy).
-  double* ay = &inc_(0, 0);
-  double* my = &inc_(0, 1);
-  double* ag = &inc_(0, 2);
-  double* mg = &inc_(0, 3);
-  double* as = &inc_(0, 4);
-  double* ms = &inc_(0, 5);
-  double* dS = &inc_(0, 6);
-  const Eigen::Index ni = L - 1;
-  // Pass 1: interior intervals with the interior rule; the segment's edges use one-sided rules,
-  // so a segment reads no sample outside itself (streamed segments give the whole-record
-  // estimates, and a NaN next door does not leak in).
-  auto intervalRule = [&](Eigen::Index j) -> const CubicIntervalRule& {
-    return rules_.forInterval(j, seg_lo_, seg_hi_);
-  };
-  Eigen::Index i_lo = 0, i_hi = ni;  // [i_lo, i_hi) use the interior rule
-  while (i_lo < ni && intervalRule(w0 + i_lo).offset() != -1) ++i_lo;
-  while (i_hi > i_lo && intervalRule(w0 + i_hi - 1).offset() != -1) --i_hi;
-  {
-    const auto& wa = rules_.interior.area();
-    const auto& wm = rules_.interior.moment();
-    const double a0 = h * wa[0], a1 = h * wa[1], a2 = h * wa[2], a3 = h * wa[3];
-    const double m0 = h2 * wm[0], m1 = h2 * wm[1], m2 = h2 * wm[2], m3 = h2 * wm[3];
-    const double* yb = y + w0 - 1;
-    if (split_k) {
-      // K held on the interval (a switch inside is fixed up below): the hot path.
-      const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
-      heldStiffnessIncrements(yb, k + w0, T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my, ag,
-                              mg);
-    } else {
-      for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-        ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
-        my[i] = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
-      }
-    }
-    if (known) {
-      const double* Tb = T + w0 - 1;
-      if (!split_k) {
-        const double* kk = k + w0 - 1;
-        const double* yy = y + w0 - 1;
-        for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-          double g[4];
-          for (int c = 0; c < 4; ++c) g[c] = kk[i + c] * inv_me * yy[i + c] - ff * Tb[i + c];
-          ag[i] = a0 * g[0] + a1 * g[1] + a2 * g[2] + a3 * g[3];
-          mg[i] = m0 * g[0] + m1 * g[1] + m2 * g[2] + m3 * g[3];
-        }
-      }
-    } else if (grey) {
-      const double* Tb = T + w0 - 1;
-      const double* sb = st + w0;
-      for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-        const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
-        ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
-        mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
-        as[i] = sb[i] * ay[i];
-        ms[i] = sb[i] * my[i];
-      }
-    }
-  }
-  // Edge intervals (first/last of the record), generic.
-  auto generic = [&](Eigen::Index i) {
-    const Eigen::Index j = w0 + i;
-    const CubicIntervalRule& rule = intervalRule(j);
-    const Eigen::Index b = j + rule.offset();
-    const auto& wa = rule.area();
-    const auto& wm = rule.moment();
-    double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0;
-    for (int c = 0; c < 4; ++c) {
-      sa += wa[c] * y[b + c], sm += wm[c] * y[b + c];
-      if (use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
-      if (known && !split_k) {
-        ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
-      }
-    }
-    ay[i] = h * sa, my[i] = h2 * sm;
-    if (known) {
-      if (split_k) ga = k[j] * inv_me * sa, gm = k[j] * inv_me * sm;
-      ag[i] = h * (ga - fa), mg[i] = h2 * (gm - fm);
-    } else if (grey) {
-      ag[i] = -h * fa, mg[i] = -h2 * fm;
-      as[i] = st[j] * ay[i], ms[i] = st[j] * my[i];
-    }
-  };
-  for (Eigen::Index i = 0; i < i_lo; ++i) generic(i);
-  for (Eigen::Index i = i_hi; i < ni; ++i) generic(i);
-  // Intervals next to a break (a switch of a held channel, a jump or kink of a smooth
-  // stiffness: quadrature.hpp): every stencil on one side of it, an interval holding one split
-  // there, each part with its own held value. Recomputed in full (all increments).
-  auto byParts = [&](Eigen::Index j) {
-    const Eigen::Index i = j - w0;
-    QuadratureBreak near[5];
-    int nn = 0;
-    auto it = std::lower_bound(breaks_.begin(), breaks_.end(), j - 2,
-                               [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
-    for (; it != breaks_.end() && it->j <= j + 2 && nn < 5; ++it) near[nn++] = *it;
-    IntervalPart parts[2];
-    const int np = rules_.parts(j, seg_lo_, seg_hi_, near, nn, parts);
-    double sa = 0, sm = 0, fa = 0, fm = 0, ga = 0, gm = 0, xa = 0, xm = 0;
-    for (int p = 0; p < np; ++p) {
-      const IntervalPart& P = parts[p];
-      const auto wa = P.rule->area(P.u0, P.u1);
-      const auto wm = P.rule->moment(P.u0, P.u1);
-      const Eigen::Index b = j + P.rule->offset();
-      double pa = 0, pm = 0;
-      for (int c = 0; c < 4; ++c) {
-        pa += wa[c] * y[b + c], pm += wm[c] * y[b + c];
-        if (use_force) fa += wa[c] * ff * T[b + c], fm += wm[c] * ff * T[b + c];
-        if (known && !split_k) {
-          ga += wa[c] * k[b + c] * inv_me * y[b + c], gm += wm[c] * k[b + c] * inv_me * y[b + c];
-        }
-      }
-      sa += pa, sm += pm;
-      if (split_k) {
-        const double K = (P.right ? k[j + 1] : k[j]) * inv_me;
-        ga += K * pa, gm += K * pm;
-      }
-      if (grey) {
-        const double sv = P.right ? st[j + 1] : st[j];
-        xa += sv * pa, xm += sv * pm;
-      }
-    }
-    ay[i] = h * sa, my[i] = h2 * sm;
-    if (known) {
-      ag[i] = h * (ga - fa), mg[i] = h2 * (gm - fm);
-    } else if (grey) {
-      ag[i] = -h * fa, mg[i] = -h2 * fm;
-      as[i] = h * xa, ms[i] = h2 * xm;
-    }
-  };
-  {
-    // The segment's breaks (see addSegment) whose neighbourhood meets this window's intervals.
-    auto it = std::lower_bound(breaks_.begin(), breaks_.end(), w0 - 1,
-                               [](const QuadratureBreak& b, Eigen::Index v) { return b.j < v; });
-    for (; it != breaks_.end() && it->j <= w0 + ni; ++it) {
-      for (Eigen::Index j = it->j - 1; j <= it->j + 1; ++j) {
-        if (j >= w0 && j < w0 + ni) byParts(j);
-      }
-    }
-  }
-  if (load) {
-    for (Eigen::Index i = 0; i < ni; ++i) {
-      const Eigen::Index j = w0 + i;
-      dS[i] = 0.5 * ((T[j] - T_c) + (T[j + 1] - T_c)) * (y[j + 1] - y[j]);
-    }
-  }
-  // Greybox shape: area/moment increments of b_k(u) y for every basis function, the product
-  // interpolated by the interval's cubic rule (columns 2k: area, 2k + 1: moment).
+  const WindowPass p(rules_, seg_lo_, seg_hi_, breaks_, s, w0, w1, gear_, options_, held_k_, &inc_);
+  interiorIncrements(p);
+  for (Eigen::Index i = 0; i < p.i_lo; ++i) edgeIncrements(p, i);
+  for (Eigen::Index i = p.i_hi; i < p.ni; ++i) edgeIncrements(p, i);
+  nearBreakIncrements(p);
+  if (p.load) loadIncrements(p);
   const int nb = shape_ ? n_basis_ : 0;
-  if (nb > 0) {
-    if (basis_inc_.rows() < L || basis_inc_.cols() < 2 * nb) {
-      basis_inc_.resize(std::max<Eigen::Index>(L, 1), 2 * nb);
-    }
-    for (Eigen::Index i = 0; i < ni; ++i) {
-      const Eigen::Index j = w0 + i;
-      const CubicIntervalRule& rule = intervalRule(j);
-      const Eigen::Index b = j + rule.offset();
-      const auto& wa = rule.area();
-      const auto& wm = rule.moment();
-      for (int k = 0; k < nb; ++k) {
-        double sa = 0.0, sm = 0.0;
-        for (int c = 0; c < 4; ++c) {
-          const double g = basis_(k, b + c - seg_lo_) * y[b + c];
-          sa += wa[c] * g, sm += wm[c] * g;
-        }
-        basis_inc_(i, 2 * k) = h * sa;
-        basis_inc_(i, 2 * k + 1) = h2 * sm;
-      }
-    }
-  }
-
-  // Pass 2: prefix sums -> rows.
-  const int cC = columnIndex(Column::DampC), cL = columnIndex(Column::DampLoad);
-  const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);
-  const int cF = columnIndex(Column::ForceConst);
-  double* colb = &rows_(0, q);
-  if (known && options_.model != DampingModel::LoadLaw && q == 1) {
-    // Hot path (known, piecewise/constant): rows [-P, y + IIKy - IIF].
-    double* colC = &rows_(0, 0);
-    double P = 0.0, G = 0.0, Q = 0.0;
-    colC[0] = 0.0;
-    colb[0] = y[w0];
-    // Two rows per step: each running sum advances by the pair's total, so its add chain is
-    // half as long (the sums are latency-bound); the odd row is formed off the chain.
-    Eigen::Index r = 1;
-    for (; r + 1 < L; r += 2) {
-      const double i1 = h * G + mg[r - 1];
-      const double G1 = G + ag[r - 1];
-      const double i2 = h * G1 + mg[r];
-      colC[r] = -(P + ay[r - 1]);
-      colb[r] = y[w0 + r] + (Q + i1);
-      Q += i1 + i2;
-      G += ag[r - 1] + ag[r];
-      P += ay[r - 1] + ay[r];
-      colC[r + 1] = -P;
-      colb[r + 1] = y[w0 + r + 1] + Q;
-    }
-    for (; r < L; ++r) {
-      Q += h * G + mg[r - 1];
-      G += ag[r - 1];
-      P += ay[r - 1];
-      colC[r] = -P;
-      colb[r] = y[w0 + r] + Q;
-    }
+  if (nb > 0) basisIncrements(p, basis_, nb, &basis_inc_);
+  if (p.known && !p.load && q == 1) {
+    knownRows(p, &rows_(0, 0), &rows_(0, q));
     return;
   }
-  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0, Dr = 0.0;
-  const int cB = columnIndex(Column::StiffBasis);
-  double Gb[kMaxColumns] = {}, Qb[kMaxColumns] = {};  // shape: running single/double integrals
-  for (Eigen::Index r = 0; r < L; ++r) {
-    if (nb > 0) {
-      for (int k = 0; k < nb; ++k) {
-        if (r > 0) {
-          Qb[k] += h * Gb[k] + basis_inc_(r - 1, 2 * k + 1);
-          Gb[k] += basis_inc_(r - 1, 2 * k);
-        }
-        rows_(r, cB + k) = -Qb[k];
-      }
-    }
-    if (r > 0) {
-      const Eigen::Index i = r - 1;
-      if (need_iiy) Qy += h * Gy + my[i], Gy += ay[i];
-      if (use_force) Qkf += h * Gkf + mg[i], Gkf += ag[i];
-      if (grey) Qs += h * Gs + ms[i], Gs += as[i];
-      if (load) Dr += h * (Sr + 0.5 * dS[i]), Sr += dS[i];
-      P += ay[i];
-    }
-    const double tau = static_cast<double>(r) * h;
-    double bval = y[w0 + r];
-    if (use_force) bval += Qkf;  // known: + IIKy - IIF; greybox: - IIF
-    if (f == Formulation::Legacy && !std::isnan(fbar)) bval -= fbar * 0.5 * tau * tau;
-    colb[r] = bval;
-    if (cC >= 0) rows_(r, cC) = -P;
-    if (cL >= 0) rows_(r, cL) = -(T_c * P + Dr);
-    if (cK0 >= 0) rows_(r, cK0) = -Qy;
-    if (cDK >= 0) rows_(r, cDK) = -Qs;
-    if (cF >= 0) rows_(r, cF) = 0.5 * tau * tau;
-  }
+  const RowColumns c{columnIndex(Column::DampC),
+                     columnIndex(Column::DampLoad),
+                     columnIndex(Column::StiffK0),
+                     columnIndex(Column::StiffDK),
+                     columnIndex(Column::ForceConst),
+                     columnIndex(Column::StiffBasis),
+                     q};
+  generalRows(p, c, basis_inc_, nb, fbar, &rows_);
 }
 
 namespace {

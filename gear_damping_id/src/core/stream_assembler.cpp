@@ -300,31 +300,33 @@ void StreamAssembler::decideSuspect(const ChunkData& c) {
   append(s, 0);
 }
 
-ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
-  std::string scratch;
-  std::string& why = detail ? *detail : scratch;
-  why.clear();
-  ++counters_.chunks_received;
+// push's first check: a chunk the assembler cannot place at all (no samples, no dte, a rate that
+// is not a positive finite number or above 1e12 Hz, an index beyond 2^52, fewer than 4 samples per
+// segment). Counts it and returns true with *why.
+bool StreamAssembler::malformed(const ChunkData& c, std::string* why) {
   const bool short_segments =
       !wholeRun() && !(options_.segment_length * c.sample_rate >= kMinSegmentSamples);
   const bool rate_too_high = c.sample_rate > kMaxSampleRate;
-  if (c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
-      rate_too_high || c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments) {
-    ++counters_.rejected_malformed;
-    if (c.dte != nullptr && c.n <= kMaxIndex) {
-      counters_.samples_received += c.n;
-      counters_.samples_rejected += c.n;
-    }
-    std::ostringstream m;
-    m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
-      << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
-      << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
-      << (short_segments ? ", fewer than 4 samples per segment" : "")
-      << (rate_too_high ? ", sample rate above 1e12 Hz" : "");
-    why = m.str();
-    return ChunkStatus::RejectedMalformed;
+  if (!(c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
+        rate_too_high || c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments))
+    return false;
+  ++counters_.rejected_malformed;
+  if (c.dte != nullptr && c.n <= kMaxIndex) {
+    counters_.samples_received += c.n;
+    counters_.samples_rejected += c.n;
   }
-  counters_.samples_received += c.n;
+  std::ostringstream m;
+  m << "chunk at index " << c.first_index << ": " << c.n << " samples, sample_rate "
+    << c.sample_rate << " Hz" << (c.dte == nullptr ? ", no dte" : "")
+    << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
+    << (short_segments ? ", fewer than 4 samples per segment" : "")
+    << (rate_too_high ? ", sample rate above 1e12 Hz" : "");
+  *why = m.str();
+  return true;
+}
+
+// The first non-finite sample of any channel the chunk has: false with *why naming it.
+bool StreamAssembler::allFinite(const ChunkData& c, std::string* why) const {
   const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
                                                             {c.stiffness, "stiffness"},
                                                             {c.torque, "torque"},
@@ -337,53 +339,48 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
         std::ostringstream m;
         m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
           << "] = " << ch.first[i];
-        why = m.str();
-        return reject(ChunkStatus::RejectedNonFinite, c, &counters_.rejected_nonfinite);
+        *why = m.str();
+        return false;
       }
     }
   }
-  if (implausibleValue(c, &why)) {
-    return reject(ChunkStatus::RejectedValue, c, &counters_.rejected_value);
-  }
-  decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
-  if (seen_any_ && c.first_index == 0 && next_index_ > 0) {
-    // The publisher started over: finish the old record, start a new epoch.
-    releaseHeld(true);
-    closeRun();
-    ++counters_.restarts;
-    ++epoch_;
-    std::ostringstream m;
-    m << "restart: index 0 after index " << next_index_ - 1;
-    why = m.str();
-    seen_any_ = false;
-    rate_ = 0.0;
-    recent_gaps_.clear();
-  }
-  if (seen_any_ && std::abs(c.sample_rate - rate_) > kRateTolerance * rate_) {
-    std::ostringstream m;
-    m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
-      << " Hz, stream at " << rate_ << " Hz";
-    why = m.str();
-    return reject(ChunkStatus::RejectedRate, c, &counters_.rejected_rate);
-  }
-  if (isJump(c)) {
-    ++counters_.jumps;
-    std::ostringstream m;
-    m << "implausible index jump: chunk at index " << c.first_index << ", expected " << next_index_
-      << " (" << (static_cast<double>(c.first_index) - static_cast<double>(next_index_)) / rate_
-      << " s): held until the next chunk shows a new record (it continues this one) or a glitch";
-    why = m.str();
-    have_suspect_ = true;
-    suspect_first_ = c.first_index;
-    suspect_ = Held::copyOf(c);
-    return ChunkStatus::Suspect;
-  }
-  if (!seen_any_) {
-    seen_any_ = true;
-    rate_ = c.sample_rate;
-    next_index_ = c.first_index;
-  }
-  updateScales(c);
+  return true;
+}
+
+// The publisher started over (index 0 after later ones): finish the old record, start a new
+// epoch.
+void StreamAssembler::startOver(std::string* why) {
+  releaseHeld(true);
+  closeRun();
+  ++counters_.restarts;
+  ++epoch_;
+  std::ostringstream m;
+  m << "restart: index 0 after index " << next_index_ - 1;
+  *why = m.str();
+  seen_any_ = false;
+  rate_ = 0.0;
+  recent_gaps_.clear();
+}
+
+// An implausible jump of the index: the chunk is held as a suspect until the next chunk shows a
+// new record (it continues this one) or a glitch.
+ChunkStatus StreamAssembler::holdSuspect(const ChunkData& c, std::string* why) {
+  ++counters_.jumps;
+  std::ostringstream m;
+  m << "implausible index jump: chunk at index " << c.first_index << ", expected " << next_index_
+    << " (" << (static_cast<double>(c.first_index) - static_cast<double>(next_index_)) / rate_
+    << " s): held until the next chunk shows a new record (it continues this one) or a glitch";
+  *why = m.str();
+  have_suspect_ = true;
+  suspect_first_ = c.first_index;
+  suspect_ = Held::copyOf(c);
+  return ChunkStatus::Suspect;
+}
+
+// A valid chunk of the current record, by where it falls: behind the expected index (late into
+// a recent gap, or a duplicate), at or across it (appended, then the held chunks it frees), or
+// ahead of it (held, waiting for the missing samples).
+ChunkStatus StreamAssembler::place(const ChunkData& c, std::string* why) {
   const std::uint64_t end = c.first_index + c.n;
   if (end <= next_index_) {
     if (inRecentGap(c.first_index, end)) {
@@ -402,7 +399,6 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     releaseHeld(false);
     return ChunkStatus::Accepted;
   }
-  // Ahead of the expected index: hold it, waiting for the missing samples.
   if (held_.count(c.first_index) != 0) {
     ++counters_.duplicates;
     counters_.samples_duplicate += c.n;
@@ -415,9 +411,40 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
     std::ostringstream m;
     m << "gap: " << recent_gaps_.back().second - recent_gaps_.back().first
       << " samples missing from index " << recent_gaps_.back().first;
-    why = m.str();
+    *why = m.str();
   }
   return ChunkStatus::Held;
+}
+
+ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
+  std::string scratch;
+  std::string& why = detail ? *detail : scratch;
+  why.clear();
+  ++counters_.chunks_received;
+  if (malformed(c, &why)) return ChunkStatus::RejectedMalformed;
+  counters_.samples_received += c.n;
+  if (!allFinite(c, &why))
+    return reject(ChunkStatus::RejectedNonFinite, c, &counters_.rejected_nonfinite);
+  if (implausibleValue(c, &why)) {
+    return reject(ChunkStatus::RejectedValue, c, &counters_.rejected_value);
+  }
+  decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
+  if (seen_any_ && c.first_index == 0 && next_index_ > 0) startOver(&why);
+  if (seen_any_ && std::abs(c.sample_rate - rate_) > kRateTolerance * rate_) {
+    std::ostringstream m;
+    m << "chunk at index " << c.first_index << ": sample_rate " << c.sample_rate
+      << " Hz, stream at " << rate_ << " Hz";
+    why = m.str();
+    return reject(ChunkStatus::RejectedRate, c, &counters_.rejected_rate);
+  }
+  if (isJump(c)) return holdSuspect(c, &why);
+  if (!seen_any_) {
+    seen_any_ = true;
+    rate_ = c.sample_rate;
+    next_index_ = c.first_index;
+  }
+  updateScales(c);
+  return place(c, &why);
 }
 
 void StreamAssembler::releaseHeld(bool force) {
