@@ -429,6 +429,7 @@ class DampingIdNode {
     s.add("refinement degraded", refine_.degraded() ? 1 : 0);
     s.add("refinement stride [segments]", refine_.stride());
     s.add("refinement load [core fraction]", refine_.load());  // if every segment were refined
+    s.add("load without refinement [core fraction]", refine_.baseLoad());
     s.add("refinement budget [core fraction]", refine_.budget());
     s.add("segments with refinement skipped", refine_skipped_);
     s.add("segments since start/reset/restart", live_ ? live_->segmentsAdded() : 0);

@@ -21,7 +21,7 @@ struct DampingIdNodeOptions {
   int cumulative_segments = 1000;  // last segments in /gear/damping
   int history_segments = 20000;    // segments kept for ~get_damping (bounded store)
   int shared_segments = 1000;      // constant/load_law: span of the sliding problem
-  double refine_budget = 0.5;      // refinement while it costs at most this fraction of a core
+  double refine_budget = 0.7;      // refinement while the node stays within this fraction of a core
   std::string gear_config;         // YAML path; empty: /gear/params
 };
 

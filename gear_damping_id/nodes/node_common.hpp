@@ -25,6 +25,7 @@
 #include "gear_damping_id/stream_assembler.hpp"
 #include "gear_damping_ros/live_conversions.hpp"
 #include "gear_sim/option_status.hpp"
+#include "load_governor.hpp"
 
 namespace gear_damping_nodes {
 
@@ -213,58 +214,6 @@ inline double residentMiB() {
   if (n != 2) return std::numeric_limits<double>::quiet_NaN();
   return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
 }
-
-/// Monotonic wall-clock time [s]: what a stage costs the node's (single) callback thread,
-/// including the time the machine did not give it a core, which is what decides whether the
-/// node keeps up.
-inline double busySeconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-/// Keeps an optional, costly stage (refinement of a segment, analysis of a wavelet window)
-/// within `budget` of the node's thread. Load = (wall time an item processed in full took
-/// (busySeconds), smoothed over
-/// about 20 items) x (items arriving per second of wall time, decayed over kTau = 10 s). While
-/// the load exceeds the budget the stage runs on every stride-th item only, stride =
-/// ceil(load / budget). Short bursts (a test, a few windows) never reach the budget; a sustained
-/// stream that needs more than the budget is thinned at once, before the subscriber queue
-/// grows.
-class LoadGovernor {
- public:
-  explicit LoadGovernor(double budget) : budget_(budget) {}
-  /// Whether the next item gets the stage.
-  bool allow() {
-    ++count_;
-    return stride_ <= 1 || count_ % stride_ == 0;
-  }
-  /// One item arrived: `cpu` [s] spent on it; `skipped`: allow() was false (cost not measured).
-  void record(double cpu, bool skipped) {
-    const double now =
-        std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-    arrivals_ = (last_ > 0.0 ? arrivals_ * std::exp(-(now - last_) / kTau) : 0.0) + 1.0;
-    last_ = now;
-    if (!skipped && cpu >= 0.0) {
-      cost_ = have_ ? kAlpha * cpu + (1.0 - kAlpha) * cost_ : cpu;
-      have_ = true;
-    }
-    load_ = cost_ * arrivals_ / kTau;
-    const double k = std::ceil(load_ / budget_);
-    stride_ = k > 1.0 ? static_cast<unsigned long>(std::min(k, 1e6)) : 1;
-  }
-  bool degraded() const { return stride_ > 1; }
-  unsigned long stride() const { return stride_; }
-  /// CPU seconds per wall second the stage would need on every item.
-  double load() const { return load_; }
-  double budget() const { return budget_; }
-
- private:
-  static constexpr double kAlpha = 0.05;  // cost smoothing (about 20 items)
-  static constexpr double kTau = 10.0;    // [s] arrival-rate memory
-  double budget_;
-  double cost_ = 0.0, arrivals_ = 0.0, last_ = 0.0, load_ = 0.0;
-  bool have_ = false;
-  unsigned long stride_ = 1, count_ = 0;
-};
 
 /// Chunk intake: converts messages, feeds the assembler, warns (throttled) about rejections,
 /// gaps and restarts, measures the input rate, and reports everything to diagnostics.
