@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Lists the C++ function definitions longer than a limit, longest first.
 
-Usage: function_lengths.py [--limit N] [--top N] [--fail] [PATH...]
+Usage: function_lengths.py [--limit N] [--top N] [--fail] [--junit FILE] [PATH...]
 
 PATH: files or folders (searched for *.cpp, *.hpp, *.h, *.cc); default: the production code,
 i.e. src/, tools/, nodes/ and ros/ of gear_damping_id and gear_sim. A function's length counts
@@ -9,6 +9,8 @@ the lines from its declarator (return type and name) to its closing brace, comme
 lines included; a lambda or local class counts towards the function that holds it.
 Without --top, prints every function over --limit (default 120); with --top N, the N longest
 whatever their length. Exit status: 0, or with --fail 1 when any function is over the limit.
+--junit FILE also writes one JUnit test case (failed when any function is over the limit), so
+that CI counts the check with the other tests.
 
 A brace-matching heuristic, not a parser: comments, string and character literals and
 preprocessor lines are blanked first, then every '{' at namespace or class scope whose header
@@ -224,6 +226,7 @@ def main() -> int:
     ap.add_argument("--limit", type=int, default=120)
     ap.add_argument("--top", type=int, default=0)
     ap.add_argument("--fail", action="store_true")
+    ap.add_argument("--junit", type=pathlib.Path)
     args = ap.parse_args()
     repo = pathlib.Path(__file__).resolve().parent.parent
     paths = args.paths or [repo / d for d in DEFAULT_DIRS]
@@ -245,7 +248,27 @@ def main() -> int:
         f"(of {len(rows)} defined)",
         file=sys.stderr,
     )
+    if args.junit:
+        write_junit(args.junit, over, args.limit)
     return 1 if args.fail and over else 0
+
+
+def write_junit(path: pathlib.Path, over: list, limit: int) -> None:
+    """One test case, FunctionLengths.NoFunctionOverTheLimit, failed when `over` is not empty."""
+    from xml.sax.saxutils import quoteattr, escape
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    case = '  <testcase classname="function_lengths" name="NoFunctionOverTheLimit">'
+    if over:
+        listing = "\n".join(f"{n} lines {w} {name}" for n, w, name in over)
+        message = quoteattr(f"{len(over)} function(s) over {limit} lines")
+        case += f"\n    <failure message={message}>{escape(listing)}</failure>\n  "
+    case += "</testcase>"
+    path.write_text(
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        f'<testsuite name="function_lengths" tests="1" failures="{int(bool(over))}">\n'
+        f"{case}\n</testsuite>\n"
+    )
 
 
 if __name__ == "__main__":
