@@ -73,6 +73,27 @@ struct Params {
   }
 };
 
+constexpr int kMaxMaps = 4;  // distinct held K values per segment (square: 2)
+
+// The parameter-independent look-ups of one damping segment [b, e) (SegmentSimulator::
+// buildTable), made once and reused by every evaluation of the segment: the stage torques
+// (sample values and interval midpoints) and, per sample interval, either the key of its held
+// stiffness (known K, greybox mesh state) or kSplit for an interval stepped in parts by the
+// generic path (a switch, kink or jump inside it, or more than kMaxMaps held values). A smooth
+// stiffness keeps its three stage values per interval.
+struct SegmentTable {
+  static constexpr unsigned char kSplit = 255;
+  Eigen::Index b = 0, e = 0;
+  bool smooth = false;
+  int n_keys = 0;
+  double key_K[kMaxMaps] = {0}, key_sv[kMaxMaps] = {0};
+  std::vector<double> T;           // per sample: the torque T1 [N*m]
+  std::vector<double> T_mid;       // per interval: T1 at its midpoint
+  std::vector<unsigned char> key;  // per interval
+  std::vector<double> K3;          // smooth: K at u = 0, 0.5, 1 of every interval
+  size_t intervals() const { return key.size(); }
+};
+
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
@@ -88,13 +109,8 @@ class SegmentSimulator {
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
   template <class Visit>
   void run(Index b, Index e, const Params& p, int substeps, Visit&& visit) const {
-    const int D = 2 + 2 * p.m;
     double z[kMaxState] = {0};
-    z[0] = p.y0, z[1] = p.v0;
-    for (int k = 0; k < p.m; ++k) {
-      if (p.role[k] == Role::Y0) z[2 + 2 * k] = 1.0;
-      if (p.role[k] == Role::V0) z[3 + 2 * k] = 1.0;
-    }
+    const int D = initialState(p, z);
     visit(b, z);
     const double h = fm_.signal().dt;
     const bool grey = fm_.formulation() == Formulation::Greybox;
@@ -109,8 +125,7 @@ class SegmentSimulator {
       runShape(b, e, p, substeps, visit, z, D);
       return;
     }
-    bool fast = fast_ && !smooth && substeps == 1 && ste_ == nullptr;
-    for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
+    const bool fast = fast_ && !smooth && substeps == 1 && ste_ == nullptr && constantC(p);
     AffineMap maps[kMaxMaps];
     int n_maps = 0;
     for (Index j = b; j + 1 < e; ++j) {
@@ -132,44 +147,93 @@ class SegmentSimulator {
         if (im < n_maps) {
           const double T[3] = {fm_.torque(j, 0.0, b, e), fm_.torque(j, 0.5, b, e),
                                fm_.torque(j, 1.0, b, e)};
-          maps[im].apply(z, p.m, T);
+          maps[im].apply<0>(z, p.m, T);
           visit(j + 1, z);
           continue;
         }
       }
-      const double parts[2][2] = {{0.0, th}, {th, 1.0}};
-      for (int piece = 0; piece < 2; ++piece) {
-        const double u0 = parts[piece][0], u1 = parts[piece][1];
-        if (!(u1 > u0)) continue;
-        const bool right = piece == 1;
-        double sv = 0.0, Kc = 0.0;
-        if (grey) {
-          sv = fm_.meshState(j, right);
-          Kc = p.K0 + p.dK * sv;
-        } else if (!smooth) {
-          Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+      genericInterval(j, th, b, e, p, substeps, smooth, z, D);
+      visit(j + 1, z);
+    }
+  }
+
+  // Whether runTable applies: the fast path, one step per sample, no shape and no STE.
+  bool tableApplies(int substeps) const {
+    return fast_ && substeps == 1 && shape_ == nullptr && ste_ == nullptr;
+  }
+
+  // The look-ups of segment [b, e) for runTable (the same values run() looks up per step).
+  void buildTable(Index b, Index e, SegmentTable* t) const {
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const Index n = std::max<Index>(e - b, 0), intervals = std::max<Index>(n - 1, 0);
+    t->b = b, t->e = e;
+    t->smooth = fm_.smoothStiffness(b);
+    t->n_keys = 0;
+    t->T.resize(n);
+    t->T_mid.resize(intervals);
+    t->key.assign(intervals, SegmentTable::kSplit);
+    t->K3.resize(t->smooth ? 3 * intervals : 0);
+    for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+    const std::vector<QuadratureBreak>& brk = fm_.breaks();
+    auto bi = std::lower_bound(brk.begin(), brk.end(), b,
+                               [](const QuadratureBreak& x, Index v) { return x.j < v; });
+    for (Index j = b; j + 1 < e; ++j) {
+      const Index i = j - b;
+      t->T_mid[i] = fm_.torque(j, 0.5, b, e);
+      while (bi != brk.end() && bi->j < j) ++bi;
+      if (bi != brk.end() && bi->j == j && bi->th < 1.0) continue;  // stepped in parts
+      if (t->smooth) {
+        for (int q = 0; q < 3; ++q) t->K3[3 * i + q] = fm_.knownStiffness(j, 0.5 * q, false, b, e);
+        t->key[i] = 0;
+        continue;
+      }
+      const double sv = grey ? fm_.meshState(j, false) : 0.0;
+      const double K = grey ? 0.0 : fm_.knownStiffness(j, 0.0, false, b, e);
+      int k = 0;
+      while (k < t->n_keys && !(t->key_K[k] == K && t->key_sv[k] == sv)) ++k;
+      if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
+      if (k < t->n_keys) t->key[i] = static_cast<unsigned char>(k);
+    }
+  }
+
+  // run() from the segment's table (same numbers): M the number of unknowns when fixed at
+  // compile time (0: p.m). Held stiffness and constant C: the affine maps; otherwise the RK4
+  // step with the tabled stage values; split intervals by the generic path.
+  template <int M, class Visit>
+  void runTable(const SegmentTable& t, const Params& p, Visit&& visit) const {
+    const int m = M > 0 ? M : p.m;
+    double z[kMaxState] = {0};
+    const int D = initialState(p, z);
+    visit(t.b, z);
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const bool maps_ok = !t.smooth && constantC(p);
+    AffineMap maps[kMaxMaps];
+    auto heldK = [&](int k) { return grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k]; };
+    if (maps_ok) {
+      for (int k = 0; k < t.n_keys; ++k) maps[k] = affineMap(D, p, heldK(k), t.key_sv[k], h);
+    }
+    const LinearRoles lr = linearRoles(p);
+    const double* T = t.T.data();
+    for (Index j = t.b; j + 1 < t.e; ++j) {
+      const Index i = j - t.b;
+      const unsigned char key = t.key[i];
+      if (key == SegmentTable::kSplit) {
+        genericInterval(j, fm_.heldSplit(j), t.b, t.e, p, 1, t.smooth, z, D);
+      } else if (maps_ok) {
+        const double Ts[3] = {T[i], t.T_mid[i], T[i + 1]};
+        maps[key].apply<M>(z, m, Ts);
+      } else {
+        Stage st;
+        st.T[0] = T[i], st.T[1] = t.T_mid[i], st.T[2] = T[i + 1];
+        double sv = 0.0;
+        if (t.smooth) {
+          for (int q = 0; q < 3; ++q) st.K[q] = t.K3[3 * i + q];
+        } else {
+          if (grey) sv = t.key_sv[key];
+          st.K[0] = st.K[1] = st.K[2] = heldK(key);
         }
-        const double du = (u1 - u0) / substeps;
-        for (int q = 0; q < substeps; ++q) {
-          const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
-          const double um = 0.5 * (ua + ub);
-          Stage st;
-          st.T[0] = fm_.torque(j, ua, b, e);
-          st.T[1] = fm_.torque(j, um, b, e);
-          st.T[2] = fm_.torque(j, ub, b, e);
-          if (ste_ != nullptr) {
-            const double u3[3] = {ua, um, ub};
-            for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
-          }
-          if (smooth) {
-            st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
-            st.K[1] = fm_.knownStiffness(j, um, right, b, e);
-            st.K[2] = fm_.knownStiffness(j, ub, right, b, e);
-          } else {
-            st.K[0] = st.K[1] = st.K[2] = Kc;
-          }
-          step(z, D, p, st, sv, h * (ub - ua));
-        }
+        stepLinear<M>(z, m, p, lr, st, sv, h);
       }
       visit(j + 1, z);
     }
@@ -244,13 +308,78 @@ class SegmentSimulator {
       visit(j + 1, z);
     }
   }
-  static constexpr int kMaxMaps = 4;  // distinct held K values cached per run (square: 2)
+  // The initial state (p.y0, p.v0) and the unit sensitivities of the initial-state unknowns
+  // into z; returns its dimension.
+  static int initialState(const Params& p, double* z) {
+    const int D = 2 + 2 * p.m;
+    std::fill(z, z + D, 0.0);
+    z[0] = p.y0, z[1] = p.v0;
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Y0) z[2 + 2 * k] = 1.0;
+      if (p.role[k] == Role::V0) z[3 + 2 * k] = 1.0;
+    }
+    return D;
+  }
+
+  // Whether C is constant over the segment (no load-law unknown).
+  static bool constantC(const Params& p) {
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Theta1) return false;
+    }
+    return true;
+  }
+
+  // Interval j by the generic RK4, in two parts at its split fraction th (1: one part), each by
+  // `substeps` steps with the coefficients looked up at the stage times.
+  void genericInterval(Index j, double th, Index b, Index e, const Params& p, int substeps,
+                       bool smooth, double* z, int D) const {
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const double parts[2][2] = {{0.0, th}, {th, 1.0}};
+    for (int piece = 0; piece < 2; ++piece) {
+      const double u0 = parts[piece][0], u1 = parts[piece][1];
+      if (!(u1 > u0)) continue;
+      const bool right = piece == 1;
+      double sv = 0.0, Kc = 0.0;
+      if (grey) {
+        sv = fm_.meshState(j, right);
+        Kc = p.K0 + p.dK * sv;
+      } else if (!smooth) {
+        Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+      }
+      const double du = (u1 - u0) / substeps;
+      for (int q = 0; q < substeps; ++q) {
+        const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
+        const double um = 0.5 * (ua + ub);
+        Stage st;
+        st.T[0] = fm_.torque(j, ua, b, e);
+        st.T[1] = fm_.torque(j, um, b, e);
+        st.T[2] = fm_.torque(j, ub, b, e);
+        if (ste_ != nullptr) {
+          const double u3[3] = {ua, um, ub};
+          for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
+        }
+        if (smooth) {
+          st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
+          st.K[1] = fm_.knownStiffness(j, um, right, b, e);
+          st.K[2] = fm_.knownStiffness(j, ub, right, b, e);
+        } else {
+          st.K[0] = st.K[1] = st.K[2] = Kc;
+        }
+        step(z, D, p, st, sv, h * (ub - ua));
+      }
+    }
+  }
+
   struct AffineMap {
     double K = 0, sv = 0;
     double R[2][2], G[2][3];
     double S[kMaxParams][2][2], H[kMaxParams][2][3];
     bool coupled[kMaxParams];
-    void apply(double* z, int m, const double* T) const {
+    // M: the number of unknowns when fixed at compile time (0: m).
+    template <int M>
+    void apply(double* z, int m_dyn, const double* T) const {
+      const int m = M > 0 ? M : m_dyn;
       const double y = z[0], v = z[1];
       z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
       z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
@@ -299,7 +428,8 @@ class SegmentSimulator {
   }
 
   // One RK4 step of length hs with the coefficients at the stage times.
-  void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
+  void step(double* z, int D_in, const Params& p, const Stage& st, double sv, double hs) const {
+    const int D = std::max(D_in, 2);  // the state (y, v) always
     double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
     deriv(z, D, p, st.K[0], sv, st.T[0], st.B[0], st.E[0], st.dE[0], k1);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
@@ -309,6 +439,56 @@ class SegmentSimulator {
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
     deriv(tmp, D, p, st.K[2], sv, st.T[2], st.B[2], st.E[2], st.dE[2], k4);
     for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+  }
+
+  // The sensitivities' forcing without an STE or shape basis, -(cv v + cy y) at a stage, as
+  // weights of the roles: cv = v0 + v1 (T1 - t_ref) (theta0, theta1), cy = y0 + y1 sv (K0, dK).
+  struct LinearRoles {
+    double v0[kMaxParams], v1[kMaxParams], y0[kMaxParams], y1[kMaxParams];
+  };
+  static LinearRoles linearRoles(const Params& p) {
+    LinearRoles lr;
+    for (int k = 0; k < p.m; ++k) {
+      lr.v0[k] = p.role[k] == Role::Theta0 ? 1.0 : 0.0;
+      lr.v1[k] = p.role[k] == Role::Theta1 ? 1.0 : 0.0;
+      lr.y0[k] = p.role[k] == Role::K0 ? 1.0 : 0.0;
+      lr.y1[k] = p.role[k] == Role::DK ? 1.0 : 0.0;
+    }
+    return lr;
+  }
+
+  // step() of the state and sensitivities without an STE or shape basis (the same arithmetic,
+  // the role switch replaced by the weights lr): M the number of unknowns when fixed (0: m).
+  template <int M>
+  void stepLinear(double* z, int m_dyn, const Params& p, const LinearRoles& lr, const Stage& st,
+                  double sv, double hs) const {
+    const int m = M > 0 ? M : m_dyn, D = 2 + 2 * m;
+    double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
+    derivLinear<M>(z, m, p, lr, st.K[0], sv, st.T[0], k1);
+    for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
+    derivLinear<M>(tmp, m, p, lr, st.K[1], sv, st.T[1], k2);
+    for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k2[i];
+    derivLinear<M>(tmp, m, p, lr, st.K[1], sv, st.T[1], k3);
+    for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
+    derivLinear<M>(tmp, m, p, lr, st.K[2], sv, st.T[2], k4);
+    for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+  }
+
+  template <int M>
+  void derivLinear(const double* z, int m_dyn, const Params& p, const LinearRoles& lr, double K,
+                   double sv, double T1, double* dz) const {
+    const int m = M > 0 ? M : m_dyn;
+    const double dT = T1 - p.t_ref;
+    const double C = p.theta0 + p.theta1 * dT;
+    const double F = fm_.gear().force_factor * T1;
+    const double y = z[0], v = z[1];
+    dz[0] = v;
+    dz[1] = F - C * v - K * y;
+    for (int k = 0; k < m; ++k) {
+      const double cv = lr.v0[k] + lr.v1[k] * dT, cy = lr.y0[k] + lr.y1[k] * sv;
+      dz[2 + 2 * k] = z[3 + 2 * k];
+      dz[3 + 2 * k] = -(cv * v + cy * y) - C * z[3 + 2 * k] - K * z[2 + 2 * k];
+    }
   }
 
   // y'' = F - C (y' - e'_r) - K (y - e): e the STE (0 without), e'_r its rate in the relative
@@ -594,65 +774,125 @@ class Refinement {
     return evaluateAt(i, makeParams(x, g), nm);
   }
 
-  // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
-  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
-    const int m = p.m;
-    Normal out;
-    out.N = Eigen::MatrixXd::Zero(m, m);
-    out.rhs = Eigen::VectorXd::Zero(m);
-    double Nacc[kMaxParams][kMaxParams] = {{0}};
-    double racc[kMaxParams] = {0};
-    double hist[kMaxArOrder][kMaxParams + 1] = {{0}};  // previous raw [r, J] rows, newest first
-    double rhist[kMaxArOrder] = {0};                   // previous raw residuals, newest first
-    double cost = 0.0, raw = 0.0, wlag = 0.0, wprev = 0.0;
-    long count = 0, rows = 0;
-    const int P = nm.p;
-    sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, [&](Index n, const double* z) {
-      double cur[kMaxParams + 1] = {0};
-      cur[0] = s_.dte[n] - z[0];
+  // Accumulates the normal equations (Normal) of the prewhitened residuals sample by sample:
+  // MT the number of unknowns when fixed at compile time (0: m). The AR filter reads the
+  // previous raw rows [r, J] from a ring of kRing rows.
+  template <int MT>
+  class Accumulator {
+   public:
+    Accumulator(int m, const NoiseModel& nm, const double* y)
+        : m_(MT > 0 ? MT : m), nm_(nm), y_(y) {
+      std::fill(N_, N_ + m_ * m_, 0.0);
+      std::fill(r_, r_ + m_, 0.0);
+    }
+    void add(Index n, const double* z) {
+      const int m = MT > 0 ? MT : m_;
+      double* cur = ring_[count_ & (kRing - 1)];
+      cur[0] = y_[n] - z[0];
       for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
       const double r = cur[0];
-      raw += r * r;
-      const int lags = static_cast<int>(std::min<long>(count, kMaxArOrder));
-      for (int k = 1; k <= lags; ++k) out.acov[k] += r * rhist[k - 1];
-      if (count >= P) {
-        double w[kMaxParams + 1] = {0};
+      raw_ += r * r;
+      const long lags = std::min<long>(count_, kMaxArOrder);
+      for (long k = 1; k <= lags; ++k) acov_[k] += r * ring_[(count_ - k) & (kRing - 1)][0];
+      const int P = nm_.p;
+      if (count_ >= P) {
+        double w[kMaxParams + 1];
         for (int c = 0; c <= m; ++c) {
           double v = cur[c];
-          for (int k = 0; k < P; ++k) v += nm.a[k] * hist[k][c];
+          for (int k = 0; k < P; ++k) v += nm_.a[k] * ring_[(count_ - 1 - k) & (kRing - 1)][c];
           w[c] = v;
         }
-        cost += w[0] * w[0];
-        if (rows > 0) wlag += w[0] * wprev;
-        wprev = w[0];
-        ++rows;
+        cost_ += w[0] * w[0];
+        if (rows_ > 0) wlag_ += w[0] * wprev_;
+        wprev_ = w[0];
+        ++rows_;
         for (int a = 0; a < m; ++a) {
           const double ja = w[a + 1];
-          racc[a] += ja * w[0];
-          for (int b = 0; b <= a; ++b) Nacc[a][b] += ja * w[b + 1];
+          r_[a] += ja * w[0];
+          for (int b = 0; b <= a; ++b) N_[a * m + b] += ja * w[b + 1];
         }
       }
-      for (int k = std::min(P, kMaxArOrder) - 1; k > 0; --k) {
-        for (int c = 0; c <= m; ++c) hist[k][c] = hist[k - 1][c];
-      }
-      if (P > 0) {
-        for (int c = 0; c <= m; ++c) hist[0][c] = cur[c];
-      }
-      for (int k = kMaxArOrder - 1; k > 0; --k) rhist[k] = rhist[k - 1];
-      rhist[0] = r;
-      ++count;
-    });
-    for (int a = 0; a < m; ++a) {
-      out.rhs[a] = racc[a];
-      for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = Nacc[a][b];
+      ++count_;
     }
-    out.cost = cost;
-    out.rows = rows;
-    out.raw = raw;
-    out.acov[0] = raw;
-    out.samples = count;
-    out.wlag1 = wlag;
-    return out;
+    Normal finish() const {
+      const int m = m_;
+      Normal out;
+      out.N.resize(m, m);
+      out.rhs.resize(m);
+      for (int a = 0; a < m; ++a) {
+        out.rhs[a] = r_[a];
+        for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = N_[a * m + b];
+      }
+      out.cost = cost_;
+      out.rows = rows_;
+      out.raw = raw_;
+      std::copy(acov_, acov_ + kMaxArOrder + 1, out.acov);
+      out.acov[0] = raw_;
+      out.samples = count_;
+      out.wlag1 = wlag_;
+      return out;
+    }
+
+   private:
+    static constexpr int kRing = 8;  // > kMaxArOrder, a power of two
+    static_assert(kRing > kMaxArOrder, "the ring holds the AR model's lags");
+    const int m_;
+    const NoiseModel& nm_;
+    const double* y_;
+    double N_[kMaxParams * kMaxParams], r_[kMaxParams];
+    double ring_[kRing][kMaxParams + 1];
+    double acov_[kMaxArOrder + 1] = {0};
+    double cost_ = 0, raw_ = 0, wlag_ = 0, wprev_ = 0;
+    long count_ = 0, rows_ = 0;
+  };
+
+  // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
+  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
+    switch (p.m) {  // the common problem sizes unrolled
+      case 3:
+        return evaluateWith<3>(i, p, nm);
+      case 4:
+        return evaluateWith<4>(i, p, nm);
+      case 5:
+        return evaluateWith<5>(i, p, nm);
+      case 6:
+        return evaluateWith<6>(i, p, nm);
+      default:
+        return evaluateWith<0>(i, p, nm);
+    }
+  }
+
+  template <int MT>
+  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm) const {
+    Accumulator<MT> acc(p.m, nm, s_.dte);
+    auto visit = [&acc](Index n, const double* z) { acc.add(n, z); };
+    if (sim_.tableApplies(substeps_))
+      sim_.runTable<MT>(tableOf(i), p, visit);
+    else
+      sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, visit);
+    return acc.finish();
+  }
+
+  // Segment i's look-ups (SegmentSimulator::buildTable), cached while the cached intervals stay
+  // within kTableBudget (then the cache is emptied first; a segment larger than the budget is
+  // built into a scratch table per evaluation).
+  const SegmentTable& tableOf(size_t i) const {
+    constexpr size_t kTableBudget = size_t{1} << 20;  // intervals: ~18 MB held, ~43 MB smooth
+    if (tables_.size() != nseg_) tables_.assign(nseg_, SegmentTable{});
+    SegmentTable& t = tables_[i];
+    if (t.e > t.b) return t;
+    const size_t n = static_cast<size_t>(std::max<Index>(ranges_[i].second - ranges_[i].first, 0));
+    if (n > kTableBudget) {
+      sim_.buildTable(ranges_[i].first, ranges_[i].second, &scratch_);
+      return scratch_;
+    }
+    if (cached_ + n > kTableBudget) {
+      tables_.assign(nseg_, SegmentTable{});
+      cached_ = 0;
+    }
+    sim_.buildTable(ranges_[i].first, ranges_[i].second, &t);
+    cached_ += n;
+    return t;
   }
 
   // Gauss-Newton step of a set of segments: locals eliminated per segment (Schur complement).
@@ -662,7 +902,8 @@ class Refinement {
     const int nl = nl_, ns = ns_;
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
-    std::vector<Eigen::MatrixXd> Nll_inv(nseg_);
+    std::vector<Eigen::MatrixXd>& Nll_inv = nll_inv_scratch_;  // per segment of the set
+    if (Nll_inv.size() != nseg_) Nll_inv.resize(nseg_);
     for (size_t i : set) {
       const Normal& nm = normals[i];
       Nll_inv[i] = nm.N.topLeftCorner(nl, nl).ldlt().solve(Eigen::MatrixXd::Identity(nl, nl));
@@ -716,7 +957,8 @@ class Refinement {
     if (!*finite) return 0;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
-      Locals dl(nseg_);
+      // Scratch sized for every segment, used on the set's (no O(segments) work per step).
+      Locals& dl = dl_scratch_;
       Eigen::VectorXd dg;
       solveStep(set, normals_, &dl, &dg, nullptr, nullptr);
       if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
@@ -726,9 +968,9 @@ class Refinement {
       double step = 1.0;
       bool accepted = false;
       for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
-        Locals x1(nseg_);
+        Locals& x1 = x1_scratch_;
         const Eigen::VectorXd g1 = sh_ + step * dg;
-        std::vector<Normal> n1(nseg_);
+        std::vector<Normal>& n1 = n1_scratch_;
         double c1 = 0.0;
         for (size_t i : set) {
           x1[i] = loc_[i] + step * dl[i];
@@ -778,6 +1020,9 @@ class Refinement {
       return false;
     }
     normals_.assign(nseg_, Normal{});
+    dl_scratch_.assign(nseg_, Eigen::VectorXd());
+    x1_scratch_.assign(nseg_, Eigen::VectorXd());
+    n1_scratch_.assign(nseg_, Normal{});
     converged_.assign(nseg_, 1);
     noise_of_.assign(nseg_, NoiseModel{});
     for (const auto& set : problems_) {
@@ -1045,6 +1290,13 @@ class Refinement {
   std::vector<Eigen::MatrixXd> Nll_inv_, Ainv_of_;
   double sigma2_pooled_ = 0.0;
   bool all_converged_ = true;
+  // Per-segment scratch of solveStep and gaussNewton (sized once).
+  mutable std::vector<Eigen::MatrixXd> nll_inv_scratch_;
+  Locals dl_scratch_, x1_scratch_;
+  std::vector<Normal> n1_scratch_;
+  mutable std::vector<SegmentTable> tables_;  // tableOf's cache
+  mutable SegmentTable scratch_;
+  mutable size_t cached_ = 0;
 };
 
 }  // namespace
