@@ -457,38 +457,48 @@ class SegmentSimulator {
     return lr;
   }
 
-  // step() of the state and sensitivities without an STE or shape basis (the same arithmetic,
-  // the role switch replaced by the weights lr): M the number of unknowns when fixed (0: m).
+  // step() of the state and sensitivities without an STE or shape basis (the same arithmetic
+  // per element): the state's RK4 first, keeping its four stage values, then each sensitivity
+  // pair's RK4 with the forcing -(cv v_s + cy y_s) of those stages (weights lr). M: the number
+  // of unknowns when fixed at compile time (0: m_dyn).
   template <int M>
   void stepLinear(double* z, int m_dyn, const Params& p, const LinearRoles& lr, const Stage& st,
                   double sv, double hs) const {
-    const int m = M > 0 ? M : m_dyn, D = 2 + 2 * m;
-    double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
-    derivLinear<M>(z, m, p, lr, st.K[0], sv, st.T[0], k1);
-    for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
-    derivLinear<M>(tmp, m, p, lr, st.K[1], sv, st.T[1], k2);
-    for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k2[i];
-    derivLinear<M>(tmp, m, p, lr, st.K[1], sv, st.T[1], k3);
-    for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
-    derivLinear<M>(tmp, m, p, lr, st.K[2], sv, st.T[2], k4);
-    for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    const int m = M > 0 ? M : m_dyn;
+    const double K[4] = {st.K[0], st.K[1], st.K[1], st.K[2]};
+    const double T[4] = {st.T[0], st.T[1], st.T[1], st.T[2]};
+    const double ff = fm_.gear().force_factor;
+    double dT[4], C[4], F[4], ys[4], vs[4];
+    for (int q = 0; q < 4; ++q) {
+      dT[q] = T[q] - p.t_ref;
+      C[q] = p.theta0 + p.theta1 * dT[q];
+      F[q] = ff * T[q];
+    }
+    rk4Pair(z, F, C, K, hs, ys, vs);
+    for (int k = 0; k < m; ++k) {
+      const double cy = lr.y0[k] + lr.y1[k] * sv;
+      double f[4];
+      for (int q = 0; q < 4; ++q) f[q] = -((lr.v0[k] + lr.v1[k] * dT[q]) * vs[q] + cy * ys[q]);
+      rk4Pair(z + 2 + 2 * k, f, C, K, hs, nullptr, nullptr);
+    }
   }
 
-  template <int M>
-  void derivLinear(const double* z, int m_dyn, const Params& p, const LinearRoles& lr, double K,
-                   double sv, double T1, double* dz) const {
-    const int m = M > 0 ? M : m_dyn;
-    const double dT = T1 - p.t_ref;
-    const double C = p.theta0 + p.theta1 * dT;
-    const double F = fm_.gear().force_factor * T1;
-    const double y = z[0], v = z[1];
-    dz[0] = v;
-    dz[1] = F - C * v - K * y;
-    for (int k = 0; k < m; ++k) {
-      const double cv = lr.v0[k] + lr.v1[k] * dT, cy = lr.y0[k] + lr.y1[k] * sv;
-      dz[2 + 2 * k] = z[3 + 2 * k];
-      dz[3 + 2 * k] = -(cv * v + cy * y) - C * z[3 + 2 * k] - K * z[2 + 2 * k];
+  // RK4 of one pair (a, b)' = (b, f_q - C_q b - K_q a) with the stage values f, C, K (stages 2
+  // and 3 at the midpoint); the four stage values of (a, b) into ys, vs (null: not kept).
+  static void rk4Pair(double* w, const double* f, const double* C, const double* K, double hs,
+                      double* ys, double* vs) {
+    const double h2 = 0.5 * hs, a = w[0], b = w[1];
+    double ka[4], kb[4], ta = a, tb = b;
+    for (int q = 0; q < 4; ++q) {
+      if (ys != nullptr) ys[q] = ta, vs[q] = tb;
+      ka[q] = tb;
+      kb[q] = f[q] - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = a + hq * ka[q], tb = b + hq * kb[q];
     }
+    const double h6 = hs / 6.0;
+    w[0] = a + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    w[1] = b + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
   }
 
   // y'' = F - C (y' - e'_r) - K (y - e): e the STE (0 without), e'_r its rate in the relative
@@ -792,15 +802,21 @@ class Refinement {
       for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
       const double r = cur[0];
       raw_ += r * r;
-      const long lags = std::min<long>(count_, kMaxArOrder);
-      for (long k = 1; k <= lags; ++k) acov_[k] += r * ring_[(count_ - k) & (kRing - 1)][0];
+      res_[count_ & (kRing - 1)] = r;
+      if (count_ >= kMaxArOrder) {  // every lag (the loop unrolled)
+        for (long k = 1; k <= kMaxArOrder; ++k) acov_[k] += r * res_[(count_ - k) & (kRing - 1)];
+      } else {
+        for (long k = 1; k <= count_; ++k) acov_[k] += r * res_[(count_ - k) & (kRing - 1)];
+      }
       const int P = nm_.p;
       if (count_ >= P) {
         double w[kMaxParams + 1];
-        for (int c = 0; c <= m; ++c) {
-          double v = cur[c];
-          for (int k = 0; k < P; ++k) v += nm_.a[k] * ring_[(count_ - 1 - k) & (kRing - 1)][c];
-          w[c] = v;
+        w[0] = r;
+        for (int c = 1; c <= m; ++c) w[c] = cur[c];
+        for (int k = 0; k < P; ++k) {  // w = cur + a_1 r_{n-1} + ... in this order
+          const double a = nm_.a[k];
+          const double* prev = ring_[(count_ - 1 - k) & (kRing - 1)];
+          for (int c = 0; c <= m; ++c) w[c] += a * prev[c];
         }
         cost_ += w[0] * w[0];
         if (rows_ > 0) wlag_ += w[0] * wprev_;
@@ -841,6 +857,7 @@ class Refinement {
     const double* y_;
     double N_[kMaxParams * kMaxParams], r_[kMaxParams];
     double ring_[kRing][kMaxParams + 1];
+    double res_[kRing];  // the raw residuals of ring_
     double acov_[kMaxArOrder + 1] = {0};
     double cost_ = 0, raw_ = 0, wlag_ = 0, wprev_ = 0;
     long count_ = 0, rows_ = 0;
