@@ -1372,16 +1372,14 @@ void fitMetrics(const Eigen::VectorXd& y, const Eigen::VectorXd& yh, double* nrm
   *fit = 100.0 * (1.0 - *nrmse);
 }
 
-bool modeledResponse(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
-                     ModeledResponse* out, std::string* error) {
-  if (r.segments.empty()) {
-    *error = "modeled response: no segments";
-    return false;
-  }
-  const double me = gear.equivalent_mass;
-  // Segment lookup with a fallback for non-identifiable segments (the previous identifiable
-  // one's values, else the next one's).
-  std::vector<SegmentEstimate> seg = r.segments;
+namespace {
+
+// The segments of `r` for the re-simulation: a non-identifiable segment takes the previous
+// identifiable one's values (else the next one's), keeping its own times. False when none is
+// identifiable.
+bool segmentsWithFallbacks(const IdentificationResult& r, std::vector<SegmentEstimate>* out) {
+  std::vector<SegmentEstimate>& seg = *out;
+  seg = r.segments;
   int last = -1;
   for (size_t i = 0; i < seg.size(); ++i) {
     if (seg[i].identifiable) {
@@ -1392,10 +1390,7 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       seg[i].t_start = t0, seg[i].t_end = t1;
     }
   }
-  if (last < 0) {
-    *error = "modeled response: no identifiable segment";
-    return false;
-  }
+  if (last < 0) return false;
   for (int i = static_cast<int>(seg.size()) - 1, next = -1; i >= 0; --i) {
     if (r.segments[i].identifiable)
       next = i;
@@ -1404,6 +1399,164 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       seg[i] = seg[next];
       seg[i].t_start = t0, seg[i].t_end = t1;
     }
+  }
+  return true;
+}
+
+// The re-simulation's breakpoints over samples [begin, end): the breaks of the stiffness/mesh-
+// state channel (switches, jumps, kinks), the table nodes of a greybox table shape (kinks) and
+// the segment boundaries; sorted.
+std::vector<double> responseBreakpoints(const SignalView& s, const ForwardModel& fm, bool shape,
+                                        const IdentificationResult& r,
+                                        const std::vector<SegmentEstimate>& seg, Index begin,
+                                        Index end) {
+  std::vector<double> bps;
+  for (const QuadratureBreak& b : fm.breaks()) {
+    if (b.j >= begin && b.j + 1 < end && b.th < 1.0) bps.push_back(s.time(b.j) + b.th * s.dt);
+  }
+  if (shape && r.stiffness_shape.kind == StiffnessShape::Kind::Table) {
+    const double nodes = r.stiffness_shape.n;
+    for (Index j = begin; j + 1 < end; ++j) {
+      const double pa = s.mesh_phase[j], pb = s.mesh_phase[j + 1];
+      if (!(pb > pa)) continue;
+      const double x = ((std::floor(pa * nodes) + 1.0) / nodes - pa) / (pb - pa);
+      if (x > 0.0 && x < 1.0) bps.push_back(s.time(j) + x * s.dt);
+    }
+  }
+  for (const auto& e : seg) bps.push_back(e.t_start);
+  std::sort(bps.begin(), bps.end());
+  return bps;
+}
+
+// C(t), K(t), F(t) of the modeled response from the identified segments and the forward model:
+// the generic driver's look-up by time (generic) and the affine fast path's by interval and
+// stage (stage, intervals in ascending order).
+class ResponseCoefficients {
+ public:
+  ResponseCoefficients(const SignalView& s, const GearConstants& gear,
+                       const IdentificationResult& r, const std::vector<SegmentEstimate>& seg,
+                       const ForwardModel::Ranges& ranges, const ForwardModel& fm, int substeps,
+                       Index begin)
+      : s_(s),
+        gear_(gear),
+        r_(r),
+        seg_(seg),
+        ranges_(ranges),
+        fm_(fm),
+        me_(gear.equivalent_mass),
+        inv_me_(1.0 / me_),
+        load_(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable),
+        th0_(load_ ? r.load_law->c0 / me_ : 0.0),
+        th1_(load_ ? r.load_law->c1 / me_ : 0.0),
+        shape_(r.formulation == Formulation::Greybox &&
+               r.stiffness_shape.kind != StiffnessShape::Kind::Square && s.mesh_phase != nullptr),
+        begin_(begin),
+        u_first_mid_(0.5 / substeps) {
+    held_.resize(seg.size());
+    for (size_t i = 0; i < seg.size(); ++i) held_[i] = !fm.smoothStiffness(ranges[i].first);
+    u_stage_.resize(static_cast<size_t>(2 * substeps + 1));
+    for (int k = 0; k < 2 * substeps; ++k) u_stage_[static_cast<size_t>(k)] = k * (0.5 / substeps);
+    u_stage_.back() = 1.0;
+  }
+
+  bool shape() const { return shape_; }
+
+  // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
+  gear_sim::SdofCoefficients generic(double t, double t_ref) const {
+    const double uref = (t_ref - s_.t0) / s_.dt;
+    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s_.n - 2);
+    const double u = std::clamp((t - s_.t0) / s_.dt - static_cast<double>(j), 0.0, 1.0);
+    const bool right = uref - static_cast<double>(j) >= fm_.heldSplit(j);
+    return at(j, u, right, segmentAt(t_ref));
+  }
+
+  // The fast path's look-up of an interval without a breakpoint inside, at the exact stage
+  // coordinates u = k / (2 substeps) (the midpoint and the ends take the precomputed stencils):
+  // cursors over the segments and the breaks instead of a search per look-up.
+  gear_sim::SdofCoefficients stage(Index i, int k) {
+    const Index j = begin_ + i;
+    const std::vector<QuadratureBreak>& brk = fm_.breaks();
+    while (si_ + 1 < seg_.size() && ranges_[si_ + 1].first <= j) ++si_;
+    while (bi_ < brk.size() && brk[bi_].j < j) ++bi_;
+    const double split = bi_ < brk.size() && brk[bi_].j == j ? brk[bi_].th : 1.0;
+    return at(j, u_stage_[static_cast<size_t>(k)], u_first_mid_ >= split, si_);
+  }
+
+ private:
+  size_t segmentAt(double t) const {
+    size_t lo = 0, hi = seg_.size();
+    while (hi - lo > 1) {
+      const size_t mid = (lo + hi) / 2;
+      if (seg_[mid].t_start <= t)
+        lo = mid;
+      else
+        hi = mid;
+    }
+    return lo;
+  }
+
+  // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
+  // after the interval's break.
+  gear_sim::SdofCoefficients at(Index j, double u, bool right, size_t si) const {
+    const SegmentEstimate& e = seg_[si];
+    const Index lo = ranges_[si].first, hi = ranges_[si].second;
+    const double T1 = fm_.torque(j, u, lo, hi);
+    gear_sim::SdofCoefficients c;
+    c.C = load_ ? th0_ + th1_ * T1 : e.C;
+    c.F = gear_.force_factor * T1;
+    switch (r_.formulation) {
+      case Formulation::Known:
+        // A held channel's value directly (knownStiffness's first case, without its search of
+        // the segment's smoothness per look-up).
+        c.K = held_[si] ? (right && j + 1 < s_.n ? s_.stiffness[j + 1] : s_.stiffness[j]) * inv_me_
+                        : fm_.knownStiffness(j, u, right, lo, hi);
+        break;
+      case Formulation::Greybox:
+        if (shape_ && !e.stiffness_curve.empty()) {
+          const double phase = fm_.cubic(s_.mesh_phase, j, u, lo, hi);
+          c.K = shapeStiffness(r_.stiffness_shape, e.stiffness_curve, phase) / me_;
+        } else {
+          c.K = (e.k_min + (e.k_max - e.k_min) * fm_.meshState(j, right)) / me_;
+        }
+        break;
+      case Formulation::Paper:
+      case Formulation::Legacy:
+        c.K = e.k_min / me_;
+        c.F = std::isfinite(e.forcing) ? e.forcing : 0.0;
+        break;
+    }
+    return c;
+  }
+
+  const SignalView& s_;
+  const GearConstants& gear_;
+  const IdentificationResult& r_;
+  const std::vector<SegmentEstimate>& seg_;
+  const ForwardModel::Ranges& ranges_;
+  const ForwardModel& fm_;
+  const double me_, inv_me_;
+  const bool load_;
+  const double th0_, th1_;
+  const bool shape_;
+  const Index begin_;
+  const double u_first_mid_;
+  std::vector<char> held_;
+  std::vector<double> u_stage_;
+  size_t si_ = 0, bi_ = 0;  // stage()'s cursors
+};
+
+}  // namespace
+
+bool modeledResponse(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
+                     ModeledResponse* out, std::string* error) {
+  if (r.segments.empty()) {
+    *error = "modeled response: no segments";
+    return false;
+  }
+  std::vector<SegmentEstimate> seg;
+  if (!segmentsWithFallbacks(r, &seg)) {
+    *error = "modeled response: no identifiable segment";
+    return false;
   }
   const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
   const Index end =
@@ -1420,9 +1573,6 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       break;
     }
   }
-  const bool load = r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable;
-  const double th0 = load ? r.load_law->c0 / me : 0.0, th1 = load ? r.load_law->c1 / me : 0.0;
-  const Formulation f = r.formulation;
   // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
   // integral method and the refinement.
   auto sampleOf = [&](double t) {
@@ -1432,105 +1582,12 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   for (const auto& e : seg) {
     ranges.emplace_back(sampleOf(e.t_start), std::max(sampleOf(e.t_end), sampleOf(e.t_start)));
   }
-  const ForwardModel fm(s, gear, f, ranges);
-  // Breakpoints: the breaks of the stiffness/mesh-state channel (switches, jumps, kinks), and
-  // segment boundaries.
-  std::vector<double> bps;
-  for (const QuadratureBreak& b : fm.breaks()) {
-    if (b.j >= begin && b.j + 1 < end && b.th < 1.0) bps.push_back(s.time(b.j) + b.th * s.dt);
-  }
-  // Greybox fourier/table shape: K from the identified curve at the mesh phase; table nodes
-  // are kinks.
-  const bool shape = f == Formulation::Greybox &&
-                     r.stiffness_shape.kind != StiffnessShape::Kind::Square &&
-                     s.mesh_phase != nullptr;
-  if (shape && r.stiffness_shape.kind == StiffnessShape::Kind::Table) {
-    const double nodes = r.stiffness_shape.n;
-    for (Index j = begin; j + 1 < end; ++j) {
-      const double pa = s.mesh_phase[j], pb = s.mesh_phase[j + 1];
-      if (!(pb > pa)) continue;
-      const double x = ((std::floor(pa * nodes) + 1.0) / nodes - pa) / (pb - pa);
-      if (x > 0.0 && x < 1.0) bps.push_back(s.time(j) + x * s.dt);
-    }
-  }
-  for (const auto& e : seg) bps.push_back(e.t_start);
-  std::sort(bps.begin(), bps.end());
-  auto segmentAt = [&](double t) -> size_t {
-    size_t lo = 0, hi = seg.size();
-    while (hi - lo > 1) {
-      const size_t mid = (lo + hi) / 2;
-      if (seg[mid].t_start <= t)
-        lo = mid;
-      else
-        hi = mid;
-    }
-    return lo;
-  };
-  std::vector<char> held(seg.size());
-  for (size_t i = 0; i < seg.size(); ++i) held[i] = !fm.smoothStiffness(ranges[i].first);
-  const double inv_me = 1.0 / me;
-  // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
-  // after the interval's break.
-  auto coeffsAt = [&](Index j, double u, bool right, size_t si) {
-    const SegmentEstimate& e = seg[si];
-    const Index lo = ranges[si].first, hi = ranges[si].second;
-    const double T1 = fm.torque(j, u, lo, hi);
-    gear_sim::SdofCoefficients c;
-    c.C = load ? th0 + th1 * T1 : e.C;
-    switch (f) {
-      case Formulation::Known:
-        // A held channel's value directly (knownStiffness's first case, without its search of
-        // the segment's smoothness per look-up).
-        c.K = held[si] ? (right && j + 1 < s.n ? s.stiffness[j + 1] : s.stiffness[j]) * inv_me
-                       : fm.knownStiffness(j, u, right, lo, hi);
-        c.F = gear.force_factor * T1;
-        break;
-      case Formulation::Greybox: {
-        if (shape && !e.stiffness_curve.empty()) {
-          const double phase = fm.cubic(s.mesh_phase, j, u, lo, hi);
-          c.K = shapeStiffness(r.stiffness_shape, e.stiffness_curve, phase) / me;
-          c.F = gear.force_factor * T1;
-          break;
-        }
-        const double sv = fm.meshState(j, right);
-        c.K = (e.k_min + (e.k_max - e.k_min) * sv) / me;
-        c.F = gear.force_factor * T1;
-        break;
-      }
-      case Formulation::Paper:
-      case Formulation::Legacy:
-        c.K = e.k_min / me;
-        c.F = std::isfinite(e.forcing) ? e.forcing : 0.0;
-        break;
-    }
-    return c;
-  };
-  // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
-  auto coeffs = [&](double t, double t_ref) {
-    const double uref = (t_ref - s.t0) / s.dt;
-    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
-    const double u = std::clamp((t - s.t0) / s.dt - static_cast<double>(j), 0.0, 1.0);
-    const bool right = uref - static_cast<double>(j) >= fm.heldSplit(j);
-    return coeffsAt(j, u, right, segmentAt(t_ref));
-  };
+  const ForwardModel fm(s, gear, r.formulation, ranges);
   const int substeps = substepsFor(r.omega0, s.dt);
-  // The fast path's look-up of an interval without a breakpoint inside, at the exact stage
-  // coordinates u = k / (2 substeps) (the midpoint and the ends take the precomputed stencils):
-  // cursors over the segments and the breaks instead of a search per look-up (intervals come in
-  // ascending order).
-  size_t si = 0, bi = 0;
-  const std::vector<QuadratureBreak>& brk = fm.breaks();
-  const double u_first_mid = 0.5 / substeps;
-  std::vector<double> u_stage(static_cast<size_t>(2 * substeps + 1));
-  for (int k = 0; k < 2 * substeps; ++k) u_stage[static_cast<size_t>(k)] = k * (0.5 / substeps);
-  u_stage.back() = 1.0;
-  auto stage = [&](Index i, int k) {
-    const Index j = begin + i;
-    while (si + 1 < seg.size() && ranges[si + 1].first <= j) ++si;
-    while (bi < brk.size() && brk[bi].j < j) ++bi;
-    const double split = bi < brk.size() && brk[bi].j == j ? brk[bi].th : 1.0;
-    return coeffsAt(j, u_stage[static_cast<size_t>(k)], u_first_mid >= split, si);
-  };
+  ResponseCoefficients rc(s, gear, r, seg, ranges, fm, substeps, begin);
+  const std::vector<double> bps = responseBreakpoints(s, fm, rc.shape(), r, seg, begin, end);
+  auto coeffs = [&rc](double t, double t_ref) { return rc.generic(t, t_ref); };
+  auto stage = [&rc](Index i, int k) { return rc.stage(i, k); };
   const Index n = end - begin;
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
