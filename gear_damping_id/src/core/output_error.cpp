@@ -784,53 +784,27 @@ class Refinement {
     return evaluateAt(i, makeParams(x, g), nm);
   }
 
-  // Accumulates the normal equations (Normal) of the prewhitened residuals sample by sample:
-  // MT the number of unknowns when fixed at compile time (0: m). The AR filter reads the
-  // previous raw rows [r, J] from a ring of kRing rows.
+  // Accumulates the normal equations (Normal) of the prewhitened residuals: add() stores each
+  // sample's raw row [r, J] in a block, flush() sums a block with the sums in local variables
+  // (the AR filter reads the kMaxArOrder rows before the block, kept at its front). MT: the
+  // number of unknowns when fixed at compile time (0: m). The sums run in sample order.
   template <int MT>
   class Accumulator {
    public:
     Accumulator(int m, const NoiseModel& nm, const double* y)
-        : m_(MT > 0 ? MT : m), nm_(nm), y_(y) {
+        : m_(MT > 0 ? MT : m), nm_(nm), y_(y), buf_(static_cast<size_t>(kRows * (m_ + 1))) {
       std::fill(N_, N_ + m_ * m_, 0.0);
       std::fill(r_, r_ + m_, 0.0);
     }
     void add(Index n, const double* z) {
       const int m = MT > 0 ? MT : m_;
-      double* cur = ring_[count_ & (kRing - 1)];
-      cur[0] = y_[n] - z[0];
-      for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
-      const double r = cur[0];
-      raw_ += r * r;
-      res_[count_ & (kRing - 1)] = r;
-      if (count_ >= kMaxArOrder) {  // every lag (the loop unrolled)
-        for (long k = 1; k <= kMaxArOrder; ++k) acov_[k] += r * res_[(count_ - k) & (kRing - 1)];
-      } else {
-        for (long k = 1; k <= count_; ++k) acov_[k] += r * res_[(count_ - k) & (kRing - 1)];
-      }
-      const int P = nm_.p;
-      if (count_ >= P) {
-        double w[kMaxParams + 1];
-        w[0] = r;
-        for (int c = 1; c <= m; ++c) w[c] = cur[c];
-        for (int k = 0; k < P; ++k) {  // w = cur + a_1 r_{n-1} + ... in this order
-          const double a = nm_.a[k];
-          const double* prev = ring_[(count_ - 1 - k) & (kRing - 1)];
-          for (int c = 0; c <= m; ++c) w[c] += a * prev[c];
-        }
-        cost_ += w[0] * w[0];
-        if (rows_ > 0) wlag_ += w[0] * wprev_;
-        wprev_ = w[0];
-        ++rows_;
-        for (int a = 0; a < m; ++a) {
-          const double ja = w[a + 1];
-          r_[a] += ja * w[0];
-          for (int b = 0; b <= a; ++b) N_[a * m + b] += ja * w[b + 1];
-        }
-      }
-      ++count_;
+      double* row = buf_.data() + (kMaxArOrder + fill_) * (m + 1);
+      row[0] = y_[n] - z[0];
+      for (int a = 0; a < m; ++a) row[a + 1] = z[2 + 2 * a];
+      if (++fill_ == kBlock) flush();
     }
-    Normal finish() const {
+    Normal finish() {
+      flush();
       const int m = m_;
       Normal out;
       out.N.resize(m, m);
@@ -850,14 +824,62 @@ class Refinement {
     }
 
    private:
-    static constexpr int kRing = 8;  // > kMaxArOrder, a power of two
-    static_assert(kRing > kMaxArOrder, "the ring holds the AR model's lags");
+    static constexpr long kBlock = 256;                  // rows per block
+    static constexpr long kRows = kMaxArOrder + kBlock;  // with the previous rows
+    static constexpr int kCap = MT > 0 ? MT : kMaxParams;
+
+    void flush() {
+      const int m = MT > 0 ? MT : m_, S = m + 1, P = nm_.p;
+      double N[kCap * kCap], R[kCap], acov[kMaxArOrder + 1];
+      std::copy(N_, N_ + m * m, N);
+      std::copy(r_, r_ + m, R);
+      std::copy(acov_, acov_ + kMaxArOrder + 1, acov);
+      double cost = cost_, raw = raw_, wlag = wlag_, wprev = wprev_;
+      long rows = rows_, n = count_;
+      const double* base = buf_.data() + kMaxArOrder * S;
+      for (long i = 0; i < fill_; ++i, ++n) {
+        const double* cur = base + i * S;
+        const double r = cur[0];
+        raw += r * r;
+        if (n >= kMaxArOrder) {  // every lag (the loop unrolled)
+          for (int k = 1; k <= kMaxArOrder; ++k) acov[k] += r * cur[-k * S];
+        } else {
+          for (int k = 1; k <= n; ++k) acov[k] += r * cur[-k * S];
+        }
+        if (n < P) continue;
+        double w[kCap + 1];
+        w[0] = r;
+        for (int c = 1; c <= m; ++c) w[c] = cur[c];
+        for (int k = 0; k < P; ++k) {  // w = cur + a_1 row_{n-1} + ... in this order
+          const double ak = nm_.a[k];
+          const double* prev = cur - (k + 1) * S;
+          for (int c = 0; c <= m; ++c) w[c] += ak * prev[c];
+        }
+        cost += w[0] * w[0];
+        if (rows > 0) wlag += w[0] * wprev;
+        wprev = w[0];
+        ++rows;
+        for (int a = 0; a < m; ++a) {
+          const double ja = w[a + 1];
+          R[a] += ja * w[0];
+          for (int b = 0; b <= a; ++b) N[a * m + b] += ja * w[b + 1];
+        }
+      }
+      std::copy(N, N + m * m, N_);
+      std::copy(R, R + m, r_);
+      std::copy(acov, acov + kMaxArOrder + 1, acov_);
+      cost_ = cost, raw_ = raw, wlag_ = wlag, wprev_ = wprev, rows_ = rows, count_ = n;
+      // The block's last kMaxArOrder rows (with the earlier ones when it is shorter) to the front.
+      std::copy(buf_.begin() + fill_ * S, buf_.begin() + (fill_ + kMaxArOrder) * S, buf_.begin());
+      fill_ = 0;
+    }
+
     const int m_;
     const NoiseModel& nm_;
     const double* y_;
-    double N_[kMaxParams * kMaxParams], r_[kMaxParams];
-    double ring_[kRing][kMaxParams + 1];
-    double res_[kRing];  // the raw residuals of ring_
+    std::vector<double> buf_;  // kRows rows of m + 1: the previous rows, then the block
+    long fill_ = 0;            // rows in the block
+    double N_[kCap * kCap], r_[kCap];
     double acov_[kMaxArOrder + 1] = {0};
     double cost_ = 0, raw_ = 0, wlag_ = 0, wprev_ = 0;
     long count_ = 0, rows_ = 0;
