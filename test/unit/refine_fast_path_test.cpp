@@ -23,6 +23,28 @@ void expectSame(double a, double b, const std::string& what) {
   EXPECT_LE(std::abs(a - b), kSameTol * std::abs(b)) << what << ": " << a << " vs " << b;
 }
 
+// Both refined, with the same C and C_std.
+void expectSameC(const SegmentEstimate& a, const SegmentEstimate& b, const std::string& label) {
+  ASSERT_TRUE(a.refined && b.refined) << label;
+  expectSame(a.C, b.C, label + " C");
+  expectSame(a.C_std, b.C_std, label + " C_std");
+}
+
+// The integral estimate of `t` refined by the fast path and by the reference (generic RK4).
+void refineBoth(const SignalTable& t, const gear_damping_id::GearConstants& gear,
+                const IdentificationOptions& o, IdentificationResult* fast,
+                IdentificationResult* reference) {
+  const auto view = gear_damping_id::SignalView::of(t);
+  IdentificationResult start;
+  std::string e;
+  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
+  const auto ranges = gear_damping_id::segmentRanges(view, o);
+  *fast = start, *reference = start;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, fast, &e, false)) << e;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, reference, &e, true)) << e;
+  ASSERT_EQ(fast->segments.size(), reference->segments.size());
+}
+
 void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
   SimConfig c = table1Config();
   c.simulation.duration = 0.005;
@@ -36,22 +58,14 @@ void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
   o.model = m;
   o.refine = IdentificationOptions::Refine::Never;
   o.window_length = gear_damping_id::defaultWindowLength(view, gear);
-  IdentificationResult start;
-  std::string e;
-  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
-  const auto ranges = gear_damping_id::segmentRanges(view, o);
-  IdentificationResult fast = start, reference = start;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &fast, &e, false)) << e;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &reference, &e, true)) << e;
-  ASSERT_EQ(fast.segments.size(), reference.segments.size());
+  IdentificationResult fast, reference;
+  ASSERT_NO_FATAL_FAILURE(refineBoth(t, gear, o, &fast, &reference));
   const std::string label = gear_damping_id::toString(f) + " " + gear_damping_id::toString(m);
   EXPECT_EQ(fast.noise_ar.size(), reference.noise_ar.size()) << label;
   for (size_t i = 0; i < fast.segments.size(); ++i) {
     const SegmentEstimate& a = fast.segments[i];
     const SegmentEstimate& b = reference.segments[i];
-    ASSERT_TRUE(a.refined && b.refined) << label;
-    expectSame(a.C, b.C, label + " C");
-    expectSame(a.C_std, b.C_std, label + " C_std");
+    ASSERT_NO_FATAL_FAILURE(expectSameC(a, b, label));
     if (f == Formulation::Greybox) {
       expectSame(a.k_min, b.k_min, label + " k_min");
       expectSame(a.k_max_std, b.k_max_std, label + " k_max_std");
@@ -79,21 +93,13 @@ void compareModel(const std::string& label, void (*mesh)(SimConfig*), Formulatio
   }
   o.refine = IdentificationOptions::Refine::Never;
   o.window_length = gear_damping_id::defaultWindowLength(view, gear);
-  IdentificationResult start;
-  std::string e;
-  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << label << ": " << e;
-  const auto ranges = gear_damping_id::segmentRanges(view, o);
-  IdentificationResult fast = start, reference = start;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &fast, &e, false)) << e;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &reference, &e, true)) << e;
-  ASSERT_EQ(fast.segments.size(), reference.segments.size());
+  IdentificationResult fast, reference;
+  ASSERT_NO_FATAL_FAILURE(refineBoth(t, gear, o, &fast, &reference));
   int varied = 0;
   for (size_t i = 0; i < fast.segments.size(); ++i) {
     const SegmentEstimate& a = fast.segments[i];
     const SegmentEstimate& b = reference.segments[i];
-    ASSERT_TRUE(a.refined && b.refined) << label;
-    expectSame(a.C, b.C, label + " C");
-    expectSame(a.C_std, b.C_std, label + " C_std");
+    ASSERT_NO_FATAL_FAILURE(expectSameC(a, b, label));
     expectSame(a.C_weighted, b.C_weighted, label + " C_weighted");
     ASSERT_EQ(std::isfinite(a.variation_z), std::isfinite(b.variation_z)) << label;
     if (std::isfinite(b.variation_z)) expectSame(a.variation_z, b.variation_z, label + " z");
