@@ -913,15 +913,17 @@ class Refinement {
   }
 
   // Segment i's look-ups (SegmentSimulator::buildTable), cached while the cached intervals stay
-  // within kTableBudget (then the cache is emptied first; a segment larger than the budget is
-  // built into a scratch table per evaluation).
+  // within kTableBudget. When full: the piecewise model's problems (one segment each, in order)
+  // empty the cache; a joint problem over all segments keeps the tables it has and builds the
+  // others into a scratch table per evaluation (as a segment larger than the budget).
   const SegmentTable& tableOf(size_t i) const {
     constexpr size_t kTableBudget = size_t{1} << 20;  // intervals: ~18 MB held, ~43 MB smooth
     if (tables_.size() != nseg_) tables_.assign(nseg_, SegmentTable{});
     SegmentTable& t = tables_[i];
     if (t.e > t.b) return t;
     const size_t n = static_cast<size_t>(std::max<Index>(ranges_[i].second - ranges_[i].first, 0));
-    if (n > kTableBudget) {
+    const bool single = piecewise_ && ns_ == 0;
+    if (n > kTableBudget || (cached_ + n > kTableBudget && !single)) {
       sim_.buildTable(ranges_[i].first, ranges_[i].second, &scratch_);
       return scratch_;
     }
