@@ -4,8 +4,10 @@
 //
 // Data: the Table 1 default case (sine load, load-dependent damping, 1 MHz) with white noise at
 // 40 dB, 1e6 samples in 1 ms segments; `trapezoid` the same with trapezoid stiffness (smooth
-// stiffness: the generic RK4 path). "Reference" runs the generic RK4 of the state and
-// sensitivities everywhere (the slow path the affine maps replace).
+// stiffness: the tabled RK4 step instead of the affine maps). The piecewise cases include the
+// within-segment load test (its enlarged fit iterated where the damping varies, as it does in
+// this case). "Reference" runs the generic RK4 of the state and sensitivities with per-stage
+// look-ups everywhere (the slow path the tables and affine maps replace).
 #include <benchmark/benchmark.h>
 
 #include <map>

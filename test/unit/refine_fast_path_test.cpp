@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iostream>
 
+#include "gear_damping_id/quality_flags.hpp"
 #include "id_test_support.hpp"
 
 namespace {
@@ -21,6 +23,28 @@ void expectSame(double a, double b, const std::string& what) {
   EXPECT_LE(std::abs(a - b), kSameTol * std::abs(b)) << what << ": " << a << " vs " << b;
 }
 
+// Both refined, with the same C and C_std.
+void expectSameC(const SegmentEstimate& a, const SegmentEstimate& b, const std::string& label) {
+  ASSERT_TRUE(a.refined && b.refined) << label;
+  expectSame(a.C, b.C, label + " C");
+  expectSame(a.C_std, b.C_std, label + " C_std");
+}
+
+// The integral estimate of `t` refined by the fast path and by the reference (generic RK4).
+void refineBoth(const SignalTable& t, const gear_damping_id::GearConstants& gear,
+                const IdentificationOptions& o, IdentificationResult* fast,
+                IdentificationResult* reference) {
+  const auto view = gear_damping_id::SignalView::of(t);
+  IdentificationResult start;
+  std::string e;
+  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
+  const auto ranges = gear_damping_id::segmentRanges(view, o);
+  *fast = start, *reference = start;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, fast, &e, false)) << e;
+  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, reference, &e, true)) << e;
+  ASSERT_EQ(fast->segments.size(), reference->segments.size());
+}
+
 void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
   SimConfig c = table1Config();
   c.simulation.duration = 0.005;
@@ -34,28 +58,88 @@ void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
   o.model = m;
   o.refine = IdentificationOptions::Refine::Never;
   o.window_length = gear_damping_id::defaultWindowLength(view, gear);
-  IdentificationResult start;
-  std::string e;
-  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
-  const auto ranges = gear_damping_id::segmentRanges(view, o);
-  IdentificationResult fast = start, reference = start;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &fast, &e, false)) << e;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, &reference, &e, true)) << e;
-  ASSERT_EQ(fast.segments.size(), reference.segments.size());
+  IdentificationResult fast, reference;
+  ASSERT_NO_FATAL_FAILURE(refineBoth(t, gear, o, &fast, &reference));
   const std::string label = gear_damping_id::toString(f) + " " + gear_damping_id::toString(m);
   EXPECT_EQ(fast.noise_ar.size(), reference.noise_ar.size()) << label;
   for (size_t i = 0; i < fast.segments.size(); ++i) {
     const SegmentEstimate& a = fast.segments[i];
     const SegmentEstimate& b = reference.segments[i];
-    ASSERT_TRUE(a.refined && b.refined) << label;
-    expectSame(a.C, b.C, label + " C");
-    expectSame(a.C_std, b.C_std, label + " C_std");
+    ASSERT_NO_FATAL_FAILURE(expectSameC(a, b, label));
     if (f == Formulation::Greybox) {
       expectSame(a.k_min, b.k_min, label + " k_min");
       expectSame(a.k_max_std, b.k_max_std, label + " k_max_std");
     }
   }
   expectSame(fast.noise_std, reference.noise_std, label + " noise_std");
+}
+
+// The tabled look-ups (issue 18): every stiffness model, the variation test and the greybox
+// unknowns give the reference's numbers. `mesh` sets the stiffness model; `shape` (greybox) the
+// stiffness shape ("" for the square levels).
+void compareModel(const std::string& label, void (*mesh)(SimConfig*), Formulation f,
+                  const std::string& shape, unsigned long seed) {
+  SimConfig c = table1Config();  // load-dependent damping: the variation test iterates
+  c.simulation.duration = 0.005;
+  mesh(&c);
+  SignalTable t = simulateOrFail(c);
+  addWhiteNoise(&t.dte, 40.0, seed);
+  const auto gear = gear_damping_id::gearConstants(c.gearModel());
+  const auto view = gear_damping_id::SignalView::of(t);
+  IdentificationOptions o;
+  o.formulation = f;
+  if (!shape.empty()) {
+    ASSERT_TRUE(gear_damping_id::parseStiffnessShape(shape, &o.stiffness_shape));
+  }
+  o.refine = IdentificationOptions::Refine::Never;
+  o.window_length = gear_damping_id::defaultWindowLength(view, gear);
+  IdentificationResult fast, reference;
+  ASSERT_NO_FATAL_FAILURE(refineBoth(t, gear, o, &fast, &reference));
+  int varied = 0;
+  for (size_t i = 0; i < fast.segments.size(); ++i) {
+    const SegmentEstimate& a = fast.segments[i];
+    const SegmentEstimate& b = reference.segments[i];
+    ASSERT_NO_FATAL_FAILURE(expectSameC(a, b, label));
+    expectSame(a.C_weighted, b.C_weighted, label + " C_weighted");
+    ASSERT_EQ(std::isfinite(a.variation_z), std::isfinite(b.variation_z)) << label;
+    if (std::isfinite(b.variation_z)) expectSame(a.variation_z, b.variation_z, label + " z");
+    varied += std::abs(b.variation_z) > gear_damping_id::QualityLimits::kVariationZ;
+    ASSERT_EQ(a.stiffness_curve.size(), b.stiffness_curve.size()) << label;
+    for (size_t k = 0; k < a.stiffness_curve.size(); ++k) {
+      expectSame(a.stiffness_curve[k], b.stiffness_curve[k], label + " curve");
+      expectSame(a.stiffness_curve_std[k], b.stiffness_curve_std[k], label + " curve_std");
+    }
+    if (f == Formulation::Greybox && shape.empty()) {
+      expectSame(a.k_min, b.k_min, label + " k_min");
+      expectSame(a.k_max, b.k_max, label + " k_max");
+      expectSame(a.k_min_std, b.k_min_std, label + " k_min_std");
+      expectSame(a.k_max_std, b.k_max_std, label + " k_max_std");
+    }
+  }
+  expectSame(fast.noise_std, reference.noise_std, label + " noise_std");
+  std::cout << "[ measured ] " << label << ": " << varied << " of " << fast.segments.size()
+            << " segments with |variation_z| > " << gear_damping_id::QualityLimits::kVariationZ
+            << " (the enlarged fit iterated)\n";
+}
+
+void squareMesh(SimConfig*) {}
+void trapezoidMesh(SimConfig* c) {
+  c->mesh.model = gear_sim::StiffnessModel::Trapezoid;
+  c->mesh.transition_fraction = 0.12;
+}
+void fourierMesh(SimConfig* c) {
+  c->mesh.model = gear_sim::StiffnessModel::Fourier;
+  c->mesh.k_mean = 3.0e8;
+  c->mesh.fourier_cos = {6.0e7, -1.5e7};
+  c->mesh.fourier_sin = {2.0e7, 1.0e7};
+}
+
+TEST(RefineFastPath, SameAsTheReferenceOnEveryStiffnessModelWithTheVariationTest) {
+  compareModel("square known", squareMesh, Formulation::Known, "", 31);
+  compareModel("trapezoid known", trapezoidMesh, Formulation::Known, "", 32);
+  compareModel("fourier known", fourierMesh, Formulation::Known, "", 33);
+  compareModel("square greybox", squareMesh, Formulation::Greybox, "", 34);
+  compareModel("fourier greybox fourier:2", fourierMesh, Formulation::Greybox, "fourier:2", 35);
 }
 
 TEST(RefineFastPath, SameEstimatesAsTheGenericRk4) {

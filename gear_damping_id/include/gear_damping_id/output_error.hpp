@@ -25,10 +25,13 @@
 // segment-local unknowns eliminated (Schur complement) for shared damping. Jacobian from the
 // forward sensitivity equations (z_p = dyhat/dp):  z_p'' + C z_p' + K z_p = -(dC/dp) yhat' -
 // (dK/dp) yhat, integrated with eq. (4) by classical RK4 on the sample grid with every step split
-// at the switch instants and kinks. Where K is held over a whole sample interval and C is
-// constant (piecewise/constant damping, one step per sample), the RK4 step is an affine map of
-// the state and the three stage torques, formed once per held K value and applied in its block
-// structure (same numbers to rounding; the generic RK4 is kept as the reference path).
+// at the switch instants and kinks. The look-ups that do not depend on the unknowns (stage
+// torques, held K values, smooth K stage values) are tabled once per segment. Where K is held
+// over a whole sample interval and C is constant (piecewise/constant damping, one step per
+// sample), the RK4 step is an affine map of the state and the three stage torques, formed once
+// per held K value and applied in its block structure; with a smooth K or a load-varying C the
+// state's RK4 step is taken first and each sensitivity pair stepped from its stage values (same
+// numbers to rounding; the generic RK4 with per-stage look-ups is kept as the reference path).
 // Standard errors: sigma^2 (J^T J)^-1 of the prewhitened problem, sigma^2 = prewhitened RSS /
 // (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones).
 #pragma once

@@ -73,6 +73,27 @@ struct Params {
   }
 };
 
+constexpr int kMaxMaps = 4;  // distinct held K values per segment (square: 2)
+
+// The parameter-independent look-ups of one damping segment [b, e) (SegmentSimulator::
+// buildTable), made once and reused by every evaluation of the segment: the stage torques
+// (sample values and interval midpoints) and, per sample interval, either the key of its held
+// stiffness (known K, greybox mesh state) or kSplit for an interval stepped in parts by the
+// generic path (a switch, kink or jump inside it, or more than kMaxMaps held values). A smooth
+// stiffness keeps its three stage values per interval.
+struct SegmentTable {
+  static constexpr unsigned char kSplit = 255;
+  Eigen::Index b = 0, e = 0;
+  bool smooth = false;
+  int n_keys = 0;
+  double key_K[kMaxMaps] = {0}, key_sv[kMaxMaps] = {0};
+  std::vector<double> T;           // per sample: the torque T1 [N*m]
+  std::vector<double> T_mid;       // per interval: T1 at its midpoint
+  std::vector<unsigned char> key;  // per interval
+  std::vector<double> K3;          // smooth: K at u = 0, 0.5, 1 of every interval
+  size_t intervals() const { return key.size(); }
+};
+
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
@@ -88,13 +109,8 @@ class SegmentSimulator {
   // state z = (y, v, z_1, z_1', ..., z_m, z_m').
   template <class Visit>
   void run(Index b, Index e, const Params& p, int substeps, Visit&& visit) const {
-    const int D = 2 + 2 * p.m;
     double z[kMaxState] = {0};
-    z[0] = p.y0, z[1] = p.v0;
-    for (int k = 0; k < p.m; ++k) {
-      if (p.role[k] == Role::Y0) z[2 + 2 * k] = 1.0;
-      if (p.role[k] == Role::V0) z[3 + 2 * k] = 1.0;
-    }
+    const int D = initialState(p, z);
     visit(b, z);
     const double h = fm_.signal().dt;
     const bool grey = fm_.formulation() == Formulation::Greybox;
@@ -109,8 +125,7 @@ class SegmentSimulator {
       runShape(b, e, p, substeps, visit, z, D);
       return;
     }
-    bool fast = fast_ && !smooth && substeps == 1 && ste_ == nullptr;
-    for (int k = 0; k < p.m; ++k) fast = fast && p.role[k] != Role::Theta1;
+    const bool fast = fast_ && !smooth && substeps == 1 && ste_ == nullptr && constantC(p);
     AffineMap maps[kMaxMaps];
     int n_maps = 0;
     for (Index j = b; j + 1 < e; ++j) {
@@ -132,44 +147,93 @@ class SegmentSimulator {
         if (im < n_maps) {
           const double T[3] = {fm_.torque(j, 0.0, b, e), fm_.torque(j, 0.5, b, e),
                                fm_.torque(j, 1.0, b, e)};
-          maps[im].apply(z, p.m, T);
+          maps[im].apply<0>(z, p.m, T);
           visit(j + 1, z);
           continue;
         }
       }
-      const double parts[2][2] = {{0.0, th}, {th, 1.0}};
-      for (int piece = 0; piece < 2; ++piece) {
-        const double u0 = parts[piece][0], u1 = parts[piece][1];
-        if (!(u1 > u0)) continue;
-        const bool right = piece == 1;
-        double sv = 0.0, Kc = 0.0;
-        if (grey) {
-          sv = fm_.meshState(j, right);
-          Kc = p.K0 + p.dK * sv;
-        } else if (!smooth) {
-          Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+      genericInterval(j, th, b, e, p, substeps, smooth, z, D);
+      visit(j + 1, z);
+    }
+  }
+
+  // Whether runTable applies: the fast path, one step per sample, no shape and no STE.
+  bool tableApplies(int substeps) const {
+    return fast_ && substeps == 1 && shape_ == nullptr && ste_ == nullptr;
+  }
+
+  // The look-ups of segment [b, e) for runTable (the same values run() looks up per step).
+  void buildTable(Index b, Index e, SegmentTable* t) const {
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const Index n = std::max<Index>(e - b, 0), intervals = std::max<Index>(n - 1, 0);
+    t->b = b, t->e = e;
+    t->smooth = fm_.smoothStiffness(b);
+    t->n_keys = 0;
+    t->T.resize(n);
+    t->T_mid.resize(intervals);
+    t->key.assign(intervals, SegmentTable::kSplit);
+    t->K3.resize(t->smooth ? 3 * intervals : 0);
+    for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+    const std::vector<QuadratureBreak>& brk = fm_.breaks();
+    auto bi = std::lower_bound(brk.begin(), brk.end(), b,
+                               [](const QuadratureBreak& x, Index v) { return x.j < v; });
+    for (Index j = b; j + 1 < e; ++j) {
+      const Index i = j - b;
+      t->T_mid[i] = fm_.torque(j, 0.5, b, e);
+      while (bi != brk.end() && bi->j < j) ++bi;
+      if (bi != brk.end() && bi->j == j && bi->th < 1.0) continue;  // stepped in parts
+      if (t->smooth) {
+        for (int q = 0; q < 3; ++q) t->K3[3 * i + q] = fm_.knownStiffness(j, 0.5 * q, false, b, e);
+        t->key[i] = 0;
+        continue;
+      }
+      const double sv = grey ? fm_.meshState(j, false) : 0.0;
+      const double K = grey ? 0.0 : fm_.knownStiffness(j, 0.0, false, b, e);
+      int k = 0;
+      while (k < t->n_keys && !(t->key_K[k] == K && t->key_sv[k] == sv)) ++k;
+      if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
+      if (k < t->n_keys) t->key[i] = static_cast<unsigned char>(k);
+    }
+  }
+
+  // run() from the segment's table (same numbers): M the number of unknowns when fixed at
+  // compile time (0: p.m). Held stiffness and constant C: the affine maps; otherwise the RK4
+  // step with the tabled stage values; split intervals by the generic path.
+  template <int M, class Visit>
+  void runTable(const SegmentTable& t, const Params& p, Visit&& visit) const {
+    const int m = M > 0 ? M : p.m;
+    double z[kMaxState] = {0};
+    const int D = initialState(p, z);
+    visit(t.b, z);
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const bool maps_ok = !t.smooth && constantC(p);
+    AffineMap maps[kMaxMaps];
+    auto heldK = [&](int k) { return grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k]; };
+    if (maps_ok) {
+      for (int k = 0; k < t.n_keys; ++k) maps[k] = affineMap(D, p, heldK(k), t.key_sv[k], h);
+    }
+    const LinearRoles lr = linearRoles(p);
+    const double* T = t.T.data();
+    for (Index j = t.b; j + 1 < t.e; ++j) {
+      const Index i = j - t.b;
+      const unsigned char key = t.key[i];
+      if (key == SegmentTable::kSplit) {
+        genericInterval(j, fm_.heldSplit(j), t.b, t.e, p, 1, t.smooth, z, D);
+      } else if (maps_ok) {
+        const double Ts[3] = {T[i], t.T_mid[i], T[i + 1]};
+        maps[key].apply<M>(z, m, Ts);
+      } else {
+        Stage st;
+        st.T[0] = T[i], st.T[1] = t.T_mid[i], st.T[2] = T[i + 1];
+        double sv = 0.0;
+        if (t.smooth) {
+          for (int q = 0; q < 3; ++q) st.K[q] = t.K3[3 * i + q];
+        } else {
+          if (grey) sv = t.key_sv[key];
+          st.K[0] = st.K[1] = st.K[2] = heldK(key);
         }
-        const double du = (u1 - u0) / substeps;
-        for (int q = 0; q < substeps; ++q) {
-          const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
-          const double um = 0.5 * (ua + ub);
-          Stage st;
-          st.T[0] = fm_.torque(j, ua, b, e);
-          st.T[1] = fm_.torque(j, um, b, e);
-          st.T[2] = fm_.torque(j, ub, b, e);
-          if (ste_ != nullptr) {
-            const double u3[3] = {ua, um, ub};
-            for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
-          }
-          if (smooth) {
-            st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
-            st.K[1] = fm_.knownStiffness(j, um, right, b, e);
-            st.K[2] = fm_.knownStiffness(j, ub, right, b, e);
-          } else {
-            st.K[0] = st.K[1] = st.K[2] = Kc;
-          }
-          step(z, D, p, st, sv, h * (ub - ua));
-        }
+        stepLinear<M>(z, m, p, lr, st, sv, h);
       }
       visit(j + 1, z);
     }
@@ -244,13 +308,78 @@ class SegmentSimulator {
       visit(j + 1, z);
     }
   }
-  static constexpr int kMaxMaps = 4;  // distinct held K values cached per run (square: 2)
+  // The initial state (p.y0, p.v0) and the unit sensitivities of the initial-state unknowns
+  // into z; returns its dimension.
+  static int initialState(const Params& p, double* z) {
+    const int D = 2 + 2 * p.m;
+    std::fill(z, z + D, 0.0);
+    z[0] = p.y0, z[1] = p.v0;
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Y0) z[2 + 2 * k] = 1.0;
+      if (p.role[k] == Role::V0) z[3 + 2 * k] = 1.0;
+    }
+    return D;
+  }
+
+  // Whether C is constant over the segment (no load-law unknown).
+  static bool constantC(const Params& p) {
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Theta1) return false;
+    }
+    return true;
+  }
+
+  // Interval j by the generic RK4, in two parts at its split fraction th (1: one part), each by
+  // `substeps` steps with the coefficients looked up at the stage times.
+  void genericInterval(Index j, double th, Index b, Index e, const Params& p, int substeps,
+                       bool smooth, double* z, int D) const {
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const double parts[2][2] = {{0.0, th}, {th, 1.0}};
+    for (int piece = 0; piece < 2; ++piece) {
+      const double u0 = parts[piece][0], u1 = parts[piece][1];
+      if (!(u1 > u0)) continue;
+      const bool right = piece == 1;
+      double sv = 0.0, Kc = 0.0;
+      if (grey) {
+        sv = fm_.meshState(j, right);
+        Kc = p.K0 + p.dK * sv;
+      } else if (!smooth) {
+        Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+      }
+      const double du = (u1 - u0) / substeps;
+      for (int q = 0; q < substeps; ++q) {
+        const double ua = u0 + q * du, ub = q + 1 == substeps ? u1 : ua + du;
+        const double um = 0.5 * (ua + ub);
+        Stage st;
+        st.T[0] = fm_.torque(j, ua, b, e);
+        st.T[1] = fm_.torque(j, um, b, e);
+        st.T[2] = fm_.torque(j, ub, b, e);
+        if (ste_ != nullptr) {
+          const double u3[3] = {ua, um, ub};
+          for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
+        }
+        if (smooth) {
+          st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
+          st.K[1] = fm_.knownStiffness(j, um, right, b, e);
+          st.K[2] = fm_.knownStiffness(j, ub, right, b, e);
+        } else {
+          st.K[0] = st.K[1] = st.K[2] = Kc;
+        }
+        step(z, D, p, st, sv, h * (ub - ua));
+      }
+    }
+  }
+
   struct AffineMap {
     double K = 0, sv = 0;
     double R[2][2], G[2][3];
     double S[kMaxParams][2][2], H[kMaxParams][2][3];
     bool coupled[kMaxParams];
-    void apply(double* z, int m, const double* T) const {
+    // M: the number of unknowns when fixed at compile time (0: m).
+    template <int M>
+    void apply(double* z, int m_dyn, const double* T) const {
+      const int m = M > 0 ? M : m_dyn;
       const double y = z[0], v = z[1];
       z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
       z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
@@ -299,7 +428,8 @@ class SegmentSimulator {
   }
 
   // One RK4 step of length hs with the coefficients at the stage times.
-  void step(double* z, int D, const Params& p, const Stage& st, double sv, double hs) const {
+  void step(double* z, int D_in, const Params& p, const Stage& st, double sv, double hs) const {
+    const int D = std::max(D_in, 2);  // the state (y, v) always
     double k1[kMaxState], k2[kMaxState], k3[kMaxState], k4[kMaxState], tmp[kMaxState];
     deriv(z, D, p, st.K[0], sv, st.T[0], st.B[0], st.E[0], st.dE[0], k1);
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + 0.5 * hs * k1[i];
@@ -309,6 +439,66 @@ class SegmentSimulator {
     for (int i = 0; i < D; ++i) tmp[i] = z[i] + hs * k3[i];
     deriv(tmp, D, p, st.K[2], sv, st.T[2], st.B[2], st.E[2], st.dE[2], k4);
     for (int i = 0; i < D; ++i) z[i] += hs / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+  }
+
+  // The sensitivities' forcing without an STE or shape basis, -(cv v + cy y) at a stage, as
+  // weights of the roles: cv = v0 + v1 (T1 - t_ref) (theta0, theta1), cy = y0 + y1 sv (K0, dK).
+  struct LinearRoles {
+    double v0[kMaxParams], v1[kMaxParams], y0[kMaxParams], y1[kMaxParams];
+  };
+  static LinearRoles linearRoles(const Params& p) {
+    LinearRoles lr;
+    for (int k = 0; k < p.m; ++k) {
+      lr.v0[k] = p.role[k] == Role::Theta0 ? 1.0 : 0.0;
+      lr.v1[k] = p.role[k] == Role::Theta1 ? 1.0 : 0.0;
+      lr.y0[k] = p.role[k] == Role::K0 ? 1.0 : 0.0;
+      lr.y1[k] = p.role[k] == Role::DK ? 1.0 : 0.0;
+    }
+    return lr;
+  }
+
+  // step() of the state and sensitivities without an STE or shape basis (the same arithmetic
+  // per element): the state's RK4 first, keeping its four stage values, then each sensitivity
+  // pair's RK4 with the forcing -(cv v_s + cy y_s) of those stages (weights lr). M: the number
+  // of unknowns when fixed at compile time (0: m_dyn).
+  template <int M>
+  void stepLinear(double* z, int m_dyn, const Params& p, const LinearRoles& lr, const Stage& st,
+                  double sv, double hs) const {
+    const int m = M > 0 ? M : m_dyn;
+    const double K[4] = {st.K[0], st.K[1], st.K[1], st.K[2]};
+    const double T[4] = {st.T[0], st.T[1], st.T[1], st.T[2]};
+    const double ff = fm_.gear().force_factor;
+    double dT[4], C[4], F[4], ys[4], vs[4];
+    for (int q = 0; q < 4; ++q) {
+      dT[q] = T[q] - p.t_ref;
+      C[q] = p.theta0 + p.theta1 * dT[q];
+      F[q] = ff * T[q];
+    }
+    rk4Pair(z, F, C, K, hs, ys, vs);
+    for (int k = 0; k < m; ++k) {
+      const double cy = lr.y0[k] + lr.y1[k] * sv;
+      double f[4];
+      for (int q = 0; q < 4; ++q) f[q] = -((lr.v0[k] + lr.v1[k] * dT[q]) * vs[q] + cy * ys[q]);
+      rk4Pair(z + 2 + 2 * k, f, C, K, hs, nullptr, nullptr);
+    }
+  }
+
+  // RK4 of one pair (a, b)' = (b, f_q - C_q b - K_q a) with the stage values f, C, K (stages 2
+  // and 3 at the midpoint); the four stage values of (a, b) into ys, vs (null: not kept).
+  static void rk4Pair(double* w, const double* f, const double* C, const double* K, double hs,
+                      double* ys, double* vs) {
+    const double h2 = 0.5 * hs, a = w[0], b = w[1];
+    double ka[4], kb[4], ta = a, tb = b;
+    for (int q = 0; q < 4; ++q) {
+      if (ys != nullptr) ys[q] = ta, vs[q] = tb;
+      ka[q] = tb;
+      kb[q] = f[q] - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = a + hq * ka[q], tb = b + hq * kb[q];
+    }
+    const double h6 = hs / 6.0;
+    w[0] = a + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    w[1] = b + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
   }
 
   // y'' = F - C (y' - e'_r) - K (y - e): e the STE (0 without), e'_r its rate in the relative
@@ -594,33 +784,76 @@ class Refinement {
     return evaluateAt(i, makeParams(x, g), nm);
   }
 
-  // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
-  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
-    const int m = p.m;
-    Normal out;
-    out.N = Eigen::MatrixXd::Zero(m, m);
-    out.rhs = Eigen::VectorXd::Zero(m);
-    double Nacc[kMaxParams][kMaxParams] = {{0}};
-    double racc[kMaxParams] = {0};
-    double hist[kMaxArOrder][kMaxParams + 1] = {{0}};  // previous raw [r, J] rows, newest first
-    double rhist[kMaxArOrder] = {0};                   // previous raw residuals, newest first
-    double cost = 0.0, raw = 0.0, wlag = 0.0, wprev = 0.0;
-    long count = 0, rows = 0;
-    const int P = nm.p;
-    sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, [&](Index n, const double* z) {
-      double cur[kMaxParams + 1] = {0};
-      cur[0] = s_.dte[n] - z[0];
-      for (int a = 0; a < m; ++a) cur[a + 1] = z[2 + 2 * a];
-      const double r = cur[0];
-      raw += r * r;
-      const int lags = static_cast<int>(std::min<long>(count, kMaxArOrder));
-      for (int k = 1; k <= lags; ++k) out.acov[k] += r * rhist[k - 1];
-      if (count >= P) {
-        double w[kMaxParams + 1] = {0};
-        for (int c = 0; c <= m; ++c) {
-          double v = cur[c];
-          for (int k = 0; k < P; ++k) v += nm.a[k] * hist[k][c];
-          w[c] = v;
+  // Accumulates the normal equations (Normal) of the prewhitened residuals: add() stores each
+  // sample's raw row [r, J] in a block, flush() sums a block with the sums in local variables
+  // (the AR filter reads the kMaxArOrder rows before the block, kept at its front). MT: the
+  // number of unknowns when fixed at compile time (0: m). The sums run in sample order.
+  template <int MT>
+  class Accumulator {
+   public:
+    Accumulator(int m, const NoiseModel& nm, const double* y)
+        : m_(MT > 0 ? MT : m), nm_(nm), y_(y), buf_(static_cast<size_t>(kRows * (m_ + 1))) {
+      std::fill(N_, N_ + m_ * m_, 0.0);
+      std::fill(r_, r_ + m_, 0.0);
+    }
+    void add(Index n, const double* z) {
+      const int m = MT > 0 ? MT : m_;
+      double* row = buf_.data() + (kMaxArOrder + fill_) * (m + 1);
+      row[0] = y_[n] - z[0];
+      for (int a = 0; a < m; ++a) row[a + 1] = z[2 + 2 * a];
+      if (++fill_ == kBlock) flush();
+    }
+    Normal finish() {
+      flush();
+      const int m = m_;
+      Normal out;
+      out.N.resize(m, m);
+      out.rhs.resize(m);
+      for (int a = 0; a < m; ++a) {
+        out.rhs[a] = r_[a];
+        for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = N_[a * m + b];
+      }
+      out.cost = cost_;
+      out.rows = rows_;
+      out.raw = raw_;
+      std::copy(acov_, acov_ + kMaxArOrder + 1, out.acov);
+      out.acov[0] = raw_;
+      out.samples = count_;
+      out.wlag1 = wlag_;
+      return out;
+    }
+
+   private:
+    static constexpr long kBlock = 256;                  // rows per block
+    static constexpr long kRows = kMaxArOrder + kBlock;  // with the previous rows
+    static constexpr int kCap = MT > 0 ? MT : kMaxParams;
+
+    void flush() {
+      const int m = MT > 0 ? MT : m_, S = m + 1, P = nm_.p;
+      double N[kCap * kCap], R[kCap], acov[kMaxArOrder + 1];
+      std::copy(N_, N_ + m * m, N);
+      std::copy(r_, r_ + m, R);
+      std::copy(acov_, acov_ + kMaxArOrder + 1, acov);
+      double cost = cost_, raw = raw_, wlag = wlag_, wprev = wprev_;
+      long rows = rows_, n = count_;
+      const double* base = buf_.data() + kMaxArOrder * S;
+      for (long i = 0; i < fill_; ++i, ++n) {
+        const double* cur = base + i * S;
+        const double r = cur[0];
+        raw += r * r;
+        if (n >= kMaxArOrder) {  // every lag (the loop unrolled)
+          for (int k = 1; k <= kMaxArOrder; ++k) acov[k] += r * cur[-k * S];
+        } else {
+          for (int k = 1; k <= n; ++k) acov[k] += r * cur[-k * S];
+        }
+        if (n < P) continue;
+        double w[kCap + 1];
+        w[0] = r;
+        for (int c = 1; c <= m; ++c) w[c] = cur[c];
+        for (int k = 0; k < P; ++k) {  // w = cur + a_1 row_{n-1} + ... in this order
+          const double ak = nm_.a[k];
+          const double* prev = cur - (k + 1) * S;
+          for (int c = 0; c <= m; ++c) w[c] += ak * prev[c];
         }
         cost += w[0] * w[0];
         if (rows > 0) wlag += w[0] * wprev;
@@ -628,31 +861,79 @@ class Refinement {
         ++rows;
         for (int a = 0; a < m; ++a) {
           const double ja = w[a + 1];
-          racc[a] += ja * w[0];
-          for (int b = 0; b <= a; ++b) Nacc[a][b] += ja * w[b + 1];
+          R[a] += ja * w[0];
+          for (int b = 0; b <= a; ++b) N[a * m + b] += ja * w[b + 1];
         }
       }
-      for (int k = std::min(P, kMaxArOrder) - 1; k > 0; --k) {
-        for (int c = 0; c <= m; ++c) hist[k][c] = hist[k - 1][c];
-      }
-      if (P > 0) {
-        for (int c = 0; c <= m; ++c) hist[0][c] = cur[c];
-      }
-      for (int k = kMaxArOrder - 1; k > 0; --k) rhist[k] = rhist[k - 1];
-      rhist[0] = r;
-      ++count;
-    });
-    for (int a = 0; a < m; ++a) {
-      out.rhs[a] = racc[a];
-      for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = Nacc[a][b];
+      std::copy(N, N + m * m, N_);
+      std::copy(R, R + m, r_);
+      std::copy(acov, acov + kMaxArOrder + 1, acov_);
+      cost_ = cost, raw_ = raw, wlag_ = wlag, wprev_ = wprev, rows_ = rows, count_ = n;
+      // The block's last kMaxArOrder rows (with the earlier ones when it is shorter) to the front.
+      std::copy(buf_.begin() + fill_ * S, buf_.begin() + (fill_ + kMaxArOrder) * S, buf_.begin());
+      fill_ = 0;
     }
-    out.cost = cost;
-    out.rows = rows;
-    out.raw = raw;
-    out.acov[0] = raw;
-    out.samples = count;
-    out.wlag1 = wlag;
-    return out;
+
+    const int m_;
+    const NoiseModel& nm_;
+    const double* y_;
+    std::vector<double> buf_;  // kRows rows of m + 1: the previous rows, then the block
+    long fill_ = 0;            // rows in the block
+    double N_[kCap * kCap], r_[kCap];
+    double acov_[kMaxArOrder + 1] = {0};
+    double cost_ = 0, raw_ = 0, wlag_ = 0, wprev_ = 0;
+    long count_ = 0, rows_ = 0;
+  };
+
+  // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
+  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
+    switch (p.m) {  // the common problem sizes unrolled
+      case 3:
+        return evaluateWith<3>(i, p, nm);
+      case 4:
+        return evaluateWith<4>(i, p, nm);
+      case 5:
+        return evaluateWith<5>(i, p, nm);
+      case 6:
+        return evaluateWith<6>(i, p, nm);
+      default:
+        return evaluateWith<0>(i, p, nm);
+    }
+  }
+
+  template <int MT>
+  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm) const {
+    Accumulator<MT> acc(p.m, nm, s_.dte);
+    auto visit = [&acc](Index n, const double* z) { acc.add(n, z); };
+    if (sim_.tableApplies(substeps_))
+      sim_.runTable<MT>(tableOf(i), p, visit);
+    else
+      sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, visit);
+    return acc.finish();
+  }
+
+  // Segment i's look-ups (SegmentSimulator::buildTable), cached while the cached intervals stay
+  // within kTableBudget. When full: the piecewise model's problems (one segment each, in order)
+  // empty the cache; a joint problem over all segments keeps the tables it has and builds the
+  // others into a scratch table per evaluation (as a segment larger than the budget).
+  const SegmentTable& tableOf(size_t i) const {
+    constexpr size_t kTableBudget = size_t{1} << 20;  // intervals: ~18 MB held, ~43 MB smooth
+    if (tables_.size() != nseg_) tables_.assign(nseg_, SegmentTable{});
+    SegmentTable& t = tables_[i];
+    if (t.e > t.b) return t;
+    const size_t n = static_cast<size_t>(std::max<Index>(ranges_[i].second - ranges_[i].first, 0));
+    const bool single = piecewise_ && ns_ == 0;
+    if (n > kTableBudget || (cached_ + n > kTableBudget && !single)) {
+      sim_.buildTable(ranges_[i].first, ranges_[i].second, &scratch_);
+      return scratch_;
+    }
+    if (cached_ + n > kTableBudget) {
+      tables_.assign(nseg_, SegmentTable{});
+      cached_ = 0;
+    }
+    sim_.buildTable(ranges_[i].first, ranges_[i].second, &t);
+    cached_ += n;
+    return t;
   }
 
   // Gauss-Newton step of a set of segments: locals eliminated per segment (Schur complement).
@@ -662,7 +943,8 @@ class Refinement {
     const int nl = nl_, ns = ns_;
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(ns, ns);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(ns);
-    std::vector<Eigen::MatrixXd> Nll_inv(nseg_);
+    std::vector<Eigen::MatrixXd>& Nll_inv = nll_inv_scratch_;  // per segment of the set
+    if (Nll_inv.size() != nseg_) Nll_inv.resize(nseg_);
     for (size_t i : set) {
       const Normal& nm = normals[i];
       Nll_inv[i] = nm.N.topLeftCorner(nl, nl).ldlt().solve(Eigen::MatrixXd::Identity(nl, nl));
@@ -716,7 +998,8 @@ class Refinement {
     if (!*finite) return 0;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
-      Locals dl(nseg_);
+      // Scratch sized for every segment, used on the set's (no O(segments) work per step).
+      Locals& dl = dl_scratch_;
       Eigen::VectorXd dg;
       solveStep(set, normals_, &dl, &dg, nullptr, nullptr);
       if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
@@ -726,9 +1009,9 @@ class Refinement {
       double step = 1.0;
       bool accepted = false;
       for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
-        Locals x1(nseg_);
+        Locals& x1 = x1_scratch_;
         const Eigen::VectorXd g1 = sh_ + step * dg;
-        std::vector<Normal> n1(nseg_);
+        std::vector<Normal>& n1 = n1_scratch_;
         double c1 = 0.0;
         for (size_t i : set) {
           x1[i] = loc_[i] + step * dl[i];
@@ -778,6 +1061,9 @@ class Refinement {
       return false;
     }
     normals_.assign(nseg_, Normal{});
+    dl_scratch_.assign(nseg_, Eigen::VectorXd());
+    x1_scratch_.assign(nseg_, Eigen::VectorXd());
+    n1_scratch_.assign(nseg_, Normal{});
     converged_.assign(nseg_, 1);
     noise_of_.assign(nseg_, NoiseModel{});
     for (const auto& set : problems_) {
@@ -1045,6 +1331,13 @@ class Refinement {
   std::vector<Eigen::MatrixXd> Nll_inv_, Ainv_of_;
   double sigma2_pooled_ = 0.0;
   bool all_converged_ = true;
+  // Per-segment scratch of solveStep and gaussNewton (sized once).
+  mutable std::vector<Eigen::MatrixXd> nll_inv_scratch_;
+  Locals dl_scratch_, x1_scratch_;
+  std::vector<Normal> n1_scratch_;
+  mutable std::vector<SegmentTable> tables_;  // tableOf's cache
+  mutable SegmentTable scratch_;
+  mutable size_t cached_ = 0;
 };
 
 }  // namespace
@@ -1103,16 +1396,14 @@ void fitMetrics(const Eigen::VectorXd& y, const Eigen::VectorXd& yh, double* nrm
   *fit = 100.0 * (1.0 - *nrmse);
 }
 
-bool modeledResponse(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
-                     ModeledResponse* out, std::string* error) {
-  if (r.segments.empty()) {
-    *error = "modeled response: no segments";
-    return false;
-  }
-  const double me = gear.equivalent_mass;
-  // Segment lookup with a fallback for non-identifiable segments (the previous identifiable
-  // one's values, else the next one's).
-  std::vector<SegmentEstimate> seg = r.segments;
+namespace {
+
+// The segments of `r` for the re-simulation: a non-identifiable segment takes the previous
+// identifiable one's values (else the next one's), keeping its own times. False when none is
+// identifiable.
+bool segmentsWithFallbacks(const IdentificationResult& r, std::vector<SegmentEstimate>* out) {
+  std::vector<SegmentEstimate>& seg = *out;
+  seg = r.segments;
   int last = -1;
   for (size_t i = 0; i < seg.size(); ++i) {
     if (seg[i].identifiable) {
@@ -1123,10 +1414,7 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       seg[i].t_start = t0, seg[i].t_end = t1;
     }
   }
-  if (last < 0) {
-    *error = "modeled response: no identifiable segment";
-    return false;
-  }
+  if (last < 0) return false;
   for (int i = static_cast<int>(seg.size()) - 1, next = -1; i >= 0; --i) {
     if (r.segments[i].identifiable)
       next = i;
@@ -1135,6 +1423,164 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       seg[i] = seg[next];
       seg[i].t_start = t0, seg[i].t_end = t1;
     }
+  }
+  return true;
+}
+
+// The re-simulation's breakpoints over samples [begin, end): the breaks of the stiffness/mesh-
+// state channel (switches, jumps, kinks), the table nodes of a greybox table shape (kinks) and
+// the segment boundaries; sorted.
+std::vector<double> responseBreakpoints(const SignalView& s, const ForwardModel& fm, bool shape,
+                                        const IdentificationResult& r,
+                                        const std::vector<SegmentEstimate>& seg, Index begin,
+                                        Index end) {
+  std::vector<double> bps;
+  for (const QuadratureBreak& b : fm.breaks()) {
+    if (b.j >= begin && b.j + 1 < end && b.th < 1.0) bps.push_back(s.time(b.j) + b.th * s.dt);
+  }
+  if (shape && r.stiffness_shape.kind == StiffnessShape::Kind::Table) {
+    const double nodes = r.stiffness_shape.n;
+    for (Index j = begin; j + 1 < end; ++j) {
+      const double pa = s.mesh_phase[j], pb = s.mesh_phase[j + 1];
+      if (!(pb > pa)) continue;
+      const double x = ((std::floor(pa * nodes) + 1.0) / nodes - pa) / (pb - pa);
+      if (x > 0.0 && x < 1.0) bps.push_back(s.time(j) + x * s.dt);
+    }
+  }
+  for (const auto& e : seg) bps.push_back(e.t_start);
+  std::sort(bps.begin(), bps.end());
+  return bps;
+}
+
+// C(t), K(t), F(t) of the modeled response from the identified segments and the forward model:
+// the generic driver's look-up by time (generic) and the affine fast path's by interval and
+// stage (stage, intervals in ascending order).
+class ResponseCoefficients {
+ public:
+  ResponseCoefficients(const SignalView& s, const GearConstants& gear,
+                       const IdentificationResult& r, const std::vector<SegmentEstimate>& seg,
+                       const ForwardModel::Ranges& ranges, const ForwardModel& fm, int substeps,
+                       Index begin)
+      : s_(s),
+        gear_(gear),
+        r_(r),
+        seg_(seg),
+        ranges_(ranges),
+        fm_(fm),
+        me_(gear.equivalent_mass),
+        inv_me_(1.0 / me_),
+        load_(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable),
+        th0_(load_ ? r.load_law->c0 / me_ : 0.0),
+        th1_(load_ ? r.load_law->c1 / me_ : 0.0),
+        shape_(r.formulation == Formulation::Greybox &&
+               r.stiffness_shape.kind != StiffnessShape::Kind::Square && s.mesh_phase != nullptr),
+        begin_(begin),
+        u_first_mid_(0.5 / substeps) {
+    held_.resize(seg.size());
+    for (size_t i = 0; i < seg.size(); ++i) held_[i] = !fm.smoothStiffness(ranges[i].first);
+    u_stage_.resize(static_cast<size_t>(2 * substeps + 1));
+    for (int k = 0; k < 2 * substeps; ++k) u_stage_[static_cast<size_t>(k)] = k * (0.5 / substeps);
+    u_stage_.back() = 1.0;
+  }
+
+  bool shape() const { return shape_; }
+
+  // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
+  gear_sim::SdofCoefficients generic(double t, double t_ref) const {
+    const double uref = (t_ref - s_.t0) / s_.dt;
+    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s_.n - 2);
+    const double u = std::clamp((t - s_.t0) / s_.dt - static_cast<double>(j), 0.0, 1.0);
+    const bool right = uref - static_cast<double>(j) >= fm_.heldSplit(j);
+    return at(j, u, right, segmentAt(t_ref));
+  }
+
+  // The fast path's look-up of an interval without a breakpoint inside, at the exact stage
+  // coordinates u = k / (2 substeps) (the midpoint and the ends take the precomputed stencils):
+  // cursors over the segments and the breaks instead of a search per look-up.
+  gear_sim::SdofCoefficients stage(Index i, int k) {
+    const Index j = begin_ + i;
+    const std::vector<QuadratureBreak>& brk = fm_.breaks();
+    while (si_ + 1 < seg_.size() && ranges_[si_ + 1].first <= j) ++si_;
+    while (bi_ < brk.size() && brk[bi_].j < j) ++bi_;
+    const double split = bi_ < brk.size() && brk[bi_].j == j ? brk[bi_].th : 1.0;
+    return at(j, u_stage_[static_cast<size_t>(k)], u_first_mid_ >= split, si_);
+  }
+
+ private:
+  size_t segmentAt(double t) const {
+    size_t lo = 0, hi = seg_.size();
+    while (hi - lo > 1) {
+      const size_t mid = (lo + hi) / 2;
+      if (seg_[mid].t_start <= t)
+        lo = mid;
+      else
+        hi = mid;
+    }
+    return lo;
+  }
+
+  // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
+  // after the interval's break.
+  gear_sim::SdofCoefficients at(Index j, double u, bool right, size_t si) const {
+    const SegmentEstimate& e = seg_[si];
+    const Index lo = ranges_[si].first, hi = ranges_[si].second;
+    const double T1 = fm_.torque(j, u, lo, hi);
+    gear_sim::SdofCoefficients c;
+    c.C = load_ ? th0_ + th1_ * T1 : e.C;
+    c.F = gear_.force_factor * T1;
+    switch (r_.formulation) {
+      case Formulation::Known:
+        // A held channel's value directly (knownStiffness's first case, without its search of
+        // the segment's smoothness per look-up).
+        c.K = held_[si] ? (right && j + 1 < s_.n ? s_.stiffness[j + 1] : s_.stiffness[j]) * inv_me_
+                        : fm_.knownStiffness(j, u, right, lo, hi);
+        break;
+      case Formulation::Greybox:
+        if (shape_ && !e.stiffness_curve.empty()) {
+          const double phase = fm_.cubic(s_.mesh_phase, j, u, lo, hi);
+          c.K = shapeStiffness(r_.stiffness_shape, e.stiffness_curve, phase) / me_;
+        } else {
+          c.K = (e.k_min + (e.k_max - e.k_min) * fm_.meshState(j, right)) / me_;
+        }
+        break;
+      case Formulation::Paper:
+      case Formulation::Legacy:
+        c.K = e.k_min / me_;
+        c.F = std::isfinite(e.forcing) ? e.forcing : 0.0;
+        break;
+    }
+    return c;
+  }
+
+  const SignalView& s_;
+  const GearConstants& gear_;
+  const IdentificationResult& r_;
+  const std::vector<SegmentEstimate>& seg_;
+  const ForwardModel::Ranges& ranges_;
+  const ForwardModel& fm_;
+  const double me_, inv_me_;
+  const bool load_;
+  const double th0_, th1_;
+  const bool shape_;
+  const Index begin_;
+  const double u_first_mid_;
+  std::vector<char> held_;
+  std::vector<double> u_stage_;
+  size_t si_ = 0, bi_ = 0;  // stage()'s cursors
+};
+
+}  // namespace
+
+bool modeledResponse(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
+                     ModeledResponse* out, std::string* error) {
+  if (r.segments.empty()) {
+    *error = "modeled response: no segments";
+    return false;
+  }
+  std::vector<SegmentEstimate> seg;
+  if (!segmentsWithFallbacks(r, &seg)) {
+    *error = "modeled response: no identifiable segment";
+    return false;
   }
   const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
   const Index end =
@@ -1151,9 +1597,6 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
       break;
     }
   }
-  const bool load = r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable;
-  const double th0 = load ? r.load_law->c0 / me : 0.0, th1 = load ? r.load_law->c1 / me : 0.0;
-  const Formulation f = r.formulation;
   // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
   // integral method and the refinement.
   auto sampleOf = [&](double t) {
@@ -1163,105 +1606,12 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   for (const auto& e : seg) {
     ranges.emplace_back(sampleOf(e.t_start), std::max(sampleOf(e.t_end), sampleOf(e.t_start)));
   }
-  const ForwardModel fm(s, gear, f, ranges);
-  // Breakpoints: the breaks of the stiffness/mesh-state channel (switches, jumps, kinks), and
-  // segment boundaries.
-  std::vector<double> bps;
-  for (const QuadratureBreak& b : fm.breaks()) {
-    if (b.j >= begin && b.j + 1 < end && b.th < 1.0) bps.push_back(s.time(b.j) + b.th * s.dt);
-  }
-  // Greybox fourier/table shape: K from the identified curve at the mesh phase; table nodes
-  // are kinks.
-  const bool shape = f == Formulation::Greybox &&
-                     r.stiffness_shape.kind != StiffnessShape::Kind::Square &&
-                     s.mesh_phase != nullptr;
-  if (shape && r.stiffness_shape.kind == StiffnessShape::Kind::Table) {
-    const double nodes = r.stiffness_shape.n;
-    for (Index j = begin; j + 1 < end; ++j) {
-      const double pa = s.mesh_phase[j], pb = s.mesh_phase[j + 1];
-      if (!(pb > pa)) continue;
-      const double x = ((std::floor(pa * nodes) + 1.0) / nodes - pa) / (pb - pa);
-      if (x > 0.0 && x < 1.0) bps.push_back(s.time(j) + x * s.dt);
-    }
-  }
-  for (const auto& e : seg) bps.push_back(e.t_start);
-  std::sort(bps.begin(), bps.end());
-  auto segmentAt = [&](double t) -> size_t {
-    size_t lo = 0, hi = seg.size();
-    while (hi - lo > 1) {
-      const size_t mid = (lo + hi) / 2;
-      if (seg[mid].t_start <= t)
-        lo = mid;
-      else
-        hi = mid;
-    }
-    return lo;
-  };
-  std::vector<char> held(seg.size());
-  for (size_t i = 0; i < seg.size(); ++i) held[i] = !fm.smoothStiffness(ranges[i].first);
-  const double inv_me = 1.0 / me;
-  // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
-  // after the interval's break.
-  auto coeffsAt = [&](Index j, double u, bool right, size_t si) {
-    const SegmentEstimate& e = seg[si];
-    const Index lo = ranges[si].first, hi = ranges[si].second;
-    const double T1 = fm.torque(j, u, lo, hi);
-    gear_sim::SdofCoefficients c;
-    c.C = load ? th0 + th1 * T1 : e.C;
-    switch (f) {
-      case Formulation::Known:
-        // A held channel's value directly (knownStiffness's first case, without its search of
-        // the segment's smoothness per look-up).
-        c.K = held[si] ? (right && j + 1 < s.n ? s.stiffness[j + 1] : s.stiffness[j]) * inv_me
-                       : fm.knownStiffness(j, u, right, lo, hi);
-        c.F = gear.force_factor * T1;
-        break;
-      case Formulation::Greybox: {
-        if (shape && !e.stiffness_curve.empty()) {
-          const double phase = fm.cubic(s.mesh_phase, j, u, lo, hi);
-          c.K = shapeStiffness(r.stiffness_shape, e.stiffness_curve, phase) / me;
-          c.F = gear.force_factor * T1;
-          break;
-        }
-        const double sv = fm.meshState(j, right);
-        c.K = (e.k_min + (e.k_max - e.k_min) * sv) / me;
-        c.F = gear.force_factor * T1;
-        break;
-      }
-      case Formulation::Paper:
-      case Formulation::Legacy:
-        c.K = e.k_min / me;
-        c.F = std::isfinite(e.forcing) ? e.forcing : 0.0;
-        break;
-    }
-    return c;
-  };
-  // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
-  auto coeffs = [&](double t, double t_ref) {
-    const double uref = (t_ref - s.t0) / s.dt;
-    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s.n - 2);
-    const double u = std::clamp((t - s.t0) / s.dt - static_cast<double>(j), 0.0, 1.0);
-    const bool right = uref - static_cast<double>(j) >= fm.heldSplit(j);
-    return coeffsAt(j, u, right, segmentAt(t_ref));
-  };
+  const ForwardModel fm(s, gear, r.formulation, ranges);
   const int substeps = substepsFor(r.omega0, s.dt);
-  // The fast path's look-up of an interval without a breakpoint inside, at the exact stage
-  // coordinates u = k / (2 substeps) (the midpoint and the ends take the precomputed stencils):
-  // cursors over the segments and the breaks instead of a search per look-up (intervals come in
-  // ascending order).
-  size_t si = 0, bi = 0;
-  const std::vector<QuadratureBreak>& brk = fm.breaks();
-  const double u_first_mid = 0.5 / substeps;
-  std::vector<double> u_stage(static_cast<size_t>(2 * substeps + 1));
-  for (int k = 0; k < 2 * substeps; ++k) u_stage[static_cast<size_t>(k)] = k * (0.5 / substeps);
-  u_stage.back() = 1.0;
-  auto stage = [&](Index i, int k) {
-    const Index j = begin + i;
-    while (si + 1 < seg.size() && ranges[si + 1].first <= j) ++si;
-    while (bi < brk.size() && brk[bi].j < j) ++bi;
-    const double split = bi < brk.size() && brk[bi].j == j ? brk[bi].th : 1.0;
-    return coeffsAt(j, u_stage[static_cast<size_t>(k)], u_first_mid >= split, si);
-  };
+  ResponseCoefficients rc(s, gear, r, seg, ranges, fm, substeps, begin);
+  const std::vector<double> bps = responseBreakpoints(s, fm, rc.shape(), r, seg, begin, end);
+  auto coeffs = [&rc](double t, double t_ref) { return rc.generic(t, t_ref); };
+  auto stage = [&rc](Index i, int k) { return rc.stage(i, k); };
   const Index n = end - begin;
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
