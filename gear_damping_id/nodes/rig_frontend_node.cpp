@@ -110,8 +110,11 @@ class RigFrontEndNode {
           SyncPolicy(static_cast<uint32_t>(queue)), joints_sub_, wrench_sub_);
       sync_->registerCallback(&RigFrontEndNode::onSynced, this);
     } else if (torque_type == "float64") {
-      plain_joints_ = nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this);
-      float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this);
+      // Latest torque held: no Nagle delay on either topic, so the pairing lags little.
+      const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
+      plain_joints_ =
+          nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this, hints);
+      float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this, hints);
     } else {
       ROS_FATAL("~torque_type = '%s': wrench or float64", torque_type.c_str());
       return false;
@@ -139,7 +142,16 @@ class RigFrontEndNode {
     const auto& t = w->wrench.torque;
     add(*js, axis_ == 'x' ? t.x : axis_ == 'y' ? t.y : t.z);
   }
-  void onJoints(const sensor_msgs::JointState::ConstPtr& js) { add(*js, torque_); }
+  // Float64: the latest torque is held; joint states before the first torque are skipped (a
+  // NaN torque would make the front end refuse the record).
+  void onJoints(const sensor_msgs::JointState::ConstPtr& js) {
+    if (std::isnan(torque_)) {
+      ROS_WARN_THROTTLE(5.0, "rig_frontend: no torque yet on rig/torque: joint states skipped");
+      ++skipped_;
+      return;
+    }
+    add(*js, torque_);
+  }
   void onFloat(const std_msgs::Float64::ConstPtr& f) { torque_ = f->data; }
 
   void add(const sensor_msgs::JointState& js, double torque) {
