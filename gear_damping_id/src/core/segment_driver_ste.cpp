@@ -171,6 +171,10 @@ SegmentDriver::SegmentOutput SegmentDriver::heldSteSegment(const SignalView& v, 
   SegmentEstimate& e = out.result.segments[0];
   e.t_start = v.time(begin);
   e.t_end = v.time(end - 1);
+  if (e.identifiable && !ste_.separable)  // the held STE carries its calibration's flag
+    e.warnings.push_back({quality_code::kSteNotSeparable,
+                          "the STE held here was not separable from the damping on its "
+                          "calibration span"});
   out.estimate = e;
   return out;
 }
