@@ -184,8 +184,10 @@ class DampingIdNode {
       gear_.reset();
       return false;
     }
-    ROS_INFO("STE %s: calibrated on the first %d segments, then held", o_.ste.c_str(),
-             o_.ste_calibration_segments);
+    ROS_INFO(
+        "STE %s: calibrated on at least the first %d segments and a revolution of each shaft "
+        "whose orders are modelled, then held",
+        o_.ste.c_str(), o_.ste_calibration_segments);
     return true;
   }
 

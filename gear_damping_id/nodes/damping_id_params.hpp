@@ -124,6 +124,10 @@ inline bool readDampingIdParameters(ParamReader& p, DampingIdNodeOptions* o) {
       ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), why.c_str());
       return false;
     }
+    if (o->publish_modeled_response) {
+      ROS_WARN("~ste: the modeled response does not include the STE: not published");
+      o->publish_modeled_response = false;
+    }
     if (o->ste_calibration_segments < 1 || o->ste_calibration_segments > 100000) {
       ROS_FATAL("~ste_calibration_segments = %d: must be in [1, 1e5] [segments]",
                 o->ste_calibration_segments);
