@@ -126,27 +126,27 @@ class DampingIdNode {
       ROS_FATAL("~gear_config = '%s': %s", o_.gear_config.c_str(), e.c_str());
       return false;
     }
-    return setGear(gd::gearConstants(cfg.gearModel()));
+    const gear_sim::GearModel model = cfg.gearModel();
+    return setGear(gd::gearConstants(model), model.gears.pinion.teeth, model.gears.gear.teeth);
   }
 
  private:
-  bool setGear(const gd::GearConstants& g) {
+  bool setGear(const gd::GearConstants& g, int z1, int z2) {
     const std::string e = g.validate();
     if (!e.empty()) {
       ROS_ERROR_THROTTLE(5.0, "gear parameters ignored: %s", e.c_str());
       return false;
     }
-    if (gear_ && gear_->equivalent_mass == g.equivalent_mass &&
-        gear_->force_factor == g.force_factor && gear_->contact_ratio == g.contact_ratio &&
-        gear_->mean_stiffness == g.mean_stiffness) {
+    if (gear_ && z1 == o_.ste_options.pinion_teeth && z2 == o_.ste_options.gear_teeth &&
+        gear_->equivalent_mass == g.equivalent_mass && gear_->force_factor == g.force_factor &&
+        gear_->contact_ratio == g.contact_ratio && gear_->mean_stiffness == g.mean_stiffness) {
       return true;  // unchanged (e.g. the latched message again)
     }
     if (gear_) ROS_WARN("gear parameters changed: estimates reset");
     gear_ = std::make_unique<gd::GearConstants>(g);
-    gd::LiveLimits limits;
-    limits.history_segments = static_cast<size_t>(o_.history_segments);
-    limits.shared_segments = static_cast<size_t>(o_.shared_segments);
-    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_, limits);
+    o_.ste_options.pinion_teeth = z1;
+    o_.ste_options.gear_teeth = z2;
+    if (!makeLive()) return false;
     clearEstimates();
     ROS_INFO("gear constants: Me = %.6g kg, mean stiffness %.6g N/m", g.equivalent_mass,
              g.mean_stiffness);
@@ -165,7 +165,30 @@ class DampingIdNode {
       ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", e.c_str());
       return;
     }
-    setGear(gd::gearConstants(model));
+    setGear(gd::gearConstants(model), model.gears.pinion.teeth, model.gears.gear.teeth);
+  }
+
+  // The live identification for the current options and gear (with the STE when ~ste is set).
+  bool makeLive() {
+    gd::LiveLimits limits;
+    limits.history_segments = static_cast<size_t>(o_.history_segments);
+    limits.shared_segments = static_cast<size_t>(o_.shared_segments);
+    live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_, limits);
+    if (o_.ste.empty()) return true;
+    const std::string e =
+        live_->setSte(o_.ste_options, static_cast<size_t>(o_.ste_calibration_segments));
+    if (!e.empty()) {
+      ROS_ERROR_THROTTLE(5.0, "~ste = '%s' cannot be used with this gear: %s", o_.ste.c_str(),
+                         e.c_str());
+      live_.reset();
+      gear_.reset();
+      return false;
+    }
+    ROS_INFO(
+        "STE %s: calibrated on at least the first %d segments and a revolution of each shaft "
+        "whose orders are modelled, then held",
+        o_.ste.c_str(), o_.ste_calibration_segments);
+    return true;
   }
 
   void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
@@ -298,7 +321,7 @@ class DampingIdNode {
     }
     publishCumulative(true);
     o_.id = id;
-    if (gear_) live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_);
+    if (gear_) makeLive();
     clearEstimates();
     ROS_INFO(
         "reconfigured: segment_length %g s, window_length %g s, refine %s, max_condition %g "

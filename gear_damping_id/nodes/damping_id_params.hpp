@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "gear_damping_id/identification_types.hpp"
+#include "gear_damping_id/ste_model.hpp"
 #include "gear_damping_id/stream_assembler.hpp"
 #include "node_common.hpp"
 
@@ -23,6 +24,12 @@ struct DampingIdNodeOptions {
   int shared_segments = 1000;      // constant/load_law: span of the sliding problem
   double refine_budget = 0.7;      // refinement while the node stays within this fraction of a core
   std::string gear_config;         // YAML path; empty: /gear/params
+  // STE (docs/ste.md): "" = none, else an `analyze --ste` spec; calibrated jointly on the first
+  // ste_calibration_segments segments, then held. The tooth counts come with the gear.
+  std::string ste;
+  std::string ste_damping = "relative";
+  int ste_calibration_segments = 10;
+  gear_damping_id::SteModelOptions ste_options;
 };
 
 /// Reads and validates every private parameter of damping_id_node from `p`; false after
@@ -45,7 +52,9 @@ inline bool readDampingIdParameters(ParamReader& p, DampingIdNodeOptions* o) {
       !p.get("history_segments", &o->history_segments, "segments") ||
       !p.get("shared_segments", &o->shared_segments, "segments") ||
       !p.getDouble("refine_budget", &o->refine_budget, "of one core") ||
-      !p.get("gear_config", &o->gear_config)) {
+      !p.get("gear_config", &o->gear_config) || !p.get("ste", &o->ste) ||
+      !p.get("ste_damping", &o->ste_damping) ||
+      !p.get("ste_calibration_segments", &o->ste_calibration_segments, "segments")) {
     return false;
   }
   p.allow("diagnostic_period");  // read by diagnostic_updater
@@ -93,6 +102,35 @@ inline bool readDampingIdParameters(ParamReader& p, DampingIdNodeOptions* o) {
         {"shared_segments", o->shared_segments}}) {
     if (v < 1 || v > 10000000) {
       ROS_FATAL("~%s = %d: must be in [1, 1e7] [segments]", name, v);
+      return false;
+    }
+  }
+  if (!o->ste.empty()) {
+    std::string why;
+    if (!gear_damping_id::parseSteSpec(o->ste, &o->ste_options, &why)) {
+      ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), why.c_str());
+      return false;
+    }
+    if (o->ste_damping != "relative" && o->ste_damping != "dte") {
+      ROS_FATAL("~ste_damping = '%s': must be relative or dte", o->ste_damping.c_str());
+      return false;
+    }
+    o->ste_options.damping =
+        o->ste_damping == "dte" ? gear_sim::SteDamping::Dte : gear_sim::SteDamping::Relative;
+    why = gear_damping_id::steOptionsError(o->id);
+    if (why.empty() && o->id.model == gear_damping_id::DampingModel::Constant)
+      why = "the constant damping model with the STE needs the whole record (not live)";
+    if (!why.empty()) {
+      ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), why.c_str());
+      return false;
+    }
+    if (o->publish_modeled_response) {
+      ROS_WARN("~ste: the modeled response does not include the STE: not published");
+      o->publish_modeled_response = false;
+    }
+    if (o->ste_calibration_segments < 1 || o->ste_calibration_segments > 100000) {
+      ROS_FATAL("~ste_calibration_segments = %d: must be in [1, 1e5] [segments]",
+                o->ste_calibration_segments);
       return false;
     }
   }

@@ -53,6 +53,9 @@ class RigFrontEndNode {
     double mesh_offset = std::numeric_limits<double>::quiet_NaN(), dte_offset = mesh_offset;
     if (pnh.hasParam("mesh_offset")) pnh.getParam("mesh_offset", mesh_offset);
     if (pnh.hasParam("dte_offset")) pnh.getParam("dte_offset", dte_offset);
+    // The offsets estimated with the STE modelled (docs/rig.md): an `analyze --ste` spec.
+    std::string model_ste;
+    pnh.param<std::string>("model_ste", model_ste, "");
     std::string error;
     if (gear_config.empty() || !gear_sim::loadGearModelFile(gear_config, &model_, &error)) {
       ROS_FATAL("~gear_config: %s", gear_config.empty() ? "required (a gear YAML, "
@@ -82,6 +85,16 @@ class RigFrontEndNode {
     opts_.counts_per_rev2 = counts2;
     opts_.mesh_offset = mesh_offset;
     opts_.dte_offset = dte_offset;
+    if (!model_ste.empty()) {
+      std::string why;
+      if (!gd::parseSteSpec(model_ste, &opts_.ste, &why)) {
+        ROS_FATAL("~model_ste = '%s': %s", model_ste.c_str(), why.c_str());
+        return false;
+      }
+      opts_.model_ste = true;
+      opts_.ste.pinion_teeth = model_.gears.pinion.teeth;
+      opts_.ste.gear_teeth = model_.gears.gear.teeth;
+    }
     if (const std::string e = opts_.validate(); !e.empty()) {
       ROS_FATAL("front end: %s", e.c_str());
       return false;
@@ -97,15 +110,21 @@ class RigFrontEndNode {
           SyncPolicy(static_cast<uint32_t>(queue)), joints_sub_, wrench_sub_);
       sync_->registerCallback(&RigFrontEndNode::onSynced, this);
     } else if (torque_type == "float64") {
-      plain_joints_ = nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this);
-      float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this);
+      // Latest torque held: no Nagle delay on either topic, so the pairing lags little.
+      const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
+      plain_joints_ =
+          nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this, hints);
+      float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this, hints);
     } else {
       ROS_FATAL("~torque_type = '%s': wrench or float64", torque_type.c_str());
       return false;
     }
     timer_ = nh.createWallTimer(ros::WallDuration(0.1), &RigFrontEndNode::onTimer, this);
-    ROS_INFO("rig_frontend: joints %s, %s at %g Hz, torque %s (%c), calibration %d samples",
-             joint1_.c_str(), joint2_.c_str(), rate_, torque_type.c_str(), axis_, calibration);
+    ROS_INFO(
+        "rig_frontend: joints %s, %s at %g Hz, torque %s (%c), calibration %d samples, offsets "
+        "estimated %s",
+        joint1_.c_str(), joint2_.c_str(), rate_, torque_type.c_str(), axis_, calibration,
+        model_ste.empty() ? "without the STE" : ("with the STE " + model_ste).c_str());
     return true;
   }
 
@@ -123,7 +142,16 @@ class RigFrontEndNode {
     const auto& t = w->wrench.torque;
     add(*js, axis_ == 'x' ? t.x : axis_ == 'y' ? t.y : t.z);
   }
-  void onJoints(const sensor_msgs::JointState::ConstPtr& js) { add(*js, torque_); }
+  // Float64: the latest torque is held; joint states before the first torque are skipped (a
+  // NaN torque would make the front end refuse the record).
+  void onJoints(const sensor_msgs::JointState::ConstPtr& js) {
+    if (std::isnan(torque_)) {
+      ROS_WARN_THROTTLE(5.0, "rig_frontend: no torque yet on rig/torque: joint states skipped");
+      ++skipped_;
+      return;
+    }
+    add(*js, torque_);
+  }
   void onFloat(const std_msgs::Float64::ConstPtr& f) { torque_ = f->data; }
 
   void add(const sensor_msgs::JointState& js, double torque) {

@@ -32,9 +32,22 @@ struct Record {
   gear_sim::SignalTable table;
   gd::GearConstants gear;
   double sample_rate = 0.0;
-  Record() {
+  gd::SteModelOptions ste;  // active() when the record has an STE to identify
+  size_t ste_calibration = 0;
+  explicit Record(bool with_ste = false) {
     gear_sim::SimConfig c = table1Config();
     c.simulation.duration = 0.006;  // six 1 ms segments
+    if (with_ste) {  // three mesh harmonics and an offset; calibrated on the first 3 segments
+      c.ste.mesh_cos = {1.0e-6, 0.3e-6, -0.12e-6};
+      c.ste.mesh_sin = {-0.4e-6, 0.25e-6, 0.08e-6};
+      c.ste.offset = 3e-6;
+      ste.mesh_orders = 3;
+      ste.pinion_teeth = c.gears.pinion.teeth;
+      ste.gear_teeth = c.gears.gear.teeth;
+      ste_calibration = 3;
+    } else {
+      ste.offset = false;
+    }
     table = simulateOrFail(c);
     // 40 dB: the piecewise segments are refined (Auto), each on its own.
     addWhiteNoise(&table.dte, 40.0, 7);
@@ -43,9 +56,21 @@ struct Record {
   }
 };
 
-const Record& record() {
+const Record& plainRecord() {
   static const Record r;
   return r;
+}
+const Record& steRecord() {
+  static const Record r(true);
+  return r;
+}
+const Record* current = &plainRecord();  // the record the helpers below run on
+const Record& record() { return *current; }
+
+void setUp(gd::SegmentDriver* d) {
+  if (record().ste.active()) {
+    EXPECT_EQ(d->setSte(record().ste, record().ste_calibration), "");
+  }
 }
 
 gd::IdentificationOptions optionsFor(gd::Formulation f, gd::DampingModel m) {
@@ -66,8 +91,17 @@ std::string label(const gd::IdentificationOptions& o) {
 gd::IdentificationResult batch(const gd::IdentificationOptions& o, int threads = 1) {
   gd::IdentificationResult r;
   std::string e;
-  EXPECT_TRUE(gd::identify(record().table, record().gear, o, &r, &e, threads)) << e;
-  return r;
+  if (!record().ste.active()) {
+    EXPECT_TRUE(gd::identify(record().table, record().gear, o, &r, &e, threads)) << e;
+    return r;
+  }
+  // The STE: the whole record's segments fed to one driver (what identify() does without).
+  const gd::SignalView whole = gd::SignalView::of(record().table);
+  const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
+  gd::SegmentDriver driver(o, record().gear);
+  setUp(&driver);
+  driver.addAll(whole, ranges);
+  return driver.finish(&whole, &ranges);
 }
 
 // The record read in blocks of `group` segments plus context, as analyze streams a bag.
@@ -79,6 +113,7 @@ gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t gro
   gd::DriverLimits limits;
   limits.threads = threads;
   gd::SegmentDriver driver(o, record().gear, limits);
+  setUp(&driver);
   if (o.formulation == gd::Formulation::Legacy)
     driver.setLegacyForcing(gd::legacyForcing(whole, ranges, record().gear));
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, group);
@@ -109,6 +144,9 @@ gd::IdentificationResult live(const gd::IdentificationOptions& o, unsigned seed)
   so.max_jump = INFINITY;
   gd::StreamAssembler assembler(so);
   gd::LiveIdentification li(o, record().gear);
+  if (record().ste.active()) {
+    EXPECT_EQ(li.setSte(record().ste, record().ste_calibration), "");
+  }
   if (o.formulation == gd::Formulation::Legacy) {
     const gd::SignalView whole = gd::SignalView::of(t);
     li.setLegacyForcing(gd::legacyForcing(whole, gd::segmentRanges(whole, o), record().gear));
@@ -195,6 +233,51 @@ TEST(SegmentDriver, BatchStreamedAndLiveGiveTheSameSegmentsForEveryFormulationAn
     }
   }
   EXPECT_GT(refined, 0) << "the case must exercise the per-segment refinement";
+}
+
+// The STE in the segment pipeline: calibrated jointly on the first 3 segments, held for the
+// other 3; batch, streamed and live runs give the same segments (known and greybox, piecewise;
+// the constant model's calibration is the whole record, so live refuses it), and a calibration
+// span covering the record gives the batch identifyWithSte.
+TEST(SegmentDriver, WithTheSteBatchStreamedAndLiveGiveTheSameSegments) {
+  current = &steRecord();
+  int refined = 0, held = 0;
+  for (const auto f : {gd::Formulation::Known, gd::Formulation::Greybox}) {
+    gd::IdentificationOptions o = optionsFor(f, gd::DampingModel::Piecewise);
+    const gd::IdentificationResult b = batch(o);
+    ASSERT_EQ(b.segments.size(), 6u) << label(o);
+    for (size_t i = 0; i < b.segments.size(); ++i) {
+      EXPECT_TRUE(b.segments[i].identifiable) << label(o) << " " << b.segments[i].reason;
+      refined += b.segments[i].refined ? 1 : 0;
+      held += i >= 3 && b.segments[i].identifiable ? 1 : 0;
+    }
+    expectSameResult(streamed(o, 1), b, 0.0, label(o) + " STE streamed");
+    expectSameResult(live(o, 11), b, kSameRelTol, label(o) + " STE live");
+    expectSameResult(live(o, 12), b, kSameRelTol, label(o) + " STE live, other chunking");
+    // Calibration over the whole record = the batch joint identification.
+    gd::SteModelOptions so = record().ste;
+    const gd::SignalView whole = gd::SignalView::of(record().table);
+    const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
+    gd::SegmentDriver all(o, record().gear);
+    ASSERT_EQ(all.setSte(so, 100), "");
+    all.addAll(whole, ranges);
+    gd::IdentificationResult joint;
+    gd::SteResult ste;
+    std::string e;
+    ASSERT_TRUE(gd::identifyWithSte(record().table, record().gear, o, so, &joint, &ste, &e)) << e;
+    // (omega0 of the record: the driver's duration-weighted mean, identifyWithSte's plain mean.)
+    const gd::IdentificationResult whole_span = all.finish(&whole, &ranges);
+    ASSERT_EQ(whole_span.segments.size(), joint.segments.size());
+    for (size_t i = 0; i < joint.segments.size(); ++i)
+      expectSameEstimate(whole_span.segments[i], joint.segments[i], kSameRelTol,
+                         label(o) + " whole span, segment " + std::to_string(i));
+  }
+  EXPECT_GT(refined, 0) << "the case must exercise the refinement";
+  EXPECT_EQ(held, 6) << "every held segment identified";
+  gd::LiveIdentification constant(optionsFor(gd::Formulation::Known, gd::DampingModel::Constant),
+                                  record().gear);
+  EXPECT_NE(constant.setSte(record().ste, 3), "");
+  current = &plainRecord();
 }
 
 TEST(SegmentDriver, SegmentsOnSeveralThreadsEqualOneThreadBitForBit) {

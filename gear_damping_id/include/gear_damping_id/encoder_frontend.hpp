@@ -125,6 +125,7 @@ class EncoderFrontEnd {
  private:
   bool check(const double* th1, const double* th2, size_t n, std::string* error);
   bool calibrate(std::string* error);
+  bool calibrationTable(gear_sim::SignalTable* t, Eigen::VectorXd* u_raw, double* y_shift) const;
   void convert(size_t begin, size_t end);
 
   gear_sim::GearModel model_;

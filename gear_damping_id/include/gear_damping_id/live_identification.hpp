@@ -54,6 +54,16 @@ class LiveIdentification {
 
   /// Legacy formulation: the record's mean forcing [m/s^2], when known in advance.
   void setLegacyForcing(double fbar) { driver_.setLegacyForcing(fbar); }
+  /// Identify the STE too (SegmentDriver::setSte): jointly on the first `calibration_segments`
+  /// segments, then held. Returns "" or why not (the constant model is refused live: its
+  /// calibration would be the whole run).
+  std::string setSte(const SteModelOptions& ste, size_t calibration_segments) {
+    if (driver_.options().model == DampingModel::Constant)
+      return "the STE with the constant damping model needs the whole record (not live)";
+    return driver_.setSte(ste, calibration_segments);
+  }
+  /// The held STE once calibrated (else null).
+  const SteResult* steResult() const { return driver_.steResult(); }
 
   /// The last `last` segments kept (at most limits.history_segments; piecewise: per-segment
   /// estimates, refined where applied). No integration windows (they are per segment, in add()).

@@ -27,6 +27,19 @@
 //   shared unknown (the live node, which cannot look ahead).
 // - A segment lacking a channel the formulation needs, or with no samples, is reported as not
 //   identifiable (the reason names the channel) and takes no part in any estimate.
+// - STE (setSte, docs/ste.md "The STE in the segment pipeline"): the STE coefficients are a
+//   property of the gears, shared by the record, but a streamed or live run cannot wait for the
+//   record's end. The driver buffers the first `calibration_segments` usable segments, and more
+//   until they span a revolution of each shaft whose orders are modelled (with their stencil
+//   context; memory bounded by them), identifies C and the STE jointly on them
+//   (identifySteSegments, refined as options.refine asks) and then HOLDS the STE: every later
+//   segment is fitted on its own given it (identifySegmentWithHeldSte), its C_std including the
+//   STE's covariance. Until the calibration completes add() returns the segments as pending
+//   (not identifiable, reason "awaiting the STE calibration"); result() lists them with their
+//   joint estimates once it has. finish() calibrates on what arrived when the record ended
+//   first. With calibration_segments >= the record's segment count the result is the batch
+//   identifyWithSte of the whole record. The constant model shares C: its calibration is the
+//   whole record (not bounded; the live node refuses it).
 // - threads > 1 (addAll): segments are processed in parallel, each by its own integral-method
 //   object, and recorded in segment order: the results equal those of one thread bit for bit.
 #pragma once
@@ -40,10 +53,9 @@
 
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
+#include "gear_damping_id/ste_model.hpp"
 
 namespace gear_damping_id {
-
-using SampleRanges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
 
 /// Samples the integral method reads on either side of a segment (quadrature stencils).
 constexpr int kStencilContext = 2;
@@ -71,6 +83,13 @@ class SegmentDriver {
 
   /// Legacy formulation: the mean forcing Fbar [m/s^2] of the analysed record (before add()).
   void setLegacyForcing(double fbar);
+
+  /// Identify the STE with the damping (before add(); header comment): jointly on the first
+  /// `calibration_segments` usable segments (>= 1; the constant model: all), then held. `ste`
+  /// must be valid, options known/greybox (steOptionsError). Returns "" or why not.
+  std::string setSte(const SteModelOptions& ste, size_t calibration_segments);
+  /// The STE once calibrated (else null).
+  const SteResult* steResult() const { return ste_ready_ ? &ste_ : nullptr; }
 
   struct SegmentOutput {
     SegmentEstimate estimate;  ///< final for piecewise; shared: the current shared value when
@@ -117,7 +136,8 @@ class SegmentDriver {
   SegmentOutput piecewiseSegment(IntegralMethod* method, const SignalView& v, Eigen::Index begin,
                                  Eigen::Index end, bool refine_allowed) const;
   SegmentOutput unusableSegment(const SignalView& v, Eigen::Index begin, Eigen::Index end) const;
-  void recordPiecewise(const SegmentOutput& out, long unlocated, double dt);
+  void recordPiecewise(const SegmentOutput& out, long unlocated, double dt,
+                       bool keep_estimate = true);
   SegmentOutput addShared(const SignalView& v, Eigen::Index begin, Eigen::Index end);
   void addSharedParallel(const SignalView& v, const SampleRanges& ranges);
   IdentificationResult sharedResult(size_t last) const;
@@ -125,6 +145,15 @@ class SegmentDriver {
   IntegralMethod newMethod() const;
   void resolveWindow(const SignalView& v);
   void keep(Kept k);
+  // STE mode (segment_driver_ste.cpp).
+  SegmentOutput addSte(const SignalView& v, Eigen::Index begin, Eigen::Index end,
+                       bool refine_allowed);
+  void bufferCalibrationSegment(const SignalView& v, Eigen::Index begin, Eigen::Index end);
+  void calibrate();
+  double calibrationCycles() const;
+  bool calibrationComplete() const;
+  SegmentOutput heldSteSegment(const SignalView& v, Eigen::Index begin, Eigen::Index end,
+                               bool refine_allowed) const;
 
   IdentificationOptions options_;
   GearConstants gear_;
@@ -143,6 +172,23 @@ class SegmentDriver {
   int iterations_ = 0;
   double noise_sq_ = 0.0, innovation_sq_ = 0.0, noise_samples_ = 0.0;
   unsigned long added_ = 0;
+  // STE mode: options, the calibration buffer (record columns of the calibration segments with
+  // their context, merged where contiguous) and the held STE.
+  bool ste_on_ = false, ste_ready_ = false;
+  SteModelOptions ste_options_;
+  size_t ste_calibration_ = 0;
+  SteResult ste_;
+  struct Calibration {
+    std::vector<double> col[5];  // dte, stiffness, torque, mesh_state, mesh_phase
+    bool present[5] = {false, false, false, false, false};
+    double t0 = 0.0, dt = 0.0, origin = 0.0;       // buffer sample 0's time; record sample 0's time
+    long long next_abs = -1;                       // record sample after the buffer's last
+    SampleRanges ranges;                           // in buffer samples
+    std::vector<std::pair<double, double>> times;  // each segment's t_start, time(end - 1)
+    std::vector<unsigned long> added_at;           // added_ when each was kept
+    double phase_min = std::numeric_limits<double>::infinity();  // mesh phase span [cycles]
+    double phase_max = -std::numeric_limits<double>::infinity();
+  } calib_;
 };
 
 /// Legacy formulation: the mean forcing Fbar = force_factor * mean(T1) [m/s^2] over the samples

@@ -83,6 +83,9 @@ struct SteResult {
   double residual_rms = kNaN;  ///< [m] RMS residual of the integral equations
   bool refined = false;        ///< theta, theta_std from the output-error refinement
   long rows = 0;
+  /// Covariance of theta [m^2] (refined: the integral fit's correlations scaled to theta_std);
+  /// what the held-STE segments propagate into their C.
+  Eigen::MatrixXd theta_cov;
 };
 
 /// Identifies C (per segment, or constant: options.model), greybox stiffness levels when
@@ -93,5 +96,30 @@ struct SteResult {
 bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& gear,
                      const IdentificationOptions& options, const SteModelOptions& ste_options,
                      IdentificationResult* result, SteResult* ste, std::string* error);
+
+using SampleRanges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
+
+/// identifyWithSte on the segments `ranges` of a checked view (every channel present and
+/// finite; samples next to a range serve as quadrature stencils, as in the integral method).
+bool identifySteSegments(const SignalView& view, const SampleRanges& ranges,
+                         const GearConstants& gear, const IdentificationOptions& options,
+                         const SteModelOptions& ste_options, IdentificationResult* result,
+                         SteResult* ste, std::string* error);
+
+/// One segment [begin, end) of `view` with the STE held at `ste` (a calibration's result, with
+/// theta_cov): C (and the greybox levels) fitted given the STE by the integral equations, refined
+/// when options.refine asks for it by output error on the record with the STE taken out
+/// (z = y - e, forcing F - e'' (- C e' for the dte form), docs/ste.md); C_std includes theta's
+/// covariance propagated through dC/dtheta. Estimator `integral_ste_held` or
+/// `output_error_ste_held`. False with `*error` when the segment cannot be fitted.
+bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eigen::Index end,
+                                const GearConstants& gear, const IdentificationOptions& options,
+                                const SteResult& ste, IdentificationResult* result,
+                                std::string* error);
+
+/// "" when the formulation, model and stiffness shape can be used with the STE, else why not.
+std::string steOptionsError(const IdentificationOptions& options);
+/// First sample of `view` with a non-finite channel the STE fit reads, or -1.
+Eigen::Index nonFiniteSteInput(const SignalView& view, Formulation formulation);
 
 }  // namespace gear_damping_id

@@ -242,6 +242,208 @@ bool EncoderFrontEnd::finish(std::string* error) {
   return true;
 }
 
+namespace {
+
+// The search for the encoder offsets of EncoderFrontEnd::calibrate (docs/rig.md "Offsets"), one
+// named step per member: the mesh phase u0 on a grid, a golden section, the middle of a flat
+// plateau, the output-error sub-sample stage; the DTE constant y0 profiled at each u0.
+class OffsetSearch {
+ public:
+  // `t`: time, dte (shifted by its mean), torque of the contiguous run; `u_raw`: its mesh phase
+  // without the offset.
+  OffsetSearch(gear_sim::SignalTable t, Eigen::VectorXd u_raw, const gear_sim::GearModel& model,
+               const EncoderFrontEndOptions& o, bool need_y0)
+      : t_(std::move(t)),
+        u_raw_(std::move(u_raw)),
+        stiff_(model.mesh),
+        me_(model.gears.equivalentMass()),
+        ff_(model.gears.forceFactor()),
+        gear_(gearConstants(model)),
+        o_(o),
+        need_y0_(need_y0) {
+    io_.formulation = Formulation::Known;
+    io_.model = DampingModel::Piecewise;
+    io_.refine = IdentificationOptions::Refine::Never;
+    ste_ = o_.ste;
+    ste_.pinion_teeth = model.gears.pinion.teeth;
+    ste_.gear_teeth = model.gears.gear.teeth;
+  }
+  void setSegmentLength(double duration) { io_.segment_length = std::min(1e-3, duration); }
+  void setShift(double y_shift) { y_shift_ = y_shift; }
+
+  /// The mesh phase and stiffness at offset u0.
+  void fill(double u0) {
+    for (Eigen::Index j = 0; j < t_.time.size(); ++j) {
+      t_.mesh_phase[j] = u_raw_[j] + u0;
+      t_.stiffness[j] = stiff_.at(t_.mesh_phase[j] + kPhaseNudge);
+    }
+  }
+  /// y0 profiled at the current u0 (`*rss_min` the residual there; y0Best() the offset).
+  void profileY0(double* rss_min);
+  double y0Best() const { return y0_best_; }
+  /// The residual at u0 with y0 profiled.
+  double objective(double u0) {
+    fill(u0);
+    double f;
+    profileY0(&f);
+    return f;
+  }
+  /// The grid of 40 offsets and a golden section on the best cell's neighbours; false when no
+  /// offset gives an identifiable segment.
+  bool gridAndGolden(double* u0);
+  /// The middle of the objective's plateau around u0 (*lo, *hi its ends).
+  double plateauMiddle(double u0, double* lo, double* hi);
+  /// The output-error stage on the plateau [lo, hi] widened (returns u0 when it fails).
+  double subSample(double u0, double lo, double hi);
+
+ private:
+  // Mean force balance: mean(K (y + shift - y0)) = mean(F), in units of the shifted DTE.
+  double forceBalanceOffset() const {
+    double ky = 0.0, k = 0.0, f = 0.0;
+    for (Eigen::Index j = 0; j < t_.time.size(); ++j) {
+      ky += t_.stiffness[j] * t_.dte[j];
+      k += t_.stiffness[j];
+      f += ff_ * me_ * t_.torque[j];
+    }
+    return (ky - f) / k;
+  }
+  // Residual of the known integral method (or the joint STE fit) of table c.
+  double residual(const gear_sim::SignalTable& c, const IdentificationOptions& opt,
+                  bool refined) const {
+    return o_.model_ste ? meanSquaredResidualSte(c, gear_, opt, ste_, refined)
+                        : meanSquaredResidual(c, gear_, opt, refined);
+  }
+  double rss(double y0) const {
+    gear_sim::SignalTable c = t_;
+    c.dte.array() -= y0;
+    return residual(c, io_, false);
+  }
+  double step() const { return std::abs(u_raw_[1] - u_raw_[0]) / 16.0; }  // [mesh cycles]
+
+  gear_sim::SignalTable t_;
+  Eigen::VectorXd u_raw_;
+  const gear_sim::MeshStiffness stiff_;
+  const double me_, ff_;
+  const GearConstants gear_;
+  const EncoderFrontEndOptions& o_;
+  const bool need_y0_;
+  IdentificationOptions io_;
+  SteModelOptions ste_;
+  double y0_best_ = 0.0, y_shift_ = 0.0;
+};
+
+// y0 enters the known equations linearly (through int int K y0), so the RSS minimised over the
+// other unknowns is a quadratic in y0: three evaluations give its minimum exactly.
+void OffsetSearch::profileY0(double* rss_min) {
+  const double y_fb = forceBalanceOffset();
+  if (!need_y0_ || o_.model_ste) {  // given, or the STE's order-0 term takes the rest
+    y0_best_ = need_y0_ ? y_fb : o_.dte_offset - y_shift_;
+    *rss_min = rss(y0_best_);
+    return;
+  }
+  const double d = 1e-3 * std::max(1e-12, std::sqrt(t_.dte.squaredNorm() / t_.dte.size()));
+  const double fm = rss(y_fb - d), f0 = rss(y_fb), fp = rss(y_fb + d);
+  const double curv = fp - 2.0 * f0 + fm;
+  double y = y_fb;
+  if (curv > 0.0 && std::isfinite(curv)) y = y_fb - 0.5 * d * (fp - fm) / curv;
+  y0_best_ = y;
+  *rss_min = rss(y);
+  if (!(*rss_min <= f0)) y0_best_ = y_fb, *rss_min = f0;
+}
+
+bool OffsetSearch::gridAndGolden(double* u0) {
+  constexpr int kGrid = 40;
+  double best = std::numeric_limits<double>::infinity();
+  int best_i = -1;
+  std::vector<double> f(kGrid);
+  for (int i = 0; i < kGrid; ++i) {
+    f[static_cast<size_t>(i)] = objective(static_cast<double>(i) / kGrid);
+    if (f[static_cast<size_t>(i)] < best) best = f[static_cast<size_t>(i)], best_i = i;
+  }
+  if (best_i < 0) return false;
+  // Golden section on the neighbouring grid cells.
+  auto obj = [this](double u) { return objective(u); };
+  *u0 = goldenSection(obj, (best_i - 1.0) / kGrid, (best_i + 1.0) / kGrid, 1e-9, 40);
+  return true;
+}
+
+// When the switches fall on samples, every offset within a sample's mesh-phase advance gives the
+// same quadrature: the objective is flat there and the golden section may stop at an edge of the
+// plateau, where a rounding flips a switch to the next sample. Take the middle of the plateau
+// (for switches between samples it has zero width: u0 stays).
+double OffsetSearch::plateauMiddle(double u0, double* lo_out, double* hi_out) {
+  const double f_min = objective(u0);
+  const double st = step();
+  auto same = [&](double u) {
+    const double f = objective(u);
+    return std::abs(f - f_min) <= 1e-9 * std::abs(f_min);
+  };
+  double lo = u0, hi = u0;
+  for (int k = 0; k < 40 && st > 0.0 && same(lo - st); ++k) lo -= st;
+  for (int k = 0; k < 40 && st > 0.0 && same(hi + st); ++k) hi += st;
+  *lo_out = lo;
+  *hi_out = hi;
+  return 0.5 * (lo + hi);
+}
+
+// Sub-sample: the output-error refinement integrates the model with the switch instants of the
+// mesh phase, so its residual sees offsets the quadrature cannot. Golden section on it over the
+// plateau widened by a step either side (y0 kept from the integral stage).
+double OffsetSearch::subSample(double u0, double lo, double hi) {
+  fill(u0);
+  double f_tmp;
+  profileY0(&f_tmp);
+  const double y0_keep = y0_best_;
+  IdentificationOptions ro = io_;
+  ro.refine = IdentificationOptions::Refine::Always;
+  auto refined = [&](double u) {
+    fill(u);
+    gear_sim::SignalTable c = t_;
+    c.dte.array() -= y0_keep;
+    return residual(c, ro, true);
+  };
+  // With coarse encoders the integral stage can miss by several samples: the bracket spans at
+  // least +-0.01 mesh cycles.
+  const double half = std::max(0.5 * (hi - lo) + step(), 0.01);
+  const double centre = 0.5 * (lo + hi);
+  const double u_ref = goldenSection(refined, centre - half, centre + half, 1e-3 * step(), 40);
+  return std::isfinite(refined(u_ref)) ? u_ref : u0;
+}
+
+}  // namespace
+
+// The contiguous run from the first sample as a table (time, DTE less its mean, torque; the
+// mesh phase without offset in *u_raw); *y_shift the mean taken out; false when a torque is not
+// finite.
+bool EncoderFrontEnd::calibrationTable(gear_sim::SignalTable* tp, Eigen::VectorXd* u_raw,
+                                       double* y_shift) const {
+  const size_t n = index_.size();
+  size_t m = 1;
+  while (m < n && index_[m] == index_[m - 1] + 1) ++m;
+  const double z1 = model_.gears.pinion.teeth;
+  const double dt = 1.0 / rate_;
+  gear_sim::SignalTable& t = *tp;
+  t.time.resize(static_cast<Eigen::Index>(m));
+  t.dte.resize(t.time.size());
+  t.torque.resize(t.time.size());
+  t.stiffness.resize(t.time.size());
+  t.mesh_phase.resize(t.time.size());
+  u_raw->resize(t.time.size());
+  bool torque_ok = has_torque_;
+  for (size_t i = 0; i < m; ++i) {
+    const Eigen::Index j = static_cast<Eigen::Index>(i);
+    t.time[j] = static_cast<double>(index_[i]) * dt;
+    t.dte[j] = coef_.a1 * th1_[i] + coef_.a2 * th2_[i];
+    t.torque[j] = torque_[i];
+    if (!std::isfinite(torque_[i])) torque_ok = false;
+    (*u_raw)[j] = z1 * (coef_.w1 * th1_[i] + coef_.w2 * th2_[i]) / (2.0 * M_PI);
+  }
+  // Make the raw DTE small before the sums (the encoder zeros can make it large).
+  *y_shift = t.dte.mean();
+  t.dte.array() -= *y_shift;
+  return torque_ok;
+}
+
 bool EncoderFrontEnd::calibrate(std::string* error) {
   const size_t n = index_.size();
   if (n < 16) {
@@ -253,32 +455,10 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
     refused_ = true;
     return false;
   }
-  // The contiguous run from the first sample serves the estimates.
-  size_t m = 1;
-  while (m < n && index_[m] == index_[m - 1] + 1) ++m;
-  const double me = model_.gears.equivalentMass(), ff = model_.gears.forceFactor();
-  const double z1 = model_.gears.pinion.teeth;
-  const gear_sim::MeshStiffness stiff(model_.mesh);
-  const double dt = 1.0 / rate_;
   gear_sim::SignalTable t;
-  t.time.resize(static_cast<Eigen::Index>(m));
-  t.dte.resize(t.time.size());
-  t.torque.resize(t.time.size());
-  t.stiffness.resize(t.time.size());
-  t.mesh_phase.resize(t.time.size());
-  Eigen::VectorXd u_raw(t.time.size());
-  bool torque_ok = has_torque_;
-  for (size_t i = 0; i < m; ++i) {
-    const Eigen::Index j = static_cast<Eigen::Index>(i);
-    t.time[j] = static_cast<double>(index_[i]) * dt;
-    t.dte[j] = coef_.a1 * th1_[i] + coef_.a2 * th2_[i];
-    t.torque[j] = torque_[i];
-    if (!std::isfinite(torque_[i])) torque_ok = false;
-    u_raw[j] = z1 * (coef_.w1 * th1_[i] + coef_.w2 * th2_[i]) / (2.0 * M_PI);
-  }
-  // Make the raw DTE small before the sums (the encoder zeros can make it large).
-  const double y_shift = t.dte.mean();
-  t.dte.array() -= y_shift;
+  Eigen::VectorXd u_raw;
+  double y_shift = 0.0;
+  const bool torque_ok = calibrationTable(&t, &u_raw, &y_shift);
   const bool need_u0 = std::isnan(o_.mesh_offset), need_y0 = std::isnan(o_.dte_offset);
   if ((need_u0 || need_y0) && !torque_ok) {
     if (error)
@@ -287,140 +467,37 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
           "offset (or give both)";
     return false;
   }
-  auto fill = [&](double u0) {
-    for (Eigen::Index j = 0; j < t.time.size(); ++j) {
-      t.mesh_phase[j] = u_raw[j] + u0;
-      t.stiffness[j] = stiff.at(t.mesh_phase[j] + kPhaseNudge);
-    }
-  };
-  // Mean force balance: mean(K (y + shift - y0)) = mean(F).
-  auto forceBalanceOffset = [&]() {
-    double ky = 0.0, k = 0.0, f = 0.0;
-    for (Eigen::Index j = 0; j < t.time.size(); ++j) {
-      ky += t.stiffness[j] * t.dte[j];
-      k += t.stiffness[j];
-      f += ff * me * t.torque[j];
-    }
-    return (ky - f) / k;  // in units of the shifted DTE
-  };
-  GearConstants gear = gearConstants(model_);
-  IdentificationOptions io;
-  io.formulation = Formulation::Known;
-  io.model = DampingModel::Piecewise;
-  io.refine = IdentificationOptions::Refine::Never;
-  const double duration = static_cast<double>(m) * dt;
-  io.segment_length = std::min(1e-3, duration);
-  // Residual of the known integral method at (u0, y0): the sum over segments of RSS.
-  SteModelOptions ste = o_.ste;
-  ste.pinion_teeth = model_.gears.pinion.teeth;
-  ste.gear_teeth = model_.gears.gear.teeth;
-  auto residual = [&](const gear_sim::SignalTable& c, const IdentificationOptions& opt,
-                      bool refined) {
-    return o_.model_ste ? meanSquaredResidualSte(c, gear, opt, ste, refined)
-                        : meanSquaredResidual(c, gear, opt, refined);
-  };
-  auto rss = [&](double y0) {
-    gear_sim::SignalTable c = t;
-    c.dte.array() -= y0;
-    return residual(c, io, false);
-  };
-  // y0 enters the known equations linearly (through int int K y0), so the RSS minimised over
-  // the other unknowns is a quadratic in y0: three evaluations give its minimum exactly.
-  double y0_best = 0.0;
-  auto profileY0 = [&](double* rss_min) {
-    const double y_fb = forceBalanceOffset();
-    if (!need_y0 || o_.model_ste) {  // given, or the STE's order-0 term takes the rest
-      y0_best = need_y0 ? y_fb : o_.dte_offset - y_shift;
-      *rss_min = rss(y0_best);
-      return;
-    }
-    const double d = 1e-3 * std::max(1e-12, std::sqrt(t.dte.squaredNorm() / t.dte.size()));
-    const double fm = rss(y_fb - d), f0 = rss(y_fb), fp = rss(y_fb + d);
-    const double curv = fp - 2.0 * f0 + fm;
-    double y = y_fb;
-    if (curv > 0.0 && std::isfinite(curv)) y = y_fb - 0.5 * d * (fp - fm) / curv;
-    y0_best = y;
-    *rss_min = rss(y);
-    if (!(*rss_min <= f0)) y0_best = y_fb, *rss_min = f0;
-  };
-  auto objective = [&](double u0) {
-    fill(u0);
-    double f;
-    profileY0(&f);
-    return f;
-  };
+  const Eigen::Index m = t.time.size();
+  std::vector<double> y(t.dte.data(), t.dte.data() + m);
+  OffsetSearch search(std::move(t), std::move(u_raw), model_, o_, need_y0);
+  search.setShift(y_shift);
+  search.setSegmentLength(static_cast<double>(m) * (1.0 / rate_));  // as dt = 1 / rate
   double u0 = o_.mesh_offset;
   if (need_u0) {
     if (model_.mesh.model == gear_sim::StiffnessModel::Constant) {
       u0 = 0.0;  // no mesh timing to find
     } else {
-      constexpr int kGrid = 40;
-      double best = std::numeric_limits<double>::infinity();
-      int best_i = -1;
-      std::vector<double> f(kGrid);
-      for (int i = 0; i < kGrid; ++i) {
-        f[static_cast<size_t>(i)] = objective(static_cast<double>(i) / kGrid);
-        if (f[static_cast<size_t>(i)] < best) best = f[static_cast<size_t>(i)], best_i = i;
-      }
-      if (best_i < 0) {
+      if (!search.gridAndGolden(&u0)) {
         if (error)
           *error = "the mesh offset could not be estimated (no identifiable segment); give it";
         return false;
       }
-      // Golden section on the neighbouring grid cells.
-      u0 = goldenSection(objective, (best_i - 1.0) / kGrid, (best_i + 1.0) / kGrid, 1e-9, 40);
-      // When the switches fall on samples, every offset within a sample's mesh-phase advance
-      // gives the same quadrature: the objective is flat there and the golden section may stop
-      // at an edge of the plateau, where a rounding flips a switch to the next sample. Take the
-      // middle of the plateau (for switches between samples it has zero width: u0 stays).
-      const double f_min = objective(u0);
-      const double step = std::abs(u_raw[1] - u_raw[0]) / 16.0;  // [mesh cycles]
-      auto same = [&](double u) {
-        const double f = objective(u);
-        return std::abs(f - f_min) <= 1e-9 * std::abs(f_min);
-      };
       double lo = u0, hi = u0;
-      for (int k = 0; k < 40 && step > 0.0 && same(lo - step); ++k) lo -= step;
-      for (int k = 0; k < 40 && step > 0.0 && same(hi + step); ++k) hi += step;
-      u0 = 0.5 * (lo + hi);
-      // Sub-sample: the output-error refinement integrates the model with the switch instants
-      // of the mesh phase, so its residual sees offsets the quadrature cannot. Golden section on
-      // it over the plateau widened by a step either side (y0 kept from the integral stage).
-      if (o_.refine_offset) {
-        fill(u0);
-        double f_tmp;
-        profileY0(&f_tmp);
-        const double y0_keep = y0_best;
-        IdentificationOptions ro = io;
-        ro.refine = IdentificationOptions::Refine::Always;
-        auto refined = [&](double u) {
-          fill(u);
-          gear_sim::SignalTable c = t;
-          c.dte.array() -= y0_keep;
-          return residual(c, ro, true);
-        };
-        // With coarse encoders the integral stage can miss by several samples: the bracket spans
-        // at least +-0.01 mesh cycles.
-        const double half = std::max(0.5 * (hi - lo) + step, 0.01);
-        const double centre = 0.5 * (lo + hi);
-        const double u_ref = goldenSection(refined, centre - half, centre + half, 1e-3 * step, 40);
-        if (std::isfinite(refined(u_ref))) u0 = u_ref;
-      }
+      u0 = search.plateauMiddle(u0, &lo, &hi);
+      if (o_.refine_offset) u0 = search.subSample(u0, lo, hi);
     }
     report_.mesh_offset_estimated = true;
   }
   double f_final;
-  fill(u0);
-  profileY0(&f_final);
-  const double y0 = y0_best + y_shift;
+  search.fill(u0);
+  search.profileY0(&f_final);
+  const double y0 = search.y0Best() + y_shift;
   report_.dte_offset_estimated = need_y0;
   report_.dte_offset = y0;
   report_.mesh_offset = u0 - std::floor(u0);
   o_.mesh_offset = u0;
   o_.dte_offset = y0;
   calibrated_ = true;
-  std::vector<double> y(m);
-  for (size_t i = 0; i < m; ++i) y[i] = t.dte[static_cast<Eigen::Index>(i)];
   report_.noise_std = thirdDifferenceNoise(y);
   return true;
 }

@@ -69,6 +69,9 @@ void SegmentDriver::reset() {
   iterations_ = 0;
   noise_sq_ = innovation_sq_ = noise_samples_ = 0.0;
   added_ = 0;
+  ste_ready_ = false;
+  ste_ = SteResult();
+  calib_ = Calibration();
 }
 
 IntegralMethod SegmentDriver::newMethod() const {
@@ -150,7 +153,8 @@ SegmentDriver::SegmentOutput SegmentDriver::piecewiseSegment(IntegralMethod* m, 
   return out;
 }
 
-void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, double dt) {
+void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, double dt,
+                                    bool keep_estimate) {
   const IdentificationResult& seg = out.result;
   unlocated_ += unlocated;
   // omega0 of the record: the duration-weighted mean of the segments' mean stiffness.
@@ -175,7 +179,7 @@ void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, do
     innovation_sq_ += seg.noise_innovation_std * seg.noise_innovation_std * n;
     noise_samples_ += n;
   }
-  keep({out.estimate, seg.windows});
+  if (keep_estimate) keep({out.estimate, seg.windows});
 }
 
 IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
@@ -193,7 +197,8 @@ IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
     r.segments.push_back(it->estimate);
     r.windows.insert(r.windows.end(), it->windows.begin(), it->windows.end());
   }
-  if (std::isfinite(r.omega0) && r.omega0 > 0.0) {
+  // (The STE fits give each segment's xi with its own omega0, as identifyWithSte does.)
+  if (std::isfinite(r.omega0) && r.omega0 > 0.0 && !ste_on_) {
     for (auto& e : r.segments)
       if (e.identifiable) e.xi = ratioFromC(e.C, r.omega0);
   }
@@ -210,6 +215,10 @@ IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
     r.warnings.push_back(w);
   }
   if (unlocated_ > 0) r.warnings.push_back(switchesUnlocatedWarning(unlocated_));
+  if (ste_on_) {  // segment_driver_ste.cpp
+    r.estimator = ste_.refined ? "output_error_ste" : "integral_ste";
+    if (shared_solve_.constant) r.constant = shared_solve_.constant;
+  }
   applyQualityFlags(options_, &r);  // xi changed with the record's omega0
   return r;
 }
@@ -297,6 +306,7 @@ IdentificationResult SegmentDriver::sharedResult(size_t last) const {
 SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Index begin,
                                                 Eigen::Index end, bool refine_allowed) {
   resolveWindow(v);
+  if (ste_on_) return addSte(v, begin, end, refine_allowed);
   if (end - begin < 1 || !missingChannel(v, options_.formulation, options_.model).empty()) {
     SegmentOutput out = unusableSegment(v, begin, end);
     keep({out.estimate, {}});
@@ -315,7 +325,7 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   const bool sliding = limits_.shared_segments != std::numeric_limits<size_t>::max();
   std::vector<SegmentOutput> outs;
   if (limits_.threads <= 1 || ranges.size() < 2 || missing || sliding ||
-      limits_.solve_shared_each_segment) {
+      limits_.solve_shared_each_segment || ste_on_) {
     for (const auto& r : ranges) outs.push_back(add(v, r.first, r.second));
     return outs;
   }
@@ -361,6 +371,11 @@ IdentificationResult SegmentDriver::result(size_t last) const {
 
 IdentificationResult SegmentDriver::finish(const SignalView* record,
                                            const SampleRanges* ranges) const {
+  if (ste_on_ && !ste_ready_) {  // the record ended before the calibration span
+    SegmentDriver done = *this;
+    done.calibrate();
+    return done.finish(record, ranges);
+  }
   IdentificationResult r = result();
   if (!shared_ || !wantsRefinement(options_, r)) return r;
   if (!options_.refinable()) {
