@@ -18,7 +18,7 @@
 #include "gear_sim/encoders.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/topics.hpp"
-#include "run_command.hpp"
+#include "tester_support.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -42,13 +42,9 @@ TEST(RigEncoders, LiveDampingMatchesOfflineAndTruth) {
   gd::IdentificationResult offline;
   ASSERT_TRUE(gd::identify(table, gd::gearConstants(c.gearModel()), {}, &offline, &e)) << e;
 
-  gear_damping::DampingArray live;
-  bool have = false;
-  ros::Subscriber sub = nh.subscribe<gear_damping::DampingArray>(
-      gear_sim_ros::kDampingTopic, 10, [&](const gear_damping::DampingArray::ConstPtr& m) {
-        live = *m;
-        have = true;
-      });
+  gear_test::LatestMessage<gear_damping::DampingArray> latest(nh, gear_sim_ros::kDampingTopic);
+  const gear_damping::DampingArray& live = latest.msg;
+  const bool& have = latest.have;
   const size_t n = offline.segments.size();
   ASSERT_TRUE(gear_test::waitFor([&] { return have && live.segments.size() >= n; }, 150.0))
       << "live segments: " << live.segments.size() << " of " << n;

@@ -21,7 +21,7 @@
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
-#include "run_command.hpp"
+#include "tester_support.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -57,13 +57,9 @@ TEST(SteLive, LiveDampingWithTheSteEqualsTheOfflineDriverAndCoversTheTruth) {
   driver.addAll(v, ranges);
   const gd::IdentificationResult offline = driver.finish();
 
-  gear_damping::DampingArray live;
-  bool have = false;
-  ros::Subscriber sub = nh.subscribe<gear_damping::DampingArray>(
-      gear_sim_ros::kDampingTopic, 10, [&](const gear_damping::DampingArray::ConstPtr& m) {
-        live = *m;
-        have = true;
-      });
+  gear_test::LatestMessage<gear_damping::DampingArray> latest(nh, gear_sim_ros::kDampingTopic);
+  const gear_damping::DampingArray& live = latest.msg;
+  const bool& have = latest.have;
   ros::Publisher params =
       nh.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, true);
   ros::Publisher signal = nh.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);

@@ -17,6 +17,22 @@
 
 namespace gear_test {
 
+/// Keeps the latest message of a topic; `have` once one arrived. Not movable (the subscription
+/// writes into this object).
+template <class M>
+struct LatestMessage {
+  M msg;
+  bool have = false;
+  ros::Subscriber sub;
+  LatestMessage(ros::NodeHandle& nh, const std::string& topic)
+      : sub(nh.subscribe<M>(topic, 10, [this](const typename M::ConstPtr& m) {
+          msg = *m;
+          have = true;
+        })) {}
+  LatestMessage(const LatestMessage&) = delete;
+  LatestMessage& operator=(const LatestMessage&) = delete;
+};
+
 /// The simulator configuration the way gear_sim_node reads it (from its private namespace `ns`).
 inline bool simConfigFromParams(const std::string& ns, gear_sim::SimConfig* cfg, std::string* e) {
   YAML::Node root(YAML::NodeType::Map);
