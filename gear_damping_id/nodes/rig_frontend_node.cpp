@@ -115,6 +115,7 @@ class RigFrontEndNode {
       plain_joints_ =
           nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this, hints);
       float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this, hints);
+      ROS_WARN("%s", kFloat64Warning);
     } else {
       ROS_FATAL("~torque_type = '%s': wrench or float64", torque_type.c_str());
       return false;
@@ -150,9 +151,17 @@ class RigFrontEndNode {
       ++skipped_;
       return;
     }
+    ROS_WARN_THROTTLE(60.0, "%s", kFloat64Warning);
     add(*js, torque_);
   }
   void onFloat(const std_msgs::Float64::ConstPtr& f) { torque_ = f->data; }
+  // Float64 carries no stamp: measured on a 20-bit rig bag relayed as Float64, live C was off the
+  // stamp-synchronised chain by up to 10 % (7 SE) in the worst of 10 segments (docs/rig.md).
+  static constexpr const char* kFloat64Warning =
+      "rig_frontend: torque_type float64: std_msgs/Float64 has no time stamp, each joint state "
+      "is paired with the latest torque received (one to several samples late, jittering). "
+      "With a torque that varies within a mesh period C can be biased (measured up to 10 %); "
+      "use geometry_msgs/WrenchStamped (torque_type wrench) for such torques";
 
   void add(const sensor_msgs::JointState& js, double torque) {
     last_wall_ = ros::WallTime::now();
