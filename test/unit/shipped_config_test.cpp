@@ -7,9 +7,11 @@
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "damping_id_params.hpp"
 #include "gear_sim/config_yaml.hpp"
@@ -109,6 +111,44 @@ TEST(ShippedConfig, NodeReadersRefuseATypoAndAWrongTypeInAShippedFile) {
   nodes::ParamReader p3(std::make_shared<gear_test::YamlParams>(invalid));
   nodes::WaveletNodeOptions o3;
   EXPECT_FALSE(nodes::readWaveletParameters(p3, &o3));
+}
+
+// The STE parameters of damping_id_node (~ste, ~ste_damping, ~ste_calibration_segments) on the
+// shipped file: a valid spec is read (and turns off the modeled response, which has no STE in it);
+// each hostile value stops the node at start instead of running a wrong model.
+TEST(ShippedConfig, DampingIdReaderChecksTheSteParameters) {
+  auto read = [](const std::map<std::string, YAML::Node>& set, nodes::DampingIdNodeOptions* o) {
+    YAML::Node n = YAML::LoadFile(configPath("damping_id.yaml"));
+    for (const auto& [k, v] : set) n[k] = v;
+    nodes::ParamReader p(std::make_shared<gear_test::YamlParams>(n));
+    return nodes::readDampingIdParameters(p, o);
+  };
+  nodes::DampingIdNodeOptions ok;
+  ASSERT_TRUE(read({{"ste", YAML::Node("mesh:3,shaft:1")},
+                    {"ste_damping", YAML::Node("dte")},
+                    {"publish_modeled_response", YAML::Node(true)}},
+                   &ok));
+  EXPECT_EQ(ok.ste_options.mesh_orders, 3);
+  EXPECT_EQ(ok.ste_options.pinion_orders, 1);
+  EXPECT_EQ(ok.ste_options.gear_orders, 1);
+  EXPECT_EQ(ok.ste_options.damping, gear_sim::SteDamping::Dte);
+  EXPECT_FALSE(ok.publish_modeled_response);
+
+  const std::vector<std::map<std::string, YAML::Node>> hostile = {
+      {{"ste", YAML::Node("mesh:x")}},
+      {{"ste", YAML::Node("mesh:3,warp:2")}},
+      {{"ste", YAML::Node("mesh:3")}, {"ste_damping", YAML::Node("viscous")}},
+      {{"ste", YAML::Node("mesh:3")}, {"ste_calibration_segments", YAML::Node(0)}},
+      {{"ste", YAML::Node("mesh:3")}, {"ste_calibration_segments", YAML::Node(1000000)}},
+      {{"ste", YAML::Node("mesh:3")}, {"model", YAML::Node("constant")}},
+      {{"ste", YAML::Node(3)}},
+  };
+  for (const auto& set : hostile) {
+    nodes::DampingIdNodeOptions o;
+    std::string shown;
+    for (const auto& [k, v] : set) shown += k + "=" + v.as<std::string>() + " ";
+    EXPECT_FALSE(read(set, &o)) << shown;
+  }
 }
 
 TEST(ShippedConfig, DiagnosticAnalyzersCoverEveryLiveNode) {
