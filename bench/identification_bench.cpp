@@ -18,6 +18,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "../test/unit/support/status_support.hpp"
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_sim/simulator.hpp"
@@ -44,7 +45,7 @@ const Data& data(long n) {
   d.config.simulation.duration = static_cast<double>(n) / 1e6;
   d.config.simulation.noise_snr_db = 40.0;
   std::string e;
-  if (!gear_sim::simulate(d.config, &d.table, &e)) throw std::runtime_error(e);
+  if (!gear_test::ok(gear_sim::simulate(d.config, &d.table), &e)) throw std::runtime_error(e);
   d.gear = gear_damping_id::gearConstants(d.config.gearModel());
   return cache.emplace(n, std::move(d)).first->second;
 }
@@ -66,7 +67,7 @@ void runIdentify(benchmark::State& state, Formulation f, DampingModel m,
   gear_damping_id::IdentificationResult r;
   std::string e;
   for (auto _ : state) {
-    if (!gear_damping_id::identify(d.table, d.gear, o, &r, &e, threads)) {
+    if (!gear_test::ok(gear_damping_id::identify(d.table, d.gear, o, &r, threads), &e)) {
       state.SkipWithError(e.c_str());
       break;
     }

@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "../test/unit/support/status_support.hpp"
 #include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_sim/simulator.hpp"
@@ -43,7 +44,7 @@ const Case& data(long n, bool trapezoid) {
     d.config.mesh.transition_fraction = 0.12;
   }
   std::string e;
-  if (!gear_sim::simulate(d.config, &d.table, &e)) throw std::runtime_error(e);
+  if (!gear_test::ok(gear_sim::simulate(d.config, &d.table), &e)) throw std::runtime_error(e);
   d.gear = gear_damping_id::gearConstants(d.config.gearModel());
   return cache.emplace(std::make_pair(n, trapezoid), std::move(d)).first->second;
 }
@@ -61,7 +62,7 @@ void runRefine(benchmark::State& state, Formulation f, DampingModel m, bool trap
   const auto ranges = gear_damping_id::segmentRanges(view, o);
   gear_damping_id::IdentificationResult start, r;
   std::string e;
-  if (!gear_damping_id::identify(d.table, d.gear, o, &start, &e)) {
+  if (!gear_test::ok(gear_damping_id::identify(d.table, d.gear, o, &start), &e)) {
     state.SkipWithError(e.c_str());
     return;
   }
@@ -69,7 +70,8 @@ void runRefine(benchmark::State& state, Formulation f, DampingModel m, bool trap
     state.PauseTiming();
     r = start;
     state.ResumeTiming();
-    if (!gear_damping_id::refineOutputError(view, ranges, d.gear, o, &r, &e, reference)) {
+    if (!gear_test::ok(gear_damping_id::refineOutputError(view, ranges, d.gear, o, &r, reference),
+                       &e)) {
       state.SkipWithError(e.c_str());
       break;
     }

@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "../test/unit/support/status_support.hpp"
 #include "gear_sim/simulator.hpp"
 
 namespace {
@@ -14,9 +15,10 @@ void runSim(benchmark::State& state, gear_sim::SimConfig c) {
   c.simulation.duration = static_cast<double>(state.range(0)) / c.simulation.sample_rate;
   gear_sim::SignalTable t;
   std::string error;
-  if (!gear_sim::simulate(c, &t, &error)) state.SkipWithError(error.c_str());  // allocation here
+  if (!gear_test::ok(gear_sim::simulate(c, &t), &error))
+    state.SkipWithError(error.c_str());  // allocation here
   for (auto _ : state) {
-    gear_sim::simulate(c, &t, &error);
+    gear_test::ok(gear_sim::simulate(c, &t), &error);
     benchmark::DoNotOptimize(t.dte.data());
   }
   state.SetItemsProcessed(state.iterations() * state.range(0));

@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "../test/unit/support/status_support.hpp"
 #include "gear_damping_id/wavelet.hpp"
 
 namespace {
@@ -69,13 +70,13 @@ void BM_Cwt(benchmark::State& state) {
   const std::vector<double> y = signalOf(n);
   MorletCwt cwt;
   std::string error;
-  if (!cwt.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, &error)) {
+  if (!gear_test::ok(cwt.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning), &error)) {
     state.SkipWithError(error.c_str());
     return;
   }
   std::vector<double> row(static_cast<size_t>(n), 0.0);
   auto once = [&]() {
-    if (!cwt.setSignal(y.data(), &error)) return false;
+    if (!gear_test::ok(cwt.setSignal(y.data()), &error)) return false;
     for (int i = 0; i < cwt.rows(); ++i) {
       if (!cwt.rowModulus(i, row.data())) return false;
     }
@@ -102,7 +103,8 @@ void BM_FftBound(benchmark::State& state) {
   const long n = state.range(0);
   MorletCwt probe;  // only to get the same padded length
   std::string error;
-  if (!probe.configure(n, kSampleRate, gridFor(n), kOmega0, FftPlanning::Estimate, &error)) {
+  if (!gear_test::ok(probe.configure(n, kSampleRate, gridFor(n), kOmega0, FftPlanning::Estimate),
+                     &error)) {
     state.SkipWithError(error.c_str());
     return;
   }
@@ -139,14 +141,14 @@ void scalogram(benchmark::State& state, gear_damping_id::Precision precision) {
   const std::vector<double> y = signalOf(n);
   gear_damping_id::MorletScalogram scal;
   std::string error;
-  if (!scal.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, threads, &error,
-                      precision)) {
+  if (!gear_test::ok(
+          scal.configure(n, kSampleRate, gridFor(n), kOmega0, g_planning, threads, precision),
+          &error)) {
     state.SkipWithError(error.c_str());
     return;
   }
   auto once = [&]() {
-    return scal.forEachRow(
-        y.data(), [](int, const double*) {}, &error);
+    return gear_test::ok(scal.forEachRow(y.data(), [](int, const double*) {}), &error);
   };
   if (!once()) {
     state.SkipWithError(error.c_str());
@@ -178,7 +180,7 @@ void BM_ModeDamping(benchmark::State& state) {
   gear_damping_id::WaveletResult r;
   std::string error;
   for (auto _ : state) {
-    if (!gear_damping_id::analyzeWavelet(y.data(), n, kSampleRate, o, &r, &error)) {
+    if (!gear_test::ok(gear_damping_id::analyzeWavelet(y.data(), n, kSampleRate, o, &r), &error)) {
       state.SkipWithError(error.c_str());
       return;
     }

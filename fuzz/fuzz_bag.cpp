@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <string>
 
+#include "../test/unit/support/status_support.hpp"
 #include "fuzz_support.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/rig_bag_io.hpp"
@@ -19,7 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   const gear_sim_ros::RigBagTopics rig_topics;
   if (gear_sim_ros::isRigBag(path, rig_topics)) {
     gear_sim::SignalTable rig;
-    if (!gear_sim_ros::readRigBag(path, rig_topics, &rig, &error)) {
+    if (!gear_test::ok(gear_sim_ros::readRigBag(path, rig_topics, &rig), &error)) {
       gear_fuzz::checkMessage(error);
     } else if (rig.size() == 0 || rig.theta1.size() != rig.size() ||
                rig.torque.size() != rig.size()) {
@@ -28,7 +29,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     return 0;
   }
   gear_sim_ros::BagSignalInfo info;
-  if (!gear_sim_ros::scanSignalBag(path, "", &info, &error)) {
+  if (!gear_test::ok(gear_sim_ros::scanSignalBag(path, "", &info), &error)) {
     gear_fuzz::checkMessage(error);  // rosbag's own texts are quoted too
     return 0;
   }
@@ -36,13 +37,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
                               gear_sim_ros::kMaxGapRatio * static_cast<double>(info.real_samples))
     std::abort();
   gear_sim::SignalTable t;
-  if (gear_sim_ros::readSignalBag(info, &t, &error) && t.size() != info.samples) std::abort();
+  if (gear_test::ok(gear_sim_ros::readSignalBag(info, &t), &error) && t.size() != info.samples)
+    std::abort();
   std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges;
   const Eigen::Index step = 37;
   for (Eigen::Index b = 0; b + step <= info.samples; b += 2 * step)
     ranges.emplace_back(b, b + step);
-  gear_sim_ros::streamSignalBag(
-      info, ranges, [](const gear_sim::SignalTable& block, size_t) { return block.size() > 0; },
-      &error);
+  gear_test::ok(gear_sim_ros::streamSignalBag(info, ranges,
+                                              [](const gear_sim::SignalTable& block, size_t) {
+                                                return block.size() > 0
+                                                           ? gear_sim::Status()
+                                                           : gear_sim::Status::internal("empty");
+                                              }),
+                &error);
   return 0;
 }

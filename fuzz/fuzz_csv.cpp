@@ -9,6 +9,7 @@
 #include <fstream>
 #include <string>
 
+#include "../test/unit/support/status_support.hpp"
 #include "fuzz_support.hpp"
 #include "gear_damping_id/input_checks.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -19,7 +20,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   gear_sim::SignalTable t;
   std::string error;
   const bool allow_non_finite = size > 0 && (data[size - 1] & 1);
-  if (!gear_sim::readSignalCsv(path, &t, &error, {"time", "dte"}, allow_non_finite)) {
+  if (!gear_test::ok(gear_sim::readSignalCsv(path, &t, {"time", "dte"}, allow_non_finite),
+                     &error)) {
     gear_fuzz::checkMessage(error);
     return 0;
   }
@@ -28,9 +30,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
   gear_damping_id::GearConstants gear;  // the default gear pair
   std::string warning;
-  gear_fuzz::checkMessage(gear_damping_id::checkSampleRate(1.0 / dt, gear, &warning));
+  gear_fuzz::checkMessage(gear_damping_id::checkSampleRate(1.0 / dt, gear, &warning).message());
   gear_damping_id::IdentificationOptions options;
   gear_fuzz::checkMessage(
-      gear_damping_id::checkRecordLength(t.time[n - 1] - t.time[0] + dt, options));
+      gear_damping_id::checkRecordLength(t.time[n - 1] - t.time[0] + dt, options).message());
   return 0;
 }

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "../test/unit/support/status_support.hpp"
 #include "fuzz_support.hpp"
 #include "gear_damping_id/encoder_frontend.hpp"
 #include "gear_sim/rig_csv.hpp"
@@ -19,7 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   gear_sim::GearModel model;  // the Table 1 pair
   if ((data[0] & 1) == 0) {
     gear_sim::SignalTable rig;
-    if (!gear_sim::readRigCsv(path, &rig, &error)) {
+    if (!gear_test::ok(gear_sim::readRigCsv(path, &rig), &error)) {
       gear_fuzz::checkMessage(error);
       return 0;
     }
@@ -28,7 +29,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     o.refine_offset = false;
     gear_sim::SignalTable out;
     gear_damping_id::EncoderFrontEndReport report;
-    if (!gear_damping_id::encoderToSignalTable(rig, model, o, &out, &report, &error))
+    if (!gear_test::ok(gear_damping_id::encoderToSignalTable(rig, model, o, &out, &report), &error))
       gear_fuzz::checkMessage(error);
     // Streamed, in chunks of 1 + data[0] / 4 samples.
     o.mesh_offset = 0.25, o.dte_offset = 0.0, o.calibration_samples = 16;
@@ -37,8 +38,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     const bool torque = rig.torque.size() == rig.size();
     for (Eigen::Index b = 0; b < rig.size(); b += chunk) {
       const Eigen::Index n = std::min(chunk, rig.size() - b);
-      if (!fe.push(1e6, static_cast<std::uint64_t>(b), rig.theta1.data() + b, rig.theta2.data() + b,
-                   torque ? rig.torque.data() + b : nullptr, static_cast<size_t>(n), &error)) {
+      if (!gear_test::ok(fe.push(1e6, static_cast<std::uint64_t>(b), rig.theta1.data() + b,
+                                 rig.theta2.data() + b, torque ? rig.torque.data() + b : nullptr,
+                                 static_cast<size_t>(n)),
+                         &error)) {
         gear_fuzz::checkMessage(error);
         break;
       }
@@ -48,14 +51,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     }
   } else {
     std::vector<double> edges;
-    if (!gear_sim::readEdgeCsv(path, &edges, &error)) {
+    if (!gear_test::ok(gear_sim::readEdgeCsv(path, &edges), &error)) {
       gear_fuzz::checkMessage(error);
       return 0;
     }
     if (edges.empty()) return 0;
     Eigen::VectorXd grid = Eigen::VectorXd::LinSpaced(32, edges.front(), edges.back());
     Eigen::VectorXd theta;
-    if (!gear_damping_id::edgeTimesToAngles(edges, 1 + data[0] / 2, grid, &theta, &error))
+    if (!gear_test::ok(gear_damping_id::edgeTimesToAngles(edges, 1 + data[0] / 2, grid, &theta),
+                       &error))
       gear_fuzz::checkMessage(error);
   }
   return 0;

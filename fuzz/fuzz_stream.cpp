@@ -90,7 +90,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   const std::uint8_t range = r.byte();
   if (range & 1) o.t_start = 1e-6 * static_cast<double>(r.byte()) * 10.0;
   if (range & 2) o.t_end = o.t_start + 1e-6 * static_cast<double>(1 + r.byte()) * 40.0;
-  if (!o.validate().empty()) return 0;
+  if (!o.check().message().empty()) return 0;
   gear_damping_id::StreamAssembler a(o);
   std::uint64_t next = 0;
   std::vector<double> ch[5];

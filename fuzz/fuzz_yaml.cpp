@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <string>
 
+#include "../test/unit/support/status_support.hpp"
 #include "fuzz_support.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
@@ -20,7 +21,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   }
   std::string error;
   gear_sim::SimConfig config;
-  if (gear_sim::loadSimConfig(root, &config, &error, "/nonexistent")) {
+  if (gear_test::ok(gear_sim::loadSimConfig(root, &config, "/nonexistent"), &error)) {
     // A valid configuration stays within the documented sizes.
     if (!(config.simulation.duration * config.simulation.sample_rate <=
           gear_sim::kMaxSimulationSamples))
@@ -30,6 +31,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   }
   error.clear();
   gear_sim::GearModel model;
-  if (!gear_sim::loadGearModel(root, &model, &error)) gear_fuzz::checkMessage(error);
+  if (!gear_test::ok(gear_sim::loadGearModel(root, &model), &error)) gear_fuzz::checkMessage(error);
   return 0;
 }

@@ -121,9 +121,8 @@ class DampingIdNode {
   bool loadGearConfig() {
     if (o_.gear_config.empty()) return true;
     gear_sim::SimConfig cfg;
-    std::string e;
-    if (!gear_sim::loadSimConfigFile(o_.gear_config, &cfg, &e)) {
-      ROS_FATAL("~gear_config = '%s': %s", o_.gear_config.c_str(), e.c_str());
+    if (const gear_sim::Status s = gear_sim::loadSimConfigFile(o_.gear_config, &cfg); !s.ok()) {
+      ROS_FATAL("~gear_config = '%s': %s", o_.gear_config.c_str(), s.message().c_str());
       return false;
     }
     const gear_sim::GearModel model = cfg.gearModel();
@@ -132,9 +131,8 @@ class DampingIdNode {
 
  private:
   bool setGear(const gd::GearConstants& g, int z1, int z2) {
-    const std::string e = g.validate();
-    if (!e.empty()) {
-      ROS_ERROR_THROTTLE(5.0, "gear parameters ignored: %s", e.c_str());
+    if (const gear_sim::Status s = g.check(); !s.ok()) {
+      ROS_ERROR_THROTTLE(5.0, "gear parameters ignored: %s", s.message().c_str());
       return false;
     }
     if (gear_ && z1 == o_.ste_options.pinion_teeth && z2 == o_.ste_options.gear_teeth &&
@@ -160,9 +158,8 @@ class DampingIdNode {
 
   void onParams(const gear_damping::GearParams::ConstPtr& msg) {
     gear_sim::GearModel model;
-    std::string e;
-    if (!gear_sim_ros::fromMsg(*msg, &model, &e)) {
-      ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", e.c_str());
+    if (const gear_sim::Status s = gear_sim_ros::fromMsg(*msg, &model); !s.ok()) {
+      ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", s.message().c_str());
       return;
     }
     setGear(gd::gearConstants(model), model.gears.pinion.teeth, model.gears.gear.teeth);
@@ -175,11 +172,11 @@ class DampingIdNode {
     limits.shared_segments = static_cast<size_t>(o_.shared_segments);
     live_ = std::make_unique<gd::LiveIdentification>(o_.id, *gear_, limits);
     if (o_.ste.empty()) return true;
-    const std::string e =
+    const gear_sim::Status s =
         live_->setSte(o_.ste_options, static_cast<size_t>(o_.ste_calibration_segments));
-    if (!e.empty()) {
+    if (!s.ok()) {
       ROS_ERROR_THROTTLE(5.0, "~ste = '%s' cannot be used with this gear: %s", o_.ste.c_str(),
-                         e.c_str());
+                         s.message().c_str());
       live_.reset();
       gear_.reset();
       return false;
@@ -367,8 +364,7 @@ class DampingIdNode {
     }
     if (o_.publish_modeled_response && est.identifiable && std::isfinite(est.C)) {
       gd::ModeledResponse mr;
-      std::string why;
-      if (gd::modeledResponse(v, *gear_, seg, &mr, &why)) {
+      if (const gear_sim::Status made = gd::modeledResponse(v, *gear_, seg, &mr); made.ok()) {
         auto msg = gear_damping_ros::toMsg(mr, s.sample_rate,
                                            s.first_index + static_cast<std::uint64_t>(mr.begin));
         msg.header.stamp = ros::Time::now();
@@ -376,7 +372,7 @@ class DampingIdNode {
         last_fit_ = mr.fit_percent;
         fit = mr.fit_percent;
       } else {
-        ROS_WARN_THROTTLE(5.0, "modeled response: %s", why.c_str());
+        ROS_WARN_THROTTLE(5.0, "modeled response: %s", made.message().c_str());
       }
     }
     publishSample(est, fit);

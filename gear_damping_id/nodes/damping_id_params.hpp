@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "gear_damping_id/identification_types.hpp"
+#include "gear_damping_id/live_identification.hpp"
 #include "gear_damping_id/ste_model.hpp"
 #include "gear_damping_id/stream_assembler.hpp"
 #include "node_common.hpp"
@@ -27,7 +28,7 @@ struct DampingIdNodeOptions {
   // STE (docs/ste.md): "" = none, else an `analyze --ste` spec; calibrated jointly on the first
   // ste_calibration_segments segments, then held. The tooth counts come with the gear.
   std::string ste;
-  std::string ste_damping = "relative";
+  std::string ste_damping = gear_sim::steDampingName(gear_sim::SteDamping::Relative);
   int ste_calibration_segments = 10;
   gear_damping_id::SteModelOptions ste_options;
 };
@@ -106,24 +107,19 @@ inline bool readDampingIdParameters(ParamReader& p, DampingIdNodeOptions* o) {
     }
   }
   if (!o->ste.empty()) {
-    std::string why;
-    if (!gear_damping_id::parseSteSpec(o->ste, &o->ste_options, &why)) {
-      ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), why.c_str());
+    gear_sim::Status s = gear_damping_id::parseSteSpec(o->ste, &o->ste_options);
+    if (s.ok()) s = gear_damping_id::LiveIdentification::checkSte(o->id);
+    if (!s.ok()) {
+      ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), s.message().c_str());
       return false;
     }
-    if (o->ste_damping != "relative" && o->ste_damping != "dte") {
+    const gear_sim::Result<gear_sim::SteDamping> damping =
+        gear_sim::parseSteDamping(o->ste_damping);
+    if (!damping.ok()) {
       ROS_FATAL("~ste_damping = '%s': must be relative or dte", o->ste_damping.c_str());
       return false;
     }
-    o->ste_options.damping =
-        o->ste_damping == "dte" ? gear_sim::SteDamping::Dte : gear_sim::SteDamping::Relative;
-    why = gear_damping_id::steOptionsError(o->id);
-    if (why.empty() && o->id.model == gear_damping_id::DampingModel::Constant)
-      why = "the constant damping model with the STE needs the whole record (not live)";
-    if (!why.empty()) {
-      ROS_FATAL("~ste = '%s': %s", o->ste.c_str(), why.c_str());
-      return false;
-    }
+    o->ste_options.damping = *damping;
     if (o->publish_modeled_response) {
       ROS_WARN("~ste: the modeled response does not include the STE: not published");
       o->publish_modeled_response = false;

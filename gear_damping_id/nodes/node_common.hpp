@@ -26,6 +26,7 @@
 #include "gear_damping_ros/live_conversions.hpp"
 #include "gear_sim/option_status.hpp"
 #include "load_governor.hpp"
+#include "param_error.hpp"
 
 namespace gear_damping_nodes {
 
@@ -228,17 +229,17 @@ class ChunkIntake {
   void push(const gear_damping::SignalChunk& msg) {
     last_chunk_ = ros::WallTime::now();
     ++messages_;
-    std::string why;
     gear_damping_id::ChunkData c;
-    if (!gear_damping_ros::toChunkData(msg, &state_, &c, &why)) {
+    if (const gear_sim::Status s = gear_damping_ros::toChunkData(msg, &state_, &c); !s.ok()) {
       c = gear_damping_id::ChunkData();  // empty: the assembler counts it as malformed
       c.first_index = msg.first_index;
       c.sample_rate = msg.sample_rate;
       assembler_.push(c);
       ROS_WARN_THROTTLE(2.0, "chunk at index %lu rejected: malformed (%s)",
-                        static_cast<unsigned long>(msg.first_index), why.c_str());
+                        static_cast<unsigned long>(msg.first_index), s.message().c_str());
       return;
     }
+    std::string why;  // the assembler's account of a classified chunk (ChunkStatus)
     const auto status = assembler_.push(c, &why);
     switch (status) {
       case gear_damping_id::ChunkStatus::Suspect:
@@ -343,15 +344,5 @@ class ChunkIntake {
   gear_damping_id::LossMonitor monitor_;
   std::string last_jump_;
 };
-
-/// A core options error in the node's "~param = value: violated `rule`" form, from the
-/// structured status (no message parsing). `rename` maps a core field to the node parameter that
-/// sets it where the names differ (wavelet_node's ~window sets StreamOptions::segment_length).
-inline std::string paramError(const gear_sim::OptionStatus& s,
-                              const std::map<std::string, std::string>& rename = {}) {
-  const auto it = rename.find(s.field);
-  const std::string& name = it == rename.end() ? s.field : it->second;
-  return "~" + name + " = " + s.value + ": violated `" + s.rule + "`";
-}
 
 }  // namespace gear_damping_nodes

@@ -25,6 +25,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
+#include "param_error.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -56,11 +57,12 @@ class RigFrontEndNode {
     // The offsets estimated with the STE modelled (docs/rig.md): an `analyze --ste` spec.
     std::string model_ste;
     pnh.param<std::string>("model_ste", model_ste, "");
-    std::string error;
-    if (gear_config.empty() || !gear_sim::loadGearModelFile(gear_config, &model_, &error)) {
-      ROS_FATAL("~gear_config: %s", gear_config.empty() ? "required (a gear YAML, "
-                                                          "config/table1.yaml layout)"
-                                                        : error.c_str());
+    const gear_sim::Status loaded =
+        gear_config.empty()
+            ? gear_sim::Status::invalidArgument("required (a gear YAML, config/table1.yaml layout)")
+            : gear_sim::loadGearModelFile(gear_config, &model_);
+    if (!loaded.ok()) {
+      ROS_FATAL("~gear_config: %s", loaded.message().c_str());
       return false;
     }
     if (!(rate_ > 0.0 && std::isfinite(rate_))) {
@@ -86,17 +88,16 @@ class RigFrontEndNode {
     opts_.mesh_offset = mesh_offset;
     opts_.dte_offset = dte_offset;
     if (!model_ste.empty()) {
-      std::string why;
-      if (!gd::parseSteSpec(model_ste, &opts_.ste, &why)) {
-        ROS_FATAL("~model_ste = '%s': %s", model_ste.c_str(), why.c_str());
+      if (const gear_sim::Status s = gd::parseSteSpec(model_ste, &opts_.ste); !s.ok()) {
+        ROS_FATAL("~model_ste = '%s': %s", model_ste.c_str(), s.message().c_str());
         return false;
       }
       opts_.model_ste = true;
       opts_.ste.pinion_teeth = model_.gears.pinion.teeth;
       opts_.ste.gear_teeth = model_.gears.gear.teeth;
     }
-    if (const std::string e = opts_.validate(); !e.empty()) {
-      ROS_FATAL("front end: %s", e.c_str());
+    if (const gear_sim::OptionStatus s = opts_.check(); !s.ok()) {
+      ROS_FATAL("%s", gear_damping_nodes::paramError(s).c_str());
       return false;
     }
     reset();
@@ -208,9 +209,10 @@ class RigFrontEndNode {
     for (size_t k = 0; k < pending_.size(); ++k)
       a[k] = pending_[k][0], b[k] = pending_[k][1], c[k] = pending_[k][2];
     pending_.clear();
-    std::string error;
-    if (!fe_->push(rate_, pending_first_, a.data(), b.data(), c.data(), a.size(), &error)) {
-      ROS_ERROR("rig_frontend: %s", error.c_str());
+    if (const gear_sim::Status s =
+            fe_->push(rate_, pending_first_, a.data(), b.data(), c.data(), a.size());
+        !s.ok()) {
+      ROS_ERROR("rig_frontend: %s", s.message().c_str());
       refused_ = true;
       return;
     }
@@ -246,9 +248,8 @@ class RigFrontEndNode {
     if (!started_ || finished_ || refused_) return;
     if ((ros::WallTime::now() - last_wall_).toSec() < eos_timeout_) return;
     flush();
-    std::string error;
-    if (!refused_ && !fe_->finish(&error)) {
-      ROS_ERROR("rig_frontend: %s", error.c_str());
+    if (const gear_sim::Status s = refused_ ? gear_sim::Status() : fe_->finish(); !s.ok()) {
+      ROS_ERROR("rig_frontend: %s", s.message().c_str());
       refused_ = true;
       return;
     }

@@ -205,9 +205,9 @@ class WaveletNode {
     load_.record(nodes::busySeconds() - cpu0, false);
     if (!r.ok()) {
       ++windows_failed_;
-      last_problem_ = r.error;
+      last_problem_ = r.status.message();
       ROS_WARN_THROTTLE(2.0, "wavelet analysis of the window at %.6f s failed: %s", t_start,
-                        r.error.c_str());
+                        last_problem_.c_str());
       return;
     }
     gd::attachIntegralDampingRatio(&r, xi_integral_);

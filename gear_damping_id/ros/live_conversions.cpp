@@ -4,20 +4,18 @@ namespace gear_damping_ros {
 
 namespace gd = gear_damping_id;
 
-bool toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh_state,
-                 gd::ChunkData* out, std::string* error) {
+gear_sim::Status toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh_state,
+                             gd::ChunkData* out) {
   const size_t n = msg.dte.size();
-  auto check = [&](size_t len, const char* name) {
-    if (len == 0 || len == n) return true;
-    *error =
-        std::string(name) + " has " + std::to_string(len) + " samples, dte " + std::to_string(n);
-    return false;
-  };
-  if (!check(msg.stiffness.size(), "stiffness") || !check(msg.torque.size(), "torque") ||
-      !check(msg.mesh_state.size(), "mesh_state") || !check(msg.mesh_phase.size(), "mesh_phase") ||
-      !check(msg.dte_velocity.size(), "dte_velocity") || !check(msg.damping.size(), "damping")) {
-    return false;
-  }
+  const std::pair<size_t, const char*> channels[] = {
+      {msg.stiffness.size(), "stiffness"},       {msg.torque.size(), "torque"},
+      {msg.mesh_state.size(), "mesh_state"},     {msg.mesh_phase.size(), "mesh_phase"},
+      {msg.dte_velocity.size(), "dte_velocity"}, {msg.damping.size(), "damping"}};
+  for (const auto& [len, name] : channels)
+    if (len != 0 && len != n)
+      return gear_sim::Status::invalidInput(
+          std::string(name) + " has " + std::to_string(len) + " samples, dte " + std::to_string(n),
+          name);
   auto ptr = [n](const std::vector<double>& v) { return n > 0 && !v.empty() ? v.data() : nullptr; };
   *out = gd::ChunkData();
   out->first_index = msg.first_index;
@@ -29,7 +27,7 @@ bool toChunkData(const gear_damping::SignalChunk& msg, std::vector<double>* mesh
   out->mesh_phase = ptr(msg.mesh_phase);
   mesh_state->assign(msg.mesh_state.begin(), msg.mesh_state.end());
   out->mesh_state = ptr(*mesh_state);
-  return true;
+  return {};
 }
 
 }  // namespace gear_damping_ros

@@ -75,6 +75,9 @@ int fail(int code, const std::string& message) {
   std::cerr << "analyze: " << message << "\n";
   return code;
 }
+// A failed step exits with its step's code (reading the input: kExitInput, writing an output:
+// kExitOutput), whatever the StatusCode; docs/limits.md "Exit codes".
+int fail(int code, const gear_sim::Status& s) { return fail(code, s.message()); }
 
 void warn(const std::string& message) { std::cerr << "analyze: warning: " << message << "\n"; }
 
@@ -114,15 +117,14 @@ struct FitAccumulator {
 // The optional bag of results (written to a temporary file, renamed when complete).
 class ResultBag {
  public:
-  bool open(const std::string& path, std::string* error) {
+  gear_sim::Status open(const std::string& path) {
     path_ = path;
     try {
       bag_ = std::make_unique<rosbag::Bag>(path + ".partial", rosbag::bagmode::Write);
     } catch (const std::exception& e) {
-      *error = path + ": cannot write (" + e.what() + ")";
-      return false;
+      return gear_sim::Status::ioError(path + ": cannot write (" + e.what() + ")");
     }
-    return true;
+    return {};
   }
   bool active() const { return bag_ != nullptr; }
   template <class M>
@@ -133,17 +135,16 @@ class ResultBag {
     bag_->write(topic, stamp, msg);
   }
   // Closes the bag and stages it (renamed by stage->commit() with the other outputs).
-  bool close(std::string* error, gd::OutputStage* stage) {
-    if (!bag_) return true;
+  gear_sim::Status close(gd::OutputStage* stage) {
+    if (!bag_) return {};
     try {
       bag_->close();
     } catch (const std::exception& e) {
-      *error = path_ + ": cannot write (" + e.what() + ")";
-      return false;
+      return gear_sim::Status::ioError(path_ + ": cannot write (" + e.what() + ")");
     }
     bag_.reset();
     stage->add(path_ + ".partial", path_);
-    return true;
+    return {};
   }
   ~ResultBag() {
     if (bag_) {  // not closed: an error path; leave nothing that looks complete
@@ -170,33 +171,33 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
 // equal those of the record read whole. Memory: a group of segments per read. The piecewise
 // modeled response is per segment (from its identified state); shared-unknown runs are not
 // refined and have no modeled response (both need the whole record), with a warning.
-bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
-                      int threads, std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
-                      std::vector<double>* wavelet_dte, size_t wavelet_max,
-                      gear_sim::ProgressBar* progress, std::string* error) {
+gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
+                                  const gd::GearConstants& gear, int threads,
+                                  std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
+                                  std::vector<double>* wavelet_dte, size_t wavelet_max,
+                                  gear_sim::ProgressBar* progress) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
   whole.n = static_cast<Eigen::Index>(info.samples);
   const Ranges ranges = gd::segmentRanges(whole, runs->front().options);
-  if (ranges.empty()) {
-    *error = "no samples in the analysed time range";
-    return false;
-  }
+  if (ranges.empty())
+    return gear_sim::Status::invalidInput("no samples in the analysed time range");
   // Legacy forcing: the mean load over the analysed range (one extra pass, summed in order).
   double fbar = gd::kNaN;
   bool legacy = false;
   for (const auto& r : *runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
   if (legacy && info.torque) {
     double sum = 0.0;
-    if (!gear_sim_ros::streamSignalBag(
-            info, {{ranges.front().first, ranges.back().second}},
-            [&](const gear_sim::SignalTable& t, size_t) {
-              for (Eigen::Index i = 0; i < t.torque.size(); ++i) sum += t.torque[i];
-              return true;
-            },
-            error))
-      return false;
+    if (gear_sim::Status s =
+            gear_sim_ros::streamSignalBag(info, {{ranges.front().first, ranges.back().second}},
+                                          [&](const gear_sim::SignalTable& t, size_t) {
+                                            for (Eigen::Index i = 0; i < t.torque.size(); ++i)
+                                              sum += t.torque[i];
+                                            return gear_sim::Status();
+                                          });
+        !s.ok())
+      return s;
     fbar =
         gear.force_factor * sum / static_cast<double>(ranges.back().second - ranges.front().first);
   }
@@ -237,9 +238,8 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
       if (drivers[k].sharedModel()) continue;
       for (size_t j = 0; j < outs.size(); ++j) {
         gd::ModeledResponse resp;
-        std::string why;
         if (!outs[j].estimate.identifiable ||
-            !gd::modeledResponse(view, gear, outs[j].result, &resp, &why))
+            !gd::modeledResponse(view, gear, outs[j].result, &resp).ok())
           continue;
         fits[k].add(resp);
         bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
@@ -253,11 +253,15 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
         "segment " + std::to_string(first + segs.size()) + " of " + std::to_string(ranges.size()));
     return true;
   };
-  if (!gear_sim_ros::streamSignalBag(
-          info, reads,
-          [&](const gear_sim::SignalTable& block, size_t r) { return feeder.push(block, r, sink); },
-          error))
-    return false;
+  // (The sink never stops the feeder: every read range is fed.)
+  if (gear_sim::Status s =
+          gear_sim_ros::streamSignalBag(info, reads,
+                                        [&](const gear_sim::SignalTable& block, size_t r) {
+                                          feeder.push(block, r, sink);
+                                          return gear_sim::Status();
+                                        });
+      !s.ok())
+    return s;
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
     run.result = drivers[k].finish();
@@ -270,7 +274,7 @@ bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
                            " samples): the shared model's response needs the whole record";
     }
   }
-  return true;
+  return {};
 }
 
 // The integral method's xi set beside a wavelet mode: the shared estimate of a constant model,
@@ -351,7 +355,7 @@ class Analysis {
   std::vector<std::string> regions;
   long wavelet_max = 1L << 18;
   std::string wavelet_input;
-  std::string ste_spec, ste_damping = "relative";  // docs/ste.md
+  std::string ste_spec, ste_damping = gear_sim::steDampingName(gear_sim::SteDamping::Relative);
   gd::SteModelOptions ste_options;
   std::vector<gd::SteResult> ste_results;
   bool quiet = false, summary = false, table_mode = false;
@@ -367,7 +371,6 @@ class Analysis {
   bool is_bag = false;
   std::vector<gd::IdentificationOptions> runs_options;
   // Input.
-  std::string error;
   gear_sim::SignalTable table;
   gear_sim_ros::BagSignalInfo bag_info;
   bool streaming = false;
@@ -495,7 +498,9 @@ void Analysis::declareSteOptions(CLI::App& app) {
   app.add_option("--ste-damping", ste_damping,
                  "with --ste: damping on the deflection rate y' - e' (relative, default) or on "
                  "y' alone (dte)")
-      ->check(CLI::IsMember({"relative", "dte"}));
+      ->check([](const std::string& name) {
+        return gear_sim::parseSteDamping(name).ok() ? "" : "must be relative or dte";
+      });
 }
 
 // The Morlet wavelet validation (docs/method.md §5).
@@ -588,7 +593,7 @@ int Analysis::checkOptions() {
       gd::IdentificationOptions o = base;
       gd::parseFormulation(f, &o.formulation);
       gd::parseDampingModel(m, &o.model);
-      if (const std::string e = o.validate(); !e.empty()) return fail(kExitUsage, e);
+      if (const gear_sim::Status s = o.check(); !s.ok()) return fail(kExitUsage, s);
       runs_options.push_back(o);
     }
   }
@@ -600,12 +605,12 @@ int Analysis::checkOptions() {
   }
   wopt.full_scalogram = !csv_out.empty();  // only wavelet_scalogram.csv needs every row
   wopt.threads = threads;
-  if (const std::string e = wopt.validate(); !e.empty()) return fail(kExitUsage, "wavelet: " + e);
+  if (const gear_sim::Status s = wopt.check(); !s.ok())
+    return fail(kExitUsage, s.withContext("wavelet"));
   if (!ste_spec.empty()) {
-    std::string e;
-    if (!gd::parseSteSpec(ste_spec, &ste_options, &e)) return fail(kExitUsage, e);
-    ste_options.damping =
-        ste_damping == "dte" ? gear_sim::SteDamping::Dte : gear_sim::SteDamping::Relative;
+    if (const gear_sim::Status s = gd::parseSteSpec(ste_spec, &ste_options); !s.ok())
+      return fail(kExitUsage, "--ste: " + s.message());
+    ste_options.damping = *gear_sim::parseSteDamping(ste_damping);  // checked by CLI11
   }
 
   return kContinue;
@@ -617,18 +622,20 @@ int Analysis::readRecord() {
   const gear_sim_ros::RigBagTopics rig_topics;
   const bool rig_bag = is_bag && topic.empty() && gear_sim_ros::isRigBag(input, rig_topics);
   if (is_bag && !rig_bag) {
-    if (!gear_sim_ros::scanSignalBag(input, topic, &bag_info, &error))
-      return fail(kExitInput, error);
+    if (const gear_sim::Status s = gear_sim_ros::scanSignalBag(input, topic, &bag_info); !s.ok())
+      return fail(kExitInput, s);
     for (const auto& w : bag_info.warnings) warn(input + ": " + w);
     streaming = bag_info.samples > max_in_memory;
-    if (!streaming && !gear_sim_ros::readSignalBag(bag_info, &table, &error))
-      return fail(kExitInput, error);
+    if (!streaming)
+      if (const gear_sim::Status s = gear_sim_ros::readSignalBag(bag_info, &table); !s.ok())
+        return fail(kExitInput, s);
   } else if (rig_bag || gd::isRigInput(input, rig_opts)) {
     return readRigRecord(rig_bag, rig_topics);
-  } else if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"},
-                                      /*allow_non_finite=*/true)) {
+  } else if (const gear_sim::Status s = gear_sim::readSignalCsv(input, &table, {"time", "dte"},
+                                                                /*allow_non_finite=*/true);
+             !s.ok()) {
     // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
-    return fail(kExitInput, error);
+    return fail(kExitInput, s);
   }
   return kContinue;
 }
@@ -638,7 +645,8 @@ int Analysis::readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_
   if (params.empty())
     return fail(kExitUsage, "--params GEAR.yaml is required for a rig record (encoder input)");
   gear_sim::GearModel rig_model;
-  if (!gear_sim::loadGearModelFile(params, &rig_model, &error)) return fail(kExitInput, error);
+  if (const gear_sim::Status s = gear_sim::loadGearModelFile(params, &rig_model); !s.ok())
+    return fail(kExitInput, s);
   if (!edge_counts.empty()) {
     rig_opts.edge_counts1 = edge_counts.front();
     rig_opts.edge_counts2 = edge_counts.back();
@@ -655,12 +663,14 @@ int Analysis::readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_
   }
   if (rig_bag) {
     gear_sim::SignalTable rig;
-    if (!gear_sim_ros::readRigBag(input, rig_topics, &rig, &error) ||
-        !gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report, &error))
-      return fail(kExitInput, error);
+    gear_sim::Status s = gear_sim_ros::readRigBag(input, rig_topics, &rig);
+    if (s.ok()) s = gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report);
+    if (!s.ok()) return fail(kExitInput, s);
     bag_info.topic = rig_topics.joints;
-  } else if (!gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report, &error)) {
-    return fail(kExitInput, error);
+  } else if (const gear_sim::Status s =
+                 gd::loadRigInput(input, rig_opts, rig_model, &table, &rig_report);
+             !s.ok()) {
+    return fail(kExitInput, s);
   }
   rig_input = true;
   return kContinue;
@@ -670,7 +680,8 @@ int Analysis::readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_
 int Analysis::readGearParameters() {
   params_source = params;
   if (!params.empty()) {
-    if (!gear_sim::loadGearModelFile(params, &model, &error)) return fail(kExitInput, error);
+    if (const gear_sim::Status s = gear_sim::loadGearModelFile(params, &model); !s.ok())
+      return fail(kExitInput, s);
   } else if (is_bag && bag_info.has_params) {
     model = bag_info.params;
     params_source = input + ":" + bag_info.params_topic;
@@ -703,11 +714,11 @@ int Analysis::readGearParameters() {
     if (streaming) return fail(kExitUsage, "--ste: a bag beyond --max-in-memory is not supported");
     ste_options.pinion_teeth = model.gears.pinion.teeth;
     ste_options.gear_teeth = model.gears.gear.teeth;
-    if (const std::string e = ste_options.validate(); !e.empty()) return fail(kExitUsage, e);
+    if (const gear_sim::Status s = ste_options.check(); !s.ok()) return fail(kExitUsage, s);
   }
   if (identification) {
-    if (const std::string e = gear.validate(); !e.empty())
-      return fail(kExitInput, params_source + ": " + e);
+    if (const gear_sim::Status s = gear.check(); !s.ok())
+      return fail(kExitInput, s.withContext(params_source));
   }
   return kContinue;
 }
@@ -722,11 +733,11 @@ int Analysis::checkRecord() {
   whole.n = streaming ? static_cast<Eigen::Index>(bag_info.samples) : table.size();
   if (!streaming) {
     for (const auto& o : runs_options) {
-      const std::string e = gd::checkSignalTable(
+      const gear_sim::Status s = gd::checkSignalTable(
           table, identification ? o.formulation : gd::Formulation::Paper,  // Paper: dte only
           identification ? o.model : gd::DampingModel::Piecewise, o.time_tolerance,
           /*first_line=*/is_bag ? -1 : 2);
-      if (!e.empty()) return fail(kExitInput, input + ": " + e);
+      if (!s.ok()) return fail(kExitInput, s.withContext(input));
     }
   } else if (identification) {
     gd::ChannelSet present;
@@ -735,19 +746,18 @@ int Analysis::checkRecord() {
     present.mesh_state = bag_info.mesh_state;
     present.mesh_phase = bag_info.mesh_phase;
     for (const auto& o : runs_options)
-      if (const std::string e = gd::missingChannelError(present, o.formulation, o.model);
-          !e.empty())
-        return fail(kExitInput, input + ": " + e);
+      if (const gear_sim::Status s = gd::checkChannels(present, o.formulation, o.model); !s.ok())
+        return fail(kExitInput, s.withContext(input));
   }
   if (const int rc = checkAnalysedRange(); rc != kContinue) return rc;
   if (identification) {
     std::string rate_warning;
-    if (const std::string e = gd::checkSampleRate(sample_rate, gear, &rate_warning); !e.empty())
-      return fail(kExitInput, input + ": " + e);
+    if (const gear_sim::Status s = gd::checkSampleRate(sample_rate, gear, &rate_warning); !s.ok())
+      return fail(kExitInput, s.withContext(input));
     if (!rate_warning.empty()) warn(input + ": " + rate_warning);
     for (const auto& o : runs_options)
-      if (const std::string e = gd::checkRecordLength(duration, o); !e.empty())
-        return fail(kExitInput, input + ": " + e);
+      if (const gear_sim::Status s = gd::checkRecordLength(duration, o); !s.ok())
+        return fail(kExitInput, s.withContext(input));
   }
   return kContinue;
 }
@@ -785,7 +795,8 @@ int Analysis::load() {
 }
 
 int Analysis::identify() {
-  if (!bag_out.empty() && !bag.open(bag_out, &error)) return fail(kExitOutput, error);
+  if (!bag_out.empty())
+    if (const gear_sim::Status s = bag.open(bag_out); !s.ok()) return fail(kExitOutput, s);
 
   // Identification (table or streaming); the wavelet's samples are collected on the way.
   first = analysed.front().first;
@@ -803,19 +814,20 @@ int Analysis::identify() {
   }
   gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
-    if (!analyzeStreaming(bag_info, gear, threads, &runs, &bag,
-                          wavelet_on_record ? &wavelet_dte : nullptr, wavelet_n_record, &progress,
-                          &error))
-      return fail(kExitInput, input + ": " + error);
+    if (const gear_sim::Status s = analyzeStreaming(bag_info, gear, threads, &runs, &bag,
+                                                    wavelet_on_record ? &wavelet_dte : nullptr,
+                                                    wavelet_n_record, &progress);
+        !s.ok())
+      return fail(kExitInput, s.withContext(input));
   } else if (streaming && wavelet_on_record) {
-    if (!gear_sim_ros::streamSignalBag(
+    if (const gear_sim::Status s = gear_sim_ros::streamSignalBag(
             bag_info, {{first, first + static_cast<Eigen::Index>(wavelet_n_record)}},
             [&](const gear_sim::SignalTable& t, size_t) {
               wavelet_dte.assign(t.dte.data(), t.dte.data() + t.dte.size());
-              return true;
-            },
-            &error))
-      return fail(kExitInput, error);
+              return gear_sim::Status();
+            });
+        !s.ok())
+      return fail(kExitInput, s);
   } else {
     const gd::SignalView view = gd::SignalView::of(table);
     for (size_t k = 0; k < runs.size(); ++k) {
@@ -823,18 +835,24 @@ int Analysis::identify() {
       progress.set(2.0 * static_cast<double>(k), run.name() + ": identification");
       if (!ste_spec.empty()) {
         ste_results.emplace_back();
-        if (!gd::identifyWithSte(table, gear, run.options, ste_options, &run.result,
-                                 &ste_results.back(), &error))
-          return fail(kExitInput, input + ": " + error);
-      } else if (!gd::identify(table, gear, run.options, &run.result, &error, threads)) {
-        return fail(kExitInput, input + ": " + error);
+        if (const gear_sim::Status s = gd::identifyWithSte(table, gear, run.options, ste_options,
+                                                           &run.result, &ste_results.back());
+            !s.ok())
+          return fail(kExitInput, s.withContext(input));
+      } else if (const gear_sim::Status s =
+                     gd::identify(table, gear, run.options, &run.result, threads);
+                 !s.ok()) {
+        return fail(kExitInput, s.withContext(input));
       }
       progress.set(2.0 * static_cast<double>(k) + 1.0, run.name() + ": modeled response");
       if (!ste_spec.empty()) {  // the forward model has no STE forcing (docs/ste.md)
         run.response = gd::ModeledResponse{};
         run.response_error = "the modeled response does not include the STE (--ste)";
-      } else if (!gd::modeledResponse(view, gear, run.result, &run.response, &run.response_error)) {
+      } else if (const gear_sim::Status s =
+                     gd::modeledResponse(view, gear, run.result, &run.response);
+                 !s.ok()) {
         run.response = gd::ModeledResponse{};
+        run.response_error = s.message();
       } else {
         const double tr = table.time[run.response.begin];
         bag.write(
@@ -872,23 +890,25 @@ int Analysis::waveletStep() {
     gear_sim::SignalTable w;
     if (endsWith(wavelet_input, ".bag")) {
       gear_sim_ros::BagSignalInfo wi;
-      if (!gear_sim_ros::scanSignalBag(wavelet_input, "", &wi, &error) ||
-          !gear_sim_ros::streamSignalBag(
-              wi, {{0, std::min<Eigen::Index>(wavelet_max, wi.samples)}},
-              [&](const gear_sim::SignalTable& t, size_t) {
-                w = t;
-                return true;
-              },
-              &error))
-        return fail(kExitInput, "--wavelet-input: " + error);
-    } else if (!gear_sim::readSignalCsv(wavelet_input, &w, &error, {"time", "dte"}, true)) {
-      return fail(kExitInput, "--wavelet-input: " + error);
+      gear_sim::Status s = gear_sim_ros::scanSignalBag(wavelet_input, "", &wi);
+      if (s.ok())
+        s = gear_sim_ros::streamSignalBag(wi,
+                                          {{0, std::min<Eigen::Index>(wavelet_max, wi.samples)}},
+                                          [&](const gear_sim::SignalTable& t, size_t) {
+                                            w = t;
+                                            return gear_sim::Status();
+                                          });
+      if (!s.ok()) return fail(kExitInput, s.withContext("--wavelet-input"));
+    } else if (const gear_sim::Status s =
+                   gear_sim::readSignalCsv(wavelet_input, &w, {"time", "dte"}, true);
+               !s.ok()) {
+      return fail(kExitInput, s.withContext("--wavelet-input"));
     }
-    if (const std::string e =
+    if (const gear_sim::Status s =
             gd::checkSignalTable(w, gd::Formulation::Paper, gd::DampingModel::Piecewise, 1e-6,
                                  endsWith(wavelet_input, ".bag") ? -1 : 2);
-        !e.empty())
-      return fail(kExitInput, wavelet_input + ": " + e);
+        !s.ok())
+      return fail(kExitInput, s.withContext(wavelet_input));
     wavelet_n = static_cast<size_t>(std::min<Eigen::Index>(wavelet_max, w.size()));
     wavelet_dte.assign(w.dte.data(), w.dte.data() + wavelet_n);
     wavelet_rate = static_cast<double>(w.size() - 1) / (w.time[w.size() - 1] - w.time[0]);
@@ -916,8 +936,8 @@ int Analysis::waveletStep() {
     wres = gd::validateWavelet(wavelet_dte.data(), wavelet_dte.size(), wavelet_rate, wopt);
     wavelet_progress.finish();
     if (!wres.ok()) {
-      if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.error);
-      warn("wavelet validation not possible: " + wres.error);
+      if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.status.message());
+      warn("wavelet validation not possible: " + wres.status.message());
     } else {
       gd::shiftWaveletTimes(&wres, t_first);  // onto the record's time axis
       if (identification && !runs.empty())
@@ -951,26 +971,26 @@ int Analysis::write() {
   }
   doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {
-    doc["wavelet"] = wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.error}};
+    doc["wavelet"] =
+        wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.status.message()}};
     if (wres.ok()) {
       doc["wavelet"]["samples"] = wavelet_n;
       doc["wavelet"]["input"] = wavelet_input.empty() ? input : wavelet_input;
     }
   }
   gd::OutputStage stage;  // every output renamed only once all are written
-  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error, &stage))
-    return fail(kExitOutput, error);
-  if (!csv_out.empty()) {
-    if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error, &stage))
-      return fail(kExitOutput, error);
-    if (!ste_results.empty() && !gd::writeSteCsv(csv_out, ste_results.front(), &error, &stage))
-      return fail(kExitOutput, error);
-    if (wavelet && wres.ok() &&
-        !gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
-                             wavelet_rate, t_first, 4000, &error, &stage))
-      return fail(kExitOutput, error);
+  gear_sim::Status s;
+  if (!output.empty()) s = gd::writeFileAtomically(output, doc.dump(2) + "\n", &stage);
+  if (s.ok() && !csv_out.empty()) {
+    if (!runs.empty()) s = gd::writeRunCsv(csv_out, runs, &stage);
+    if (s.ok() && !ste_results.empty()) s = gd::writeSteCsv(csv_out, ste_results.front(), &stage);
+    if (s.ok() && wavelet && wres.ok())
+      s = gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
+                              wavelet_rate, t_first, 4000, &stage);
   }
-  if (!bag.close(&error, &stage) || !stage.commit(&error)) return fail(kExitOutput, error);
+  if (s.ok()) s = bag.close(&stage);
+  if (s.ok()) s = stage.commit();
+  if (!s.ok()) return fail(kExitOutput, s);
   if (identification && !identifiable)
     return fail(kExitNothing, "no segment of " + input + " is identifiable (see the table)");
   return 0;

@@ -65,9 +65,10 @@ bool loadParameters(ros::NodeHandle& pnh, NodeOptions* o) {
       return false;
     }
   }
-  std::string error;
-  if (!gear_sim::loadSimConfig(root, &o->sim, &error)) {
-    ROS_FATAL("~%s", error.c_str());
+  // The loader's message starts with the key ("load.amplitud: unknown key ..."), a parameter
+  // under the private namespace here.
+  if (const gear_sim::Status s = gear_sim::loadSimConfig(root, &o->sim); !s.ok()) {
+    ROS_FATAL("~%s", s.message().c_str());
     return false;
   }
   gear_damping_nodes::ParamReader p(pnh);
@@ -121,9 +122,8 @@ class GearSimNode {
   }
 
   bool simulate() {
-    std::string error;
-    if (!gear_sim::simulate(o_.sim, &table_, &error)) {
-      ROS_FATAL("simulation failed: %s", error.c_str());
+    if (const gear_sim::Status s = gear_sim::simulate(o_.sim, &table_); !s.ok()) {
+      ROS_FATAL("simulation failed: %s", s.message().c_str());
       return false;
     }
     return true;

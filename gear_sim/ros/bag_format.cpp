@@ -420,26 +420,21 @@ void walk(std::ifstream* f, std::uint64_t file_size) { BagWalker(f, file_size).w
 
 }  // namespace
 
-bool checkBagStructure(const std::string& path, std::string* error) {
+gear_sim::Status checkBagStructure(const std::string& path) {
+  using gear_sim::Status;
   std::ifstream f(path, std::ios::binary);
-  if (!f) {
-    *error = path + ": cannot read as a bag (cannot open the file)";
-    return false;
-  }
+  if (!f) return Status::ioError(path + ": cannot read as a bag (cannot open the file)");
   f.seekg(0, std::ios::end);
   const std::streamoff end = f.tellg();
-  if (end < 0) {
-    *error = path + ": cannot read as a bag (cannot determine its size)";
-    return false;
-  }
+  if (end < 0) return Status::ioError(path + ": cannot read as a bag (cannot determine its size)");
   try {
     walk(&f, static_cast<std::uint64_t>(end));
   } catch (const Corrupt& c) {
-    *error = path + ": cannot read as a bag (" + c.what + " at byte " + std::to_string(c.at) + ")" +
-             (c.truncated ? "; if it is truncated, `rosbag reindex` may recover it" : "");
-    return false;
+    return Status::invalidInput(
+        path + ": cannot read as a bag (" + c.what + " at byte " + std::to_string(c.at) + ")" +
+        (c.truncated ? "; if it is truncated, `rosbag reindex` may recover it" : ""));
   }
-  return true;
+  return {};
 }
 
 }  // namespace gear_sim_ros

@@ -24,6 +24,7 @@
 
 namespace gear_sim_ros {
 using gear_sim::formatNumber;
+using gear_sim::Status;
 namespace {
 
 constexpr const char* kChunkType = "gear_damping/SignalChunk";
@@ -188,8 +189,8 @@ class ChunkReader {
 
 // The SignalChunk topic to read: `topic` when given (it must exist and have that type), else the
 // only one in the bag. Also notes the first GearParams topic.
-bool chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
-                 BagSignalInfo* out, std::string* error) {
+Status chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
+                   BagSignalInfo* out) {
   rosbag::View all(bag);
   std::vector<std::string> chunk_topics, params_topics;
   std::string topic_type;
@@ -205,29 +206,28 @@ bool chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::str
   if (!params_topics.empty()) out->params_topic = params_topics.front();
   if (!topic.empty()) {
     if (topic_type.empty()) {
-      *error = path + ": no topic " + gear_sim::quoteForMessage(topic) + " in the bag";
-      return false;
+      return Status::invalidInput(path + ": no topic " + gear_sim::quoteForMessage(topic) +
+                                  " in the bag");
     }
     if (topic_type != kChunkType) {
-      *error = path + ": topic " + gear_sim::quoteForMessage(topic) + " has type " +
-               gear_sim::quoteForMessage(topic_type) + ", not " + kChunkType;
-      return false;
+      return Status::invalidInput(path + ": topic " + gear_sim::quoteForMessage(topic) +
+                                  " has type " + gear_sim::quoteForMessage(topic_type) + ", not " +
+                                  kChunkType);
     }
     out->topic = topic;
   } else if (chunk_topics.size() == 1) {
     out->topic = chunk_topics.front();
   } else if (chunk_topics.empty()) {
-    *error = path + ": no topic of type " + std::string(kChunkType) + " in the bag";
-    return false;
+    return Status::invalidInput(path + ": no topic of type " + std::string(kChunkType) +
+                                " in the bag");
   } else {
     std::string list;
     for (const auto& t : chunk_topics)
       list += (list.empty() ? "" : ", ") + gear_sim::quoteForMessage(t);
-    *error = path + ": several topics of type " + std::string(kChunkType) + " (" + list +
-             "): choose one with --topic";
-    return false;
+    return Status::invalidInput(path + ": several topics of type " + std::string(kChunkType) +
+                                " (" + list + "): choose one with --topic");
   }
-  return true;
+  return {};
 }
 
 // The last GearParams message of out->params_topic (if any) into out->params, or the reason
@@ -237,13 +237,12 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
   rosbag::View pv(bag, rosbag::TopicQuery(out->params_topic));
   gear_damping::GearParams::ConstPtr last;
   for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
-  std::string e;
-  if (last && fromMsg(*last, &out->params, &e)) {
+  const Status s =
+      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
+  if (s.ok())
     out->has_params = true;
-  } else {
-    out->params_error =
-        gear_sim::quoteForMessage(out->params_topic) + ": " + (last ? e : "no readable message");
-  }
+  else
+    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
@@ -253,12 +252,12 @@ class ChunkScan {
  public:
   ChunkScan(const std::string& path, BagSignalInfo* out) : path_(path), out_(*out) {}
 
-  bool add(const rosbag::MessageInstance& m, std::string* error) {
+  Status add(const rosbag::MessageInstance& m) {
     if (m.getDataType() == kChunkType) {
-      if (const std::string bad = messageLayoutError(m); !bad.empty()) {
-        *error = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
-                 std::to_string(out_.chunks + 1) + ": corrupt " + kChunkType + " (" + bad + ")";
-        return false;
+      if (const Status bad = checkMessageLayout(m); !bad.ok()) {
+        return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
+                                    " message " + std::to_string(out_.chunks + 1) + ": corrupt " +
+                                    kChunkType + " (" + bad.message() + ")");
       }
     }
     const auto c = m.instantiate<gear_damping::SignalChunk>();
@@ -266,16 +265,15 @@ class ChunkScan {
                               std::to_string(out_.chunks + 1) + " (first_index " +
                               (c ? std::to_string(c->first_index) : std::string("?")) + ")";
     if (!c) {
-      *error = where + ": not a " + std::string(kChunkType);
-      return false;
+      return Status::invalidInput(where + ": not a " + std::string(kChunkType));
     }
-    if (!checkChunk(*c, where, error)) return false;
+    if (Status st = checkChunk(*c, where); !st.ok()) return st;
     if (out_.chunks == 0) {
       out_.sample_rate = c->sample_rate;
       out_.first_index = c->first_index;
       channels_ = channelSet(*c);
-    } else if (!checkSequence(*c, where, error)) {
-      return false;
+    } else if (Status st = checkSequence(*c, where); !st.ok()) {
+      return st;
     }
     next_ = c->first_index + c->dte.size();
     out_.real_samples += static_cast<std::int64_t>(c->dte.size());
@@ -283,13 +281,13 @@ class ChunkScan {
     for (double k : c->stiffness)
       if (std::isfinite(k)) k_sum_ += k, ++k_count_;
     ++out_.chunks;
-    return true;
+    return {};
   }
 
-  bool finish(std::string* error) {
+  Status finish() {
     if (out_.chunks == 0) {
-      *error = path_ + ": topic " + gear_sim::quoteForMessage(out_.topic) + " has no messages";
-      return false;
+      return Status::invalidInput(path_ + ": topic " + gear_sim::quoteForMessage(out_.topic) +
+                                  " has no messages");
     }
     if (out_.gaps > kMaxGapWarnings)
       out_.warnings.push_back(std::to_string(out_.gaps) + " gaps in all, " +
@@ -297,12 +295,12 @@ class ChunkScan {
     out_.samples = static_cast<std::int64_t>(next_ - out_.first_index);
     if (static_cast<double>(out_.gap_samples) >
         kMaxGapRatio * static_cast<double>(out_.real_samples)) {
-      *error = largest_gap_at_ + ": gaps hold " + std::to_string(out_.gap_samples) +
-               " missing samples, more than the " + std::to_string(out_.real_samples) +
-               " present (at most " + formatNumber(kMaxGapRatio) +
-               "x): a corrupt first_index? The largest gap, of " + std::to_string(largest_gap_) +
-               " samples, ends before this message";
-      return false;
+      return Status::invalidInput(
+          largest_gap_at_ + ": gaps hold " + std::to_string(out_.gap_samples) +
+          " missing samples, more than the " + std::to_string(out_.real_samples) +
+          " present (at most " + formatNumber(kMaxGapRatio) +
+          "x): a corrupt first_index? The largest gap, of " + std::to_string(largest_gap_) +
+          " samples, ends before this message");
     }
     addPlausibilityWarnings(chunk_max_, &out_);
     if (k_count_ > 0) out_.stiffness_mean = k_sum_ / static_cast<double>(k_count_);
@@ -312,51 +310,48 @@ class ChunkScan {
     out_.mesh_state = channels_ & 8u;
     out_.mesh_phase = channels_ & 16u;
     out_.damping = channels_ & 32u;
-    return true;
+    return {};
   }
 
  private:
   // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
-  static bool checkChunk(const gear_damping::SignalChunk& c, const std::string& where,
-                         std::string* error) {
+  static Status checkChunk(const gear_damping::SignalChunk& c, const std::string& where) {
     if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
-      *error = where + ": sample_rate " + formatNumber(c.sample_rate) + " is not a positive number";
-      return false;
+      return Status::invalidInput(where + ": sample_rate " + formatNumber(c.sample_rate) +
+                                  " is not a positive number");
     }
     if (c.dte.empty()) {
-      *error = where + ": no dte samples";
-      return false;
+      return Status::invalidInput(where + ": no dte samples");
     }
-    if (const std::string bad = channelLengthError(c); !bad.empty()) {
-      *error = where + ": channel " + bad + " has " + "a length other than dte's (" +
-               std::to_string(c.dte.size()) + ")";
-      return false;
-    }
+    if (const std::string bad = channelLengthError(c); !bad.empty())
+      return Status::invalidInput(where + ": channel " + bad + " has " +
+                                      "a length other than dte's (" + std::to_string(c.dte.size()) +
+                                      ")",
+                                  bad);
     if (c.first_index >= kMaxSampleIndex || c.dte.size() > kMaxSampleIndex - c.first_index) {
-      *error = where + ": sample indices beyond 2^53 (" + std::to_string(kMaxSampleIndex) +
-               "): corrupt or wrapped-around first_index";
-      return false;
+      return Status::invalidInput(where + ": sample indices beyond 2^53 (" +
+                                  std::to_string(kMaxSampleIndex) +
+                                  "): corrupt or wrapped-around first_index");
     }
-    return true;
+    return {};
   }
 
   // A later chunk against the first ones: same rate and channels, indices increasing; a gap
   // is counted and (the first kMaxGapWarnings) warned about.
-  bool checkSequence(const gear_damping::SignalChunk& c, const std::string& where,
-                     std::string* error) {
+  Status checkSequence(const gear_damping::SignalChunk& c, const std::string& where) {
     if (c.sample_rate != out_.sample_rate) {
-      *error = where + ": sample_rate changed from " + formatNumber(out_.sample_rate) + " to " +
-               formatNumber(c.sample_rate) + " Hz";
-      return false;
+      return Status::invalidInput(where + ": sample_rate changed from " +
+                                  formatNumber(out_.sample_rate) + " to " +
+                                  formatNumber(c.sample_rate) + " Hz");
     }
     if (channelSet(c) != channels_) {
-      *error = where + ": carries a different set of channels than the first chunk";
-      return false;
+      return Status::invalidInput(where +
+                                  ": carries a different set of channels than the first chunk");
     }
     if (c.first_index < next_) {
-      *error = where + ": sample indices not increasing (the previous chunk ended at " +
-               std::to_string(next_ - 1) + "): a duplicated or out-of-order chunk";
-      return false;
+      return Status::invalidInput(
+          where + ": sample indices not increasing (the previous chunk ended at " +
+          std::to_string(next_ - 1) + "): a duplicated or out-of-order chunk");
     }
     if (c.first_index > next_) {
       const std::uint64_t missing = c.first_index - next_;
@@ -373,7 +368,7 @@ class ChunkScan {
                                 std::to_string(next_) + " to " + std::to_string(c.first_index - 1) +
                                 "): the segments there are not identifiable");
     }
-    return true;
+    return {};
   }
 
   const std::string& path_;
@@ -440,9 +435,8 @@ class LayoutWalk {
   std::uint64_t k_ = 0;
 };
 
-}  // namespace
-
-std::string messageLayoutError(const rosbag::MessageInstance& m) {
+// The problem of checkMessageLayout, empty when the layout fits (LayoutWalk's convention).
+std::string layoutProblem(const rosbag::MessageInstance& m) {
   const std::string& type = m.getDataType();
   LayoutWalk w(m);
   if (type == kChunkType) {
@@ -463,45 +457,47 @@ std::string messageLayoutError(const rosbag::MessageInstance& m) {
   }
   return {};
 }
+}  // namespace
 
-bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
-                   std::string* error) {
+Status checkMessageLayout(const rosbag::MessageInstance& m) {
+  const std::string problem = layoutProblem(m);
+  return problem.empty() ? Status() : Status::invalidInput(problem);
+}
+
+Status scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info) {
   BagSignalInfo out;
   out.path = path;
   // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
   // length): every record is checked first.
-  if (!checkBagStructure(path, error)) return false;
+  if (Status s = checkBagStructure(path); !s.ok()) return s;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
-    if (!chooseTopic(bag, path, topic, &out, error)) return false;
+    if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
     ChunkScan scan(path, &out);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     for (const rosbag::MessageInstance& m : view)
-      if (!scan.add(m, error)) return false;
-    if (!scan.finish(error)) return false;
+      if (Status s = scan.add(m); !s.ok()) return s;
+    if (Status s = scan.finish(); !s.ok()) return s;
   } catch (const std::exception& e) {
-    *error = openError(path, e);
-    return false;
+    return Status::invalidInput(openError(path, e));
   }
   *info = std::move(out);
-  return true;
+  return {};
 }
 
-bool streamSignalBag(const BagSignalInfo& info,
-                     const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                     const std::function<bool(const gear_sim::SignalTable&, size_t)>& sink,
-                     std::string* error) {
-  if (ranges.empty()) return true;
+Status streamSignalBag(const BagSignalInfo& info,
+                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+  if (ranges.empty()) return {};
   for (size_t k = 0; k < ranges.size(); ++k)
     if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
         ranges[k].second > info.samples) {
-      *error = info.path + ": sample range " + std::to_string(k) + " [" +
-               std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
-               ") is not ascending within the record's " + std::to_string(info.samples) +
-               " samples";
-      return false;
+      return Status::invalidInput(
+          info.path + ": sample range " + std::to_string(k) + " [" +
+          std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
+          ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
     }
   const double nan = std::numeric_limits<double>::quiet_NaN();
   gear_sim::SignalTable block;
@@ -534,10 +530,10 @@ bool streamSignalBag(const BagSignalInfo& info,
   // Emits every range that ends at or before sample `upto` (gap samples stay NaN).
   auto flushUpTo = [&](Eigen::Index upto) {
     while (r < ranges.size() && ranges[r].second <= upto) {
-      if (!sink(block, r)) return false;
+      if (Status s = sink(block, r); !s.ok()) return s;
       if (++r < ranges.size()) startRange();
     }
-    return true;
+    return Status();
   };
   startRange();
   try {
@@ -550,7 +546,7 @@ bool streamSignalBag(const BagSignalInfo& info,
         continue;
       const Eigen::Index b = static_cast<Eigen::Index>(c->first_index - info.first_index);
       const Eigen::Index e = b + static_cast<Eigen::Index>(c->dte.size());
-      if (!flushUpTo(b)) return false;
+      if (Status s = flushUpTo(b); !s.ok()) return s;
       while (r < ranges.size() && ranges[r].first < e) {
         const Eigen::Index lo = std::max(b, ranges[r].first), hi = std::min(e, ranges[r].second);
         for (Eigen::Index g = lo; g < hi; ++g) {
@@ -566,76 +562,66 @@ bool streamSignalBag(const BagSignalInfo& info,
           if (info.damping) block.damping[i] = plausible(5, c->damping[j]);
         }
         if (hi < ranges[r].second) break;  // the range continues in the next chunk
-        if (!sink(block, r)) return false;
+        if (Status s = sink(block, r); !s.ok()) return s;
         if (++r < ranges.size()) startRange();
       }
     }
-    if (!reader.error().empty()) {
-      *error = reader.error();
-      return false;
-    }
-    if (!flushUpTo(std::numeric_limits<Eigen::Index>::max())) return false;
+    if (!reader.error().empty()) return Status::invalidInput(reader.error());
+    if (Status s = flushUpTo(std::numeric_limits<Eigen::Index>::max()); !s.ok()) return s;
   } catch (const std::exception& e) {
-    *error = openError(info.path, e);
-    return false;
+    return Status::invalidInput(openError(info.path, e));
   }
-  return true;
-}
-
-bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error) {
-  return streamSignalBag(
-      info, {{0, static_cast<Eigen::Index>(info.samples)}},
-      [&](const gear_sim::SignalTable& t, size_t) {
-        *out = t;
-        return true;
-      },
-      error);
-}
-
-std::string bagTimeError(const gear_sim::SignalTable& t, double sample_rate) {
-  if (t.size() == 0) return "no samples";
-  const double first = t.time[0], last = t.time[t.size() - 1];
-  if (!(first >= 0.0) || !(last <= kMaxBagTime))
-    return "time " + formatNumber(first < 0.0 || !std::isfinite(first) ? first : last) +
-           " s outside [0, " + formatNumber(kMaxBagTime) +
-           "] s, the range a bag's time stamps (ros::Time) can hold";
-  if (!(first * sample_rate + static_cast<double>(t.size()) < static_cast<double>(kMaxSampleIndex)))
-    return "sample indices (time x sample_rate " + formatNumber(sample_rate) + " Hz) beyond 2^53";
   return {};
 }
 
-bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, double sample_rate,
-                    const gear_sim::GearModel* params, long chunk_size, std::string* error,
-                    const std::string& topic, const std::string& params_topic) {
-  if (!(chunk_size > 0) || t.size() == 0 || !(sample_rate > 0.0)) {
-    *error = path + ": nothing to write (empty record, chunk size or sample rate not positive)";
-    return false;
-  }
-  if (const std::string e = bagTimeError(t, sample_rate); !e.empty()) {
-    *error = path + ": " + e;
-    return false;
-  }
-  return writeBagStaged(
-      path, params, params_topic,
-      [&](rosbag::Bag& bag, const ros::Time& base) {
-        const std::uint64_t first =
-            static_cast<std::uint64_t>(std::llround(std::max(0.0, t.time[0] * sample_rate)));
-        gear_damping::SignalChunk chunk;
-        for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
-          const Eigen::Index n = std::min<Eigen::Index>(chunk_size, t.size() - b);
-          toChunk(t, b, n, sample_rate, first + static_cast<std::uint64_t>(b), &chunk);
-          chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
-          chunk.header.stamp = base + ros::Duration(t.time[b]);
-          bag.write(topic, chunk.header.stamp, chunk);
-        }
-      },
-      error);
+Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out) {
+  return streamSignalBag(info, {{0, static_cast<Eigen::Index>(info.samples)}},
+                         [&](const gear_sim::SignalTable& t, size_t) {
+                           *out = t;
+                           return Status();
+                         });
 }
 
-bool writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
-                    const std::string& params_topic,
-                    const std::function<void(rosbag::Bag&, const ros::Time&)>& fill,
-                    std::string* error) {
+Status checkBagTimes(const gear_sim::SignalTable& t, double sample_rate) {
+  if (t.size() == 0) return Status::invalidInput("no samples");
+  const double first = t.time[0], last = t.time[t.size() - 1];
+  if (!(first >= 0.0) || !(last <= kMaxBagTime))
+    return Status::invalidInput(
+        "time " + formatNumber(first < 0.0 || !std::isfinite(first) ? first : last) +
+            " s outside [0, " + formatNumber(kMaxBagTime) +
+            "] s, the range a bag's time stamps (ros::Time) can hold",
+        "time");
+  if (!(first * sample_rate + static_cast<double>(t.size()) < static_cast<double>(kMaxSampleIndex)))
+    return Status::invalidInput(
+        "sample indices (time x sample_rate " + formatNumber(sample_rate) + " Hz) beyond 2^53",
+        "time");
+  return {};
+}
+
+Status writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, double sample_rate,
+                      const gear_sim::GearModel* params, long chunk_size, const std::string& topic,
+                      const std::string& params_topic) {
+  if (!(chunk_size > 0) || t.size() == 0 || !(sample_rate > 0.0))
+    return Status::invalidInput(
+        path + ": nothing to write (empty record, chunk size or sample rate not positive)");
+  if (Status s = checkBagTimes(t, sample_rate); !s.ok()) return s.withContext(path);
+  return writeBagStaged(path, params, params_topic, [&](rosbag::Bag& bag, const ros::Time& base) {
+    const std::uint64_t first =
+        static_cast<std::uint64_t>(std::llround(std::max(0.0, t.time[0] * sample_rate)));
+    gear_damping::SignalChunk chunk;
+    for (Eigen::Index b = 0; b < t.size(); b += chunk_size) {
+      const Eigen::Index n = std::min<Eigen::Index>(chunk_size, t.size() - b);
+      toChunk(t, b, n, sample_rate, first + static_cast<std::uint64_t>(b), &chunk);
+      chunk.header.seq = static_cast<std::uint32_t>(b / chunk_size);
+      chunk.header.stamp = base + ros::Duration(t.time[b]);
+      bag.write(topic, chunk.header.stamp, chunk);
+    }
+  });
+}
+
+Status writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
+                      const std::string& params_topic,
+                      const std::function<void(rosbag::Bag&, const ros::Time&)>& fill) {
   const std::string tmp = path + ".partial";
   try {
     rosbag::Bag bag(tmp, rosbag::bagmode::Write);
@@ -649,10 +635,9 @@ bool writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
     bag.close();
   } catch (const std::exception& e) {
     std::remove(tmp.c_str());
-    *error = path + ": cannot write (" + e.what() + ")";
-    return false;
+    return Status::ioError(path + ": cannot write (" + e.what() + ")");
   }
-  return gear_sim::commitFile(tmp, path, error);
+  return gear_sim::commitFile(tmp, path);
 }
 
 }  // namespace gear_sim_ros

@@ -34,16 +34,12 @@ void toChunk(const gear_sim::SignalTable& t, Eigen::Index begin, Eigen::Index co
       msg->mesh_state.push_back(t.mesh_state[begin + i] != 0.0 ? 1 : 0);
 }
 
-bool chunksToTable(const std::vector<gear_damping::SignalChunk>& chunks, gear_sim::SignalTable* out,
-                   std::string* error) {
+gear_sim::Status chunksToTable(const std::vector<gear_damping::SignalChunk>& chunks,
+                               gear_sim::SignalTable* out) {
   auto fail = [&](size_t k, const std::string& what) {
-    if (error) *error = "chunk " + std::to_string(k) + ": " + what;
-    return false;
+    return gear_sim::Status::invalidInput("chunk " + std::to_string(k) + ": " + what);
   };
-  if (chunks.empty()) {
-    if (error) *error = "no chunks";
-    return false;
-  }
+  if (chunks.empty()) return gear_sim::Status::invalidInput("no chunks");
   size_t n = 0;
   const auto& c0 = chunks.front();
   for (size_t k = 0; k < chunks.size(); ++k) {
@@ -95,7 +91,7 @@ bool chunksToTable(const std::vector<gear_damping::SignalChunk>& chunks, gear_si
       if (t.damping.size()) t.damping[i] = c.damping[j];
     }
   *out = std::move(t);
-  return true;
+  return {};
 }
 
 gear_damping::GearParams toMsg(const gear_sim::GearModel& m) {
@@ -117,14 +113,13 @@ gear_damping::GearParams toMsg(const gear_sim::GearModel& m) {
   return p;
 }
 
-bool fromMsg(const gear_damping::GearParams& p, gear_sim::GearModel* out, std::string* error) {
+gear_sim::Status fromMsg(const gear_damping::GearParams& p, gear_sim::GearModel* out) {
   gear_sim::GearModel m;
   m.gears.pinion = {static_cast<int>(p.pinion_teeth), p.pinion_inertia, p.pinion_base_radius};
   m.gears.gear = {static_cast<int>(p.gear_teeth), p.gear_inertia, p.gear_base_radius};
-  if (!gear_sim::parse(p.stiffness_model, &m.mesh.model)) {
-    if (error) *error = "stiffness_model = '" + p.stiffness_model + "': unknown";
-    return false;
-  }
+  if (!gear_sim::parse(p.stiffness_model, &m.mesh.model))
+    return gear_sim::Status::invalidInput("stiffness_model = '" + p.stiffness_model + "': unknown",
+                                          "stiffness_model");
   m.mesh.k_max = p.k_max;
   m.mesh.k_min = p.k_min;
   m.mesh.k_mean = p.contact_ratio > 1
@@ -133,12 +128,9 @@ bool fromMsg(const gear_damping::GearParams& p, gear_sim::GearModel* out, std::s
   m.mesh.contact_ratio = p.contact_ratio;
   m.speed.pinion_rpm = p.pinion_rpm;
   m.speed.end_rpm = p.pinion_rpm;
-  if (std::string e = m.validate(); !e.empty()) {
-    if (error) *error = e;
-    return false;
-  }
+  if (gear_sim::Status s = m.check(); !s.ok()) return s;
   *out = m;
-  return true;
+  return {};
 }
 
 YAML::Node toYaml(const XmlRpc::XmlRpcValue& v) {

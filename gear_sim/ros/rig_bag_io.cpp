@@ -15,40 +15,36 @@
 #include "gear_sim_ros/bag_io.hpp"
 
 namespace gear_sim_ros {
+using gear_sim::Status;
 
-bool writeRigBag(const std::string& path, const gear_sim::SignalTable& t,
-                 const gear_sim::GearModel* params, const RigBagTopics& topics,
-                 std::string* error) {
+Status writeRigBag(const std::string& path, const gear_sim::SignalTable& t,
+                   const gear_sim::GearModel* params, const RigBagTopics& topics) {
   const Eigen::Index n = t.size();
   if (n == 0 || t.theta1.size() != n || t.theta2.size() != n || t.torque.size() != n) {
-    *error = path + ": a rig bag needs time, theta1, theta2 and torque";
-    return false;
+    return Status::invalidInput(path + ": a rig bag needs time, theta1, theta2 and torque");
   }
   if (!(t.time[0] >= 0.0) || !(t.time[n - 1] <= kMaxBagTime - 1.0)) {
-    *error = path + ": sample times outside [0, " + std::to_string(kMaxBagTime - 1.0) + "] s";
-    return false;
+    return Status::invalidInput(path + ": sample times outside [0, " +
+                                std::to_string(kMaxBagTime - 1.0) + "] s");
   }
-  return writeBagStaged(
-      path, params, topics.params,
-      [&](rosbag::Bag& bag, const ros::Time& base) {
-        sensor_msgs::JointState js;
-        js.name = {topics.joint1, topics.joint2};
-        js.position.resize(2);
-        geometry_msgs::WrenchStamped w;
-        for (Eigen::Index i = 0; i < n; ++i) {
-          const ros::Time stamp = base + ros::Duration(t.time[i]);
-          js.header.seq = w.header.seq = static_cast<std::uint32_t>(i);
-          js.header.stamp = w.header.stamp = stamp;
-          js.position[0] = t.theta1[i];
-          js.position[1] = t.theta2[i];
-          w.wrench.torque.x = topics.axis == 'x' ? t.torque[i] : 0.0;
-          w.wrench.torque.y = topics.axis == 'y' ? t.torque[i] : 0.0;
-          w.wrench.torque.z = topics.axis == 'z' ? t.torque[i] : 0.0;
-          bag.write(topics.joints, stamp, js);
-          bag.write(topics.torque, stamp, w);
-        }
-      },
-      error);
+  return writeBagStaged(path, params, topics.params, [&](rosbag::Bag& bag, const ros::Time& base) {
+    sensor_msgs::JointState js;
+    js.name = {topics.joint1, topics.joint2};
+    js.position.resize(2);
+    geometry_msgs::WrenchStamped w;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const ros::Time stamp = base + ros::Duration(t.time[i]);
+      js.header.seq = w.header.seq = static_cast<std::uint32_t>(i);
+      js.header.stamp = w.header.stamp = stamp;
+      js.position[0] = t.theta1[i];
+      js.position[1] = t.theta2[i];
+      w.wrench.torque.x = topics.axis == 'x' ? t.torque[i] : 0.0;
+      w.wrench.torque.y = topics.axis == 'y' ? t.torque[i] : 0.0;
+      w.wrench.torque.z = topics.axis == 'z' ? t.torque[i] : 0.0;
+      bag.write(topics.joints, stamp, js);
+      bag.write(topics.torque, stamp, w);
+    }
+  });
 }
 
 namespace {
@@ -65,13 +61,13 @@ double wrenchAxis(const geometry_msgs::WrenchStamped& w, char axis) {
   return axis == 'x' ? w.wrench.torque.x : axis == 'y' ? w.wrench.torque.y : w.wrench.torque.z;
 }
 
-// False with `*error` when message `m` claims arrays longer than its bytes (messageLayoutError).
-bool layoutFits(const std::string& path, const rosbag::MessageInstance& m, std::string* error) {
-  const std::string bad = messageLayoutError(m);
-  if (bad.empty()) return true;
-  *error = path + ": " + gear_sim::quoteForMessage(m.getTopic()) + ": corrupt " +
-           gear_sim::quoteForMessage(m.getDataType()) + " (" + bad + ")";
-  return false;
+// InvalidInput when message `m` claims arrays longer than its bytes (checkMessageLayout).
+Status layoutFits(const std::string& path, const rosbag::MessageInstance& m) {
+  const Status bad = checkMessageLayout(m);
+  if (bad.ok()) return {};
+  return Status::invalidInput(path + ": " + gear_sim::quoteForMessage(m.getTopic()) + ": corrupt " +
+                              gear_sim::quoteForMessage(m.getDataType()) + " (" + bad.message() +
+                              ")");
 }
 
 }  // namespace
@@ -79,8 +75,7 @@ bool layoutFits(const std::string& path, const rosbag::MessageInstance& m, std::
 bool isRigBag(const std::string& path, const RigBagTopics& topics) {
   // rosbag trusts the lengths in the file: a corrupt bag is not opened here (the signal-bag
   // reader then refuses it with the reason).
-  std::string structure_error;
-  if (!checkBagStructure(path, &structure_error)) return false;
+  if (!checkBagStructure(path).ok()) return false;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
@@ -92,9 +87,8 @@ bool isRigBag(const std::string& path, const RigBagTopics& topics) {
   return false;
 }
 
-bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig,
-                std::string* error) {
-  if (!checkBagStructure(path, error)) return false;
+Status readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig) {
+  if (Status s = checkBagStructure(path); !s.ok()) return s;
   std::vector<ros::Time> stamps;
   std::vector<double> th1, th2, tq;
   try {
@@ -103,7 +97,7 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
     std::map<ros::Time, double> torque;  // by stamp
     rosbag::View tv(bag, rosbag::TopicQuery(topics.torque));
     for (const rosbag::MessageInstance& m : tv) {
-      if (!layoutFits(path, m, error)) return false;
+      if (Status s = layoutFits(path, m); !s.ok()) return s;
       if (const auto w = m.instantiate<geometry_msgs::WrenchStamped>()) {
         torque[w->header.stamp] = wrenchAxis(*w, topics.axis);
       } else if (const auto f = m.instantiate<std_msgs::Float64>()) {
@@ -112,25 +106,22 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
     }
     rosbag::View jv(bag, rosbag::TopicQuery(topics.joints));
     for (const rosbag::MessageInstance& m : jv) {
-      if (!layoutFits(path, m, error)) return false;
+      if (Status s = layoutFits(path, m); !s.ok()) return s;
       const auto js = m.instantiate<sensor_msgs::JointState>();
       if (!js) continue;
       const int i1 = jointIndex(*js, topics.joint1), i2 = jointIndex(*js, topics.joint2);
       if (i1 < 0 || i2 < 0 || static_cast<size_t>(std::max(i1, i2)) >= js->position.size()) {
-        *error = path + ": a JointState message lacks the position of " + topics.joint1 + " or " +
-                 topics.joint2;
-        return false;
+        return Status::invalidInput(path + ": a JointState message lacks the position of " +
+                                    topics.joint1 + " or " + topics.joint2);
       }
       const ros::Time stamp = js->header.stamp.isZero() ? m.getTime() : js->header.stamp;
       const auto t = torque.find(stamp);
       if (t == torque.end()) {
-        *error = path + ": no torque on " + topics.torque + " with the stamp " +
-                 std::to_string(stamp.toSec()) + " s of a JointState message";
-        return false;
+        return Status::invalidInput(path + ": no torque on " + topics.torque + " with the stamp " +
+                                    std::to_string(stamp.toSec()) + " s of a JointState message");
       }
       if (!stamps.empty() && !(stamp > stamps.back())) {
-        *error = path + ": the JointState stamps do not increase";
-        return false;
+        return Status::invalidInput(path + ": the JointState stamps do not increase");
       }
       stamps.push_back(stamp);
       th1.push_back(js->position[static_cast<size_t>(i1)]);
@@ -138,12 +129,10 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
       tq.push_back(t->second);
     }
   } catch (const std::exception& e) {
-    *error = path + ": cannot read the rig bag (" + e.what() + ")";
-    return false;
+    return Status::invalidInput(path + ": cannot read the rig bag (" + e.what() + ")");
   }
   if (stamps.empty()) {
-    *error = path + ": no JointState message on " + topics.joints;
-    return false;
+    return Status::invalidInput(path + ": no JointState message on " + topics.joints);
   }
   const Eigen::Index n = static_cast<Eigen::Index>(stamps.size());
   *rig = gear_sim::SignalTable{};
@@ -158,7 +147,7 @@ bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::S
     rig->theta2[i] = th2[k];
     rig->torque[i] = tq[k];
   }
-  return true;
+  return {};
 }
 
 }  // namespace gear_sim_ros

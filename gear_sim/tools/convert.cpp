@@ -36,6 +36,9 @@ int fail(int code, const std::string& message) {
   std::cerr << "convert: " << message << "\n";
   return code;
 }
+// A failed step exits with the step's code (reading: kExitInput, writing: kExitOutput),
+// whatever the StatusCode (docs/limits.md "Exit codes").
+int fail(int code, const gear_sim::Status& s) { return fail(code, s.message()); }
 
 }  // namespace
 
@@ -62,26 +65,30 @@ int run(int argc, char** argv) {
     return fail(kExitUsage, "convert .csv to .bag or .bag to .csv (got " +
                                 gear_sim::quoteForMessage(input) + " -> " +
                                 gear_sim::quoteForMessage(output) + ")");
-  std::string error;
   gear_sim::SignalTable table;
   if (to_bag) {
     gear_sim::GearModel model;
-    if (!params.empty() && !gear_sim::loadGearModelFile(params, &model, &error))
-      return fail(kExitInput, error);
+    if (!params.empty())
+      if (const gear_sim::Status s = gear_sim::loadGearModelFile(params, &model); !s.ok())
+        return fail(kExitInput, s);
     if (gear_sim::isRigCsv(input)) {
       // A rig record (time, theta1, theta2, torque; docs/rig.md): a bag of JointState and
       // WrenchStamped messages, one per sample, as a rig's drivers would record it.
-      if (!gear_sim::readRigCsv(input, &table, &error)) return fail(kExitInput, error);
+      if (const gear_sim::Status s = gear_sim::readRigCsv(input, &table); !s.ok())
+        return fail(kExitInput, s);
       if (table.torque.size() != table.size())
         return fail(kExitInput, input + ": a rig bag needs the torque column");
-      if (!gear_sim_ros::writeRigBag(output, table, params.empty() ? nullptr : &model, {}, &error))
-        return fail(kExitOutput, error);
+      if (const gear_sim::Status s =
+              gear_sim_ros::writeRigBag(output, table, params.empty() ? nullptr : &model, {});
+          !s.ok())
+        return fail(kExitOutput, s);
       std::cerr << "convert: " << table.size() << " rig samples " << input << " -> " << output
                 << " (/rig/joint_states, /rig/torque)\n";
       return 0;
     }
-    if (!gear_sim::readSignalCsv(input, &table, &error, {"time", "dte"}, true))
-      return fail(kExitInput, error);
+    if (const gear_sim::Status s = gear_sim::readSignalCsv(input, &table, {"time", "dte"}, true);
+        !s.ok())
+      return fail(kExitInput, s);
     const Eigen::Index n = table.size();
     const double dt = (table.time[n - 1] - table.time[0]) / static_cast<double>(n - 1);
     for (Eigen::Index i = 1; i < n; ++i) {
@@ -92,21 +99,25 @@ int run(int argc, char** argv) {
                                     " s, mean step " + gear_sim::formatNumber(dt) +
                                     " s): a bag needs a uniform sample rate");
     }
-    if (const std::string e = gear_sim_ros::bagTimeError(table, 1.0 / dt); !e.empty())
-      return fail(kExitInput, input + ": " + e);
-    if (!gear_sim_ros::writeSignalBag(output, table, 1.0 / dt, params.empty() ? nullptr : &model,
-                                      chunk_size, &error))
-      return fail(kExitOutput, error);
+    if (const gear_sim::Status s = gear_sim_ros::checkBagTimes(table, 1.0 / dt); !s.ok())
+      return fail(kExitInput, s.withContext(input));
+    if (const gear_sim::Status s = gear_sim_ros::writeSignalBag(
+            output, table, 1.0 / dt, params.empty() ? nullptr : &model, chunk_size);
+        !s.ok())
+      return fail(kExitOutput, s);
   } else {
     gear_sim_ros::BagSignalInfo info;
-    if (!gear_sim_ros::scanSignalBag(input, topic, &info, &error)) return fail(kExitInput, error);
+    if (const gear_sim::Status s = gear_sim_ros::scanSignalBag(input, topic, &info); !s.ok())
+      return fail(kExitInput, s);
     for (const auto& w : info.warnings) std::cerr << "convert: warning: " << w << "\n";
-    if (!gear_sim_ros::readSignalBag(info, &table, &error)) return fail(kExitInput, error);
+    if (const gear_sim::Status s = gear_sim_ros::readSignalBag(info, &table); !s.ok())
+      return fail(kExitInput, s);
     const std::string tmp = output + ".partial";
-    if (!gear_sim::writeSignalCsv(tmp, table, &error) ||
-        !gear_sim::commitFile(tmp, output, &error)) {
+    gear_sim::Status s = gear_sim::writeSignalCsv(tmp, table);
+    if (s.ok()) s = gear_sim::commitFile(tmp, output);
+    if (!s.ok()) {
       std::remove(tmp.c_str());
-      return fail(kExitOutput, error.empty() ? output + ": cannot write" : error);
+      return fail(kExitOutput, s);
     }
   }
   std::cerr << "convert: " << table.size() << " samples " << input << " -> " << output << "\n";

@@ -47,8 +47,10 @@ struct Options {
   bool no_output = false;
 };
 
-// Each step returns an exit code: kContinue to go on, else what run() returns.
-constexpr int kContinue = -1;
+// Each step returns an exit code: kContinue to go on, else what run() returns. A failed Status
+// exits with the code of its step: reading the configuration and simulating are invalid input,
+// writing is the output (docs/limits.md "Exit codes").
+constexpr int kContinue = -1, kExitInput = 1, kExitOutput = 2;
 
 int parse(int argc, char** argv, Options* o) {
   CLI::App app{"Simulate a spur gear pair (Yousfi et al. 2022) and write its DTE and signals."};
@@ -96,11 +98,11 @@ int parse(int argc, char** argv, Options* o) {
 
 // The configuration and the encoder section, with the command line's overrides.
 int load(Options* o, gear_sim::SimConfig* c, gear_sim::EncoderOptions* enc) {
-  std::string error;
-  if (!gear_sim::loadSimConfigFile(o->config_path, c, &error) ||
-      !gear_sim::loadEncoderOptionsFile(o->config_path, enc, &error)) {
-    std::cerr << "simulate: " << error << "\n";
-    return 1;
+  gear_sim::Status s = gear_sim::loadSimConfigFile(o->config_path, c);
+  if (s.ok()) s = gear_sim::loadEncoderOptionsFile(o->config_path, enc);
+  if (!s.ok()) {
+    std::cerr << "simulate: " << s.message() << "\n";
+    return kExitInput;
   }
   if (o->counts) enc->counts_per_rev1 = enc->counts_per_rev2 = *o->counts;
   o->rig = o->rig || enc->enabled;
@@ -125,11 +127,10 @@ int load(Options* o, gear_sim::SimConfig* c, gear_sim::EncoderOptions* enc) {
 // configured, is left out of the difference and added once.
 int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::ProgressBar* progress,
                  gear_sim::SignalTable* t) {
-  std::string error;
   progress->set(0.0, "simulating " + std::to_string(c.simulation.duration) + " s");
-  if (!gear_sim::simulate(c, t, &error)) {  // validates the overridden values too
-    std::cerr << "simulate: " << error << "\n";
-    return 1;
+  if (const gear_sim::Status s = gear_sim::simulate(c, t); !s.ok()) {  // checks the overrides too
+    std::cerr << "simulate: " << s.message() << "\n";
+    return kExitInput;
   }
   if (!o.free_response) return kContinue;
   gear_sim::SimConfig quiet = c, shifted;
@@ -140,9 +141,11 @@ int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::Progr
       c.simulation.initial_dte + c.gears.forceFactor() * t->torque.mean() / (w0 * w0);
   gear_sim::SignalTable a, b;
   progress->set(1.0, "free response");
-  if (!gear_sim::simulate(quiet, &a, &error) || !gear_sim::simulate(shifted, &b, &error)) {
-    std::cerr << "simulate: " << error << "\n";
-    return 1;
+  gear_sim::Status s = gear_sim::simulate(quiet, &a);
+  if (s.ok()) s = gear_sim::simulate(shifted, &b);
+  if (!s.ok()) {
+    std::cerr << "simulate: " << s.message() << "\n";
+    return kExitInput;
   }
   const Eigen::VectorXd noise = t->dte - a.dte;  // the configured measurement noise (or 0)
   t->dte = b.dte - a.dte + noise;
@@ -154,49 +157,45 @@ int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::Progr
 // A CSV written next to the target and renamed on success: no partial file that looks complete
 // (the bag writers do so themselves).
 template <class Write>
-bool writeCsvStaged(const std::string& output, Write&& write, std::string* error) {
+gear_sim::Status writeCsvStaged(const std::string& output, Write&& write) {
   const std::string tmp = output + ".partial";
-  const bool ok = write(tmp) && gear_sim::commitFile(tmp, output, error);
-  if (!ok) std::remove(tmp.c_str());
-  return ok;
+  gear_sim::Status s = write(tmp);
+  if (s.ok()) s = gear_sim::commitFile(tmp, output);
+  if (!s.ok()) std::remove(tmp.c_str());
+  return s;
 }
 
 // The edge files (--edges), then the record: rig or signal, CSV or bag.
 int write(const Options& o, const gear_sim::SimConfig& c, const gear_sim::EncoderOptions& enc,
           const gear_sim::SignalTable& t) {
-  std::string error;
   const gear_sim::GearModel model = c.gearModel();
   if (!o.edges_prefix.empty()) {
     for (int shaft : {1, 2}) {
       const auto e = gear_sim::encoderEdges(c, enc, t, shaft,
                                             shaft == 1 ? enc.counts_per_rev1 : enc.counts_per_rev2);
       const std::string path = o.edges_prefix + std::to_string(shaft) + ".csv";
-      if (!gear_sim::writeEdgeCsv(path, e, &error)) {
-        std::cerr << "simulate: " << error << "\n";
-        return 2;
+      if (const gear_sim::Status s = gear_sim::writeEdgeCsv(path, e); !s.ok()) {
+        std::cerr << "simulate: " << s.message() << "\n";
+        return kExitOutput;
       }
     }
   }
   const bool csv = endsWith(o.output, ".csv");
-  bool ok;
+  gear_sim::Status s;
   if (o.rig) {
     const gear_sim::SignalTable r = gear_sim::rigRecord(c, enc, t);
-    ok =
-        csv ? writeCsvStaged(
-                  o.output,
-                  [&](const std::string& p) { return gear_sim::writeRigCsv(p, r, &error); }, &error)
-            : gear_sim_ros::writeRigBag(o.output, r, &model, {}, &error);
+    s = csv ? writeCsvStaged(o.output,
+                             [&](const std::string& p) { return gear_sim::writeRigCsv(p, r); })
+            : gear_sim_ros::writeRigBag(o.output, r, &model, {});
   } else {
-    ok = csv ? writeCsvStaged(
-                   o.output,
-                   [&](const std::string& p) { return gear_sim::writeSignalCsv(p, t, &error); },
-                   &error)
-             : gear_sim_ros::writeSignalBag(o.output, t, c.simulation.sample_rate, &model,
-                                            o.chunk_size, &error);
+    s = csv ? writeCsvStaged(o.output,
+                             [&](const std::string& p) { return gear_sim::writeSignalCsv(p, t); })
+            : gear_sim_ros::writeSignalBag(o.output, t, c.simulation.sample_rate, &model,
+                                           o.chunk_size);
   }
-  if (!ok) {
-    std::cerr << "simulate: " << (error.empty() ? o.output + ": cannot write" : error) << "\n";
-    return 2;
+  if (!s.ok()) {
+    std::cerr << "simulate: " << s.message() << "\n";
+    return kExitOutput;
   }
   return kContinue;
 }

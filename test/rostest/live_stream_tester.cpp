@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/DampingArray.h"
 #include "gear_damping/GearParams.h"
 #include "gear_damping/SignalChunk.h"
@@ -132,13 +133,15 @@ TEST(LiveStream, SustainedRateLosesNothingStaysBoundedAndMatchesOffline) {
   // The record: table1.yaml, record_seconds long, a whole number of chunks and segments.
   gear_sim::SimConfig cfg;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(
-      ros::package::getPath("gear_damping") + "/config/table1.yaml", &cfg, &e))
+  ASSERT_TRUE(
+      gear_test::ok(gear_sim::loadSimConfigFile(
+                        ros::package::getPath("gear_damping") + "/config/table1.yaml", &cfg),
+                    &e))
       << e;
   cfg.simulation.duration = record_seconds;
   cfg.simulation.noise_snr_db = noise_snr_db > 0.0 ? noise_snr_db : INFINITY;  // 0: none
   gear_sim::SignalTable rec;
-  ASSERT_TRUE(gear_sim::simulate(cfg, &rec, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &rec), &e)) << e;
   const double fs = cfg.simulation.sample_rate;
   const double seg_len = 1e-3;  // the node's default segment_length
   const Eigen::Index seg_samples = static_cast<Eigen::Index>(std::llround(seg_len * fs));
@@ -172,7 +175,7 @@ TEST(LiveStream, SustainedRateLosesNothingStaysBoundedAndMatchesOffline) {
   first.n = seg_samples;
   o.window_length = gd::defaultWindowLength(first, gear);
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(two, gear, o, &offline, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::identify(two, gear, o, &offline), &e)) << e;
   ASSERT_GE(offline.segments.size(), m_segments);
   std::vector<double> truth(m_segments);  // segment-mean true C [1/s]
   for (size_t i = 0; i < m_segments; ++i) {

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/DampingArray.h"
 #include "gear_damping/GearParams.h"
 #include "gear_damping/GetDamping.h"
@@ -156,11 +157,11 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
   std::string e;
   ASSERT_TRUE(simConfigFromParams("gear_sim", &cfg, &e)) << e;
   gear_sim::SignalTable t;
-  ASSERT_TRUE(gear_sim::simulate(cfg, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &t), &e)) << e;
   const gd::GearConstants gear = gd::gearConstants(cfg.gearModel());
   const gd::IdentificationOptions o = nodeOptions("damping_id");
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(t, gear, o, &offline, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::identify(t, gear, o, &offline), &e)) << e;
   ASSERT_EQ(offline.segments.size(), col.cumulative.segments.size());
   double max_rel = 0.0, max_truth = 0.0, max_xi_rel = 0.0;
   for (size_t i = 0; i < offline.segments.size(); ++i) {
@@ -274,7 +275,7 @@ TEST(Robustness, NodeSurvivesBadChunksReportsEachEventAndIdentifiesIntactSegment
   const gd::GearConstants gear = gd::gearConstants(s.config().gearModel());
   gd::IdentificationOptions o = nodeOptions("damping_id");
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(s.table(), gear, o, &offline, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::identify(s.table(), gear, o, &offline), &e)) << e;
   // Intact segments: 0 1 2 4 6 7 8 9. Those whose neighbours arrived too (0, 1, 7, 8, 9) read
   // the same stencil context as offline; 2, 4, 6 border a gap (see kGapBorderRelTol).
   const int intact[] = {0, 1, 2, 4, 6, 7, 8, 9};
@@ -349,7 +350,8 @@ TEST(IndexGlitch, FarFutureChunkThenPauseIsDroppedAndTheStreamRecovers) {
   std::string e;
   const gd::GearConstants gear = gd::gearConstants(s.config().gearModel());
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(s.table(), gear, nodeOptions("damping_id"), &offline, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::identify(s.table(), gear, nodeOptions("damping_id"), &offline), &e))
+      << e;
   ASSERT_EQ(offline.segments.size(), 10u);
   const std::string st = "damping_id: stream";
   const std::string rejected = "rejected chunks (index jump glitch)";

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <string>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/DampingArray.h"
 #include "gear_damping_id/encoder_frontend.hpp"
 #include "gear_damping_id/integral_method.hpp"
@@ -29,18 +30,21 @@ TEST(RigEncoders, LiveDampingMatchesOfflineAndTruth) {
   gear_sim::SimConfig c;
   gear_sim::EncoderOptions enc;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(config, &c, &e)) << e;
-  ASSERT_TRUE(gear_sim::loadEncoderOptionsFile(config, &enc, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(config, &c), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadEncoderOptionsFile(config, &enc), &e)) << e;
   gear_sim::SignalTable sim, table;
-  ASSERT_TRUE(gear_sim::simulate(c, &sim, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &sim), &e)) << e;
   const gear_sim::SignalTable rig = gear_sim::rigRecord(c, enc, sim);
   gd::EncoderFrontEndOptions fo;
   fo.counts_per_rev1 = enc.counts_per_rev1;
   fo.counts_per_rev2 = enc.counts_per_rev2;
   gd::EncoderFrontEndReport rep;
-  ASSERT_TRUE(gd::encoderToSignalTable(rig, c.gearModel(), fo, &table, &rep, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::encoderToSignalTable(rig, c.gearModel(), fo, &table, &rep), &e))
+      << e;
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(table, gd::gearConstants(c.gearModel()), {}, &offline, &e)) << e;
+  ASSERT_TRUE(
+      gear_test::ok(gd::identify(table, gd::gearConstants(c.gearModel()), {}, &offline), &e))
+      << e;
 
   gear_test::LatestMessage<gear_damping::DampingArray> latest(nh, gear_sim_ros::kDampingTopic);
   const gear_damping::DampingArray& live = latest.msg;

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/DampingArray.h"
 #include "gear_damping/DampingSample.h"
 #include "gear_damping/GearParams.h"
@@ -94,12 +95,12 @@ struct PipelineTap {
 gd::IdentificationResult offlineOf(const gear_sim::SimConfig& cfg, double segment_length) {
   gear_sim::SignalTable t;
   std::string e;
-  EXPECT_TRUE(gear_sim::simulate(cfg, &t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &t), &e)) << e;
   gd::IdentificationOptions o;
   o.refine = gd::IdentificationOptions::Refine::Never;
   o.segment_length = segment_length;
   gd::IdentificationResult r;
-  EXPECT_TRUE(gd::identify(t, gd::gearConstants(cfg.gearModel()), o, &r, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gd::identify(t, gd::gearConstants(cfg.gearModel()), o, &r), &e)) << e;
   return r;
 }
 

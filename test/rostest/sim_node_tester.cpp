@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/GearParams.h"
 #include "gear_damping/SignalChunk.h"
 #include "gear_sim/config_yaml.hpp"
@@ -40,9 +41,9 @@ TEST(GearSimNode, PublishesTheWholeRecordContiguouslyWithLatchedParameters) {
       });
   gear_sim::SimConfig cfg;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(configPath(), &cfg, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(configPath(), &cfg), &e)) << e;
   gear_sim::SignalTable expected;
-  ASSERT_TRUE(gear_sim::simulate(cfg, &expected, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &expected), &e)) << e;
 
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(30.0);
   size_t samples = 0;
@@ -61,7 +62,7 @@ TEST(GearSimNode, PublishesTheWholeRecordContiguouslyWithLatchedParameters) {
   EXPECT_DOUBLE_EQ(params.k_max, 4e8);
 
   gear_sim::SignalTable received;
-  ASSERT_TRUE(gear_sim_ros::chunksToTable(chunks, &received, &e))
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::chunksToTable(chunks, &received), &e))
       << e;  // contiguity is checked here
   EXPECT_EQ(chunks.front().first_index, 0u);
   EXPECT_EQ(chunks.front().sample_rate, 1e6);

@@ -13,6 +13,7 @@
 #include <random>
 #include <string>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/DampingArray.h"
 #include "gear_damping/GearParams.h"
 #include "gear_damping/SignalChunk.h"
@@ -29,12 +30,14 @@ TEST(SteLive, LiveDampingWithTheSteEqualsTheOfflineDriverAndCoversTheTruth) {
   ros::NodeHandle nh;
   gear_sim::SimConfig c;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(
-      ros::package::getPath("gear_damping") + "/config/ste_example.yaml", &c, &e))
+  ASSERT_TRUE(
+      gear_test::ok(gear_sim::loadSimConfigFile(
+                        ros::package::getPath("gear_damping") + "/config/ste_example.yaml", &c),
+                    &e))
       << e;
   c.simulation.duration = 0.05;  // a gear revolution of calibration (40 ms), then held segments
   gear_sim::SignalTable t;
-  ASSERT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   const double rms = std::sqrt(t.dte.squaredNorm() / static_cast<double>(t.size()));
   std::mt19937_64 gen(7);
   std::normal_distribution<double> nd(0.0, rms * std::pow(10.0, -40.0 / 20.0));
@@ -48,12 +51,12 @@ TEST(SteLive, LiveDampingWithTheSteEqualsTheOfflineDriverAndCoversTheTruth) {
   o.window_length = gd::defaultWindowLength(v, gear);
   gd::SteModelOptions so;
   std::string why;
-  ASSERT_TRUE(gd::parseSteSpec("mesh:3,shaft:1", &so, &why)) << why;
+  ASSERT_TRUE(gear_test::ok(gd::parseSteSpec("mesh:3,shaft:1", &so), &why)) << why;
   so.pinion_teeth = c.gears.pinion.teeth;
   so.gear_teeth = c.gears.gear.teeth;
   const gd::SampleRanges ranges = gd::segmentRanges(v, o);
   gd::SegmentDriver driver(o, gear);
-  ASSERT_EQ(driver.setSte(so, 3), "");
+  ASSERT_EQ(driver.setSte(so, 3).message(), "");
   driver.addAll(v, ranges);
   const gd::IdentificationResult offline = driver.finish();
 

@@ -7,6 +7,7 @@
 
 #include <string>
 
+#include "../unit/support/status_support.hpp"
 #include "gear_damping/GearParams.h"
 #include "gear_damping/SignalChunk.h"
 #include "gear_sim/config_yaml.hpp"
@@ -40,7 +41,7 @@ inline bool simConfigFromParams(const std::string& ns, gear_sim::SimConfig* cfg,
   for (const char* section : {"pinion", "gear", "mesh", "speed", "load", "damping", "simulation"}) {
     if (ros::param::get(ns + "/" + section, tree)) root[section] = gear_sim_ros::toYaml(tree);
   }
-  return gear_sim::loadSimConfig(root, cfg, e);
+  return gear_test::ok(gear_sim::loadSimConfig(root, cfg), e);
 }
 
 /// Publishes chunks of the default case (config/table1.yaml) as a rig would, with the latched
@@ -49,9 +50,10 @@ class CraftedStream {
  public:
   CraftedStream() {
     std::string e;
-    ok_ = gear_sim::loadSimConfigFile(ros::package::getPath("gear_damping") + "/config/table1.yaml",
-                                      &cfg_, &e) &&
-          gear_sim::simulate(cfg_, &table_, &e);
+    ok_ = gear_test::ok(gear_sim::loadSimConfigFile(
+                            ros::package::getPath("gear_damping") + "/config/table1.yaml", &cfg_),
+                        &e) &&
+          gear_test::ok(gear_sim::simulate(cfg_, &table_), &e);
     error_ = e;
     signal_ = nh_.advertise<gear_damping::SignalChunk>(gear_sim_ros::kSignalTopic, 1000);
     params_ = nh_.advertise<gear_damping::GearParams>(gear_sim_ros::kParamsTopic, 1, true);

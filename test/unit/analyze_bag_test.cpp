@@ -19,6 +19,7 @@
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "status_support.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -34,9 +35,9 @@ class AnalyzeBag : public ::testing::Test {
   static void SetUpTestSuite() {
     scratch_ = new gear_test::ScratchDir("analyze_bag_test");
     std::string e;
-    ASSERT_TRUE(gear_sim::loadSimConfigFile(kParams, &config_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kParams, &config_), &e)) << e;
     config_.simulation.duration = 4e-3;  // four 1 ms segments
-    ASSERT_TRUE(gear_sim::simulate(config_, &table_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(config_, &table_), &e)) << e;
   }
   static void TearDownTestSuite() { delete scratch_; }
   static fs::path dir() { return scratch_->path(); }
@@ -124,7 +125,8 @@ TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
   }
   gear_sim_ros::BagSignalInfo info;
   std::string e;
-  EXPECT_FALSE(gear_sim_ros::scanSignalBag(out.string(), "", &info, &e));  // results, no signal
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanSignalBag(out.string(), "", &info),
+                             &e));  // results, no signal
   EXPECT_NE(e.find("no topic of type"), std::string::npos) << e;
   EXPECT_TRUE(fs::is_regular_file(out));
 }

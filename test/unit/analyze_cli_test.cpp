@@ -16,6 +16,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -56,11 +57,11 @@ class AnalyzeTool : public ::testing::Test {
     fs::create_directories(dir_);
     gear_sim::SimConfig c;
     std::string e;
-    ASSERT_TRUE(gear_sim::loadSimConfigFile(kParams, &c, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kParams, &c), &e)) << e;
     c.simulation.duration = 4e-3;  // four 1 ms segments keep the test quick
-    ASSERT_TRUE(gear_sim::simulate(c, &table_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &table_), &e)) << e;
     csv_ = dir_ / "sim.csv";
-    ASSERT_TRUE(gear_sim::writeSignalCsv(csv_.string(), table_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::writeSignalCsv(csv_.string(), table_), &e)) << e;
     text_ = readText(csv_);
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
@@ -101,10 +102,12 @@ TEST_F(AnalyzeTool, WritesTheDesignJsonAndAgreesWithTheLibrary) {
   // The CSV round trip is bit-exact, so the tool's estimates are the library's on the table.
   gear_sim::GearModel model;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadGearModelFile(kParams, &model, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadGearModelFile(kParams, &model), &e)) << e;
   gear_damping_id::IdentificationResult lib;
-  ASSERT_TRUE(gear_damping_id::identify(table_, gear_damping_id::gearConstants(model),
-                                        gear_damping_id::IdentificationOptions{}, &lib, &e))
+  ASSERT_TRUE(
+      gear_test::ok(gear_damping_id::identify(table_, gear_damping_id::gearConstants(model),
+                                              gear_damping_id::IdentificationOptions{}, &lib),
+                    &e))
       << e;
   ASSERT_EQ(lib.segments.size(), segs.size());
   for (size_t i = 0; i < segs.size(); ++i) {

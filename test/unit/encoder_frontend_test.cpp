@@ -17,6 +17,7 @@
 #include "gear_sim/rig_csv.hpp"
 #include "id_test_support.hpp"
 #include "rig_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -31,7 +32,9 @@ struct Chain {
 Chain frontEnd(const SignalTable& rig, const SimConfig& c, gd::EncoderFrontEndOptions o = {}) {
   Chain ch;
   std::string e;
-  EXPECT_TRUE(gd::encoderToSignalTable(rig, c.gearModel(), o, &ch.table, &ch.report, &e)) << e;
+  EXPECT_TRUE(
+      gear_test::ok(gd::encoderToSignalTable(rig, c.gearModel(), o, &ch.table, &ch.report), &e))
+      << e;
   return ch;
 }
 
@@ -81,27 +84,27 @@ TEST_F(EncoderChain, RefusesWhatIsNotAGearPair) {
   // Wrong ratio (a 2.2 reduction, as the Table 1 radii would suggest).
   SignalTable wrong = rig;
   wrong.theta2 *= 2.0 / 2.2;
-  EXPECT_FALSE(gd::encoderToSignalTable(wrong, c.gearModel(), {}, &out, &rep, &e));
+  EXPECT_FALSE(gear_test::ok(gd::encoderToSignalTable(wrong, c.gearModel(), {}, &out, &rep), &e));
   EXPECT_NE(e.find("ratio"), std::string::npos) << e;
   // A reversal of the gear shaft halfway.
   SignalTable rev = rig;
   const Eigen::Index h = rig.size() / 2;
   for (Eigen::Index i = h; i < rig.size(); ++i) rev.theta2[i] = 2 * rig.theta2[h] - rig.theta2[i];
   e.clear();
-  EXPECT_FALSE(gd::encoderToSignalTable(rev, c.gearModel(), {}, &out, &rep, &e));
+  EXPECT_FALSE(gear_test::ok(gd::encoderToSignalTable(rev, c.gearModel(), {}, &out, &rep), &e));
   EXPECT_NE(e.find("backwards"), std::string::npos) << e;
   // An encoder counting against the rotation.
   SignalTable neg = rig;
   neg.theta1 = -rig.theta1;
   e.clear();
-  EXPECT_FALSE(gd::encoderToSignalTable(neg, c.gearModel(), {}, &out, &rep, &e));
+  EXPECT_FALSE(gear_test::ok(gd::encoderToSignalTable(neg, c.gearModel(), {}, &out, &rep), &e));
   EXPECT_NE(e.find("not a gear-pair record"), std::string::npos) << e;
   // Standing shafts.
   SignalTable still = rig;
   still.theta1.setConstant(1.0);
   still.theta2.setConstant(2.0);
   e.clear();
-  EXPECT_FALSE(gd::encoderToSignalTable(still, c.gearModel(), {}, &out, &rep, &e));
+  EXPECT_FALSE(gear_test::ok(gd::encoderToSignalTable(still, c.gearModel(), {}, &out, &rep), &e));
   EXPECT_NE(e.find("rotate"), std::string::npos) << e;
 }
 
@@ -119,8 +122,10 @@ TEST_F(EncoderChain, StreamingEqualsOffline) {
   Eigen::Index got = 0;
   for (Eigen::Index s = 0; s < rig.size(); s += 777) {
     const Eigen::Index n = std::min<Eigen::Index>(777, rig.size() - s);
-    ASSERT_TRUE(fe.push(1e6, static_cast<std::uint64_t>(s), rig.theta1.data() + s,
-                        rig.theta2.data() + s, rig.torque.data() + s, static_cast<size_t>(n), &e))
+    ASSERT_TRUE(
+        gear_test::ok(fe.push(1e6, static_cast<std::uint64_t>(s), rig.theta1.data() + s,
+                              rig.theta2.data() + s, rig.torque.data() + s, static_cast<size_t>(n)),
+                      &e))
         << e;
     SignalTable t;
     std::uint64_t first;
@@ -130,7 +135,7 @@ TEST_F(EncoderChain, StreamingEqualsOffline) {
       got += t.size();
     }
   }
-  ASSERT_TRUE(fe.finish(&e)) << e;
+  ASSERT_TRUE(gear_test::ok(fe.finish(), &e)) << e;
   SignalTable t;
   std::uint64_t first;
   while (fe.pop(&t, &first)) dte.segment(got, t.size()) = t.dte, got += t.size();
@@ -207,7 +212,8 @@ TEST_F(EncoderChain, EdgeTimesGiveTheUniformC) {
     ASSERT_GT(e1.size(), 100u);
     SignalTable rig;
     std::string res, err;
-    ASSERT_TRUE(gd::edgesToRigTable(e1, 5000, e2, 5000, *clean_, &rig, &res, &err)) << err;
+    ASSERT_TRUE(gear_test::ok(gd::edgesToRigTable(e1, 5000, e2, 5000, *clean_, &rig, &res), &err))
+        << err;
     gd::EncoderFrontEndOptions o;
     const IdentificationResult r = identifyOrFail(frontEnd(rig, c, o).table, c, io);
     // Compare the segments that start at the same time (the edge grid starts a few us later).
@@ -267,45 +273,51 @@ std::string writeTemp(const std::string& name, const std::string& text) {
 TEST(RigInputs, HostileFilesAreRefusedWithReasons) {
   gear_sim::SignalTable t, out;
   std::string e;
-  EXPECT_FALSE(gear_sim::readRigCsv(
-      writeTemp("dte.csv", "time,dte,theta1,theta2\n0,0,0,0\n1,0,1,1\n"), &t, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gear_sim::readRigCsv(writeTemp("dte.csv", "time,dte,theta1,theta2\n0,0,0,0\n1,0,1,1\n"), &t),
+      &e));
   EXPECT_NE(e.find("not a rig record"), std::string::npos) << e;
-  EXPECT_FALSE(
-      gear_sim::readRigCsv(writeTemp("nan.csv", "time,theta1,theta2\n0,nan,0\n1,1,1\n"), &t, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gear_sim::readRigCsv(writeTemp("nan.csv", "time,theta1,theta2\n0,nan,0\n1,1,1\n"), &t), &e));
   EXPECT_FALSE(e.empty());
-  EXPECT_FALSE(
-      gear_sim::readRigCsv(writeTemp("time.csv", "time,theta1,theta2\n1,0,0\n0,1,1\n"), &t, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gear_sim::readRigCsv(writeTemp("time.csv", "time,theta1,theta2\n1,0,0\n0,1,1\n"), &t), &e));
   EXPECT_FALSE(e.empty());
   // Too short for the front end; a missing torque with offsets to estimate.
-  ASSERT_TRUE(gear_sim::readRigCsv(
-      writeTemp("short.csv", "time,theta1,theta2\n0,0,0\n1e-6,1e-3,5e-4\n2e-6,2e-3,1e-3\n"), &t,
+  ASSERT_TRUE(gear_test::ok(
+      gear_sim::readRigCsv(
+          writeTemp("short.csv", "time,theta1,theta2\n0,0,0\n1e-6,1e-3,5e-4\n2e-6,2e-3,1e-3\n"),
+          &t),
       &e))
       << e;
   gear_sim::GearModel model;
-  EXPECT_FALSE(gd::encoderToSignalTable(t, model, {}, &out, nullptr, &e));
+  EXPECT_FALSE(gear_test::ok(gd::encoderToSignalTable(t, model, {}, &out, nullptr), &e));
   EXPECT_NE(e.find("16"), std::string::npos) << e;
   // Edge files: decreasing, a gap, too few edges, the grid outside.
   std::vector<double> edges;
-  EXPECT_FALSE(gear_sim::readEdgeCsv(writeTemp("e1.csv", "time\n0\n2e-6\n1e-6\n"), &edges, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gear_sim::readEdgeCsv(writeTemp("e1.csv", "time\n0\n2e-6\n1e-6\n"), &edges), &e));
   Eigen::VectorXd theta;
-  EXPECT_FALSE(
-      gd::edgeTimesToAngles({0, 1, 2}, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gd::edgeTimesToAngles({0, 1, 2}, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta), &e));
   EXPECT_NE(e.find("4 edges"), std::string::npos) << e;
   std::vector<double> gap;
   for (int k = 0; k < 40; ++k) gap.push_back(k);
   gap.push_back(5000.0);  // 125x the mean interval: a standstill or lost edges
-  EXPECT_FALSE(gd::edgeTimesToAngles(gap, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gd::edgeTimesToAngles(gap, 100, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta), &e));
   EXPECT_NE(e.find("gap"), std::string::npos) << e;
-  EXPECT_FALSE(gd::edgeTimesToAngles({0, 1, 2, 3, 4}, 100, Eigen::VectorXd::LinSpaced(3, -1, 2),
-                                     &theta, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gd::edgeTimesToAngles({0, 1, 2, 3, 4}, 100, Eigen::VectorXd::LinSpaced(3, -1, 2), &theta),
+      &e));
   EXPECT_NE(e.find("outside"), std::string::npos) << e;
-  EXPECT_FALSE(
-      gd::edgeTimesToAngles({0, 1, 2, 3}, 0, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta, &e));
+  EXPECT_FALSE(gear_test::ok(
+      gd::edgeTimesToAngles({0, 1, 2, 3}, 0, Eigen::VectorXd::LinSpaced(3, 0, 2), &theta), &e));
   // Cubic edges reproduce a cubic rotation exactly.
   std::vector<double> cubic;
   for (int k = 0; k < 50; ++k) cubic.push_back(0.01 * k + 1e-5 * k * k);
-  ASSERT_TRUE(
-      gd::edgeTimesToAngles(cubic, 1000, Eigen::VectorXd::LinSpaced(7, 0.0, 0.4), &theta, &e))
+  ASSERT_TRUE(gear_test::ok(
+      gd::edgeTimesToAngles(cubic, 1000, Eigen::VectorXd::LinSpaced(7, 0.0, 0.4), &theta), &e))
       << e;
   // Streaming: a sample index that goes back is refused.
   gd::EncoderFrontEndOptions o;
@@ -313,10 +325,10 @@ TEST(RigInputs, HostileFilesAreRefusedWithReasons) {
   gd::EncoderFrontEnd fe(model, o);
   std::vector<double> a(20), b(20);
   for (int i = 0; i < 20; ++i) a[i] = 1e-3 * i, b[i] = 5e-4 * i;
-  ASSERT_TRUE(fe.push(1e6, 0, a.data(), b.data(), nullptr, 20, &e)) << e;
-  EXPECT_FALSE(fe.push(1e6, 5, a.data(), b.data(), nullptr, 20, &e));
+  ASSERT_TRUE(gear_test::ok(fe.push(1e6, 0, a.data(), b.data(), nullptr, 20), &e)) << e;
+  EXPECT_FALSE(gear_test::ok(fe.push(1e6, 5, a.data(), b.data(), nullptr, 20), &e));
   EXPECT_NE(e.find("not after"), std::string::npos) << e;
-  EXPECT_FALSE(fe.push(2e6, 100, a.data(), b.data(), nullptr, 20, &e));
+  EXPECT_FALSE(gear_test::ok(fe.push(2e6, 100, a.data(), b.data(), nullptr, 20), &e));
   EXPECT_NE(e.find("rate changed"), std::string::npos) << e;
 }
 

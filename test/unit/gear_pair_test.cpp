@@ -35,15 +35,15 @@ TEST(GearPair, ForceFactorIsSumOfRadiusOverInertia) {
 TEST(GearPair, NonPositiveInertiaIsRejectedNamingTheField) {
   gear_sim::GearPair p;
   p.gear.inertia = -1.0;
-  const std::string e = p.validate();
+  const std::string e = p.check().message();
   EXPECT_NE(e.find("gear.inertia"), std::string::npos) << e;
   p = gear_sim::GearPair{};
   p.pinion.base_radius = 0.0;
-  EXPECT_NE(p.validate().find("pinion.base_radius"), std::string::npos);
+  EXPECT_NE(p.check().message().find("pinion.base_radius"), std::string::npos);
   p = gear_sim::GearPair{};
   p.pinion.teeth = 0;
-  EXPECT_NE(p.validate().find("pinion.teeth"), std::string::npos);
-  EXPECT_TRUE(gear_sim::GearPair{}.validate().empty());
+  EXPECT_NE(p.check().message().find("pinion.teeth"), std::string::npos);
+  EXPECT_TRUE(gear_sim::GearPair{}.check().message().empty());
 }
 
 }  // namespace

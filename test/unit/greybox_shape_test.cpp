@@ -10,6 +10,7 @@
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -83,8 +84,8 @@ void expectExact(const SimConfig& c, const std::string& text, const std::string&
   if (refine) {
     gd::ModeledResponse m;
     std::string e;
-    ASSERT_TRUE(
-        gd::modeledResponse(gd::SignalView::of(t), gd::gearConstants(c.gearModel()), r, &m, &e))
+    ASSERT_TRUE(gear_test::ok(
+        gd::modeledResponse(gd::SignalView::of(t), gd::gearConstants(c.gearModel()), r, &m), &e))
         << e;
     EXPECT_GT(m.fit_percent, 99.0) << label;
   }
@@ -249,7 +250,7 @@ TEST(GreyboxShape, ParseAndValidate) {
   IdentificationOptions o;
   o.stiffness_shape.kind = StiffnessShape::Kind::Table;
   o.stiffness_shape.n = 99;
-  EXPECT_NE(o.validate().find("stiffness_shape"), std::string::npos);
+  EXPECT_NE(o.check().message().find("stiffness_shape"), std::string::npos);
 }
 
 }  // namespace

@@ -30,6 +30,7 @@
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "gear_sim_ros/rig_bag_io.hpp"
+#include "status_support.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -48,10 +49,11 @@ class Hostile : public ::testing::Test {
   static void SetUpTestSuite() {
     scratch_ = new gear_test::ScratchDir("hostile_inputs_test");
     std::string e;
-    ASSERT_TRUE(gear_sim::loadSimConfigFile(kParams, &config_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kParams, &config_), &e)) << e;
     config_.simulation.duration = 2e-3;  // two 1 ms segments, 2000 samples
-    ASSERT_TRUE(gear_sim::simulate(config_, &table_, &e)) << e;
-    ASSERT_TRUE(gear_sim::writeSignalCsv((dir() / "good.csv").string(), table_, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(config_, &table_), &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim::writeSignalCsv((dir() / "good.csv").string(), table_), &e))
+        << e;
   }
   static void TearDownTestSuite() { delete scratch_; }
   static fs::path dir() { return scratch_->path(); }
@@ -85,20 +87,20 @@ class Hostile : public ::testing::Test {
   static std::string scanError(const std::string& bag) {
     gear_sim_ros::BagSignalInfo info;
     std::string e;
-    EXPECT_FALSE(gear_sim_ros::scanSignalBag(bag, "", &info, &e));
+    EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanSignalBag(bag, "", &info), &e));
     return e;
   }
   static std::string simConfigError(const std::string& yaml) {
     gear_sim::SimConfig c;
     std::string e;
-    EXPECT_FALSE(gear_sim::loadSimConfig(YAML::Load(yaml), &c, &e, dir().string()));
+    EXPECT_FALSE(gear_test::ok(gear_sim::loadSimConfig(YAML::Load(yaml), &c, dir().string()), &e));
     return e;
   }
   static std::string csvError(const std::string& name, const std::string& text) {
     writeText(dir() / name, text);
     gear_sim::SignalTable t;
     std::string e;
-    EXPECT_FALSE(gear_sim::readSignalCsv(path(name), &t, &e));
+    EXPECT_FALSE(gear_test::ok(gear_sim::readSignalCsv(path(name), &t), &e));
     return e;
   }
 
@@ -162,7 +164,7 @@ TEST_F(Hostile, AGapAsLongAsTheSamplesPresentIsStillAccepted) {
       writeBag("gap_ok.bag", [](size_t k) { return 500 * k + (k >= 2 ? 2000 : 0); });
   gear_sim_ros::BagSignalInfo info;
   std::string e;
-  ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag, "", &info), &e)) << e;
   EXPECT_EQ(info.gap_samples, 2000);
   EXPECT_EQ(info.real_samples, 2000);
 }
@@ -195,9 +197,9 @@ TEST_F(Hostile, IntactBagsPassTheStructureCheckCompressedOrNot) {
         "intact" + std::to_string(static_cast<int>(c)) + ".bag", [](size_t k) { return 500 * k; },
         nullptr, c);
     std::string e;
-    EXPECT_TRUE(gear_sim_ros::checkBagStructure(bag, &e)) << e;
+    EXPECT_TRUE(gear_test::ok(gear_sim_ros::checkBagStructure(bag), &e)) << e;
     gear_sim_ros::BagSignalInfo info;
-    ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag, "", &info), &e)) << e;
     EXPECT_EQ(info.samples, 2000);
   }
 }
@@ -317,7 +319,7 @@ TEST_F(Hostile, RigBagArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
   }
   gear_sim::SignalTable rig;
   std::string e;
-  ASSERT_TRUE(gear_sim_ros::readRigBag(good, topics, &rig, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readRigBag(good, topics, &rig), &e)) << e;
   ASSERT_EQ(rig.size(), 3);
   // The first JointState's position: length 2, then 0.125 and 0.25.
   std::string pattern(20, '\0');
@@ -329,7 +331,7 @@ TEST_F(Hostile, RigBagArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
   putLe32(&b, find(b, pattern), 0x7FFFFFFF);
   writeBytes(path("rig_overflow.bag"), b);
   ASSERT_TRUE(gear_sim_ros::isRigBag(path("rig_overflow.bag"), topics));
-  EXPECT_FALSE(gear_sim_ros::readRigBag(path("rig_overflow.bag"), topics, &rig, &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::readRigBag(path("rig_overflow.bag"), topics, &rig), &e));
   EXPECT_TRUE(has(e, "position claims 2147483647 elements")) << e;
   const ToolRun r = run("analyze", "--input " + path("rig_overflow.bag") + " --params " +
                                        std::string(GEAR_SOURCE_DIR) + "/config/rig_example.yaml");
@@ -369,12 +371,12 @@ TEST_F(Hostile, ImplausibleChunkValuesAreCountedReportedAndReadAsNan) {
       });
   gear_sim_ros::BagSignalInfo info;
   std::string e;
-  ASSERT_TRUE(gear_sim_ros::scanSignalBag(bag, "", &info, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag, "", &info), &e)) << e;
   EXPECT_EQ(info.bad_mesh_states, 1);
   EXPECT_EQ(info.out_of_range_values, 2);
   EXPECT_EQ(info.outlier_chunks, 1);  // 1e308 dwarfs every other chunk's DTE
   gear_sim::SignalTable t;
-  ASSERT_TRUE(gear_sim_ros::readSignalBag(info, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &t), &e)) << e;
   EXPECT_TRUE(std::isnan(t.mesh_state[510]));
   EXPECT_TRUE(std::isnan(t.dte[520]));
   EXPECT_TRUE(std::isnan(t.stiffness[530]));
@@ -397,9 +399,11 @@ TEST_F(Hostile, NonScalarYamlKeysAreNamedNotAnAbort) {
       << simConfigError("pinion:\n  ? {x: 1}\n  : 3\n");
   gear_sim::GearModel m;
   std::string e;
-  EXPECT_FALSE(gear_sim::loadGearModel(YAML::Load("? [a, b]\n: 1\n"), &m, &e));
-  EXPECT_FALSE(gear_sim::loadGearModel(
-      YAML::Load("pinion: {? [a] : 1}\ngear: {}\nmesh: {}\nspeed: {}\n"), &m, &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim::loadGearModel(YAML::Load("? [a, b]\n: 1\n"), &m), &e));
+  EXPECT_FALSE(
+      gear_test::ok(gear_sim::loadGearModel(
+                        YAML::Load("pinion: {? [a] : 1}\ngear: {}\nmesh: {}\nspeed: {}\n"), &m),
+                    &e));
   EXPECT_TRUE(has(e, "a key must be a plain name")) << e;
   // The tools: exit codes, not 134.
   writeText(dir() / "key.yaml", "? [a, b]\n: 1\n");
@@ -448,7 +452,7 @@ TEST_F(Hostile, AnUnstableIntegrationIsRefusedNotWrittenAsNan) {
   c.damping.coefficient = 1e12;  // [N*s/m] xi of order 1e6: RK4 at 1 MHz cannot follow
   gear_sim::SignalTable t;
   std::string e;
-  EXPECT_FALSE(gear_sim::simulate(c, &t, &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim::simulate(c, &t), &e));
   EXPECT_TRUE(has(e, "the integration diverged")) << e;
   EXPECT_TRUE(has(e, "simulation.substeps")) << e;
 }
@@ -459,7 +463,7 @@ TEST_F(Hostile, Utf8ByteOrderMarkIsAccepted) {
   writeText(dir() / "bom.csv", "\xEF\xBB\xBFtime,dte\n0,1e-6\n1e-6,2e-6\n");
   gear_sim::SignalTable t;
   std::string e;
-  ASSERT_TRUE(gear_sim::readSignalCsv(path("bom.csv"), &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::readSignalCsv(path("bom.csv"), &t), &e)) << e;
   EXPECT_EQ(t.size(), 2);
   // Elsewhere than the start a BOM is named as one.
   const std::string e2 = csvError("bom2.csv",
@@ -575,15 +579,17 @@ TEST_F(Hostile, OutputsAreCommittedTogetherOrNotAtAll) {
   {
     gear_damping_id::OutputStage stage;
     std::string e;
-    ASSERT_TRUE(gear_damping_id::writeFileAtomically(path("a.txt"), "a", &e, &stage)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_damping_id::writeFileAtomically(path("a.txt"), "a", &stage), &e))
+        << e;
     EXPECT_FALSE(fs::exists(path("a.txt")));  // staged, not renamed yet
-    ASSERT_TRUE(stage.commit(&e)) << e;
+    ASSERT_TRUE(gear_test::ok(stage.commit(), &e)) << e;
     EXPECT_EQ(readText(path("a.txt")), "a");
   }
   {
     gear_damping_id::OutputStage stage;
     std::string e;
-    ASSERT_TRUE(gear_damping_id::writeFileAtomically(path("b.txt"), "b", &e, &stage)) << e;
+    ASSERT_TRUE(gear_test::ok(gear_damping_id::writeFileAtomically(path("b.txt"), "b", &stage), &e))
+        << e;
   }  // destroyed without commit: an error path
   EXPECT_FALSE(fs::exists(path("b.txt")));
   EXPECT_FALSE(fs::exists(path("b.txt.partial")));

@@ -9,6 +9,7 @@
 #include <iostream>
 
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -130,7 +131,7 @@ TEST(IdentificationAccuracy, LoadLawRecoversC0AndC1Within05PercentOnTheLoadDepen
 // The same bars on a case none of the defaults were chosen for.
 TEST(IdentificationAccuracy, HeldOutCaseMeetsTheSameBars) {
   SimConfig c = heldOutCase();
-  ASSERT_EQ(c.validate(), "");
+  ASSERT_EQ(c.check().message(), "");
   setPiecewiseTruth(&c, 1e-3);
   expectPiecewiseAccuracy(c, Formulation::Known, IdentificationOptions::Refine::Auto, kKnownCTol,
                           "held-out known");
@@ -156,7 +157,7 @@ TEST(IdentificationAccuracy, LoadLawRecoversALoadLinearTruthUnderATrapezoidalLoa
   c.damping.model = gear_sim::DampingProfile::LoadLinear;
   c.damping.c0 = 250.0;  // [N*s/m]
   c.damping.c1 = 2.5;    // [N*s/m per N*m]
-  ASSERT_EQ(c.validate(), "");
+  ASSERT_EQ(c.check().message(), "");
   expectLoadLawAccuracy(c, Formulation::Known, IdentificationOptions::Refine::Auto,
                         "held-out trapezoid load known load_law");
 }
@@ -165,8 +166,10 @@ TEST(IdentificationAccuracy, LoadLawRecoversALoadLinearTruthUnderATrapezoidalLoa
 double fitPercent(const SignalTable& t, const SimConfig& c, const IdentificationResult& r) {
   gear_damping_id::ModeledResponse m;
   std::string e;
-  EXPECT_TRUE(gear_damping_id::modeledResponse(
-      gear_damping_id::SignalView::of(t), gear_damping_id::gearConstants(c.gearModel()), r, &m, &e))
+  EXPECT_TRUE(gear_test::ok(
+      gear_damping_id::modeledResponse(gear_damping_id::SignalView::of(t),
+                                       gear_damping_id::gearConstants(c.gearModel()), r, &m),
+      &e))
       << e;
   return m.fit_percent;
 }

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -181,12 +182,13 @@ TEST_F(IdentificationInput, MissingColumnIsNamed) {
     SignalTable t = *clean_;
     (t.*c.column).resize(0);
     const std::string e =
-        gear_damping_id::checkSignalTable(t, c.f, c.m, IdentificationOptions().time_tolerance);
+        gear_damping_id::checkSignalTable(t, c.f, c.m, IdentificationOptions().time_tolerance)
+            .message();
     EXPECT_NE(e.find(std::string("'") + c.name + "'"), std::string::npos)
         << gear_damping_id::toString(c.f) << "/" << gear_damping_id::toString(c.m) << ": " << e;
     IdentificationResult r;
     std::string err;
-    EXPECT_FALSE(gear_damping_id::identify(t, gear(), opts(c.f, c.m), &r, &err));
+    EXPECT_FALSE(gear_test::ok(gear_damping_id::identify(t, gear(), opts(c.f, c.m), &r), &err));
     EXPECT_EQ(err, e);
   }
   // The paper formulation with a piecewise C needs only the DTE.
@@ -194,7 +196,9 @@ TEST_F(IdentificationInput, MissingColumnIsNamed) {
   t.stiffness.resize(0);
   t.torque.resize(0);
   t.mesh_state.resize(0);
-  EXPECT_EQ(gear_damping_id::checkSignalTable(t, Formulation::Paper, DampingModel::Piecewise), "");
+  EXPECT_EQ(
+      gear_damping_id::checkSignalTable(t, Formulation::Paper, DampingModel::Piecewise).message(),
+      "");
 }
 
 TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
@@ -202,20 +206,23 @@ TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
   const double dt = 1e-6;
   t.time[4321] += 0.01 * dt;  // 1 % of a step: far above the 1e-6 tolerance
   const std::string e =
-      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise).message();
   EXPECT_NE(e.find("not uniformly sampled"), std::string::npos) << e;
   EXPECT_NE(e.find("sample 4321"), std::string::npos) << e;  // 0-based index of the sample
   const std::string with_line =
-      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise, 1e-6, 2);
+      gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise, 1e-6, 2)
+          .message();
   EXPECT_NE(with_line.find("line 4323"), std::string::npos) << with_line;  // CSV: header + 1
   IdentificationResult r;
   std::string err;
-  EXPECT_FALSE(gear_damping_id::identify(t, gear(), opts(), &r, &err));
+  EXPECT_FALSE(gear_test::ok(gear_damping_id::identify(t, gear(), opts(), &r), &err));
   EXPECT_EQ(err, e);
   // Within tolerance (rounding of time stamps) is fine.
   SignalTable ok = *clean_;
   ok.time[4321] += 1e-9 * dt;
-  EXPECT_EQ(gear_damping_id::checkSignalTable(ok, Formulation::Known, DampingModel::Piecewise), "");
+  EXPECT_EQ(
+      gear_damping_id::checkSignalTable(ok, Formulation::Known, DampingModel::Piecewise).message(),
+      "");
 }
 
 TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
@@ -236,7 +243,7 @@ TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
       {"refine_threshold", [](IdentificationOptions* o) { o->refine_threshold = -1.0; }},
       {"max_iterations", [](IdentificationOptions* o) { o->max_iterations = 0; }},
   };
-  EXPECT_EQ(IdentificationOptions().validate(), "");
+  EXPECT_EQ(IdentificationOptions().check().message(), "");
   const SimConfig c = table1Config();
   SimConfig short_case = c;
   short_case.simulation.duration = 1e-3;
@@ -244,14 +251,14 @@ TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
   for (const Case& k : cases) {
     IdentificationOptions o;
     k.set(&o);
-    const std::string e = o.validate();
+    const std::string e = o.check().message();
     EXPECT_EQ(o.check().field, k.field) << e;
     EXPECT_NE(e.find(std::string("IdentificationOptions::") + k.field + " = "), std::string::npos)
         << e;
     IdentificationResult r;
     std::string err;
-    EXPECT_FALSE(
-        gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r, &err));
+    EXPECT_FALSE(gear_test::ok(
+        gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r), &err));
     EXPECT_EQ(err, e);
   }
 }
@@ -281,7 +288,7 @@ TEST_F(IdentificationInput, AnalysedTimeRangeSelectsTheSameSegments) {
   o.t_end = 2.0;
   IdentificationResult r;
   std::string err;
-  EXPECT_FALSE(gear_damping_id::identify(*clean_, gear(), o, &r, &err));
+  EXPECT_FALSE(gear_test::ok(gear_damping_id::identify(*clean_, gear(), o, &r), &err));
   EXPECT_NE(err.find("no samples in the analysed time range"), std::string::npos) << err;
 }
 

@@ -9,6 +9,7 @@
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -26,11 +27,12 @@ struct Case {
   gd::GearConstants gear;
   explicit Case(double snr_db = INFINITY) {
     std::string e;
-    EXPECT_TRUE(
-        gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &cfg, &e))
+    EXPECT_TRUE(gear_test::ok(
+        gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &cfg),
+        &e))
         << e;
     cfg.simulation.noise_snr_db = snr_db;
-    EXPECT_TRUE(gear_sim::simulate(cfg, &table, &e)) << e;
+    EXPECT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &table), &e)) << e;
     gear = gd::gearConstants(cfg.gearModel());
   }
   // Feeds every offline segment range to a LiveIdentification; returns its cumulative result.
@@ -50,7 +52,7 @@ struct Case {
   gd::IdentificationResult offline(const gd::IdentificationOptions& o) const {
     gd::IdentificationResult r;
     std::string e;
-    EXPECT_TRUE(gd::identify(table, gear, o, &r, &e)) << e;
+    EXPECT_TRUE(gear_test::ok(gd::identify(table, gear, o, &r), &e)) << e;
     return r;
   }
 };
@@ -86,7 +88,9 @@ TEST(LiveIdentification, PiecewiseWithoutRefinementEqualsIdentify) {
     EXPECT_FALSE(out.result.windows.empty());
     gd::ModeledResponse mr;
     std::string e;
-    EXPECT_TRUE(gd::modeledResponse(gd::SignalView::of(k.table), k.gear, out.result, &mr, &e)) << e;
+    EXPECT_TRUE(gear_test::ok(
+        gd::modeledResponse(gd::SignalView::of(k.table), k.gear, out.result, &mr), &e))
+        << e;
     EXPECT_GT(mr.fit_percent, 90.0);
   }
 }

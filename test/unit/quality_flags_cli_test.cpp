@@ -13,6 +13,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -24,7 +25,7 @@ const std::string kParams = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml"
 gear_sim::SimConfig baseConfig() {
   gear_sim::SimConfig c;
   std::string e;
-  EXPECT_TRUE(gear_sim::loadSimConfigFile(kParams, &c, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kParams, &c), &e)) << e;
   c.simulation.duration = 4e-3;  // four 1 ms segments
   return c;
 }
@@ -35,14 +36,14 @@ std::pair<std::string, std::string> record(const gear_sim::SimConfig& c, const f
                                            const std::string& name, double noise_rel = 0.0) {
   gear_sim::SignalTable t;
   std::string e;
-  EXPECT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   if (noise_rel > 0.0) {  // white noise of noise_rel times the mean |DTE| (seeded)
     std::mt19937_64 gen(7);
     std::normal_distribution<double> nd(0.0, noise_rel * t.dte.cwiseAbs().mean());
     for (Eigen::Index i = 0; i < t.size(); ++i) t.dte[i] += nd(gen);
   }
   const std::string csv = (dir / (name + ".csv")).string();
-  EXPECT_TRUE(gear_sim::writeSignalCsv(csv, t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::writeSignalCsv(csv, t), &e)) << e;
   return {csv, kParams};
 }
 

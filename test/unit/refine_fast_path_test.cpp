@@ -9,6 +9,7 @@
 
 #include "gear_damping_id/quality_flags.hpp"
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -37,11 +38,15 @@ void refineBoth(const SignalTable& t, const gear_damping_id::GearConstants& gear
   const auto view = gear_damping_id::SignalView::of(t);
   IdentificationResult start;
   std::string e;
-  ASSERT_TRUE(gear_damping_id::identify(t, gear, o, &start, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_damping_id::identify(t, gear, o, &start), &e)) << e;
   const auto ranges = gear_damping_id::segmentRanges(view, o);
   *fast = start, *reference = start;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, fast, &e, false)) << e;
-  ASSERT_TRUE(gear_damping_id::refineOutputError(view, ranges, gear, o, reference, &e, true)) << e;
+  ASSERT_TRUE(
+      gear_test::ok(gear_damping_id::refineOutputError(view, ranges, gear, o, fast, false), &e))
+      << e;
+  ASSERT_TRUE(
+      gear_test::ok(gear_damping_id::refineOutputError(view, ranges, gear, o, reference, true), &e))
+      << e;
   ASSERT_EQ(fast->segments.size(), reference->segments.size());
 }
 

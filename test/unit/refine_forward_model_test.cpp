@@ -146,8 +146,10 @@ SignalTable simulateRigTable(const SimConfig& c) {
     t.mesh_phase[i] = p;
     t.damping[i] = dampingC(ti) * me;
   }
-  const std::string e = gear_sim::integrateSdof(
-      coeffs, bps, 0.0, dt, n, {0.0, 0.0}, gear_sim::Integrator::Rk4, 16, t.dte.data(), nullptr);
+  const std::string e =
+      gear_sim::integrateSdof(coeffs, bps, 0.0, dt, n, {0.0, 0.0}, gear_sim::Integrator::Rk4, 16,
+                              t.dte.data(), nullptr)
+          .message();
   EXPECT_TRUE(e.empty()) << e;
   (void)gm;
   return t;

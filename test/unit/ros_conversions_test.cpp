@@ -12,6 +12,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
 #include "gear_sim_ros/conversions.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -20,8 +21,8 @@ namespace gd = gear_damping_id;
 gear_sim::SimConfig table1() {
   gear_sim::SimConfig c;
   std::string e;
-  EXPECT_TRUE(
-      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
+  EXPECT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c), &e))
       << e;
   c.simulation.duration = 2e-3;
   return c;
@@ -39,7 +40,7 @@ TEST(RosConversions, ARecordThroughChunksAndBackIsTheSameRecord) {
   const gear_sim::SimConfig c = table1();
   gear_sim::SignalTable t;
   std::string e;
-  ASSERT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   const double rate = c.simulation.sample_rate;
   std::vector<gear_damping::SignalChunk> chunks;
   for (Eigen::Index b = 0; b < t.size(); b += 333) {
@@ -49,7 +50,7 @@ TEST(RosConversions, ARecordThroughChunksAndBackIsTheSameRecord) {
     chunks.push_back(m);
   }
   gear_sim::SignalTable back;
-  ASSERT_TRUE(gear_sim_ros::chunksToTable(chunks, &back, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::chunksToTable(chunks, &back), &e)) << e;
   ASSERT_EQ(back.size(), t.size());
   for (Eigen::Index i = 0; i < t.size(); ++i) {
     EXPECT_EQ(back.dte[i], t.dte[i]) << i;
@@ -66,12 +67,12 @@ TEST(RosConversions, AChunkAsCoreDataPointsAtTheSameSamples) {
   const gear_sim::SimConfig c = table1();
   gear_sim::SignalTable t;
   std::string e;
-  ASSERT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   gear_damping::SignalChunk m;
   gear_sim_ros::toChunk(t, 100, 250, c.simulation.sample_rate, 1000100, &m);
   std::vector<double> state;
   gd::ChunkData d;
-  ASSERT_TRUE(gear_damping_ros::toChunkData(m, &state, &d, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_damping_ros::toChunkData(m, &state, &d), &e)) << e;
   EXPECT_EQ(d.first_index, 1000100u);
   EXPECT_EQ(d.sample_rate, c.simulation.sample_rate);
   ASSERT_EQ(d.n, 250u);
@@ -84,14 +85,14 @@ TEST(RosConversions, AChunkAsCoreDataPointsAtTheSameSamples) {
     EXPECT_EQ(d.mesh_phase[i], t.mesh_phase[k]);
   }
   m.torque.pop_back();  // a channel of the wrong length is refused
-  EXPECT_FALSE(gear_damping_ros::toChunkData(m, &state, &d, &e));
+  EXPECT_FALSE(gear_test::ok(gear_damping_ros::toChunkData(m, &state, &d), &e));
 }
 
 TEST(RosConversions, GearParametersThroughTheMessageAndBackAreTheSameModel) {
   const gear_sim::GearModel model = table1().gearModel();
   gear_sim::GearModel back;
   std::string e;
-  ASSERT_TRUE(gear_sim_ros::fromMsg(gear_sim_ros::toMsg(model), &back, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::fromMsg(gear_sim_ros::toMsg(model), &back), &e)) << e;
   EXPECT_EQ(back.gears.pinion.teeth, model.gears.pinion.teeth);
   EXPECT_EQ(back.gears.gear.teeth, model.gears.gear.teeth);
   EXPECT_EQ(back.gears.pinion.inertia, model.gears.pinion.inertia);

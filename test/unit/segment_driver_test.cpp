@@ -14,6 +14,7 @@
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_id/stream_assembler.hpp"
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -69,7 +70,7 @@ const Record& record() { return *current; }
 
 void setUp(gd::SegmentDriver* d) {
   if (record().ste.active()) {
-    EXPECT_EQ(d->setSte(record().ste, record().ste_calibration), "");
+    EXPECT_EQ(d->setSte(record().ste, record().ste_calibration).message(), "");
   }
 }
 
@@ -92,7 +93,8 @@ gd::IdentificationResult batch(const gd::IdentificationOptions& o, int threads =
   gd::IdentificationResult r;
   std::string e;
   if (!record().ste.active()) {
-    EXPECT_TRUE(gd::identify(record().table, record().gear, o, &r, &e, threads)) << e;
+    EXPECT_TRUE(gear_test::ok(gd::identify(record().table, record().gear, o, &r, threads), &e))
+        << e;
     return r;
   }
   // The STE: the whole record's segments fed to one driver (what identify() does without).
@@ -145,7 +147,7 @@ gd::IdentificationResult live(const gd::IdentificationOptions& o, unsigned seed)
   gd::StreamAssembler assembler(so);
   gd::LiveIdentification li(o, record().gear);
   if (record().ste.active()) {
-    EXPECT_EQ(li.setSte(record().ste, record().ste_calibration), "");
+    EXPECT_EQ(li.setSte(record().ste, record().ste_calibration).message(), "");
   }
   if (o.formulation == gd::Formulation::Legacy) {
     const gd::SignalView whole = gd::SignalView::of(t);
@@ -259,12 +261,14 @@ TEST(SegmentDriver, WithTheSteBatchStreamedAndLiveGiveTheSameSegments) {
     const gd::SignalView whole = gd::SignalView::of(record().table);
     const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
     gd::SegmentDriver all(o, record().gear);
-    ASSERT_EQ(all.setSte(so, 100), "");
+    ASSERT_EQ(all.setSte(so, 100).message(), "");
     all.addAll(whole, ranges);
     gd::IdentificationResult joint;
     gd::SteResult ste;
     std::string e;
-    ASSERT_TRUE(gd::identifyWithSte(record().table, record().gear, o, so, &joint, &ste, &e)) << e;
+    ASSERT_TRUE(
+        gear_test::ok(gd::identifyWithSte(record().table, record().gear, o, so, &joint, &ste), &e))
+        << e;
     // (omega0 of the record: the driver's duration-weighted mean, identifyWithSte's plain mean.)
     const gd::IdentificationResult whole_span = all.finish(&whole, &ranges);
     ASSERT_EQ(whole_span.segments.size(), joint.segments.size());
@@ -276,7 +280,7 @@ TEST(SegmentDriver, WithTheSteBatchStreamedAndLiveGiveTheSameSegments) {
   EXPECT_EQ(held, 6) << "every held segment identified";
   gd::LiveIdentification constant(optionsFor(gd::Formulation::Known, gd::DampingModel::Constant),
                                   record().gear);
-  EXPECT_NE(constant.setSte(record().ste, 3), "");
+  EXPECT_NE(constant.setSte(record().ste, 3).message(), "");
   current = &plainRecord();
 }
 

@@ -16,6 +16,7 @@
 #include "damping_id_params.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/encoder_yaml.hpp"
+#include "status_support.hpp"
 #include "wavelet_params.hpp"
 #include "yaml_params.hpp"
 
@@ -53,13 +54,14 @@ TEST(ShippedConfig, SimulatorFilesLoadAndValidate) {
   for (const std::string& name : kSimulatorFiles) {
     gear_sim::SimConfig c;
     std::string e;
-    EXPECT_TRUE(gear_sim::loadSimConfigFile(configPath(name), &c, &e)) << name << ": " << e;
-    EXPECT_TRUE(c.check().ok()) << name << ": " << c.validate();
+    EXPECT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(configPath(name), &c), &e))
+        << name << ": " << e;
+    EXPECT_TRUE(c.check().ok()) << name << ": " << c.check().message();
     const YAML::Node root = YAML::LoadFile(configPath(name));
     if (root["encoder"]) {
       gear_sim::EncoderOptions enc;
-      EXPECT_TRUE(gear_sim::loadEncoderOptions(root, &enc, &e)) << name << ": " << e;
-      EXPECT_TRUE(enc.check().ok()) << name << ": " << enc.validate();
+      EXPECT_TRUE(gear_test::ok(gear_sim::loadEncoderOptions(root, &enc), &e)) << name << ": " << e;
+      EXPECT_TRUE(enc.check().ok()) << name << ": " << enc.check().message();
     }
   }
 }
@@ -68,8 +70,8 @@ TEST(ShippedConfig, DampingIdFileIsReadByTheNodesReaderWithoutUnknownKeys) {
   nodes::ParamReader p = readerOf(configPath("damping_id.yaml"));
   nodes::DampingIdNodeOptions o;
   ASSERT_TRUE(nodes::readDampingIdParameters(p, &o));
-  EXPECT_TRUE(o.id.check().ok()) << o.id.validate();
-  EXPECT_TRUE(o.stream.check().ok()) << o.stream.validate();
+  EXPECT_TRUE(o.id.check().ok()) << o.id.check().message();
+  EXPECT_TRUE(o.stream.check().ok()) << o.stream.check().message();
   // The file sets values (not only defaults): a few of them reach the options.
   const YAML::Node root = YAML::LoadFile(configPath("damping_id.yaml"));
   EXPECT_EQ(o.id.segment_length, root["segment_length"].as<double>());
@@ -82,8 +84,8 @@ TEST(ShippedConfig, WaveletFileIsReadByTheNodesReaderWithoutUnknownKeys) {
   nodes::ParamReader p = readerOf(configPath("wavelet.yaml"));
   nodes::WaveletNodeOptions o;
   ASSERT_TRUE(nodes::readWaveletParameters(p, &o));
-  EXPECT_TRUE(o.wavelet.check().ok()) << o.wavelet.validate();
-  EXPECT_TRUE(o.stream.check().ok()) << o.stream.validate();
+  EXPECT_TRUE(o.wavelet.check().ok()) << o.wavelet.check().message();
+  EXPECT_TRUE(o.stream.check().ok()) << o.stream.check().message();
   const YAML::Node root = YAML::LoadFile(configPath("wavelet.yaml"));
   EXPECT_EQ(o.window, root["window"].as<double>());
   EXPECT_EQ(o.stream.segment_length, o.window);

@@ -11,6 +11,7 @@
 #include "gear_sim/models.hpp"
 #include "gear_sim/sdof_integrator.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -20,7 +21,7 @@ using gear_sim::SimConfig;
 SignalTable run(const SimConfig& c) {
   SignalTable t;
   std::string e;
-  EXPECT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   return t;
 }
 
@@ -111,7 +112,8 @@ TEST(Simulator, FastPathAgreesWithTheGenericIntegrator) {
       if (cycle + b > 0) bps.push_back(tm.timeOfPhase(cycle + b));
   Eigen::VectorXd y(t.size()), v(t.size());
   ASSERT_EQ(gear_sim::integrateSdof(coeffs, bps, 0.0, 1e-6, t.size(), {}, gear_sim::Integrator::Rk4,
-                                    1, y.data(), v.data()),
+                                    1, y.data(), v.data())
+                .message(),
             "");
   // Same steps, same stage times; only the sine's evaluation differs (phasor recurrence vs
   // sin(), ~1e-14 relative), so agreement is at rounding level.
@@ -146,10 +148,12 @@ TEST(SdofIntegrator, AffineDriverAgreesWithTheStageWiseDriver) {
       };
       Eigen::VectorXd y0(n), v0(n), y1(n), v1(n);
       ASSERT_EQ(gear_sim::integrateSdof(coeffs, bps, 0.0, dt, n, {1e-6, 0.0}, method, m, y0.data(),
-                                        v0.data()),
+                                        v0.data())
+                    .message(),
                 "");
       ASSERT_EQ(gear_sim::integrateSdofAffine(coeffs, stage, bps, 0.0, dt, n, {1e-6, 0.0}, method,
-                                              m, y1.data(), v1.data()),
+                                              m, y1.data(), v1.data())
+                    .message(),
                 "");
       // Rounding (~1e-16 per step) over 3000 steps of a lightly damped oscillator.
       constexpr double kRelTol = 1e-11;
@@ -238,7 +242,8 @@ Reference referenceRun(const SimConfig& c) {
     };
     EXPECT_EQ(gear_sim::integrateSdof(coeffs, bps, 0.0, dt, n,
                                       {c.simulation.initial_dte, c.simulation.initial_velocity},
-                                      method, m, r.y.data(), r.v.data()),
+                                      method, m, r.y.data(), r.v.data())
+                  .message(),
               "");
     return r;
   }

@@ -8,6 +8,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -24,7 +25,7 @@ std::string writeFile(const std::string& name, const std::string& text) {
 std::string loadError(const std::string& yaml) {
   gear_sim::SimConfig c;
   std::string e;
-  EXPECT_FALSE(gear_sim::loadSimConfig(YAML::Load(yaml), &c, &e)) << yaml;
+  EXPECT_FALSE(gear_test::ok(gear_sim::loadSimConfig(YAML::Load(yaml), &c), &e)) << yaml;
   return e;
 }
 
@@ -39,7 +40,8 @@ TEST(ConfigYaml, EveryShippedConfigurationLoadsAndValidates) {
     // Simulator files have a simulation section; node/analysis files are checked by their users.
     if (!root["simulation"]) continue;
     gear_sim::SimConfig c;
-    EXPECT_TRUE(gear_sim::loadSimConfigFile(f.path().string(), &c, &e)) << f.path() << ": " << e;
+    EXPECT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(f.path().string(), &c), &e))
+        << f.path() << ": " << e;
   }
   EXPECT_GE(n, 1);
 }
@@ -47,8 +49,8 @@ TEST(ConfigYaml, EveryShippedConfigurationLoadsAndValidates) {
 TEST(ConfigYaml, Table1FileIsTheDefaultCase) {
   gear_sim::SimConfig c;
   std::string e;
-  ASSERT_TRUE(
-      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
+  ASSERT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c), &e))
       << e;
   const gear_sim::SimConfig d;
   EXPECT_EQ(c.gears.pinion.inertia, d.gears.pinion.inertia);
@@ -85,7 +87,7 @@ TEST(ConfigYaml, YamlRoundTripKeepsEveryValue) {
   c.speed.end_rpm = 4000;
   gear_sim::SimConfig back;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfig(gear_sim::toYaml(c), &back, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfig(gear_sim::toYaml(c), &back), &e)) << e;
   EXPECT_EQ(back.damping.ratios, c.damping.ratios);
   EXPECT_EQ(back.speed.end_rpm, 4000);
   EXPECT_EQ(back.speed.profile, gear_sim::SpeedProfile::Ramp);
@@ -99,11 +101,11 @@ TEST(ConfigYaml, GearModelLoaderNeedsOnlyTheGearSectionsAndIgnoresTheRest) {
                 "mesh: {k_max: 4.0e8}\nspeed: {pinion_rpm: 2500}\nanything: {x: 1}\n");
   gear_sim::GearModel m;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadGearModelFile(p, &m, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadGearModelFile(p, &m), &e)) << e;
   EXPECT_EQ(m.speed.pinion_rpm, 2500);
   const std::string q =
       writeFile("gm2.yaml", "pinion: {teeth: 20, inertia: 0.00026, base_radius: 0.05}\n");
-  EXPECT_FALSE(gear_sim::loadGearModelFile(q, &m, &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim::loadGearModelFile(q, &m), &e));
   EXPECT_NE(e.find("gear: missing section"), std::string::npos) << e;
 }
 
@@ -113,7 +115,7 @@ TEST(ConfigYaml, LoadFromCsvFileBecomesATable) {
   std::string e;
   const std::string p =
       writeFile("csvload.yaml", "load: {profile: csv, file: gear_sim_io_test_torque.csv}\n");
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(p, &c, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(p, &c), &e)) << e;
   EXPECT_EQ(c.load.profile, gear_sim::LoadProfile::Table);
   EXPECT_EQ(c.load.values, (std::vector<double>{10, 20, 10}));
 }
@@ -123,10 +125,10 @@ TEST(SignalCsv, WriteThenReadIsBitExact) {
   c.simulation.noise_snr_db = 20;
   gear_sim::SignalTable t, back;
   std::string e;
-  ASSERT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   const std::string p = tempPath("roundtrip.csv");
-  ASSERT_TRUE(gear_sim::writeSignalCsv(p, t, &e)) << e;
-  ASSERT_TRUE(gear_sim::readSignalCsv(p, &back, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::writeSignalCsv(p, t), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::readSignalCsv(p, &back), &e)) << e;
   EXPECT_EQ(back.time, t.time);
   EXPECT_EQ(back.dte, t.dte);
   EXPECT_EQ(back.dte_velocity, t.dte_velocity);
@@ -141,8 +143,8 @@ TEST(SignalCsv, WriteThenReadIsBitExact) {
 TEST(SignalCsv, AnySubsetAndOrderOfKnownColumnsIsAccepted) {
   gear_sim::SignalTable t;
   std::string e;
-  ASSERT_TRUE(
-      gear_sim::readSignalCsv(writeFile("sub.csv", "dte, time\n1e-6,0\n2e-6,1e-6\n"), &t, &e))
+  ASSERT_TRUE(gear_test::ok(
+      gear_sim::readSignalCsv(writeFile("sub.csv", "dte, time\n1e-6,0\n2e-6,1e-6\n"), &t), &e))
       << e;
   EXPECT_EQ(t.time[1], 1e-6);
   EXPECT_EQ(t.dte[1], 2e-6);
@@ -153,7 +155,7 @@ TEST(SignalCsv, BadFilesAreRejectedNamingLineAndColumn) {
   auto err = [](const std::string& name, const std::string& text) {
     gear_sim::SignalTable t;
     std::string e;
-    EXPECT_FALSE(gear_sim::readSignalCsv(writeFile(name, text), &t, &e)) << text;
+    EXPECT_FALSE(gear_test::ok(gear_sim::readSignalCsv(writeFile(name, text), &t), &e)) << text;
     return e;
   };
   EXPECT_NE(err("e1.csv", "").find("empty file"), std::string::npos);
@@ -171,7 +173,7 @@ TEST(SignalCsv, BadFilesAreRejectedNamingLineAndColumn) {
   EXPECT_NE(err("e9.csv", "time,dte\n0,1\n").find("fewer than two data rows"), std::string::npos);
   gear_sim::SignalTable t;
   std::string e;
-  EXPECT_FALSE(gear_sim::readSignalCsv("/nonexistent/x.csv", &t, &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim::readSignalCsv("/nonexistent/x.csv", &t), &e));
   EXPECT_NE(e.find("cannot open"), std::string::npos);
 }
 

@@ -5,6 +5,7 @@
 
 #include "gear_sim/models.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -14,7 +15,7 @@ using gear_sim::SimConfig;
 SignalTable run(const SimConfig& c) {
   SignalTable t;
   std::string e;
-  EXPECT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   return t;
 }
 
@@ -184,7 +185,7 @@ TEST(Simulator, EveryDampingLawGivesItsCoefficient) {
 }
 
 TEST(SimConfig, InvalidValuesAreRejectedNamingTheKey) {
-  auto error = [](const SimConfig& c) { return c.validate(); };
+  auto error = [](const SimConfig& c) { return c.check().message(); };
   SimConfig c;
   EXPECT_EQ(error(c), "");
   c.mesh.contact_ratio = 1.0;

@@ -11,6 +11,7 @@
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -92,21 +93,21 @@ TEST(SteCli, BadSpecsAreUsageErrors) {
 TEST(SteSim, NoSteSectionIsBitIdenticalAndAnEmptyOneToo) {
   gear_sim::SimConfig c;
   std::string e;
-  ASSERT_TRUE(
-      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
+  ASSERT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c), &e))
       << e;
   c.simulation.duration = 0.003;
   gear_sim::SignalTable a, b;
-  ASSERT_TRUE(gear_sim::simulate(c, &a, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &a), &e)) << e;
   c.ste = gear_sim::SteOptions{};  // present but empty
-  ASSERT_TRUE(gear_sim::simulate(c, &b, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &b), &e)) << e;
   EXPECT_EQ(a.dte, b.dte);
   EXPECT_EQ(a.dte_velocity, b.dte_velocity);
   // A YAML round trip keeps an STE.
   gear_sim::SimConfig s;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(kSte, &s, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kSte, &s), &e)) << e;
   gear_sim::SimConfig back;
-  ASSERT_TRUE(gear_sim::loadSimConfig(gear_sim::toYaml(s), &back, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfig(gear_sim::toYaml(s), &back), &e)) << e;
   EXPECT_EQ(back.ste.mesh_cos, s.ste.mesh_cos);
   EXPECT_EQ(back.ste.gear_sin, s.ste.gear_sin);
   EXPECT_EQ(back.ste.offset, s.ste.offset);
@@ -117,12 +118,12 @@ TEST(SteSim, NoSteSectionIsBitIdenticalAndAnEmptyOneToo) {
 TEST(SteSim, TorsionalAndReducedAgreeWithAnSte) {
   gear_sim::SimConfig c;
   std::string e;
-  ASSERT_TRUE(gear_sim::loadSimConfigFile(kSte, &c, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kSte, &c), &e)) << e;
   c.simulation.duration = 0.003;
   gear_sim::SignalTable red, tor;
-  ASSERT_TRUE(gear_sim::simulate(c, &red, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &red), &e)) << e;
   c.simulation.dynamics = gear_sim::DynamicsModel::Torsional;
-  ASSERT_TRUE(gear_sim::simulate(c, &tor, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &tor), &e)) << e;
   const double scale = red.dte.cwiseAbs().maxCoeff();
   EXPECT_LT((red.dte - tor.dte).cwiseAbs().maxCoeff(), 1e-6 * scale);
 }

@@ -122,7 +122,7 @@ TEST(SteModel, HeldSteSegmentsCoverTheTruth) {
         gear_damping_id::defaultWindowLength(v, gear_damping_id::gearConstants(c.gearModel()));
     const gear_damping_id::SampleRanges ranges = gear_damping_id::segmentRanges(v, o);
     gear_damping_id::SegmentDriver d(o, gear_damping_id::gearConstants(c.gearModel()));
-    ASSERT_EQ(d.setSte(steOptions(c, 3, 1), 3), "");
+    ASSERT_EQ(d.setSte(steOptions(c, 3, 1), 3).message(), "");
     // The calibration: at least 3 segments, until the mesh phase spans Z2 cycles.
     size_t n_cal = 0;
     while (n_cal < ranges.size() && (n_cal < 3 || t.mesh_phase[ranges[n_cal - 1].second - 1] -

@@ -11,6 +11,7 @@
 #include "gear_damping_id/ste_model.hpp"
 #include "id_test_support.hpp"
 #include "rig_test_support.hpp"
+#include "status_support.hpp"
 #include "ste_test_support.hpp"
 
 using namespace gear_ste_test;
@@ -30,7 +31,9 @@ RigRun rigRun(const SimConfig& c, const SignalTable& sim, const gear_sim::Encode
   RigRun r;
   const SignalTable rig = gear_sim::rigRecord(c, enc, sim);
   std::string e;
-  EXPECT_TRUE(gd::encoderToSignalTable(rig, c.gearModel(), fo, &r.table, &r.report, &e)) << e;
+  EXPECT_TRUE(
+      gear_test::ok(gd::encoderToSignalTable(rig, c.gearModel(), fo, &r.table, &r.report), &e))
+      << e;
   if (r.table.size() > 0) r.du = r.table.mesh_phase[0] - sim.mesh_phase[0];
   return r;
 }

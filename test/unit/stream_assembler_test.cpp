@@ -13,6 +13,7 @@
 #include "gear_damping_id/live_identification.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace gd = gear_damping_id;
 
@@ -460,20 +461,20 @@ TEST(LossMonitor, OneLossWarnsSustainedLossIsAnErrorAJumpWarnsUntilReset) {
 TEST(StreamAssembler, InvalidOptionsNameTheField) {
   gd::StreamOptions o;
   o.segment_length = -1.0;
-  EXPECT_NE(o.validate().find("segment_length = -1"), std::string::npos);
+  EXPECT_NE(o.check().message().find("segment_length = -1"), std::string::npos);
   o = gd::StreamOptions();
   o.reorder_chunks = -3;
-  EXPECT_NE(o.validate().find("reorder_chunks"), std::string::npos);
+  EXPECT_NE(o.check().message().find("reorder_chunks"), std::string::npos);
   o = gd::StreamOptions();
   o.max_jump = 0.0;
-  EXPECT_NE(o.validate().find("max_jump = 0"), std::string::npos);
+  EXPECT_NE(o.check().message().find("max_jump = 0"), std::string::npos);
   o = gd::StreamOptions();
   o.magnitude_factor = 2.0;
-  EXPECT_NE(o.validate().find("magnitude_factor = 2"), std::string::npos);
+  EXPECT_NE(o.check().message().find("magnitude_factor = 2"), std::string::npos);
   o = gd::StreamOptions();
   o.max_abs_dte = -1.0;
-  EXPECT_NE(o.validate().find("max_abs_dte"), std::string::npos);
-  EXPECT_EQ(gd::StreamOptions().validate(), "");
+  EXPECT_NE(o.check().message().find("max_abs_dte"), std::string::npos);
+  EXPECT_EQ(gd::StreamOptions().check().message(), "");
 }
 
 // The live path (chunks -> assembler -> LiveIdentification) equals identify() on the
@@ -481,16 +482,16 @@ TEST(StreamAssembler, InvalidOptionsNameTheField) {
 TEST(StreamAssembler, LiveIdentificationEqualsOfflineOnTheDefaultCase) {
   gear_sim::SimConfig cfg;
   std::string e;
-  ASSERT_TRUE(
-      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &cfg, &e))
+  ASSERT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &cfg), &e))
       << e;
   gear_sim::SignalTable t;
-  ASSERT_TRUE(gear_sim::simulate(cfg, &t, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &t), &e)) << e;
   const gd::GearConstants gear = gd::gearConstants(cfg.gearModel());
   gd::IdentificationOptions io;
   io.refine = gd::IdentificationOptions::Refine::Never;
   gd::IdentificationResult offline;
-  ASSERT_TRUE(gd::identify(t, gear, io, &offline, &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gd::identify(t, gear, io, &offline), &e)) << e;
 
   gd::StreamAssembler a{gd::StreamOptions()};
   gd::LiveIdentification live(io, gear);  // window resolved from the first segment, as the node

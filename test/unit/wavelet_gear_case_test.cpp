@@ -29,6 +29,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/models.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace {
 
@@ -62,16 +63,16 @@ const GearCase& defaultGearCase() {
     GearCase c;
     std::string error;
     const std::string path = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
-    EXPECT_TRUE(gear_sim::loadSimConfigFile(path, &c.config, &error)) << error;
+    EXPECT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(path, &c.config), &error)) << error;
     c.me = c.config.gears.equivalentMass();
     c.f0 = gear_sim::naturalFrequencyHz(c.config.gears, c.config.mesh);
     c.omega0 = 2.0 * kPi * c.f0;
-    EXPECT_TRUE(gear_sim::simulate(c.config, &c.forced, &error)) << error;
+    EXPECT_TRUE(gear_test::ok(gear_sim::simulate(c.config, &c.forced), &error)) << error;
     // Second run from the static deflection under the mean load instead of rest.
     gear_sim::SimConfig shifted = c.config;
     shifted.simulation.initial_dte =
         c.config.gears.forceFactor() * c.config.load.mean / (c.omega0 * c.omega0);
-    EXPECT_TRUE(gear_sim::simulate(shifted, &c.shifted, &error)) << error;
+    EXPECT_TRUE(gear_test::ok(gear_sim::simulate(shifted, &c.shifted), &error)) << error;
     c.free_decay = c.shifted.dte - c.forced.dte;
     return c;
   }();
@@ -126,14 +127,14 @@ TEST(WaveletGearCase, FreeDecayOfTheDefaultCaseGivesTheTrueDampingRatioWithinTen
   const GearCase& g = defaultGearCase();
   ASSERT_EQ(g.free_decay.size(), g.forced.size());
   WaveletResult r = analyzeCase(g, g.free_decay, true);
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   const WaveletMode* m = nearest(r, g.f0);
   ASSERT_NE(m, nullptr);
   ASSERT_TRUE(std::isfinite(m->damping_ratio)) << gear_damping_id::warningText(m->warnings);
   const double truth = trueXiOver(g, *m);
   gear_damping_id::attachIntegralDampingRatio(&r, truth);
   std::ostringstream table;
-  ASSERT_EQ(gear_damping_id::writeModesCsv(r, table), "");
+  ASSERT_EQ(gear_damping_id::writeModesCsv(r, table).message(), "");
   std::printf(
       "[ measured ] default gear case, free decay, automatic peak: f_d %.1f Hz "
       "(f0 %.1f Hz), xi %.5f vs true %.5f (error %+.2f %%), R^2 %.5f, region "
@@ -150,7 +151,7 @@ TEST(WaveletGearCase, FreeDecayOfTheDefaultCaseGivesTheTrueDampingRatioWithinTen
 TEST(WaveletGearCase, ExplicitNaturalFrequencyGivesTheTrueDampingRatioWithinTenPercent) {
   const GearCase& g = defaultGearCase();
   const WaveletResult r = analyzeCase(g, g.free_decay, false, {g.f0});
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   ASSERT_EQ(r.modes.size(), 1u);
   const WaveletMode& m = r.modes[0];
   ASSERT_TRUE(std::isfinite(m.damping_ratio)) << gear_damping_id::warningText(m.warnings);
@@ -184,7 +185,7 @@ TEST(WaveletGearCase, RawForcedResponseIsFlaggedAsForcedLinesNotDamping) {
     }
     const WaveletResult r = gear_damping_id::validateWavelet(
         g.forced.dte.data(), static_cast<size_t>(g.forced.dte.size()), fs, o);
-    ASSERT_TRUE(r.ok()) << r.error;
+    ASSERT_TRUE(r.ok()) << r.status.message();
     ASSERT_FALSE(r.modes.empty());
     for (const WaveletMode& m : r.modes) {
       std::printf("[ measured ] forced DTE: line %.1f Hz (harmonic %.3f), R^2 %.3f, free %d: %s\n",

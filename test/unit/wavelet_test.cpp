@@ -16,6 +16,8 @@
 #include <utility>
 #include <vector>
 
+#include "status_support.hpp"
+
 namespace gear_damping_id {
 namespace {
 
@@ -204,9 +206,10 @@ TEST(MorletCwt, MatchesDirectConvolutionWithTheSameWaveletIncludingTheRecordEdge
     const std::vector<double> y = toneBursts(n, fs, c.cut_at_edges);
     MorletCwt cwt;
     std::string error;
-    ASSERT_TRUE(cwt.configure(n, fs, freqs, c.omega0, FftPlanning::Estimate, &error)) << error;
+    ASSERT_TRUE(gear_test::ok(cwt.configure(n, fs, freqs, c.omega0, FftPlanning::Estimate), &error))
+        << error;
     std::vector<std::complex<double>> out(freqs.size() * size_t(n));
-    ASSERT_TRUE(cwt.transform(y.data(), out.data(), &error)) << error;
+    ASSERT_TRUE(gear_test::ok(cwt.transform(y.data(), out.data()), &error)) << error;
     for (size_t i = 0; i < freqs.size(); ++i) {
       const auto direct = directCwt(y, fs, freqs[i], c.omega0);
       double peak = 0.0, worst = 0.0;
@@ -231,8 +234,9 @@ TEST(MorletCwt, PureSinusoidReadsItsAmplitudeAndFrequencyOnTheRidge) {
   // the wavelet's Gaussian is exp(-25) = 1e-11).
   MorletCwt own;
   std::string error;
-  ASSERT_TRUE(own.configure(n, fs, {f}, 6.0, FftPlanning::Estimate, &error)) << error;
-  ASSERT_TRUE(own.setSignal(y.data(), &error)) << error;
+  ASSERT_TRUE(gear_test::ok(own.configure(n, fs, {f}, 6.0, FftPlanning::Estimate), &error))
+      << error;
+  ASSERT_TRUE(gear_test::ok(own.setSignal(y.data()), &error)) << error;
   const std::complex<double>* w = own.row(0);
   ASSERT_NE(w, nullptr);
   const long edge = static_cast<long>(std::ceil(5.0 * morletConeOfInfluence(f, 6.0) * fs));
@@ -252,9 +256,10 @@ TEST(MorletCwt, PureSinusoidReadsItsAmplitudeAndFrequencyOnTheRidge) {
   // of the lowest row.
   const std::vector<double> grid = logSpacedFrequencies(100.0, 8000.0, 200);
   MorletCwt cwt;
-  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate), &error))
+      << error;
   std::vector<double> modulus(grid.size() * size_t(n));
-  ASSERT_TRUE(cwt.transformModulus(y.data(), modulus.data(), &error)) << error;
+  ASSERT_TRUE(gear_test::ok(cwt.transformModulus(y.data(), modulus.data()), &error)) << error;
   const long e2 = static_cast<long>(std::ceil(3.0 * morletConeOfInfluence(f / 1.1, 6.0) * fs));
   double worst_f = 0.0;
   std::vector<double> column(grid.size());
@@ -276,12 +281,14 @@ TEST(MorletCwt, ReusesItsPlansAndBuffersAcrossRowsAndSignals) {
   std::reverse(b.begin(), b.end());
   MorletCwt reused, fresh;
   std::string error;
-  ASSERT_TRUE(reused.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
-  ASSERT_TRUE(fresh.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(reused.configure(n, fs, grid, 6.0, FftPlanning::Estimate), &error))
+      << error;
+  ASSERT_TRUE(gear_test::ok(fresh.configure(n, fs, grid, 6.0, FftPlanning::Estimate), &error))
+      << error;
   std::vector<double> first(grid.size() * size_t(n)), second(first.size()), ref(first.size());
-  ASSERT_TRUE(reused.transformModulus(a.data(), first.data(), &error));
-  ASSERT_TRUE(reused.transformModulus(b.data(), second.data(), &error));
-  ASSERT_TRUE(fresh.transformModulus(b.data(), ref.data(), &error));
+  ASSERT_TRUE(gear_test::ok(reused.transformModulus(a.data(), first.data()), &error));
+  ASSERT_TRUE(gear_test::ok(reused.transformModulus(b.data(), second.data()), &error));
+  ASSERT_TRUE(gear_test::ok(fresh.transformModulus(b.data(), ref.data()), &error));
   EXPECT_EQ(second, ref);  // no state leaks from the first signal (same plan: bitwise equal)
   const std::complex<double>* p0 = reused.row(0);
   const std::complex<double>* p1 = reused.row(5);
@@ -301,8 +308,9 @@ TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
   const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
   std::string error;
-  ASSERT_TRUE(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate, &error)) << error;
-  ASSERT_TRUE(cwt.setSignal(y.data(), &error)) << error;
+  ASSERT_TRUE(gear_test::ok(cwt.configure(n, fs, grid, 6.0, FftPlanning::Estimate), &error))
+      << error;
+  ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
   std::vector<double> fast(static_cast<size_t>(n));
   std::vector<float> fast_f(static_cast<size_t>(n));
   double worst = 0.0;
@@ -332,25 +340,31 @@ TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
   MorletCwt cwt;
   std::string error;
   EXPECT_EQ(cwt.row(0), nullptr);  // not configured
-  EXPECT_FALSE(cwt.setSignal(nullptr, &error));
+  EXPECT_FALSE(gear_test::ok(cwt.setSignal(nullptr), &error));
   EXPECT_NE(error.find("not configured"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, 1000.0, {600.0}, 6.0, FftPlanning::Estimate, &error));
+  EXPECT_FALSE(
+      gear_test::ok(cwt.configure(100, 1000.0, {600.0}, 6.0, FftPlanning::Estimate), &error));
   EXPECT_NE(error.find("frequencies[0]"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, -1.0, {10.0}, 6.0, FftPlanning::Estimate, &error));
+  EXPECT_FALSE(gear_test::ok(cwt.configure(100, -1.0, {10.0}, 6.0, FftPlanning::Estimate), &error));
   EXPECT_NE(error.find("sample_rate"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, 1000.0, {10.0}, 0.5, FftPlanning::Estimate, &error));
+  EXPECT_FALSE(
+      gear_test::ok(cwt.configure(100, 1000.0, {10.0}, 0.5, FftPlanning::Estimate), &error));
   EXPECT_NE(error.find("omega0"), std::string::npos) << error;
-  EXPECT_FALSE(cwt.configure(100, 1000.0, {10.0, 20.0}, std::vector<double>{6.0, 6.0, 6.0},
-                             FftPlanning::Estimate, &error));
+  EXPECT_FALSE(
+      gear_test::ok(cwt.configure(100, 1000.0, {10.0, 20.0}, std::vector<double>{6.0, 6.0, 6.0},
+                                  FftPlanning::Estimate),
+                    &error));
   EXPECT_NE(error.find("omega0s"), std::string::npos) << error;
-  ASSERT_TRUE(cwt.configure(100, 1000.0, {100.0}, 6.0, FftPlanning::Estimate, &error)) << error;
+  ASSERT_TRUE(
+      gear_test::ok(cwt.configure(100, 1000.0, {100.0}, 6.0, FftPlanning::Estimate), &error))
+      << error;
   EXPECT_EQ(cwt.row(0), nullptr);  // no signal yet
   std::vector<double> y(100, 1.0);
   y[42] = NAN;
-  EXPECT_FALSE(cwt.setSignal(y.data(), &error));
+  EXPECT_FALSE(gear_test::ok(cwt.setSignal(y.data()), &error));
   EXPECT_NE(error.find("sample 42"), std::string::npos) << error;
   y[42] = 0.0;
-  ASSERT_TRUE(cwt.setSignal(y.data(), &error)) << error;
+  ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
   EXPECT_NE(cwt.row(0), nullptr);
   EXPECT_EQ(cwt.row(1), nullptr);
   EXPECT_EQ(cwt.rowAt(2.0, 6.0), nullptr) << "a 2 Hz wavelet is wider than the padding";
@@ -403,7 +417,8 @@ TEST_P(SingleDampedSinusoid, GivesTheDampingRatioWithinOnePercent) {
   options.full_scalogram = false;
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, n), fs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(freeDecay({m}, fs, n), fs, options, &r), &error))
+      << error;
   ASSERT_EQ(r.modes.size(), 1u);
   const WaveletMode& w = r.modes[0];
   EXPECT_LT(relErr(w.damping_ratio, c.xi), kSingleModeXiTol) << warningText(w.warnings);
@@ -431,8 +446,9 @@ constexpr long kPaperN = 12000;        // 60 ms: the 1731 Hz mode decays to exp(
 TEST(AnalyzeWavelet, FindsAndSeparatesThePapersThreeModesWithinTwoPercent) {
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN), kPaperFs, WaveletOptions{},
-                             &r, &error))
+  ASSERT_TRUE(gear_test::ok(
+      analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN), kPaperFs, WaveletOptions{}, &r),
+      &error))
       << error;
   ASSERT_EQ(r.modes.size(), 3u) << "peak picking must find exactly the three modes";
   for (const Mode& m : kPaperModes) {
@@ -466,8 +482,10 @@ TEST(AnalyzeWavelet, KeepsThePapersThreeModesWithinFivePercentAt30dBSnr) {
   for (unsigned seed = 1; seed <= 9; ++seed) {
     WaveletResult r;
     std::string error;
-    ASSERT_TRUE(analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN, kSnrDb, seed), kPaperFs,
-                               options, &r, &error))
+    ASSERT_TRUE(
+        gear_test::ok(analyzeWavelet(freeDecay(kPaperModes, kPaperFs, kPaperN, kSnrDb, seed),
+                                     kPaperFs, options, &r),
+                      &error))
         << error;
     EXPECT_EQ(r.modes.size(), 3u) << "seed " << seed;
     EXPECT_LT(relErr(r.noise_std, true_noise), kNoiseStdTol) << "seed " << seed;
@@ -498,7 +516,8 @@ TEST(AnalyzeWavelet, KeepsSingleModesFromLightToHeavyDampingWithinFivePercentAt3
     for (unsigned seed = 1; seed <= 9; ++seed) {
       WaveletResult r;
       std::string error;
-      ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, n, 30.0, seed), fs, options, &r, &error));
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(freeDecay({m}, fs, n, 30.0, seed), fs, options, &r),
+                                &error));
       ASSERT_EQ(r.modes.size(), 1u);
       err.push_back(relErr(r.modes[0].damping_ratio, xi));
     }
@@ -512,8 +531,9 @@ TEST(AnalyzeWavelet, HandlesADecayStartingInsideTheRecord) {
   const Mode m{2000.0, 0.01, 1.0, 0.3};
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(freeDecay({m}, fs, 5000, INFINITY, 1, 0.02), fs, WaveletOptions{}, &r,
-                             &error));
+  ASSERT_TRUE(gear_test::ok(
+      analyzeWavelet(freeDecay({m}, fs, 5000, INFINITY, 1, 0.02), fs, WaveletOptions{}, &r),
+      &error));
   ASSERT_EQ(r.modes.size(), 1u);
   EXPECT_GT(r.modes[0].t_start, 0.02) << "the region must start after the impulse";
   EXPECT_LT(relErr(r.modes[0].damping_ratio, m.xi), kSingleModeXiTol);
@@ -527,7 +547,7 @@ TEST(AnalyzeWavelet, SeparatesModesTwentyPercentApartWithAnAutomaticOmega0) {
   options.full_scalogram = false;
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, fs, options, &r), &error)) << error;
   ASSERT_EQ(r.modes.size(), 2u);
   for (const Mode& m : modes) {
     const WaveletMode* w = modeNear(r, m.f);
@@ -538,7 +558,7 @@ TEST(AnalyzeWavelet, SeparatesModesTwentyPercentApartWithAnAutomaticOmega0) {
   }
   // Forcing omega0 = 6 on the same data: the modes leak into each other, and each mode says so.
   options.fit_omega0 = 6.0;
-  ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, fs, options, &r), &error)) << error;
   ASSERT_EQ(r.modes.size(), 2u);
   for (const WaveletMode& w : r.modes) {
     EXPECT_NE(warningText(w.warnings).find("closer than the wavelet"), std::string::npos)
@@ -556,7 +576,7 @@ TEST(AnalyzeWavelet, UsesExplicitModeFrequenciesAndDecayRegions) {
   options.decay_regions = {{0.005, 0.03}};
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, fs, options, &r), &error)) << error;
   ASSERT_EQ(r.modes.size(), 1u);
   EXPECT_DOUBLE_EQ(r.modes[0].t_start, 0.005);
   EXPECT_DOUBLE_EQ(r.modes[0].t_end, 0.03);
@@ -570,8 +590,8 @@ TEST(AnalyzeWavelet, GivesTheSameModesWithoutTheFullScalogram) {
   without.full_scalogram = false;
   WaveletResult a, b;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(y, kPaperFs, with, &a, &error)) << error;
-  ASSERT_TRUE(analyzeWavelet(y, kPaperFs, without, &b, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, with, &a), &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, without, &b), &error)) << error;
   EXPECT_GT(a.modulus.size(), 0);
   EXPECT_EQ(b.modulus.size(), 0);
   ASSERT_EQ(a.modes.size(), b.modes.size());
@@ -587,8 +607,8 @@ TEST(AnalyzeWavelet, AcceptsEigenVectorsAndStdVectorsAlike) {
   WaveletOptions options;
   options.full_scalogram = false;
   WaveletResult a, b;
-  ASSERT_TRUE(analyzeWavelet(y, 100000.0, options, &a, nullptr));
-  ASSERT_TRUE(analyzeWavelet(e, 100000.0, options, &b, nullptr));
+  ASSERT_TRUE(analyzeWavelet(y, 100000.0, options, &a).ok());
+  ASSERT_TRUE(analyzeWavelet(e, 100000.0, options, &b).ok());
   ASSERT_EQ(a.modes.size(), 1u);
   ASSERT_EQ(b.modes.size(), 1u);
   EXPECT_EQ(a.modes[0].damping_ratio, b.modes[0].damping_ratio);
@@ -604,7 +624,7 @@ TEST(AnalyzeWavelet, ReportsAModeWithoutAUsableDecayRegionAsNaNWithAWarning) {
   options.coi_factor = 10.0;
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(y, fs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, fs, options, &r), &error)) << error;
   ASSERT_EQ(r.modes.size(), 1u);
   EXPECT_TRUE(std::isnan(r.modes[0].damping_ratio));
   EXPECT_NE(warningText(r.modes[0].warnings).find("cone of influence"), std::string::npos)
@@ -619,7 +639,7 @@ TEST(AnalyzeWavelet, ReportsAModeWithoutAUsableDecayRegionAsNaNWithAWarning) {
 std::string analyzeError(const std::vector<double>& y, double fs, const WaveletOptions& o) {
   WaveletResult r;
   std::string error;
-  const bool ok = analyzeWavelet(y, fs, o, &r, &error);
+  const bool ok = gear_test::ok(analyzeWavelet(y, fs, o, &r), &error);
   EXPECT_FALSE(ok);
   EXPECT_TRUE(r.modes.empty());
   EXPECT_TRUE(r.frequencies.empty());
@@ -671,27 +691,29 @@ TEST(AnalyzeWavelet, RejectsInvalidInputWithAnErrorNamingTheProblem) {
     EXPECT_NE(e.find(c.second), std::string::npos) << "expected '" << c.second << "' in: " << e;
   }
   WaveletResult r;
-  EXPECT_FALSE(analyzeWavelet(nullptr, 100, 1000.0, ok, &r, nullptr));  // null error pointer is ok
-  EXPECT_FALSE(analyzeWavelet(y.data(), long(y.size()), 20000.0, ok, nullptr, nullptr));
+  EXPECT_FALSE(analyzeWavelet(nullptr, 100, 1000.0, ok, &r).ok());
+  EXPECT_FALSE(analyzeWavelet(y.data(), long(y.size()), 20000.0, ok, nullptr).ok());
 }
 
 TEST(WaveletOptions, DefaultsAreValidAndEachRuleNamesItsField) {
-  EXPECT_EQ(WaveletOptions{}.validate(), "");
+  EXPECT_EQ(WaveletOptions{}.check().message(), "");
   WaveletOptions o;
   o.max_modes = 0;
-  EXPECT_NE(o.validate().find("max_modes = 0"), std::string::npos) << o.validate();
+  EXPECT_NE(o.check().message().find("max_modes = 0"), std::string::npos) << o.check().message();
   o = WaveletOptions{};
   o.coi_factor = 0.5;
-  EXPECT_NE(o.validate().find("coi_factor = 0.5"), std::string::npos) << o.validate();
+  EXPECT_NE(o.check().message().find("coi_factor = 0.5"), std::string::npos) << o.check().message();
   o = WaveletOptions{};
   o.floor_factor = NAN;
-  EXPECT_NE(o.validate().find("floor_factor"), std::string::npos) << o.validate();
+  EXPECT_NE(o.check().message().find("floor_factor"), std::string::npos) << o.check().message();
   o = WaveletOptions{};
   o.decay_regions = {{0.0, 1.0}, {0.0, 1.0}};  // two regions but no explicit modes
-  EXPECT_NE(o.validate().find("decay_regions.size()"), std::string::npos) << o.validate();
+  EXPECT_NE(o.check().message().find("decay_regions.size()"), std::string::npos)
+      << o.check().message();
   o = WaveletOptions{};
   o.max_scalogram_columns = -1;
-  EXPECT_NE(o.validate().find("max_scalogram_columns"), std::string::npos) << o.validate();
+  EXPECT_NE(o.check().message().find("max_scalogram_columns"), std::string::npos)
+      << o.check().message();
 }
 
 // --- CSV export -------------------------------------------------------------------------------
@@ -702,13 +724,13 @@ TEST(WaveletCsv, WritesADecimatedScalogramAndTheSpectraOrReportsTheIoError) {
   options.max_scalogram_columns = 0;  // keep every sample: the writer decimates
   WaveletResult r;
   std::string error;
-  ASSERT_TRUE(analyzeWavelet(y, kPaperFs, options, &r, &error)) << error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, options, &r), &error)) << error;
   ASSERT_EQ(r.modulus.cols(), kPaperN);
   const std::string dir = ::testing::TempDir();
   const std::string scal = dir + "/wavelet_test_scalogram.csv";
   const std::string spec = dir + "/wavelet_test_spectrum.csv";
-  ASSERT_EQ(writeScalogramCsv(r, scal, 1000), "");
-  ASSERT_EQ(writeSpectrumCsv(r, spec), "");
+  ASSERT_EQ(writeScalogramCsv(r, scal, 1000).message(), "");
+  ASSERT_EQ(writeSpectrumCsv(r, spec).message(), "");
   std::ifstream in(scal);
   std::string line;
   std::vector<std::string> lines;
@@ -729,16 +751,18 @@ TEST(WaveletCsv, WritesADecimatedScalogramAndTheSpectraOrReportsTheIoError) {
   }
   EXPECT_GT(psd, 1000);
   EXPECT_EQ(wav, 200);
-  const std::string io = writeScalogramCsv(r, "/nonexistent_dir/x.csv");
+  const std::string io = writeScalogramCsv(r, "/nonexistent_dir/x.csv").message();
   EXPECT_NE(io.find("/nonexistent_dir/x.csv"), std::string::npos) << io;
-  EXPECT_NE(writeSpectrumCsv(r, "/nonexistent_dir/y.csv").find("cannot open"), std::string::npos);
-  EXPECT_NE(writeScalogramCsv(WaveletResult{}, scal).find("no scalogram"), std::string::npos);
+  EXPECT_NE(writeSpectrumCsv(r, "/nonexistent_dir/y.csv").message().find("cannot open"),
+            std::string::npos);
+  EXPECT_NE(writeScalogramCsv(WaveletResult{}, scal).message().find("no scalogram"),
+            std::string::npos);
 }
 
 TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
   const std::vector<double> y = freeDecay(kPaperModes, kPaperFs, kPaperN);
   WaveletResult r = validateWavelet(y, kPaperFs);
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   ASSERT_EQ(r.modes.size(), kPaperModes.size());
   // C = 2*xi*omega0 for xi = 0.02 at omega0 = 2*pi*1731 Hz gives back 0.02.
   const double w0 = 2.0 * kPi * 1731.0;
@@ -749,7 +773,7 @@ TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
   attachIntegralDampingRatio(nullptr, 0.02);  // no-op, no crash
   r.modes[1].warnings = {{"close_modes", "a \"quoted\" remark"}};
   std::ostringstream out;
-  ASSERT_EQ(writeModesCsv(r, out), "");
+  ASSERT_EQ(writeModesCsv(r, out).message(), "");
   std::istringstream in(out.str());
   std::string line;
   std::getline(in, line);
@@ -767,11 +791,11 @@ TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
   EXPECT_NE(rows[1].find(",true,close_modes,\"close_modes: a \"\"quoted\"\" remark\""),
             std::string::npos)
       << rows[1];
-  EXPECT_NE(writeModesCsv(r, "/nonexistent_dir/m.csv").find("/nonexistent_dir/m.csv"),
+  EXPECT_NE(writeModesCsv(r, "/nonexistent_dir/m.csv").message().find("/nonexistent_dir/m.csv"),
             std::string::npos);
   std::ostringstream scal, spec;
-  EXPECT_EQ(writeScalogramCsv(r, scal, 100), "");
-  EXPECT_EQ(writeSpectrumCsv(r, spec), "");
+  EXPECT_EQ(writeScalogramCsv(r, scal, 100).message(), "");
+  EXPECT_EQ(writeSpectrumCsv(r, spec).message(), "");
   EXPECT_GT(scal.str().size(), 1000u);
   EXPECT_EQ(spec.str().rfind("kind,frequency_hz,power\n", 0), 0u);
 }
@@ -781,7 +805,7 @@ TEST(WaveletCsv, WritesTheTableOfModesWithTheIntegralMethodBesideEachMode) {
 TEST(ValidateWavelet, ReturnsTheModesOfACleanFreeDecay) {
   const std::vector<double> y = freeDecay(kPaperModes, kPaperFs, kPaperN);
   const WaveletResult r = validateWavelet(y.data(), y.size(), kPaperFs);
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   ASSERT_EQ(r.modes.size(), kPaperModes.size());
   for (size_t i = 0; i < r.modes.size(); ++i) {
     EXPECT_NEAR(r.modes[i].damping_ratio, kPaperModes[i].xi, kMultiModeXiTol * kPaperModes[i].xi);
@@ -796,7 +820,7 @@ TEST(ValidateWavelet, InvalidInputGivesAnErrorStringAndAnEmptyResultNeverNaNs) {
     EXPECT_FALSE(r.ok());
     EXPECT_TRUE(r.modes.empty());
     EXPECT_TRUE(r.frequencies.empty());
-    return r.error;
+    return r.status.message();
   };
   EXPECT_NE(errorOf(validateWavelet(y, 0.0)).find("sample_rate"), std::string::npos);
   EXPECT_NE(errorOf(validateWavelet(y, -5.0)).find("sample_rate"), std::string::npos);
@@ -816,7 +840,7 @@ TEST(ValidateWavelet, InvalidInputGivesAnErrorStringAndAnEmptyResultNeverNaNs) {
   EXPECT_NE(errorOf(validateWavelet(y, 20000.0, o)).find("peak_omega0"), std::string::npos);
   // A constant record is valid input with nothing to fit: ok, no modes, a global warning.
   const WaveletResult flat = validateWavelet(std::vector<double>(4000, 1.5), 20000.0);
-  EXPECT_TRUE(flat.ok()) << flat.error;
+  EXPECT_TRUE(flat.ok()) << flat.status.message();
   for (const WaveletMode& m : flat.modes) {
     EXPECT_TRUE(std::isfinite(m.damping_ratio) || !m.warnings.empty());
   }

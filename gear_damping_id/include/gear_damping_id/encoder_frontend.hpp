@@ -41,6 +41,7 @@
 #include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -73,7 +74,6 @@ struct EncoderFrontEndOptions {
   /// finish()). Offline analysis uses the whole record.
   long calibration_samples = 0;
   gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// What the front end found; written to the JSON (`input.encoder`).
@@ -108,13 +108,13 @@ class EncoderFrontEnd {
   EncoderFrontEnd(const gear_sim::GearModel& model, const EncoderFrontEndOptions& options);
 
   /// Appends n uniform samples starting at global sample `first_index` (time first_index /
-  /// sample_rate). `torque` may be null when the offsets are given. False with `*error` when the
+  /// sample_rate). `torque` may be null when the offsets are given. InvalidInput when the
   /// record is refused (not a gear pair, reversal, rate change, non-finite value); the front end
   /// then stays refused.
-  bool push(double sample_rate, std::uint64_t first_index, const double* theta1,
-            const double* theta2, const double* torque, size_t n, std::string* error);
+  gear_sim::Status push(double sample_rate, std::uint64_t first_index, const double* theta1,
+                        const double* theta2, const double* torque, size_t n);
   /// End of the record: estimates the offsets from what was buffered, if not done yet.
-  bool finish(std::string* error);
+  gear_sim::Status finish();
   /// Moves the converted samples out (time, dte, torque, stiffness, mesh_state, mesh_phase,
   /// theta1, theta2); `first_index` of its first sample. False when none are ready.
   bool pop(gear_sim::SignalTable* out, std::uint64_t* first_index);
@@ -123,8 +123,8 @@ class EncoderFrontEnd {
   const EncoderFrontEndReport& report() const { return report_; }
 
  private:
-  bool check(const double* th1, const double* th2, size_t n, std::string* error);
-  bool calibrate(std::string* error);
+  gear_sim::Status check(const double* th1, const double* th2, size_t n);
+  gear_sim::Status calibrate();
   bool calibrationTable(gear_sim::SignalTable* t, Eigen::VectorXd* u_raw, double* y_shift) const;
   void convert(size_t begin, size_t end);
 
@@ -149,32 +149,33 @@ class EncoderFrontEnd {
 };
 
 /// Offline: a whole uniform rig table (time, theta1, theta2, torque) to an analysable table.
-bool encoderToSignalTable(const gear_sim::SignalTable& rig, const gear_sim::GearModel& model,
-                          const EncoderFrontEndOptions& options, gear_sim::SignalTable* out,
-                          EncoderFrontEndReport* report, std::string* error);
+gear_sim::Status encoderToSignalTable(const gear_sim::SignalTable& rig,
+                                      const gear_sim::GearModel& model,
+                                      const EncoderFrontEndOptions& options,
+                                      gear_sim::SignalTable* out, EncoderFrontEndReport* report);
 
 /// Edge times to angles on a uniform grid: edge k (k = 0, 1, ...) of a shaft is at angle
 /// 2 pi k / counts_per_rev; the angle between edges is the local cubic through the four nearest
 /// edges (the anti-aliasing/reconstruction filter of docs/rig.md; exact for cubics in time). The
-/// grid must lie within [edges.front(), edges.back()]. False with `*error` (times not strictly
+/// grid must lie within [edges.front(), edges.back()]. InvalidInput (times not strictly
 /// increasing, too few edges, grid outside, edge gaps longer than max_gap_edges mean intervals).
-bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
-                       const Eigen::VectorXd& grid, Eigen::VectorXd* theta, std::string* error,
-                       double max_gap_ratio = 20.0);
+gear_sim::Status edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
+                                   const Eigen::VectorXd& grid, Eigen::VectorXd* theta,
+                                   double max_gap_ratio = 20.0);
 
 /// A uniform rig table from edge-time records: the grid is `grid` (e.g. the torque file's time
 /// column, with its torque) cropped to the span both edge records cover; theta1/theta2 by
 /// edgeTimesToAngles. `resampling` describes it for the report.
-bool edgesToRigTable(const std::vector<double>& edges1, long counts1,
-                     const std::vector<double>& edges2, long counts2,
-                     const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
-                     std::string* resampling, std::string* error);
+gear_sim::Status edgesToRigTable(const std::vector<double>& edges1, long counts1,
+                                 const std::vector<double>& edges2, long counts2,
+                                 const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
+                                 std::string* resampling);
 
 /// Decimation by an integer factor with a linear-phase anti-aliasing FIR (windowed sinc, Blackman
 /// window, cutoff 0.4 of the output rate, 16 taps per factor either side; unit DC gain, so a
 /// linear ramp such as a rotating angle passes unchanged). The first and last half-filter spans
 /// are dropped. Columns time, theta1, theta2 and torque of `in`; others are dropped.
-bool decimateRig(const gear_sim::SignalTable& in, int factor, gear_sim::SignalTable* out,
-                 std::string* error);
+gear_sim::Status decimateRig(const gear_sim::SignalTable& in, int factor,
+                             gear_sim::SignalTable* out);
 
 }  // namespace gear_damping_id

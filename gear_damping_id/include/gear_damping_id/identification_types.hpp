@@ -97,7 +97,6 @@ struct IdentificationOptions {
 
   /// The first rule broken: field, value and rule (gear_sim/option_status.hpp).
   gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Statistics of the output-error refinement's residual r_n = y_n - yhat_n over one segment

@@ -1,12 +1,13 @@
 // Plausibility checks of a record against the gear model and the options, shared by the
-// analyze tool and the nodes (no ROS). Each returns an empty string when fine, else a one-line
-// message naming the problem and the numbers.
+// analyze tool and the nodes (no ROS). Each returns ok when fine, else InvalidInput with a
+// one-line message naming the problem and the numbers (field: the quantity concerned).
 #pragma once
 
 #include <string>
 
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/signal_view.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -20,12 +21,14 @@ constexpr double kWarnSamplesPerPeriod = 30.0;
 /// Natural frequency [Hz] of the gear model: sqrt(mean stiffness / Me) / (2 pi).
 double naturalFrequencyHz(const GearConstants& gear);
 
-/// Error when sample_rate gives fewer than kMinSamplesPerPeriod samples per natural period;
-/// sets *warning (if not null) below kWarnSamplesPerPeriod.
-std::string checkSampleRate(double sample_rate, const GearConstants& gear, std::string* warning);
+/// Error when sample_rate gives fewer than kMinSamplesPerPeriod samples per natural period
+/// (field "sample_rate"); sets *warning (if not null) below kWarnSamplesPerPeriod.
+gear_sim::Status checkSampleRate(double sample_rate, const GearConstants& gear,
+                                 std::string* warning);
 
 /// Error when the analysed part of a record of `duration` [s] is shorter than one damping
-/// segment of the piecewise model (options.segment_length finite and positive).
-std::string checkRecordLength(double duration, const IdentificationOptions& options);
+/// segment of the piecewise model (options.segment_length finite and positive; field
+/// "segment_length").
+gear_sim::Status checkRecordLength(double duration, const IdentificationOptions& options);
 
 }  // namespace gear_damping_id

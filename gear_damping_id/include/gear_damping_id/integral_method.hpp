@@ -78,6 +78,7 @@
 #include "gear_damping_id/signal_view.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -85,10 +86,11 @@ namespace gear_damping_id {
 /// missing column) and a uniform time step within `rel_tolerance` of the sampling step (names the
 /// first offending sample, and its file line `first_line + sample` when `first_line` >= 0, e.g.
 /// 2 for a CSV with one header line). Non-finite values are not an error here: the segments that
-/// hold them are reported as not identifiable. Returns an empty string when fine.
-std::string checkSignalTable(const gear_sim::SignalTable& table, Formulation formulation,
-                             DampingModel model, double rel_tolerance = 1e-6,
-                             Eigen::Index first_line = -1);
+/// hold them are reported as not identifiable. Ok when fine, else InvalidInput with the column
+/// concerned as Status::field() ("time" for the time axis).
+gear_sim::Status checkSignalTable(const gear_sim::SignalTable& table, Formulation formulation,
+                                  DampingModel model, double rel_tolerance = 1e-6,
+                                  Eigen::Index first_line = -1);
 
 /// The sample ranges of the damping segments of [t_start, t_end] within a record: segment i starts
 /// at the first sample at or after t_start + i*dT. A final partial segment shorter than half dT
@@ -172,15 +174,15 @@ class IntegralMethod {
   int columnIndex(Column c) const;
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
-  // addSegment's named steps (integral_method.cpp): each returns why the segment is not
-  // identifiable, empty when it may go on.
-  std::string checkFiniteInputs(const SignalView& s, Eigen::Index begin, Eigen::Index end,
-                                double channel_sum[4]) const;
-  std::string segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
-                           const double channel_sum[4], SegmentRecord* rec);
+  // addSegment's named steps (integral_method.cpp): each returns ok when the segment may go on,
+  // else NotIdentifiable saying why (the segment's reason).
+  gear_sim::Status checkFiniteInputs(const SignalView& s, Eigen::Index begin, Eigen::Index end,
+                                     double channel_sum[4]) const;
+  gear_sim::Status segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
+                                const double channel_sum[4], SegmentRecord* rec);
   double accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int windows,
                            SegmentRecord* rec);
-  std::string solveLocals(SegmentRecord* rec) const;
+  gear_sim::Status solveLocals(SegmentRecord* rec) const;
   // finishRange's named steps (integral_method.cpp).
   struct SharedSolution;
   struct SegmentParams;
@@ -219,10 +221,11 @@ QualityWarning switchesUnlocatedWarning(long count);
 /// Identifies the damping over a whole table (segments of options.segment_length, window
 /// options.window_length or the default) in one call, through the segment driver
 /// (segment_driver.hpp, which defines it): the batch run. `threads` workers identify segments in
-/// parallel (same result as one). Returns false with `*error` naming the problem (missing
-/// column, non-uniform time, invalid option, record shorter than a window).
-bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
-              const IdentificationOptions& options, IdentificationResult* result,
-              std::string* error, int threads = 1);
+/// parallel (same result as one). A failed Status names the problem: InvalidArgument for an
+/// invalid option (its field), InvalidInput for a missing column or non-uniform time (the
+/// column), NotIdentifiable when no sample lies in the analysed range.
+gear_sim::Status identify(const gear_sim::SignalTable& table, const GearConstants& gear,
+                          const IdentificationOptions& options, IdentificationResult* result,
+                          int threads = 1);
 
 }  // namespace gear_damping_id

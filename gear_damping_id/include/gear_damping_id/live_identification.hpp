@@ -55,12 +55,19 @@ class LiveIdentification {
   /// Legacy formulation: the record's mean forcing [m/s^2], when known in advance.
   void setLegacyForcing(double fbar) { driver_.setLegacyForcing(fbar); }
   /// Identify the STE too (SegmentDriver::setSte): jointly on the first `calibration_segments`
-  /// segments, then held. Returns "" or why not (the constant model is refused live: its
-  /// calibration would be the whole run).
-  std::string setSte(const SteModelOptions& ste, size_t calibration_segments) {
-    if (driver_.options().model == DampingModel::Constant)
-      return "the STE with the constant damping model needs the whole record (not live)";
+  /// segments, then held. Ok or why not (checkSte).
+  gear_sim::Status setSte(const SteModelOptions& ste, size_t calibration_segments) {
+    if (gear_sim::Status s = checkSte(driver_.options()); !s.ok()) return s;
     return driver_.setSte(ste, calibration_segments);
+  }
+  /// Whether `options` can identify the STE live: checkSteOptions, and not the constant model
+  /// (its calibration would be the whole run). The node checks its parameters with it at start.
+  static gear_sim::Status checkSte(const IdentificationOptions& options) {
+    if (gear_sim::Status s = checkSteOptions(options); !s.ok()) return s;
+    if (options.model == DampingModel::Constant)
+      return gear_sim::Status::invalidArgument(
+          "the STE with the constant damping model needs the whole record (not live)", "model");
+    return {};
   }
   /// The held STE once calibrated (else null).
   const SteResult* steResult() const { return driver_.steResult(); }

@@ -44,6 +44,8 @@
 #include <string>
 #include <vector>
 
+#include "gear_sim/status.hpp"
+
 namespace gear_damping_id {
 
 /// How much time FFTW spends choosing its algorithm (see the FFTW manual).
@@ -107,18 +109,19 @@ class MorletCwt {
   /// frequencies_hz [Hz] (any order, each in (0, sample_rate/2)) with one omega0 for all rows
   /// (omega0s.size() == 1) or one per row. Plans the forward FFT now and the inverse FFT on the
   /// first row computed (so a spectrum-only use never plans it). Preconditions: n >= 2,
-  /// sample_rate > 0, omega0 in [1, 1000]. On failure returns false with *error set (error may be
-  /// null) and leaves the object unconfigured.
-  bool configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
-                 const std::vector<double>& omega0s, FftPlanning planning, std::string* error);
-  bool configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
-                 double omega0, FftPlanning planning, std::string* error) {
-    return configure(n, sample_rate, frequencies_hz, std::vector<double>{omega0}, planning, error);
+  /// sample_rate > 0, omega0 in [1, 1000]. On failure returns InvalidArgument naming the field
+  /// (ResourceLimit for a padded length beyond 2^40 or no memory, Internal when FFTW cannot plan)
+  /// and leaves the object unconfigured.
+  gear_sim::Status configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                             const std::vector<double>& omega0s, FftPlanning planning);
+  gear_sim::Status configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                             double omega0, FftPlanning planning) {
+    return configure(n, sample_rate, frequencies_hz, std::vector<double>{omega0}, planning);
   }
 
-  /// Loads a signal of size() samples: removes its mean and computes its FFT. Fails (false,
-  /// *error names the first non-finite sample's index) if not configured or y has a NaN/Inf.
-  bool setSignal(const double* y, std::string* error);
+  /// Loads a signal of size() samples: removes its mean and computes its FFT. InvalidInput naming
+  /// the first non-finite sample's index if y has a NaN/Inf; Internal if not configured.
+  gear_sim::Status setSignal(const double* y);
 
   /// Coefficients W of row i (0 <= i < rows()) for the current signal: returns a pointer to
   /// size() complex values (time order, sample j at t = j/fs), owned by the object and valid
@@ -150,11 +153,11 @@ class MorletCwt {
   Precision precision() const { return precision_; }
 
   /// Whole transform of y: setSignal(y) then every row; output row-major [row][time] with
-  /// rows()*size() elements (caller-allocated; allocate once and reuse). False + *error on
-  /// failure (nothing written beyond the rows completed).
-  bool transform(const double* y, std::complex<double>* out, std::string* error);
-  bool transformModulus(const double* y, double* out, std::string* error);
-  bool transformModulus(const double* y, float* out, std::string* error);
+  /// rows()*size() elements (caller-allocated; allocate once and reuse). A failed Status as
+  /// setSignal's (nothing written beyond the rows completed).
+  gear_sim::Status transform(const double* y, std::complex<double>* out);
+  gear_sim::Status transformModulus(const double* y, double* out);
+  gear_sim::Status transformModulus(const double* y, float* out);
 
   /// Mean over the whole zero-padded time axis of |W|^2 of row i, times paddedSize()/size():
   /// the time-averaged scalogram, computed exactly in the frequency domain by Parseval,
@@ -218,18 +221,18 @@ class MorletScalogram {
   static constexpr double kGroupLengthRatio = 1.25;
 
   /// Same preconditions as MorletCwt::configure (one omega0 for all rows), plus threads >= 1.
-  /// precision: of the rows' inverse FFTs (see Precision). False + *error on failure.
-  bool configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
-                 double omega0, FftPlanning planning, int threads, std::string* error,
-                 Precision precision = Precision::Double);
+  /// precision: of the rows' inverse FFTs (see Precision). A failed Status as MorletCwt's
+  /// (threads out of range: InvalidArgument, field "threads").
+  gear_sim::Status configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                             double omega0, FftPlanning planning, int threads,
+                             Precision precision = Precision::Double);
   /// |W| of every row for signal y (n samples) into out, row-major [row][time], rows()*size()
-  /// values (double or float). False + *error (a non-finite sample names its index).
-  bool modulus(const double* y, double* out, std::string* error);
-  bool modulus(const double* y, float* out, std::string* error);
+  /// values (double or float). A failed Status as MorletCwt::setSignal's.
+  gear_sim::Status modulus(const double* y, double* out);
+  gear_sim::Status modulus(const double* y, float* out);
   /// Same rows, handed to sink(row, |W| of n values) instead of stored (the pointer is valid
   /// during the call only). With threads > 1, sink runs concurrently on distinct rows.
-  bool forEachRow(const double* y, const std::function<void(int, const double*)>& sink,
-                  std::string* error);
+  gear_sim::Status forEachRow(const double* y, const std::function<void(int, const double*)>& sink);
 
   long size() const { return n_; }
   int rows() const { return static_cast<int>(frequencies_.size()); }
@@ -240,9 +243,9 @@ class MorletScalogram {
 
  private:
   template <typename T>
-  bool modulusImpl(const double* y, T* out, std::string* error);
+  gear_sim::Status modulusImpl(const double* y, T* out);
   template <typename T, typename Dest, typename Done>
-  bool runRows(const double* y, Dest dest, Done done, std::string* error);
+  gear_sim::Status runRows(const double* y, Dest dest, Done done);
 
   long n_ = 0;
   std::vector<double> frequencies_;

@@ -44,6 +44,7 @@
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/signal_view.hpp"
+#include "gear_sim/status.hpp"
 #include "gear_sim/ste.hpp"
 
 namespace gear_damping_id {
@@ -69,17 +70,18 @@ struct SteRefinement {
 /// `residuals`; a segment (or the shared estimate) whose iteration hit max_iterations gets the
 /// warning "refine_not_converged". Sets result->estimator = "output_error", iterations,
 /// noise_std, noise_ar and noise_innovation_std. Only the known and greybox
-/// formulations are refined; for the others it returns true and leaves `result` as it is.
-/// Returns false with `*error` when the iteration diverges (the integral estimate is then kept).
+/// formulations are refined; for the others it returns ok and leaves `result` as it is.
+/// NotIdentifiable when the iteration diverges or nothing can be refined (the integral estimate
+/// is then kept); InvalidArgument/InvalidInput when options or channels do not allow it.
 /// `reference_integration` (for tests): step every sample interval with the generic RK4 of the
 /// state and sensitivities instead of the closed-form affine maps (same numbers to rounding).
 /// `ste` (null: no STE): identify the STE coefficients jointly (SteRefinement); the square
 /// stiffness (known or greybox) and piecewise or constant damping only.
-bool refineOutputError(const SignalView& signal,
-                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                       const GearConstants& gear, const IdentificationOptions& options,
-                       IdentificationResult* result, std::string* error,
-                       bool reference_integration = false, SteRefinement* ste = nullptr);
+gear_sim::Status refineOutputError(const SignalView& signal,
+                                   const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                                   const GearConstants& gear, const IdentificationOptions& options,
+                                   IdentificationResult* result, bool reference_integration = false,
+                                   SteRefinement* ste = nullptr);
 
 /// Whether options.refine asks for refinement of this result (Auto: the median relative standard
 /// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.
@@ -105,10 +107,10 @@ struct ModeledResponse {
   double fit_percent = kNaN;  ///< 100 (1 - nrmse)
 };
 
-/// Computes the modeled response of `result` over the range of its segments. False with
-/// `*error` if no segment is identifiable or the simulation produced a non-finite value.
-bool modeledResponse(const SignalView& signal, const GearConstants& gear,
-                     const IdentificationResult& result, ModeledResponse* out, std::string* error);
+/// Computes the modeled response of `result` over the range of its segments. NotIdentifiable if
+/// no segment is identifiable or the simulation produced a non-finite value.
+gear_sim::Status modeledResponse(const SignalView& signal, const GearConstants& gear,
+                                 const IdentificationResult& result, ModeledResponse* out);
 
 /// NRMSE and fit % of `modeled` against `observed` (equal lengths) over the samples where both
 /// are finite; NaN when none are or observed is constant there.

@@ -11,6 +11,7 @@
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -36,9 +37,9 @@ class OutputStage {
   ~OutputStage();
   /// Registers the complete temporary file `tmp`, to be renamed over `path` by commit().
   void add(const std::string& tmp, const std::string& path);
-  /// Renames every registered file over its target. False with `*error` naming the first that
-  /// failed (the temporaries not renamed yet are removed).
-  bool commit(std::string* error);
+  /// Renames every registered file over its target. IoError naming the first that failed (the
+  /// temporaries not renamed yet are removed).
+  gear_sim::Status commit();
 
  private:
   std::vector<std::pair<std::string, std::string>> files_;  // (tmp, target)
@@ -63,10 +64,11 @@ nlohmann::json analysisJson(const std::vector<AnalysisRun>& runs, const nlohmann
 void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs);
 
 /// Writes `dir`/segments.csv (all runs, long format), `dir`/summary.csv (one row per run) and
-/// `dir`/response_<run>.csv (time, observed, modeled). Creates `dir`. False with `*error`.
-/// With `stage`, the files are only staged (renamed by stage->commit()).
-bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
-                 OutputStage* stage = nullptr);
+/// `dir`/response_<run>.csv (time, observed, modeled). Creates `dir`. IoError when a file or
+/// the directory cannot be written. With `stage`, the files are only staged (renamed by
+/// stage->commit()).
+gear_sim::Status writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs,
+                             OutputStage* stage = nullptr);
 
 /// JSON of a wavelet validation (docs/method.md §6 `wavelet`): modes[] with frequency_hz,
 /// damping_ratio, r2, t_start, t_end, sigma, spectrum_frequency_hz, omega0,
@@ -86,15 +88,16 @@ void printWaveletTable(std::ostream& os, const WaveletResult& w);
 /// |W(f_mode, t)| of each fitted mode at the omega0 of its fit, recomputed from the record
 /// y[0, n) sampled at `sample_rate` with its first sample at time t0 (times in the file are
 /// t0 + j/fs, so `w`'s times should be shifted by t0 too: see shiftWaveletTimes), every d-th
-/// sample so that at most `max_points` rows per mode remain. False with `*error`.
-bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
-                     double sample_rate, double t0, long max_points, std::string* error,
-                     OutputStage* stage = nullptr);
+/// sample so that at most `max_points` rows per mode remain. IoError when a file cannot be
+/// written; the writers' InvalidArgument for an unusable result.
+gear_sim::Status writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y,
+                                 long n, double sample_rate, double t0, long max_points,
+                                 OutputStage* stage = nullptr);
 
 /// Writes `text` to `path` atomically (a temporary file renamed on success), so a failed run
-/// never leaves a partial file that looks complete. False with `*error`. With `stage`, the
-/// complete temporary file is registered there instead of renamed.
-bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
-                         OutputStage* stage = nullptr);
+/// never leaves a partial file that looks complete. IoError ("<path>: cannot write"). With
+/// `stage`, the complete temporary file is registered there instead of renamed.
+gear_sim::Status writeFileAtomically(const std::string& path, const std::string& text,
+                                     OutputStage* stage = nullptr);
 
 }  // namespace gear_damping_id

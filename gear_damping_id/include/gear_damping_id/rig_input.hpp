@@ -23,18 +23,18 @@ struct RigInputOptions {
 bool isRigInput(const std::string& csv, const RigInputOptions& options);
 
 /// Reads the rig record `csv` (uniform: time, theta1, theta2, torque; with edge files: the
-/// torque file time, torque giving the time grid) and runs the front end. False with `*error`
-/// naming the file and the reason (a refused record says why it is not a gear pair).
-bool loadRigInput(const std::string& csv, const RigInputOptions& options,
-                  const gear_sim::GearModel& model, gear_sim::SignalTable* out,
-                  EncoderFrontEndReport* report, std::string* error);
+/// torque file time, torque giving the time grid) and runs the front end. A failed Status names
+/// the file and the reason (a refused record says why it is not a gear pair).
+gear_sim::Status loadRigInput(const std::string& csv, const RigInputOptions& options,
+                              const gear_sim::GearModel& model, gear_sim::SignalTable* out,
+                              EncoderFrontEndReport* report);
 
 /// A rig table already read (time, theta1, theta2, torque; e.g. from a rig bag) through the
-/// front end; `name` prefixes the error.
-bool rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
-                           const RigInputOptions& options, const gear_sim::GearModel& model,
-                           gear_sim::SignalTable* out, EncoderFrontEndReport* report,
-                           std::string* error);
+/// front end; `name` prefixes the message.
+gear_sim::Status rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
+                                       const RigInputOptions& options,
+                                       const gear_sim::GearModel& model, gear_sim::SignalTable* out,
+                                       EncoderFrontEndReport* report);
 
 /// The report as JSON (`input.encoder` of the result).
 nlohmann::json toJson(const EncoderFrontEndReport& report);

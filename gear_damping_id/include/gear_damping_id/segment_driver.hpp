@@ -86,8 +86,8 @@ class SegmentDriver {
 
   /// Identify the STE with the damping (before add(); header comment): jointly on the first
   /// `calibration_segments` usable segments (>= 1; the constant model: all), then held. `ste`
-  /// must be valid, options known/greybox (steOptionsError). Returns "" or why not.
-  std::string setSte(const SteModelOptions& ste, size_t calibration_segments);
+  /// must be valid, options known/greybox (checkSteOptions). Ok or why not.
+  gear_sim::Status setSte(const SteModelOptions& ste, size_t calibration_segments);
   /// The STE once calibrated (else null).
   const SteResult* steResult() const { return ste_ready_ ? &ste_ : nullptr; }
 

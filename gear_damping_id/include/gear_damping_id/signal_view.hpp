@@ -17,6 +17,7 @@
 #include "gear_sim/option_status.hpp"
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -31,7 +32,6 @@ struct GearConstants {
   /// decides held or smooth stiffness from the samples (forward_model.hpp), not from this flag.
   bool piecewise_constant_stiffness = true;
   gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Constants of a gear model (validated GearModel).
@@ -65,13 +65,13 @@ bool needsStiffness(Formulation f);
 bool needsTorque(Formulation f, DampingModel m);
 bool needsMeshState(Formulation f);
 
-/// Name of the first channel that `formulation`/`model` need and `present` lacks (stiffness and
-/// torque for known; mesh_state and torque for greybox; torque for load_law), or "" if none.
-std::string missingChannel(const ChannelSet& present, Formulation formulation, DampingModel model);
-/// The same as a message naming the column and what needs it ("" if none is missing).
-std::string missingChannelError(const ChannelSet& present, Formulation formulation,
-                                DampingModel model);
+/// Ok when `present` holds every channel `formulation`/`model` need (stiffness and torque for
+/// known; mesh_state and torque for greybox; torque for load_law), else InvalidInput with the
+/// first missing channel as Status::field() and the message "column 'x' is required by
+/// formulation 'known' but missing" (or "by model 'load_law'").
+gear_sim::Status checkChannels(const ChannelSet& present, Formulation formulation,
+                               DampingModel model);
 /// The same for a view (the integral method must not be given a view without them).
-std::string missingChannel(const SignalView& view, Formulation formulation, DampingModel model);
+gear_sim::Status checkChannels(const SignalView& view, Formulation formulation, DampingModel model);
 
 }  // namespace gear_damping_id

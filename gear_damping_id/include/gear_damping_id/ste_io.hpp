@@ -17,8 +17,8 @@ namespace gear_damping_id {
 nlohmann::json steJson(const SteResult& s);
 
 /// Writes `dir`/ste.csv: kind,order,cos,sin,cos_std,sin_std,amplitude,phase (one row per term;
-/// kind offset, mesh, pinion, gear). `dir` must exist. False with `*error`.
-bool writeSteCsv(const std::string& dir, const SteResult& s, std::string* error,
-                 OutputStage* stage = nullptr);
+/// kind offset, mesh, pinion, gear). `dir` must exist. IoError when it cannot be written.
+gear_sim::Status writeSteCsv(const std::string& dir, const SteResult& s,
+                             OutputStage* stage = nullptr);
 
 }  // namespace gear_damping_id

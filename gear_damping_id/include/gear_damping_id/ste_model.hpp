@@ -58,11 +58,12 @@ struct SteModelOptions {
   bool active() const { return offset || mesh_orders + pinion_orders + gear_orders > 0; }
   gear_sim::SteBasis basis() const;
   gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 /// Parses "mesh:H,shaft:S" (shaft: both shafts), "pinion:S", "gear:S", "offset", "none" in any
 /// comma-separated combination; the offset is always included unless "nooffset" is given.
-bool parseSteSpec(const std::string& spec, SteModelOptions* out, std::string* error);
+/// InvalidArgument naming the bad item (no option prefix: the CLI says "--ste: ", the nodes
+/// "~ste = '...': "); `out` unchanged on failure.
+gear_sim::Status parseSteSpec(const std::string& spec, SteModelOptions* out);
 
 /// One identified STE term: e contribution cos * cos(order * angle) + sin * sin(order * angle).
 struct SteTerm {
@@ -91,34 +92,39 @@ struct SteResult {
 /// Identifies C (per segment, or constant: options.model), greybox stiffness levels when
 /// options.formulation is Greybox, and the STE jointly. `result` gets the damping estimates in
 /// the usual shape (segments, constant), `ste` the STE. Needs `mesh_phase` (and `stiffness` for
-/// known, `mesh_state` for greybox, `torque`). Returns false with `*error` when the input or the
-/// options cannot be used (the load_law model and the paper/legacy formulations are refused).
-bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& gear,
-                     const IdentificationOptions& options, const SteModelOptions& ste_options,
-                     IdentificationResult* result, SteResult* ste, std::string* error);
+/// known, `mesh_state` for greybox, `torque`). A failed Status when the options (InvalidArgument,
+/// the field) or the input (InvalidInput, the column) cannot be used (the load_law model and the
+/// paper/legacy formulations are refused), NotIdentifiable when the joint problem is rank
+/// deficient.
+gear_sim::Status identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& gear,
+                                 const IdentificationOptions& options,
+                                 const SteModelOptions& ste_options, IdentificationResult* result,
+                                 SteResult* ste);
 
 using SampleRanges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
 
 /// identifyWithSte on the segments `ranges` of a checked view (every channel present and
 /// finite; samples next to a range serve as quadrature stencils, as in the integral method).
-bool identifySteSegments(const SignalView& view, const SampleRanges& ranges,
-                         const GearConstants& gear, const IdentificationOptions& options,
-                         const SteModelOptions& ste_options, IdentificationResult* result,
-                         SteResult* ste, std::string* error);
+gear_sim::Status identifySteSegments(const SignalView& view, const SampleRanges& ranges,
+                                     const GearConstants& gear,
+                                     const IdentificationOptions& options,
+                                     const SteModelOptions& ste_options,
+                                     IdentificationResult* result, SteResult* ste);
 
 /// One segment [begin, end) of `view` with the STE held at `ste` (a calibration's result, with
 /// theta_cov): C (and the greybox levels) fitted given the STE by the integral equations, refined
 /// when options.refine asks for it by output error on the record with the STE taken out
 /// (z = y - e, forcing F - e'' (- C e' for the dte form), docs/ste.md); C_std includes theta's
 /// covariance propagated through dC/dtheta. Estimator `integral_ste_held` or
-/// `output_error_ste_held`. False with `*error` when the segment cannot be fitted.
-bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eigen::Index end,
-                                const GearConstants& gear, const IdentificationOptions& options,
-                                const SteResult& ste, IdentificationResult* result,
-                                std::string* error);
+/// `output_error_ste_held`. NotIdentifiable when the segment cannot be fitted.
+gear_sim::Status identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin,
+                                            Eigen::Index end, const GearConstants& gear,
+                                            const IdentificationOptions& options,
+                                            const SteResult& ste, IdentificationResult* result);
 
-/// "" when the formulation, model and stiffness shape can be used with the STE, else why not.
-std::string steOptionsError(const IdentificationOptions& options);
+/// Ok when the formulation, model and stiffness shape can be used with the STE, else
+/// InvalidArgument naming the IdentificationOptions field (no option prefix).
+gear_sim::Status checkSteOptions(const IdentificationOptions& options);
 /// First sample of `view` with a non-finite channel the STE fit reads, or -1.
 Eigen::Index nonFiniteSteInput(const SignalView& view, Formulation formulation);
 

@@ -100,7 +100,6 @@ struct StreamOptions {
   double max_abs_dte = 1.0;
   /// The first rule broken: field, value and rule (gear_sim/option_status.hpp).
   gear_sim::OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// What happened to a chunk given to push().

@@ -14,6 +14,7 @@
 #include "gear_damping_id/morlet_cwt.hpp"
 #include "gear_damping_id/quality_warning.hpp"
 #include "gear_sim/option_status.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -108,7 +109,6 @@ struct WaveletOptions {
 
   /// Status of these options: ok, or the first rule broken (field, value, rule; option_status.hpp).
   gear_sim::OptionStatus check() const;
-  std::string validate() const { return check().message(); }  ///< empty when valid
 
  private:
   gear_sim::OptionStatus checkModesAndRules() const;  ///< second half of check()
@@ -167,11 +167,10 @@ struct WaveletResult {
   double noise_std = 0.0;  ///< [unit of y] white-noise estimate per sample (see analyzeWavelet)
   std::vector<WaveletMode> modes;     ///< ascending frequency
   std::vector<std::string> warnings;  ///< global remarks (modes also carry their own)
-  /// Empty on success; otherwise why the analysis could not run (validateWavelet only: the
-  /// bool-returning analyzeWavelet reports through its error argument). When set, everything
-  /// else is empty.
-  std::string error;
-  bool ok() const { return error.empty(); }
+  /// Ok on success; otherwise why the analysis could not run (validateWavelet only:
+  /// analyzeWavelet returns its Status). When not ok, everything else is empty.
+  gear_sim::Status status;
+  bool ok() const { return status.ok(); }
 };
 
 /// Morlet-wavelet damping analysis of a record y[0..n) sampled at sample_rate [Hz]
@@ -204,24 +203,24 @@ struct WaveletResult {
 /// exactly proportional to exp(-sigma tau) at any scale and any sigma; only the record's
 /// edges (excluded above), noise and other modes (leakage) disturb it.
 ///
-/// Returns false with *error (may be null) for invalid input: n < 64, sample_rate not finite
-/// and > 0, a non-finite sample (its index is named), options.validate() failing, or
-/// frequencies not in (0, fs/2) / f_min >= f_max. A mode whose fit fails (no decay region
-/// outside the COI, too few samples) is still returned with NaN numbers and a `fit_failed`
-/// warning; *result is then otherwise complete and the call returns true.
-bool analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error);
-bool analyzeWavelet(const std::vector<double>& y, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error);
-bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error);
+/// Returns InvalidArgument naming the field for invalid input: n < 64, sample_rate not finite
+/// and > 0, options.check() failing, or frequencies not in (0, fs/2) / f_min >= f_max;
+/// InvalidInput for a non-finite sample (its index is named). A mode whose fit fails (no decay
+/// region outside the COI, too few samples) is still returned with NaN numbers and a
+/// `fit_failed` warning; *result is then otherwise complete and the call returns ok.
+gear_sim::Status analyzeWavelet(const double* y, long n, double sample_rate,
+                                const WaveletOptions& options, WaveletResult* result);
+gear_sim::Status analyzeWavelet(const std::vector<double>& y, double sample_rate,
+                                const WaveletOptions& options, WaveletResult* result);
+gear_sim::Status analyzeWavelet(const Eigen::VectorXd& y, double sample_rate,
+                                const WaveletOptions& options, WaveletResult* result);
 
 /// High-level entry point (the `analyze --wavelet` tool and the nodes): analyzeWavelet on
 /// y[0..n) sampled at sample_rate [Hz], returning the result by value. Never throws for bad
 /// input and never returns silent NaNs: on invalid input (options.validate() failing, a null
 /// or too short signal (n < 64), a NaN/Inf sample (its index is named), a sample rate that is
 /// not finite and > 0, a frequency grid or mode frequency at or above the Nyquist frequency)
-/// the result has ok() == false, `error` says which field or sample is wrong and everything
+/// the result has ok() == false, `status` says which field or sample is wrong and everything
 /// else is empty. A mode without a trusted damping ratio has damping_ratio NaN *and* non-empty
 /// `warnings`.
 WaveletResult validateWavelet(const double* y, size_t n, double sample_rate,

@@ -54,8 +54,7 @@ double refinedResidual(const IdentificationResult& r) { return segmentResidual(r
 double meanSquaredResidual(const gear_sim::SignalTable& table, const GearConstants& gear,
                            const IdentificationOptions& options, bool refined) {
   IdentificationResult r;
-  std::string e;
-  if (!identify(table, gear, options, &r, &e)) return std::numeric_limits<double>::infinity();
+  if (!identify(table, gear, options, &r).ok()) return std::numeric_limits<double>::infinity();
   return refined ? refinedResidual(r) : segmentResidual(r, false);
 }
 
@@ -66,9 +65,8 @@ double meanSquaredResidualSte(const gear_sim::SignalTable& table, const GearCons
                               bool refined) {
   IdentificationResult r;
   SteResult s;
-  std::string e;
   const double inf = std::numeric_limits<double>::infinity();
-  if (!identifyWithSte(table, gear, options, ste, &r, &s, &e)) return inf;
+  if (!identifyWithSte(table, gear, options, ste, &r, &s).ok()) return inf;
   if (!refined) return std::isfinite(s.residual_rms) ? s.residual_rms * s.residual_rms : inf;
   return refinedResidual(r);
 }
@@ -144,7 +142,7 @@ EncoderFrontEnd::EncoderFrontEnd(const gear_sim::GearModel& model,
   report_.resampling = "none (uniform input at the output rate)";
 }
 
-bool EncoderFrontEnd::check(const double* th1, const double* th2, size_t n, std::string* error) {
+gear_sim::Status EncoderFrontEnd::check(const double* th1, const double* th2, size_t n) {
   const double q1 = o_.counts_per_rev1 > 0 ? 2.0 * M_PI / o_.counts_per_rev1 : 0.0;
   const double q2 = o_.counts_per_rev2 > 0 ? 2.0 * M_PI / o_.counts_per_rev2 : 0.0;
   const double g = 1.0 / model_.gears.ratio();
@@ -153,8 +151,7 @@ bool EncoderFrontEnd::check(const double* th1, const double* th2, size_t n, std:
   auto refuse = [&](const std::string& why) {
     refused_ = true;
     refusal_ = "not a gear-pair record: " + why;
-    if (error) *error = refusal_;
-    return false;
+    return gear_sim::Status::invalidInput(refusal_);
   };
   for (size_t i = 0; i < n; ++i) {
     if (!std::isfinite(th1[i]) || !std::isfinite(th2[i]))
@@ -187,33 +184,31 @@ bool EncoderFrontEnd::check(const double* th1, const double* th2, size_t n, std:
   }
   const double r2 = th2_last_ - th2_first_;
   if (r2 != 0.0) report_.ratio_measured = (th1_last_ - th1_first_) / r2;
-  return true;
+  return {};
 }
 
-bool EncoderFrontEnd::push(double sample_rate, std::uint64_t first_index, const double* theta1,
-                           const double* theta2, const double* torque, size_t n,
-                           std::string* error) {
+gear_sim::Status EncoderFrontEnd::push(double sample_rate, std::uint64_t first_index,
+                                       const double* theta1, const double* theta2,
+                                       const double* torque, size_t n) {
   if (refused_) {
-    if (error) *error = refusal_;
-    return false;
+    return gear_sim::Status::invalidInput(refusal_);
   }
   if (!(sample_rate > 0.0 && std::isfinite(sample_rate))) {
-    if (error) *error = "sample rate " + num(sample_rate) + ": must be finite and > 0";
-    return false;
+    return gear_sim::Status::invalidInput("sample rate " + num(sample_rate) +
+                                          ": must be finite and > 0");
   }
   if (rate_ == 0.0) rate_ = sample_rate;
   if (sample_rate != rate_) {
-    if (error)
-      *error = "sample rate changed from " + num(rate_) + " to " + num(sample_rate) + " Hz";
-    return false;
+    return gear_sim::Status::invalidInput("sample rate changed from " + num(rate_) + " to " +
+                                          num(sample_rate) + " Hz");
   }
   const bool have_last = !index_.empty() || has_last_;
   const std::uint64_t last = !index_.empty() ? index_.back() : last_index_;
   if (have_last && first_index <= last) {
-    if (error) *error = "sample index " + std::to_string(first_index) + " is not after the last";
-    return false;
+    return gear_sim::Status::invalidInput("sample index " + std::to_string(first_index) +
+                                          " is not after the last");
   }
-  if (!check(theta1, theta2, n, error)) return false;
+  if (gear_sim::Status st = check(theta1, theta2, n); !st.ok()) return st;
   if (index_.empty() && n > 0) has_torque_ = torque != nullptr;
   for (size_t i = 0; i < n; ++i) {
     index_.push_back(first_index + i);
@@ -224,22 +219,21 @@ bool EncoderFrontEnd::push(double sample_rate, std::uint64_t first_index, const 
   report_.sample_rate = rate_;
   if (!calibrated_ && o_.calibration_samples > 0 &&
       index_.size() >= static_cast<size_t>(o_.calibration_samples)) {
-    if (!calibrate(error)) return false;
+    if (gear_sim::Status st = calibrate(); !st.ok()) return st;
   }
   if (calibrated_) convert(converted_, index_.size());
-  return true;
+  return {};
 }
 
-bool EncoderFrontEnd::finish(std::string* error) {
+gear_sim::Status EncoderFrontEnd::finish() {
   if (refused_) {
-    if (error) *error = refusal_;
-    return false;
+    return gear_sim::Status::invalidInput(refusal_);
   }
   if (!calibrated_) {
-    if (!calibrate(error)) return false;
+    if (gear_sim::Status st = calibrate(); !st.ok()) return st;
     convert(converted_, index_.size());
   }
-  return true;
+  return {};
 }
 
 namespace {
@@ -444,16 +438,15 @@ bool EncoderFrontEnd::calibrationTable(gear_sim::SignalTable* tp, Eigen::VectorX
   return torque_ok;
 }
 
-bool EncoderFrontEnd::calibrate(std::string* error) {
+gear_sim::Status EncoderFrontEnd::calibrate() {
   const size_t n = index_.size();
   if (n < 16) {
-    if (error) *error = "too few samples (" + std::to_string(n) + ") for the encoder front end";
-    return false;
+    return gear_sim::Status::invalidInput("too few samples (" + std::to_string(n) +
+                                          ") for the encoder front end");
   }
   if (!(std::abs(th1_last_ - th1_first_) > 0.0)) {
-    if (error) *error = "not a gear-pair record: the shafts do not rotate";
     refused_ = true;
-    return false;
+    return gear_sim::Status::invalidInput("not a gear-pair record: the shafts do not rotate");
   }
   gear_sim::SignalTable t;
   Eigen::VectorXd u_raw;
@@ -461,11 +454,9 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
   const bool torque_ok = calibrationTable(&t, &u_raw, &y_shift);
   const bool need_u0 = std::isnan(o_.mesh_offset), need_y0 = std::isnan(o_.dte_offset);
   if ((need_u0 || need_y0) && !torque_ok) {
-    if (error)
-      *error =
-          "the encoder front end needs a finite torque to estimate the mesh offset and the DTE "
-          "offset (or give both)";
-    return false;
+    return gear_sim::Status::invalidInput(
+        "the encoder front end needs a finite torque to estimate the mesh offset and the DTE "
+        "offset (or give both)");
   }
   const Eigen::Index m = t.time.size();
   std::vector<double> y(t.dte.data(), t.dte.data() + m);
@@ -477,11 +468,10 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
     if (model_.mesh.model == gear_sim::StiffnessModel::Constant) {
       u0 = 0.0;  // no mesh timing to find
     } else {
-      if (!search.gridAndGolden(&u0)) {
-        if (error)
-          *error = "the mesh offset could not be estimated (no identifiable segment); give it";
-        return false;
-      }
+      if (!search.gridAndGolden(&u0))
+        return gear_sim::Status::notIdentifiable(
+            "the mesh offset could not be estimated (no identifiable segment); give it",
+            "mesh_offset");
       double lo = u0, hi = u0;
       u0 = search.plateauMiddle(u0, &lo, &hi);
       if (o_.refine_offset) u0 = search.subSample(u0, lo, hi);
@@ -499,7 +489,7 @@ bool EncoderFrontEnd::calibrate(std::string* error) {
   o_.dte_offset = y0;
   calibrated_ = true;
   report_.noise_std = thirdDifferenceNoise(y);
-  return true;
+  return {};
 }
 
 void EncoderFrontEnd::convert(size_t begin, size_t end) {
@@ -548,25 +538,21 @@ bool EncoderFrontEnd::pop(gear_sim::SignalTable* out, std::uint64_t* first_index
   return true;
 }
 
-bool encoderToSignalTable(const gear_sim::SignalTable& rig, const gear_sim::GearModel& model,
-                          const EncoderFrontEndOptions& options, gear_sim::SignalTable* out,
-                          EncoderFrontEndReport* report, std::string* error) {
-  if (std::string e = options.validate(); !e.empty()) {
-    if (error) *error = "encoder front end: " + e;
-    return false;
-  }
+gear_sim::Status encoderToSignalTable(const gear_sim::SignalTable& rig,
+                                      const gear_sim::GearModel& model,
+                                      const EncoderFrontEndOptions& options,
+                                      gear_sim::SignalTable* out, EncoderFrontEndReport* report) {
+  if (gear_sim::Status s = options.check(); !s.ok()) return s.withContext("encoder front end");
   const Eigen::Index n = rig.size();
   if (n < 16 || rig.theta1.size() != n || rig.theta2.size() != n) {
-    if (error) *error = "a rig record needs the columns time, theta1, theta2 (16 samples or more)";
-    return false;
+    return gear_sim::Status::invalidInput(
+        "a rig record needs the columns time, theta1, theta2 (16 samples or more)");
   }
   const double dt = (rig.time[n - 1] - rig.time[0]) / static_cast<double>(n - 1);
   for (Eigen::Index i = 1; i < n; ++i)
     if (!(std::abs(rig.time[i] - rig.time[i - 1] - dt) <= 1e-6 * dt)) {
-      if (error)
-        *error = "time is not uniform at sample " + std::to_string(i) +
-                 " (edge-time records: give the edge files instead)";
-      return false;
+      return gear_sim::Status::invalidInput("time is not uniform at sample " + std::to_string(i) +
+                                            " (edge-time records: give the edge files instead)");
     }
   EncoderFrontEndOptions o = options;
   o.calibration_samples = 0;
@@ -574,50 +560,45 @@ bool encoderToSignalTable(const gear_sim::SignalTable& rig, const gear_sim::Gear
   const double fs = 1.0 / dt;
   const auto first = static_cast<std::uint64_t>(std::llround(rig.time[0] * fs));
   if (!(rig.time[0] >= 0.0)) {
-    if (error) *error = "time must start at or after 0";
-    return false;
+    return gear_sim::Status::invalidInput("time must start at or after 0");
   }
-  if (!fe.push(fs, first, rig.theta1.data(), rig.theta2.data(),
-               rig.torque.size() == n ? rig.torque.data() : nullptr, static_cast<size_t>(n),
-               error) ||
-      !fe.finish(error))
-    return false;
+  gear_sim::Status s =
+      fe.push(fs, first, rig.theta1.data(), rig.theta2.data(),
+              rig.torque.size() == n ? rig.torque.data() : nullptr, static_cast<size_t>(n));
+  if (s.ok()) s = fe.finish();
+  if (!s.ok()) return s;
   std::uint64_t f0 = 0;
   if (!fe.pop(out, &f0)) {
-    if (error) *error = "the encoder front end produced no samples";
-    return false;
+    return gear_sim::Status::invalidInput("the encoder front end produced no samples");
   }
   out->time = rig.time;  // the record's own stamps (identical to index / rate up to rounding)
   if (report) *report = fe.report();
-  return true;
+  return {};
 }
 
-bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
-                       const Eigen::VectorXd& grid, Eigen::VectorXd* theta, std::string* error,
-                       double max_gap_ratio) {
+gear_sim::Status edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
+                                   const Eigen::VectorXd& grid, Eigen::VectorXd* theta,
+                                   double max_gap_ratio) {
   const size_t m = edges.size();
   if (counts_per_rev <= 0) {
-    if (error) *error = "counts per revolution must be > 0";
-    return false;
+    return gear_sim::Status::invalidInput("counts per revolution must be > 0");
   }
   if (m < 4) {
-    if (error) *error = "at least 4 edges are needed (got " + std::to_string(m) + ")";
-    return false;
+    return gear_sim::Status::invalidInput("at least 4 edges are needed (got " + std::to_string(m) +
+                                          ")");
   }
   for (size_t k = 0; k < m; ++k)
     if (!std::isfinite(edges[k]) || (k > 0 && !(edges[k] > edges[k - 1]))) {
-      if (error)
-        *error = "edge " + std::to_string(k) + ": times must be finite and strictly increasing";
-      return false;
+      return gear_sim::Status::invalidInput("edge " + std::to_string(k) +
+                                            ": times must be finite and strictly increasing");
     }
   const double mean_gap = (edges[m - 1] - edges[0]) / static_cast<double>(m - 1);
   for (size_t k = 1; k < m; ++k)
     if (edges[k] - edges[k - 1] > max_gap_ratio * mean_gap) {
-      if (error)
-        *error = "edge " + std::to_string(k) + ": a gap of " + num(edges[k] - edges[k - 1]) +
-                 " s, " + num((edges[k] - edges[k - 1]) / mean_gap) +
-                 "x the mean edge interval (a standstill or lost edges)";
-      return false;
+      return gear_sim::Status::invalidInput(
+          "edge " + std::to_string(k) + ": a gap of " + num(edges[k] - edges[k - 1]) + " s, " +
+          num((edges[k] - edges[k - 1]) / mean_gap) +
+          "x the mean edge interval (a standstill or lost edges)");
     }
   const double q = 2.0 * M_PI / static_cast<double>(counts_per_rev);
   theta->resize(grid.size());
@@ -625,10 +606,9 @@ bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
   for (Eigen::Index i = 0; i < grid.size(); ++i) {
     const double t = grid[i];
     if (!(t >= edges[0] && t <= edges[m - 1])) {
-      if (error)
-        *error = "grid time " + num(t) + " s is outside the edge times [" + num(edges[0]) + ", " +
-                 num(edges[m - 1]) + "] s";
-      return false;
+      return gear_sim::Status::invalidInput("grid time " + num(t) +
+                                            " s is outside the edge times [" + num(edges[0]) +
+                                            ", " + num(edges[m - 1]) + "] s");
     }
     if (i > 0 && t < grid[i - 1]) k = 0;
     while (k + 2 < m && edges[k + 1] <= t) ++k;
@@ -644,16 +624,15 @@ bool edgeTimesToAngles(const std::vector<double>& edges, long counts_per_rev,
     }
     (*theta)[i] = v;
   }
-  return true;
+  return {};
 }
 
-bool edgesToRigTable(const std::vector<double>& edges1, long counts1,
-                     const std::vector<double>& edges2, long counts2,
-                     const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
-                     std::string* resampling, std::string* error) {
+gear_sim::Status edgesToRigTable(const std::vector<double>& edges1, long counts1,
+                                 const std::vector<double>& edges2, long counts2,
+                                 const gear_sim::SignalTable& grid, gear_sim::SignalTable* rig,
+                                 std::string* resampling) {
   if (edges1.size() < 4 || edges2.size() < 4) {
-    if (error) *error = "each edge-time record needs at least 4 edges";
-    return false;
+    return gear_sim::Status::invalidInput("each edge-time record needs at least 4 edges");
   }
   const double lo = std::max(edges1.front(), edges2.front());
   const double hi = std::min(edges1.back(), edges2.back());
@@ -661,46 +640,38 @@ bool edgesToRigTable(const std::vector<double>& edges1, long counts1,
   while (b < e && grid.time[b] < lo) ++b;
   while (e > b && grid.time[e - 1] > hi) --e;
   if (e - b < 16) {
-    if (error)
-      *error = "the edge times cover [" + num(lo) + ", " + num(hi) +
-               "] s: fewer than 16 samples of the time grid lie inside";
-    return false;
+    return gear_sim::Status::invalidInput("the edge times cover [" + num(lo) + ", " + num(hi) +
+                                          "] s: fewer than 16 samples of the time grid lie inside");
   }
   *rig = gear_sim::SignalTable{};
   rig->time = grid.time.segment(b, e - b);
   if (grid.torque.size() == grid.size()) rig->torque = grid.torque.segment(b, e - b);
-  std::string err;
-  if (!edgeTimesToAngles(edges1, counts1, rig->time, &rig->theta1, &err)) {
-    if (error) *error = "edge times of shaft 1: " + err;
-    return false;
-  }
-  if (!edgeTimesToAngles(edges2, counts2, rig->time, &rig->theta2, &err)) {
-    if (error) *error = "edge times of shaft 2: " + err;
-    return false;
-  }
+  if (gear_sim::Status s = edgeTimesToAngles(edges1, counts1, rig->time, &rig->theta1); !s.ok())
+    return s.withContext("edge times of shaft 1");
+  if (gear_sim::Status s = edgeTimesToAngles(edges2, counts2, rig->time, &rig->theta2); !s.ok())
+    return s.withContext("edge times of shaft 2");
   if (resampling)
     *resampling = "edge times (" + std::to_string(edges1.size()) + " and " +
                   std::to_string(edges2.size()) + " edges at " + std::to_string(counts1) + " and " +
                   std::to_string(counts2) +
                   " counts/rev) to the time grid by local cubics through four edges";
-  return true;
+  return {};
 }
 
-bool decimateRig(const gear_sim::SignalTable& in, int factor, gear_sim::SignalTable* out,
-                 std::string* error) {
+gear_sim::Status decimateRig(const gear_sim::SignalTable& in, int factor,
+                             gear_sim::SignalTable* out) {
   const Eigen::Index n = in.size();
   if (factor < 1) {
-    if (error) *error = "decimation factor must be >= 1";
-    return false;
+    return gear_sim::Status::invalidInput("decimation factor must be >= 1");
   }
   if (factor == 1) {
     *out = in;
-    return true;
+    return {};
   }
   const int half = 16 * factor;  // taps either side
   if (n < 2 * half + factor) {
-    if (error) *error = "record too short for decimation by " + std::to_string(factor);
-    return false;
+    return gear_sim::Status::invalidInput("record too short for decimation by " +
+                                          std::to_string(factor));
   }
   std::vector<double> h(static_cast<size_t>(2 * half + 1));
   const double fc = 0.4 / factor;  // cutoff [cycles per input sample]
@@ -739,7 +710,7 @@ bool decimateRig(const gear_sim::SignalTable& in, int factor, gear_sim::SignalTa
   filt(in.theta1, &out->theta1);
   filt(in.theta2, &out->theta2);
   filt(in.torque, &out->torque);
-  return true;
+  return {};
 }
 
 }  // namespace gear_damping_id

@@ -10,12 +10,13 @@ double naturalFrequencyHz(const GearConstants& gear) {
   return std::sqrt(gear.mean_stiffness / gear.equivalent_mass) / (2.0 * M_PI);
 }
 
-std::string checkSampleRate(double sample_rate, const GearConstants& gear, std::string* warning) {
+gear_sim::Status checkSampleRate(double sample_rate, const GearConstants& gear,
+                                 std::string* warning) {
   const double fn = naturalFrequencyHz(gear);
   std::ostringstream m;
   if (!(sample_rate > 0.0) || !std::isfinite(sample_rate)) {
     m << "sample rate " << sample_rate << " Hz is not a positive number";
-    return m.str();
+    return gear_sim::Status::invalidInput(m.str(), "sample_rate");
   }
   if (!std::isfinite(fn) || !(fn > 0.0)) return {};  // the gear check reports it
   const double per_period = sample_rate / fn;
@@ -23,7 +24,7 @@ std::string checkSampleRate(double sample_rate, const GearConstants& gear, std::
     m << "sample rate " << sample_rate << " Hz is too low for the natural frequency " << fn
       << " Hz of the gear pair: " << per_period << " samples per period, need at least "
       << kMinSamplesPerPeriod << " (" << kMinSamplesPerPeriod * fn << " Hz)";
-    return m.str();
+    return gear_sim::Status::invalidInput(m.str(), "sample_rate");
   }
   if (warning != nullptr && per_period < kWarnSamplesPerPeriod) {
     std::ostringstream w;
@@ -35,7 +36,7 @@ std::string checkSampleRate(double sample_rate, const GearConstants& gear, std::
   return {};
 }
 
-std::string checkRecordLength(double duration, const IdentificationOptions& o) {
+gear_sim::Status checkRecordLength(double duration, const IdentificationOptions& o) {
   if (o.model != DampingModel::Piecewise || !(o.segment_length > 0.0) ||
       !std::isfinite(o.segment_length))
     return {};
@@ -43,7 +44,7 @@ std::string checkRecordLength(double duration, const IdentificationOptions& o) {
     std::ostringstream m;
     m << "the analysed record lasts " << duration << " s, shorter than one damping segment ("
       << o.segment_length << " s): shorten --segment or analyse a longer record";
-    return m.str();
+    return gear_sim::Status::invalidInput(m.str(), "segment_length");
   }
   return {};
 }

@@ -18,24 +18,31 @@ namespace gear_damping_id {
 // ----------------------------------------------------------------------------------------------
 // Inputs
 
-std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
-                             double rel_tolerance, Eigen::Index first_line) {
+gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
+                                  double rel_tolerance, Eigen::Index first_line) {
   std::ostringstream e;
   const Eigen::Index n = t.size();
-  if (n < 2) return "the record has " + std::to_string(n) + " samples: need at least 2";
-  if (t.dte.size() != n) return "column 'dte' is missing or has the wrong length";
-  if (const std::string missing = missingChannelError(ChannelSet::of(t), f, m); !missing.empty())
+  if (n < 2)
+    return gear_sim::Status::invalidInput("the record has " + std::to_string(n) +
+                                          " samples: need at least 2");
+  if (t.dte.size() != n)
+    return gear_sim::Status::invalidInput("column 'dte' is missing or has the wrong length", "dte");
+  if (gear_sim::Status missing = checkChannels(ChannelSet::of(t), f, m); !missing.ok())
     return missing;
   auto length = [&](const Eigen::VectorXd& c, const char* name) {
     if (c.size() == 0 || c.size() == n) return true;
     e << "column '" << name << "' has " << c.size() << " values for " << n << " time stamps";
     return false;
   };
-  if (needsStiffness(f) && !length(t.stiffness, "stiffness")) return e.str();
-  if (needsMeshState(f) && !length(t.mesh_state, "mesh_state")) return e.str();
-  if (needsTorque(f, m) && !length(t.torque, "torque")) return e.str();
+  if (needsStiffness(f) && !length(t.stiffness, "stiffness"))
+    return gear_sim::Status::invalidInput(e.str(), "stiffness");
+  if (needsMeshState(f) && !length(t.mesh_state, "mesh_state"))
+    return gear_sim::Status::invalidInput(e.str(), "mesh_state");
+  if (needsTorque(f, m) && !length(t.torque, "torque"))
+    return gear_sim::Status::invalidInput(e.str(), "torque");
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
-  if (!(dt > 0.0) || !std::isfinite(dt)) return "time is not increasing";
+  if (!(dt > 0.0) || !std::isfinite(dt))
+    return gear_sim::Status::invalidInput("time is not increasing", "time");
   // Reference step: the median of the first three steps (a record whose very first step is the
   // odd one is then reported there, not at every later step).
   double ref = t.time[1] - t.time[0];
@@ -65,7 +72,7 @@ std::string checkSignalTable(const gear_sim::SignalTable& t, Formulation f, Damp
       e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step " << ref
         << " s by more than the tolerance " << rel_tolerance << " (relative)"
         << (d > ref ? ": a gap or a dropped sample" : "");
-      return e.str();
+      return gear_sim::Status::invalidInput(e.str(), "time");
     }
   }
   return {};
@@ -799,10 +806,10 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   seg_lo_ = begin;
   seg_hi_ = end;
   double channel_sum[4] = {0, 0, 0, 0};  // reused for the segment means
-  if (std::string why = checkFiniteInputs(s, begin, end, channel_sum); !why.empty())
-    return fail(why);
-  if (std::string why = segmentMeans(s, begin, end, channel_sum, &rec); !why.empty())
-    return fail(why);
+  if (gear_sim::Status why = checkFiniteInputs(s, begin, end, channel_sum); !why.ok())
+    return fail(why.message());
+  if (gear_sim::Status why = segmentMeans(s, begin, end, channel_sum, &rec); !why.ok())
+    return fail(why.message());
   // Windows: W near-equal spans. The damping column comes first among the locals or, for
   // shared damping, first among the shared columns; its raw norm serves the motion check.
   const double raw_c = accumulateWindows(s, begin, rows, W, &rec);
@@ -813,7 +820,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   if (cC >= 0 && !(rec.gram(cC, cC) > 1e-20 * raw_c)) {
     return fail("no motion: the DTE has no dynamic content to identify damping from");
   }
-  if (std::string why = solveLocals(&rec); !why.empty()) return fail(why);
+  if (gear_sim::Status why = solveLocals(&rec); !why.ok()) return fail(why.message());
   est.identifiable = true;
   segments_.push_back(std::move(rec));
   if (n_shared_ == 0 && estimate) {
@@ -827,8 +834,8 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
 // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
 // search runs only when it is not). Leaves each needed channel's sum in channel_sum (dte,
 // stiffness, torque, mesh_state).
-std::string IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index begin,
-                                              Eigen::Index end, double channel_sum[4]) const {
+gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index begin,
+                                                   Eigen::Index end, double channel_sum[4]) const {
   const Formulation f = options_.formulation;
   const double* channels[] = {s.dte, needsStiffness(f) ? s.stiffness : nullptr,
                               needsTorque(f, options_.model) ? s.torque : nullptr,
@@ -842,7 +849,7 @@ std::string IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index 
       if (!std::isfinite(channels[c][i])) {
         std::ostringstream m;
         m << "NaN/Inf in input (" << names[c] << " at t = " << s.time(i) << " s)";
-        return m.str();
+        return gear_sim::Status::notIdentifiable(m.str(), names[c]);
       }
     }
   }
@@ -851,8 +858,9 @@ std::string IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index 
 
 // Noise and signal levels, the segment means (time-weighted over the segment's intervals;
 // switches split when located), its breaks and, for a greybox shape, its basis values.
-std::string IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
-                                         const double channel_sum[4], SegmentRecord* rec) {
+gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin,
+                                              Eigen::Index end, const double channel_sum[4],
+                                              SegmentRecord* rec) {
   SegmentEstimate& est = rec->estimate;
   const long rows = static_cast<long>(end - begin);
   const Formulation f = options_.formulation;
@@ -888,15 +896,17 @@ std::string IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin
   if (shape_) {
     // The shape's basis functions at every sample of the segment, and their time-means.
     if (s.mesh_phase == nullptr) {
-      return "missing channel mesh_phase (needed by the greybox stiffness shape " +
-             toString(options_.stiffness_shape) + ")";
+      return gear_sim::Status::notIdentifiable(
+          "missing channel mesh_phase (needed by the greybox stiffness shape " +
+              toString(options_.stiffness_shape) + ")",
+          "mesh_phase");
     }
     basis_.resize(n_basis_, rows);
     for (Eigen::Index i = begin; i < end; ++i) {
       if (!std::isfinite(s.mesh_phase[i])) {
         std::ostringstream m;
         m << "NaN/Inf in input (mesh_phase at t = " << s.time(i) << " s)";
-        return m.str();
+        return gear_sim::Status::notIdentifiable(m.str(), "mesh_phase");
       }
       options_.stiffness_shape.basis(s.mesh_phase[i], &basis_(0, i - begin));
     }
@@ -909,8 +919,10 @@ std::string IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin
     }
     rec->mean_state = sum / static_cast<double>(rows);
     if (breaks_.empty()) {
-      return "mesh state constant over the segment: the stiffness levels are not "
-             "identifiable (segment shorter than a mesh period?)";
+      return gear_sim::Status::notIdentifiable(
+          "mesh state constant over the segment: the stiffness levels are not "
+          "identifiable (segment shorter than a mesh period?)",
+          "mesh_state");
     }
   }
   return {};
@@ -966,7 +978,7 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
 
 // Segment-local solve (final for models without shared unknowns): the condition number, and
 // the refusal of a rank-deficient or ill-conditioned segment.
-std::string IntegralMethod::solveLocals(SegmentRecord* rec) const {
+gear_sim::Status IntegralMethod::solveLocals(SegmentRecord* rec) const {
   if (n_local_ == 0) return {};
   const int q = static_cast<int>(columns_.size());
   Eigen::VectorXd x;
@@ -979,7 +991,7 @@ std::string IntegralMethod::solveLocals(SegmentRecord* rec) const {
   std::ostringstream m;
   m << "rank deficient or ill-conditioned (condition " << cond << " > " << options_.max_condition
     << ")";
-  return m.str();
+  return gear_sim::Status::notIdentifiable(m.str(), "max_condition");
 }
 
 IdentificationResult IntegralMethod::finish() const { return finishRange(0, segments_.size()); }

@@ -18,11 +18,11 @@
 namespace gear_damping_id {
 namespace {
 
+using gear_sim::Status;
 using wavelet_detail::kNaN;
 using wavelet_detail::kPi;
 using wavelet_detail::modulusOf;
 using wavelet_detail::num;
-using wavelet_detail::setError;
 
 // Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
 // (exp(-8.6^2/2) = 8.7e-17): those bins are set to zero, not multiplied.
@@ -325,25 +325,26 @@ void MorletCwt::release() {
   omega0s_.clear();
 }
 
-bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
-                          const std::vector<double>& omega0s, FftPlanning planning,
-                          std::string* error) {
+Status MorletCwt::configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                            const std::vector<double>& omega0s, FftPlanning planning) {
   release();
-  if (n < 2) return setError(error, "MorletCwt: n = " + std::to_string(n) + " must be >= 2"), false;
+  if (n < 2)
+    return Status::invalidArgument("MorletCwt: n = " + std::to_string(n) + " must be >= 2", "n");
   if (!(sample_rate > 0.0) || !std::isfinite(sample_rate)) {
-    return setError(error,
-                    "MorletCwt: sample_rate = " + num(sample_rate) + " Hz must be finite and > 0"),
-           false;
+    return Status::invalidArgument(
+        "MorletCwt: sample_rate = " + num(sample_rate) + " Hz must be finite and > 0",
+        "sample_rate");
   }
   if (omega0s.size() != 1 && omega0s.size() != frequencies_hz.size()) {
-    return setError(error, "MorletCwt: omega0s has " + std::to_string(omega0s.size()) +
-                               " values; it must have 1 or one per frequency (" +
-                               std::to_string(frequencies_hz.size()) + ")"),
-           false;
+    return Status::invalidArgument("MorletCwt: omega0s has " + std::to_string(omega0s.size()) +
+                                       " values; it must have 1 or one per frequency (" +
+                                       std::to_string(frequencies_hz.size()) + ")",
+                                   "omega0s");
   }
   for (double w : omega0s) {
     if (!(w >= kMinOmega0 && w <= kMaxOmega0)) {
-      return setError(error, "MorletCwt: omega0 = " + num(w) + " must be in [1, 1000]"), false;
+      return Status::invalidArgument("MorletCwt: omega0 = " + num(w) + " must be in [1, 1000]",
+                                     "omega0");
     }
   }
   const double nyquist = 0.5 * sample_rate;
@@ -351,9 +352,10 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
   for (size_t i = 0; i < frequencies_hz.size(); ++i) {
     const double f = frequencies_hz[i];
     if (!(f > 0.0 && f < nyquist)) {
-      return setError(error, "MorletCwt: frequencies[" + std::to_string(i) + "] = " + num(f) +
-                                 " Hz must be in (0, sample_rate/2 = " + num(nyquist) + " Hz)"),
-             false;
+      return Status::invalidArgument(
+          "MorletCwt: frequencies[" + std::to_string(i) + "] = " + num(f) +
+              " Hz must be in (0, sample_rate/2 = " + num(nyquist) + " Hz)",
+          "frequencies");
     }
     const double w = omega0s.size() == 1 ? omega0s[0] : omega0s[i];
     s_max = std::max(s_max, morletScale(f, w) * sample_rate);
@@ -361,9 +363,8 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
   const double padded = static_cast<double>(n) + std::ceil(kPadScales * s_max);
   const long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
   if (n_fft < 0 || n_fft > (1L << 40)) {
-    return setError(error, "MorletCwt: padded length for n = " + std::to_string(n) +
-                               " and the lowest frequency is too large"),
-           false;
+    return Status::resourceLimit("MorletCwt: padded length for n = " + std::to_string(n) +
+                                 " and the lowest frequency is too large");
   }
   auto f = std::make_unique<Fftw>();
   const size_t nc = static_cast<size_t>(n_fft);
@@ -371,7 +372,7 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
   f->in = fftw_alloc_complex(nc);
   f->out = fftw_alloc_complex(nc);
   if (!f->spec || !f->in || !f->out) {
-    return setError(error, "MorletCwt: out of memory for N = " + std::to_string(n_fft)), false;
+    return Status::resourceLimit("MorletCwt: out of memory for N = " + std::to_string(n_fft));
   }
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
@@ -379,7 +380,7 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
     f->r2c = fftw_plan_dft_r2c_1d(static_cast<int>(n_fft), reinterpret_cast<double*>(f->out),
                                   f->spec, flags);
   }
-  if (!f->r2c) return setError(error, "MorletCwt: FFTW could not plan the forward FFT"), false;
+  if (!f->r2c) return Status::internal("MorletCwt: FFTW could not plan the forward FFT");
   // No buffer is touched here: setSignal writes `out`'s first N doubles and `spec`; `in` is
   // written only in each row's band, and zeroed outside it on the first full inverse FFT
   // (in_clean). A spectrum-only or pruned-rows use (the damping fits) never faults in most
@@ -399,19 +400,18 @@ bool MorletCwt::configure(long n, double sample_rate, const std::vector<double>&
   frequencies_ = frequencies_hz;
   omega0s_.assign(frequencies_hz.size(), omega0s.empty() ? 6.0 : omega0s[0]);
   if (omega0s.size() == frequencies_hz.size()) omega0s_ = omega0s;
-  return true;
+  return {};
 }
 
-bool MorletCwt::setSignal(const double* y, std::string* error) {
+Status MorletCwt::setSignal(const double* y) {
   has_signal_ = false;
-  if (!configured()) return setError(error, "MorletCwt: not configured"), false;
-  if (!y) return setError(error, "MorletCwt: null signal"), false;
+  if (!configured()) return Status::internal("MorletCwt: not configured");
+  if (!y) return Status::internal("MorletCwt: null signal");
   double sum = 0.0;
   for (long j = 0; j < n_; ++j) {
     if (!std::isfinite(y[j])) {
-      return setError(error, "MorletCwt: sample " + std::to_string(j) + " is not finite (" +
-                                 num(y[j]) + ")"),
-             false;
+      return Status::invalidInput("MorletCwt: sample " + std::to_string(j) + " is not finite (" +
+                                  num(y[j]) + ")");
     }
     sum += y[j];
   }
@@ -421,7 +421,7 @@ bool MorletCwt::setSignal(const double* y, std::string* error) {
   std::memset(r + n_, 0, sizeof(double) * static_cast<size_t>(n_fft_ - n_));
   fftw_execute(fftw_->r2c);
   has_signal_ = true;
-  return true;
+  return {};
 }
 
 bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
@@ -683,39 +683,39 @@ bool MorletCwt::fullRowSingle() {
 bool MorletCwt::rowModulus(int i, double* out) { return rowModulusImpl(i, out); }
 bool MorletCwt::rowModulus(int i, float* out) { return rowModulusImpl(i, out); }
 
-bool MorletCwt::transform(const double* y, std::complex<double>* out, std::string* error) {
-  if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!setSignal(y, error)) return false;
+Status MorletCwt::transform(const double* y, std::complex<double>* out) {
+  if (!out) return Status::internal("MorletCwt: null output");
+  if (Status st = setSignal(y); !st.ok()) return st;
   for (int i = 0; i < rows(); ++i) {
     const std::complex<double>* w = row(i);
-    if (!w) return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
+    if (!w) return Status::internal("MorletCwt: FFTW could not plan the inverse FFT");
     std::memcpy(out + static_cast<size_t>(i) * static_cast<size_t>(n_), w,
                 sizeof(std::complex<double>) * static_cast<size_t>(n_));
   }
-  return true;
+  return {};
 }
 
 namespace {
 // Both transformModulus overloads: setSignal, then |W| of every row into out (row-major).
 template <typename T>
-bool transformModulusInto(MorletCwt* cwt, const double* y, T* out, std::string* error) {
-  if (!out) return setError(error, "MorletCwt: null output"), false;
-  if (!cwt->setSignal(y, error)) return false;
+Status transformModulusInto(MorletCwt* cwt, const double* y, T* out) {
+  if (!out) return Status::internal("MorletCwt: null output");
+  if (Status st = cwt->setSignal(y); !st.ok()) return st;
   for (int i = 0; i < cwt->rows(); ++i) {
     if (!cwt->rowModulus(i, out + static_cast<size_t>(i) * static_cast<size_t>(cwt->size()))) {
-      return setError(error, "MorletCwt: FFTW could not plan the inverse FFT"), false;
+      return Status::internal("MorletCwt: FFTW could not plan the inverse FFT");
     }
   }
-  return true;
+  return {};
 }
 }  // namespace
 
-bool MorletCwt::transformModulus(const double* y, double* out, std::string* error) {
-  return transformModulusInto(this, y, out, error);
+Status MorletCwt::transformModulus(const double* y, double* out) {
+  return transformModulusInto(this, y, out);
 }
 
-bool MorletCwt::transformModulus(const double* y, float* out, std::string* error) {
-  return transformModulusInto(this, y, out, error);
+Status MorletCwt::transformModulus(const double* y, float* out) {
+  return transformModulusInto(this, y, out);
 }
 
 namespace {
@@ -769,18 +769,17 @@ const std::complex<double>* MorletCwt::spectrum() const {
 // ------------------------------------------------------------------------------------------
 // MorletScalogram
 
-bool MorletScalogram::configure(long n, double sample_rate,
-                                const std::vector<double>& frequencies_hz, double omega0,
-                                FftPlanning planning, int threads, std::string* error,
-                                Precision precision) {
+Status MorletScalogram::configure(long n, double sample_rate,
+                                  const std::vector<double>& frequencies_hz, double omega0,
+                                  FftPlanning planning, int threads, Precision precision) {
   n_ = 0;
   frequencies_.clear();
   group_rows_.clear();
   workers_.clear();
   if (threads < 1 || threads > 256) {
-    return setError(error, "MorletScalogram: threads = " + std::to_string(threads) +
-                               " must be in [1, 256]"),
-           false;
+    return Status::invalidArgument(
+        "MorletScalogram: threads = " + std::to_string(threads) + " must be in [1, 256]",
+        "threads");
   }
   // Each row's own FFT length: its 8-scale padding; rows whose band reaches the Nyquist
   // frequency (a band-limited wavelet, whose cut rings far beyond 8 scales) keep the padding of
@@ -816,7 +815,7 @@ bool MorletScalogram::configure(long n, double sample_rate,
       std::vector<double> f;
       for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
       MorletCwt cwt;
-      if (!cwt.configure(n, sample_rate, f, omega0, planning, error)) return false;
+      if (Status st = cwt.configure(n, sample_rate, f, omega0, planning); !st.ok()) return st;
       cwt.setPrecision(precision);
       w.push_back(std::move(cwt));
     }
@@ -825,7 +824,7 @@ bool MorletScalogram::configure(long n, double sample_rate,
   frequencies_ = frequencies_hz;
   group_rows_ = std::move(groups);
   workers_ = std::move(workers);
-  return true;
+  return {};
 }
 
 long MorletScalogram::groupLength(int g) const {
@@ -836,8 +835,8 @@ long MorletScalogram::groupLength(int g) const {
 // Every row of signal y on the worker threads: each row's |W| is written to dest(t, row) (a
 // T* of n values) on thread t, then done(t, row, that pointer) is called on the same thread.
 template <typename T, typename Dest, typename Done>
-bool MorletScalogram::runRows(const double* y, Dest dest, Done done, std::string* error) {
-  if (workers_.empty()) return setError(error, "MorletScalogram: not configured"), false;
+Status MorletScalogram::runRows(const double* y, Dest dest, Done done) {
+  if (workers_.empty()) return Status::internal("MorletScalogram: not configured");
   // Work items (group, local row), dealt round-robin over the threads; each thread transforms
   // the signal once per group it has rows in.
   std::vector<std::pair<int, int>> items;
@@ -847,20 +846,22 @@ bool MorletScalogram::runRows(const double* y, Dest dest, Done done, std::string
     }
   }
   const int nt = threads();
-  std::vector<std::string> errors(static_cast<size_t>(nt));
+  std::vector<Status> errors(static_cast<size_t>(nt));
   auto work = [&](int t) {
     std::vector<MorletCwt>& cwts = workers_[size_t(t)];
     std::vector<bool> loaded(cwts.size(), false);
     for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
       const int g = items[it].first, k = items[it].second;
       if (!loaded[size_t(g)]) {
-        if (!cwts[size_t(g)].setSignal(y, &errors[size_t(t)])) return;
+        errors[size_t(t)] = cwts[size_t(g)].setSignal(y);
+        if (!errors[size_t(t)].ok()) return;
         loaded[size_t(g)] = true;
       }
       const int row = group_rows_[size_t(g)][size_t(k)];
       T* d = dest(t, row);
       if (!cwts[size_t(g)].rowModulus(k, d)) {
-        errors[size_t(t)] = "MorletScalogram: FFTW could not plan the inverse FFT";
+        errors[size_t(t)] =
+            Status::internal("MorletScalogram: FFTW could not plan the inverse FFT");
         return;
       }
       done(t, row, d);
@@ -873,37 +874,32 @@ bool MorletScalogram::runRows(const double* y, Dest dest, Done done, std::string
     for (int t = 0; t < nt; ++t) pool.emplace_back(work, t);
     for (auto& th : pool) th.join();
   }
-  for (const std::string& e : errors) {
-    if (!e.empty()) return setError(error, e), false;
+  for (const Status& e : errors) {
+    if (!e.ok()) return e;
   }
-  return true;
+  return {};
 }
 
 template <typename T>
-bool MorletScalogram::modulusImpl(const double* y, T* out, std::string* error) {
-  if (!out) return setError(error, "MorletScalogram: null output"), false;
+Status MorletScalogram::modulusImpl(const double* y, T* out) {
+  if (!out) return Status::internal("MorletScalogram: null output");
   const size_t n = static_cast<size_t>(n_);
   return runRows<T>(
       y, [&](int, int row) { return out + static_cast<size_t>(row) * n; },
-      [](int, int, const T*) {}, error);
+      [](int, int, const T*) {});
 }
 
-bool MorletScalogram::forEachRow(const double* y,
-                                 const std::function<void(int, const double*)>& sink,
-                                 std::string* error) {
+Status MorletScalogram::forEachRow(const double* y,
+                                   const std::function<void(int, const double*)>& sink) {
   std::vector<std::vector<double>> buffers(static_cast<size_t>(std::max(1, threads())),
                                            std::vector<double>(static_cast<size_t>(n_)));
   return runRows<double>(
       y, [&](int t, int) { return buffers[size_t(t)].data(); },
-      [&](int, int row, const double* d) { sink(row, d); }, error);
+      [&](int, int row, const double* d) { sink(row, d); });
 }
 
-bool MorletScalogram::modulus(const double* y, double* out, std::string* error) {
-  return modulusImpl(y, out, error);
-}
+Status MorletScalogram::modulus(const double* y, double* out) { return modulusImpl(y, out); }
 
-bool MorletScalogram::modulus(const double* y, float* out, std::string* error) {
-  return modulusImpl(y, out, error);
-}
+Status MorletScalogram::modulus(const double* y, float* out) { return modulusImpl(y, out); }
 
 }  // namespace gear_damping_id

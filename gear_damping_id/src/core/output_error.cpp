@@ -668,12 +668,14 @@ class Refinement {
              ste),
         substeps_(substepsFor(res->omega0, s.dt)) {}
 
-  bool run(std::string* error) {
+  gear_sim::Status run() {
     setUnknowns();
-    if (!startValues(error) || !iterate(error) || !covariances(error)) return false;
+    if (gear_sim::Status s = startValues(); !s.ok()) return s;
+    if (gear_sim::Status s = iterate(); !s.ok()) return s;
+    if (gear_sim::Status s = covariances(); !s.ok()) return s;
     fillSegments();
     fillShared();
-    return true;
+    return {};
   }
 
  private:
@@ -715,7 +717,7 @@ class Refinement {
   }
 
   // Start values from the integral method; keeps its estimates beside the refined ones.
-  bool startValues(std::string* error) {
+  gear_sim::Status startValues() {
     active_.assign(nseg_, 0);
     loc_.assign(nseg_, Eigen::VectorXd::Zero(nl_));
     sh_ = Eigen::VectorXd::Zero(ns_);
@@ -731,8 +733,8 @@ class Refinement {
       } else if (!load_ && res_->constant && res_->constant->identifiable) {
         sh_[0] = res_->constant->C;
       } else {
-        *error = "refinement: no identifiable shared estimate to start from";
-        return false;
+        return gear_sim::Status::notIdentifiable(
+            "refinement: no identifiable shared estimate to start from");
       }
     }
     for (int k = 0; k < nste_; ++k) sh_[ste_shared_ + k] = ste_->theta[k];
@@ -753,8 +755,7 @@ class Refinement {
       if (piecewise_) x[k++] = e.C;
       if (shape_) {
         if (static_cast<int>(e.stiffness_curve.size()) != nb_) {
-          *error = "refinement: no stiffness curve to start from";
-          return false;
+          return gear_sim::Status::notIdentifiable("refinement: no stiffness curve to start from");
         }
         for (int b = 0; b < nb_; ++b) x[k++] = e.stiffness_curve[b] / me_;
       } else if (grey_) {
@@ -762,7 +763,7 @@ class Refinement {
         x[k++] = (e.k_max - e.k_min) / me_;
       }
     }
-    return true;
+    return {};
   }
 
   Params makeParams(const Eigen::VectorXd& x, const Eigen::VectorXd& g) const {
@@ -1050,15 +1051,14 @@ class Refinement {
   // refined alone, as live; all segments for shared unknowns): round 0 assumes white noise;
   // then the AR model of its residuals and the prewhitened problem, refitted until the noise
   // model settles.
-  bool iterate(std::string* error) {
+  gear_sim::Status iterate() {
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
       if ((piecewise_ && ns_ == 0) || problems_.empty()) problems_.emplace_back();
       problems_.back().push_back(i);
     }
     if (problems_.empty()) {
-      *error = "refinement: no identifiable segment";
-      return false;
+      return gear_sim::Status::notIdentifiable("refinement: no identifiable segment");
     }
     normals_.assign(nseg_, Normal{});
     dl_scratch_.assign(nseg_, Eigen::VectorXd());
@@ -1072,9 +1072,9 @@ class Refinement {
         bool conv = false, finite = true;
         iterations_ += gaussNewton(set, noise, &conv, &finite);
         if (!finite) {
-          *error = "refinement: the model response is not finite at the " +
-                   std::string(round == 0 ? "integral-method estimate" : "white-noise estimate");
-          return false;
+          return gear_sim::Status::notIdentifiable(
+              "refinement: the model response is not finite at the " +
+              std::string(round == 0 ? "integral-method estimate" : "white-noise estimate"));
         }
         for (size_t i : set) converged_[i] = conv;
         const NoiseModel next = pooledFit(set);
@@ -1083,11 +1083,11 @@ class Refinement {
       }
       for (size_t i : set) noise_of_[i] = noise;
     }
-    return true;
+    return {};
   }
 
   // Covariances at the solution and the pooled noise statistics.
-  bool covariances(std::string* error) {
+  gear_sim::Status covariances() {
     Nll_inv_.assign(nseg_, Eigen::MatrixXd());
     Ainv_of_.assign(nseg_, Eigen::MatrixXd());
     Locals dl(nseg_);
@@ -1107,8 +1107,7 @@ class Refinement {
     }
     const long unknowns = static_cast<long>(n_active) * nl_ + ns_;
     if (rows_total - unknowns < 1) {
-      *error = "refinement: too few samples for the unknowns";
-      return false;
+      return gear_sim::Status::notIdentifiable("refinement: too few samples for the unknowns");
     }
     // Innovation variance (white noise: the residual variance) for the covariance.
     sigma2_pooled_ = cost_total / static_cast<double>(rows_total - unknowns);
@@ -1120,7 +1119,7 @@ class Refinement {
     res_->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
     res_->estimator = "output_error";
     res_->iterations = iterations_;
-    return true;
+    return {};
   }
 
   // Within-segment variation of the damping with the load (piecewise model): the converged
@@ -1342,38 +1341,38 @@ class Refinement {
 
 }  // namespace
 
-bool refineOutputError(const SignalView& s, const std::vector<std::pair<Index, Index>>& ranges,
-                       const GearConstants& gear, const IdentificationOptions& o,
-                       IdentificationResult* res, std::string* error, bool reference_integration,
-                       SteRefinement* ste) {
-  if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return true;
+gear_sim::Status refineOutputError(const SignalView& s,
+                                   const std::vector<std::pair<Index, Index>>& ranges,
+                                   const GearConstants& gear, const IdentificationOptions& o,
+                                   IdentificationResult* res, bool reference_integration,
+                                   SteRefinement* ste) {
+  if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return {};
   if (ranges.size() != res->segments.size()) {
-    *error = "refinement: segment ranges do not match the result";
-    return false;
+    return gear_sim::Status::internal("refinement: segment ranges do not match the result");
   }
   const bool shape = o.formulation == Formulation::Greybox &&
                      o.stiffness_shape.kind != StiffnessShape::Kind::Square;
   if (shape && s.mesh_phase == nullptr) {
-    *error = "refinement: the stiffness shape " + toString(o.stiffness_shape) +
-             " needs the mesh_phase channel";
-    return false;
+    return gear_sim::Status::invalidInput("refinement: the stiffness shape " +
+                                              toString(o.stiffness_shape) +
+                                              " needs the mesh_phase channel",
+                                          "mesh_phase");
   }
   if (ste != nullptr) {
     if (shape || o.model == DampingModel::LoadLaw || s.mesh_phase == nullptr) {
-      *error =
+      return gear_sim::Status::invalidArgument(
           "refinement: the STE needs the mesh_phase channel, the square stiffness and "
-          "piecewise or constant damping";
-      return false;
+          "piecewise or constant damping");
     }
     if (ste->basis.size() > SteRefinement::kMaxTerms ||
         static_cast<int>(ste->theta.size()) != ste->basis.size()) {
-      *error = "refinement: at most " + std::to_string(SteRefinement::kMaxTerms) +
-               " STE coefficients, with start values";
-      return false;
+      return gear_sim::Status::invalidArgument("refinement: at most " +
+                                               std::to_string(SteRefinement::kMaxTerms) +
+                                               " STE coefficients, with start values");
     }
   }
   Refinement r(s, ranges, gear, o, res, reference_integration, ste);
-  return r.run(error);
+  return r.run();
 }
 
 // ----------------------------------------------------------------------------------------------
@@ -1571,23 +1570,21 @@ class ResponseCoefficients {
 
 }  // namespace
 
-bool modeledResponse(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
-                     ModeledResponse* out, std::string* error) {
+gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
+                                 const IdentificationResult& r, ModeledResponse* out) {
   if (r.segments.empty()) {
-    *error = "modeled response: no segments";
-    return false;
+    return gear_sim::Status::notIdentifiable("modeled response: no segments");
   }
   std::vector<SegmentEstimate> seg;
   if (!segmentsWithFallbacks(r, &seg)) {
-    *error = "modeled response: no identifiable segment";
-    return false;
+    return gear_sim::Status::notIdentifiable("modeled response: no identifiable segment");
   }
   const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
   const Index end =
       std::min<Index>(s.n, static_cast<Index>(std::llround((seg.back().t_end - s.t0) / s.dt)));
   if (begin < 0 || end - begin < 2) {
-    *error = "modeled response: the segments do not lie in the record";
-    return false;
+    return gear_sim::Status::notIdentifiable(
+        "modeled response: the segments do not lie in the record");
   }
   // Initial state: the first window/segment estimate at the first sample.
   gear_sim::SdofState init{s.dte[begin], 0.0};
@@ -1616,19 +1613,17 @@ bool modeledResponse(const SignalView& s, const GearConstants& gear, const Ident
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
-  const std::string e = gear_sim::integrateSdofAffine(coeffs, stage, bps, s.time(begin), s.dt, n,
-                                                      init, gear_sim::Integrator::Rk4, substeps,
-                                                      out->modeled.data(), nullptr);
-  if (!e.empty()) {
-    *error = "modeled response: " + e;
-    return false;
-  }
+  if (const gear_sim::Status e = gear_sim::integrateSdofAffine(
+          coeffs, stage, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4, substeps,
+          out->modeled.data(), nullptr);
+      !e.ok())
+    return e.withContext("modeled response");
   if (!out->modeled.allFinite()) {
-    *error = "modeled response: the re-simulation diverged (non-finite values)";
-    return false;
+    return gear_sim::Status::notIdentifiable(
+        "modeled response: the re-simulation diverged (non-finite values)");
   }
   fitMetrics(out->observed, out->modeled, &out->nrmse, &out->fit_percent);
-  return true;
+  return {};
 }
 
 }  // namespace gear_damping_id

@@ -101,7 +101,7 @@ SegmentDriver::SegmentOutput SegmentDriver::unusableSegment(const SignalView& v,
   est.t_start = v.time(begin);
   est.t_end = v.time(std::max(begin, end - 1)) + v.dt;
   est.samples = static_cast<long>(std::max<Eigen::Index>(end - begin, 0));
-  const std::string missing = missingChannel(v, options_.formulation, options_.model);
+  const std::string missing = checkChannels(v, options_.formulation, options_.model).field();
   est.reason = end - begin < 1
                    ? "too few samples (0 in the segment)"
                    : "missing channel " + missing + " (needed by " +
@@ -139,12 +139,14 @@ SegmentDriver::SegmentOutput SegmentDriver::piecewiseSegment(IntegralMethod* m, 
     out.refinement_skipped = true;
   } else if (wants) {
     IdentificationResult refined = seg;
-    std::string why;
-    if (refineOutputError(v, {{begin, end}}, gear_, options_, &refined, &why)) {
+    if (const gear_sim::Status refine =
+            refineOutputError(v, {{begin, end}}, gear_, options_, &refined);
+        refine.ok()) {
       keepIntegralEstimates(seg, &refined);
       seg = std::move(refined);
     } else {
-      out.warning = "output-error refinement failed (" + why + "): integral estimate kept";
+      out.warning =
+          "output-error refinement failed (" + refine.message() + "): integral estimate kept";
       seg.warnings.push_back({quality_code::kRefineFailed, out.warning});
     }
   }
@@ -307,7 +309,7 @@ SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Inde
                                                 Eigen::Index end, bool refine_allowed) {
   resolveWindow(v);
   if (ste_on_) return addSte(v, begin, end, refine_allowed);
-  if (end - begin < 1 || !missingChannel(v, options_.formulation, options_.model).empty()) {
+  if (end - begin < 1 || !checkChannels(v, options_.formulation, options_.model).ok()) {
     SegmentOutput out = unusableSegment(v, begin, end);
     keep({out.estimate, {}});
     return out;
@@ -321,7 +323,7 @@ SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Inde
 std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView& v,
                                                                 const SampleRanges& ranges) {
   resolveWindow(v);
-  const bool missing = !missingChannel(v, options_.formulation, options_.model).empty();
+  const bool missing = !checkChannels(v, options_.formulation, options_.model).ok();
   const bool sliding = limits_.shared_segments != std::numeric_limits<size_t>::max();
   std::vector<SegmentOutput> outs;
   if (limits_.threads <= 1 || ranges.size() < 2 || missing || sliding ||
@@ -392,14 +394,15 @@ IdentificationResult SegmentDriver::finish(const SignalView* record,
     return r;
   }
   IdentificationResult refined = r;
-  std::string why;
-  if (refineOutputError(*record, *ranges, gear_, options_, &refined, &why)) {
+  if (const gear_sim::Status refine =
+          refineOutputError(*record, *ranges, gear_, options_, &refined);
+      refine.ok()) {
     keepIntegralEstimates(r, &refined);
     r = std::move(refined);
   } else {
     r.warnings.push_back(
-        {quality_code::kRefineFailed,
-         "output-error refinement failed (" + why + "): integral-method estimates reported"});
+        {quality_code::kRefineFailed, "output-error refinement failed (" + refine.message() +
+                                          "): integral-method estimates reported"});
   }
   applyQualityFlags(options_, &r);
   return r;
@@ -416,26 +419,24 @@ double legacyForcing(const SignalView& v, const SampleRanges& ranges, const Gear
   return gear.force_factor * sum / static_cast<double>(e - b);
 }
 
-bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
-              const IdentificationOptions& options, IdentificationResult* result,
-              std::string* error, int threads) {
-  std::string e = options.validate();
-  if (e.empty()) e = gear.validate();
-  if (e.empty())
-    e = checkSignalTable(table, options.formulation, options.model, options.time_tolerance);
-  if (!e.empty()) {
-    *error = e;
-    return false;
-  }
+gear_sim::Status identify(const gear_sim::SignalTable& table, const GearConstants& gear,
+                          const IdentificationOptions& options, IdentificationResult* result,
+                          int threads) {
+  if (gear_sim::Status s = options.check(); !s.ok()) return s;
+  if (gear_sim::Status s = gear.check(); !s.ok()) return s;
+  if (gear_sim::Status s =
+          checkSignalTable(table, options.formulation, options.model, options.time_tolerance);
+      !s.ok())
+    return s;
   const SignalView view = SignalView::of(table);
   IdentificationOptions o = options;
   if (o.window_length <= 0.0) o.window_length = defaultWindowLength(view, gear);
   const SampleRanges ranges = segmentRanges(view, o);
-  if (ranges.empty()) {
-    *error = "no samples in the analysed time range [" + std::to_string(o.t_start) + ", " +
-             std::to_string(o.t_end) + "] s";
-    return false;
-  }
+  if (ranges.empty())
+    return gear_sim::Status::notIdentifiable("no samples in the analysed time range [" +
+                                                 std::to_string(o.t_start) + ", " +
+                                                 std::to_string(o.t_end) + "] s",
+                                             "t_start");
   DriverLimits limits;
   limits.threads = threads;
   SegmentDriver driver(o, gear, limits);
@@ -443,7 +444,7 @@ bool identify(const gear_sim::SignalTable& table, const GearConstants& gear,
     driver.setLegacyForcing(legacyForcing(view, ranges, gear));
   driver.addAll(view, ranges);
   *result = driver.finish(&view, &ranges);
-  return true;
+  return {};
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -37,16 +37,16 @@ std::string pendingReason(size_t have, size_t need, double cycles, double need_c
 
 }  // namespace
 
-std::string SegmentDriver::setSte(const SteModelOptions& ste, size_t calibration_segments) {
-  if (auto e = ste.validate(); !e.empty()) return e;
-  if (auto e = steOptionsError(options_); !e.empty()) return e;
+gear_sim::Status SegmentDriver::setSte(const SteModelOptions& ste, size_t calibration_segments) {
+  if (gear_sim::Status s = ste.check(); !s.ok()) return s;
+  if (gear_sim::Status s = checkSteOptions(options_); !s.ok()) return s;
   ste_on_ = true;
   ste_options_ = ste;
   ste_calibration_ = options_.model == DampingModel::Constant
                          ? std::numeric_limits<size_t>::max()
                          : std::max<size_t>(calibration_segments, 1);
   shared_ = false;  // the STE path handles the constant model's shared C itself
-  return "";
+  return {};
 }
 
 // Mesh cycles the calibration must span: one revolution of each shaft whose orders are
@@ -109,13 +109,13 @@ void SegmentDriver::calibrate() {
   const double** dst[5] = {&v.dte, &v.stiffness, &v.torque, &v.mesh_state, &v.mesh_phase};
   for (int k = 0; k < 5; ++k) *dst[k] = c.present[k] ? c.col[k].data() : nullptr;
   IdentificationResult joint;
-  std::string why;
-  const bool ok =
-      identifySteSegments(v, c.ranges, gear_, options_, ste_options_, &joint, &ste_, &why);
+  const gear_sim::Status calibrated =
+      identifySteSegments(v, c.ranges, gear_, options_, ste_options_, &joint, &ste_);
+  const bool ok = calibrated.ok();
   if (!ok || joint.segments.size() != c.ranges.size()) {
     ste_ = SteResult{};  // no STE to hold: later segments are reported not identifiable
     ste_.options = ste_options_;
-    if (why.empty()) why = "a calibration segment has too few samples";
+    const std::string why = ok ? "a calibration segment has too few samples" : calibrated.message();
     for (auto& s : joint.segments) s = SegmentEstimate();
     joint.segments.resize(c.ranges.size());
     for (auto& s : joint.segments) s.reason = "STE calibration failed: " + why;
@@ -160,13 +160,15 @@ SegmentDriver::SegmentOutput SegmentDriver::heldSteSegment(const SignalView& v, 
     o.refine = IdentificationOptions::Refine::Never;
     out.refinement_skipped = true;
   }
-  std::string why;
-  if (ste_.theta.empty() || ste_.theta_cov.size() == 0 || !ste_.theta_cov.allFinite() ||
-      !identifySegmentWithHeldSte(s, begin - lo, end - lo, gear_, o, ste_, &out.result, &why)) {
+  const bool held = !ste_.theta.empty() && ste_.theta_cov.size() != 0 && ste_.theta_cov.allFinite();
+  const gear_sim::Status fit =
+      held ? identifySegmentWithHeldSte(s, begin - lo, end - lo, gear_, o, ste_, &out.result)
+           : gear_sim::Status::notIdentifiable("no STE to hold (the calibration gave none)");
+  if (!fit.ok()) {
     out.result = unusableSegment(v, begin, end).result;
     out.result.segments[0].reason = ste_.theta.empty() || !ste_.theta_cov.allFinite()
                                         ? "no STE to hold (the calibration gave none)"
-                                        : "held-STE fit failed: " + why;
+                                        : "held-STE fit failed: " + fit.message();
   }
   SegmentEstimate& e = out.result.segments[0];
   e.t_start = v.time(begin);
@@ -181,7 +183,7 @@ SegmentDriver::SegmentOutput SegmentDriver::heldSteSegment(const SignalView& v, 
 
 SegmentDriver::SegmentOutput SegmentDriver::addSte(const SignalView& v, Eigen::Index begin,
                                                    Eigen::Index end, bool refine_allowed) {
-  std::string missing = missingChannel(v, options_.formulation, options_.model);
+  std::string missing = checkChannels(v, options_.formulation, options_.model).field();
   if (missing.empty() && (v.mesh_phase == nullptr || v.torque == nullptr))
     missing = v.mesh_phase == nullptr ? "mesh_phase" : "torque";
   Eigen::Index lo = 0;

@@ -74,26 +74,24 @@ ChannelSet ChannelSet::of(const gear_sim::SignalTable& t) {
   return c;
 }
 
-std::string missingChannel(const ChannelSet& c, Formulation f, DampingModel m) {
-  if (!c.dte) return "dte";
-  if (needsStiffness(f) && !c.stiffness) return "stiffness";
-  if (needsMeshState(f) && !c.mesh_state) return "mesh_state";
-  if (needsTorque(f, m) && !c.torque) return "torque";
-  return "";
-}
-
-std::string missingChannelError(const ChannelSet& c, Formulation f, DampingModel m) {
-  const std::string name = missingChannel(c, f, m);
-  if (name.empty()) return "";
+gear_sim::Status checkChannels(const ChannelSet& c, Formulation f, DampingModel m) {
+  const char* name = !c.dte                               ? "dte"
+                     : needsStiffness(f) && !c.stiffness  ? "stiffness"
+                     : needsMeshState(f) && !c.mesh_state ? "mesh_state"
+                     : needsTorque(f, m) && !c.torque     ? "torque"
+                                                          : nullptr;
+  if (name == nullptr) return {};
   const bool by_formulation =
-      name != "torque" || f == Formulation::Known || f == Formulation::Greybox;
-  return "column '" + name + "' is required by " +
-         (by_formulation ? "formulation '" + toString(f) + "'" : std::string("model 'load_law'")) +
-         " but missing";
+      std::string(name) != "torque" || f == Formulation::Known || f == Formulation::Greybox;
+  return gear_sim::Status::invalidInput(
+      "column '" + std::string(name) + "' is required by " +
+          (by_formulation ? "formulation '" + toString(f) + "'" : std::string("model 'load_law'")) +
+          " but missing",
+      name);
 }
 
-std::string missingChannel(const SignalView& v, Formulation f, DampingModel m) {
-  return missingChannel(ChannelSet::of(v), f, m);
+gear_sim::Status checkChannels(const SignalView& v, Formulation f, DampingModel m) {
+  return checkChannels(ChannelSet::of(v), f, m);
 }
 
 }  // namespace gear_damping_id

@@ -44,7 +44,7 @@ gear_sim::OptionStatus SteModelOptions::check() const {
   return {};
 }
 
-bool parseSteSpec(const std::string& spec, SteModelOptions* out, std::string* error) {
+gear_sim::Status parseSteSpec(const std::string& spec, SteModelOptions* out) {
   SteModelOptions o = *out;
   o.mesh_orders = o.pinion_orders = o.gear_orders = 0;
   o.offset = true;
@@ -68,19 +68,16 @@ bool parseSteSpec(const std::string& spec, SteModelOptions* out, std::string* er
         v = -1;
       }
     }
-    if (v < 0 || v > 32 || (key != "mesh" && key != "shaft" && key != "pinion" && key != "gear")) {
-      if (error)
-        *error =
-            "--ste: '" + item +
-            "' is not one of mesh:H, shaft:S, pinion:S, gear:S (0..32), offset, nooffset, none";
-      return false;
-    }
+    if (v < 0 || v > 32 || (key != "mesh" && key != "shaft" && key != "pinion" && key != "gear"))
+      return gear_sim::Status::invalidArgument(
+          "'" + item +
+          "' is not one of mesh:H, shaft:S, pinion:S, gear:S (0..32), offset, nooffset, none");
     if (key == "mesh") o.mesh_orders = v;
     if (key == "shaft" || key == "pinion") o.pinion_orders = v;
     if (key == "shaft" || key == "gear") o.gear_orders = v;
   }
   *out = o;
-  return true;
+  return {};
 }
 
 namespace {
@@ -193,8 +190,9 @@ void refineWithSte(const SignalView& view,
   sr.relative = relative;
   sr.theta = st->theta;
   IdentificationResult refined = *res;
-  std::string why;
-  if (refineOutputError(view, ranges, gear, options, &refined, &why, false, &sr)) {
+  const gear_sim::Status refine =
+      refineOutputError(view, ranges, gear, options, &refined, false, &sr);
+  if (refine.ok()) {
     keepIntegralEstimates(*res, &refined);
     *res = std::move(refined);
     res->estimator = "output_error_ste";
@@ -212,8 +210,8 @@ void refineWithSte(const SignalView& view,
     st->refined = true;
   } else {
     res->warnings.push_back(
-        {quality_code::kRefineFailed,
-         "output-error refinement failed (" + why + "): integral-method estimates reported"});
+        {quality_code::kRefineFailed, "output-error refinement failed (" + refine.message() +
+                                          "): integral-method estimates reported"});
   }
   applyQualityFlags(options, res);
 }
@@ -257,8 +255,8 @@ class SteFit {
     return !segs_.empty();
   }
 
-  /// Step 2: the joint Gauss-Newton solve. False when rank deficient (`*why`).
-  bool solve(IdentificationResult* res, std::string* why);
+  /// Step 2: the joint Gauss-Newton solve. NotIdentifiable when rank deficient.
+  gear_sim::Status solve(IdentificationResult* res);
   /// Step 3: standard errors (window-clustered sandwich or sigma^2 A^-1, the larger).
   void covariance();
   /// Step 4: the damping estimates in the usual shape.
@@ -276,7 +274,7 @@ class SteFit {
 
   /// The held-STE fit of segment 0 (addSegments with one range): the local unknowns given
   /// theta, their covariance (theta's propagated) and the sensitivity of C to theta.
-  bool solveHeld(const SteResult& ste, std::string* why);
+  gear_sim::Status solveHeld(const SteResult& ste);
   /// Held: theta's share of the variance of C [1/s^2].
   double thetaVarianceOfC() const { return theta_var_of_C_; }
 
@@ -502,7 +500,7 @@ void SteFit::designMap(int s, bool with_theta, Eigen::MatrixXd* Mp, std::vector<
   idx[cb] = Pn_;
 }
 
-bool SteFit::solve(IdentificationResult* res, std::string* why) {
+gear_sim::Status SteFit::solve(IdentificationResult* res) {
   const int S = static_cast<int>(segs_.size()), Pn = Pn_;
   Eigen::MatrixXd N(Pn + 1, Pn + 1), M;
   std::vector<int> idx;
@@ -559,10 +557,11 @@ bool SteFit::solve(IdentificationResult* res, std::string* why) {
                                                   std::to_string(max_it) + " iterations"});
     }
   }
-  if (!solved && why)
-    *why = "--ste: the joint damping/STE problem is rank deficient (condition " +
-           std::to_string(cond_) + ")";
-  return solved;
+  if (!solved)
+    return gear_sim::Status::notIdentifiable(
+        "--ste: the joint damping/STE problem is rank deficient (condition " +
+        std::to_string(cond_) + ")");
+  return {};
 }
 
 // The window-clustered "meat" sum_w g_w g_w^T of the sandwich, g_w = X_w^T r_w the window's
@@ -727,7 +726,7 @@ void SteFit::fillSte(SteResult* ste, IdentificationResult* result) const {
 // multipliers (the b column less the theta columns is the target). The covariance is the larger
 // of sigma^2 A^-1 and the window-clustered sandwich, plus theta's covariance propagated through
 // dC/dtheta = -A^-1 X^T x_theta (the design linearised at the solution).
-bool SteFit::solveHeld(const SteResult& ste, std::string* why) {
+gear_sim::Status SteFit::solveHeld(const SteResult& ste) {
   const int cb = n_a_ + J_;
   for (int j = 0; j < J_; ++j) a0_[off_theta_ + j] = ste.theta[j];
   Eigen::MatrixXd M;
@@ -744,10 +743,8 @@ bool SteFit::solveHeld(const SteResult& ste, std::string* why) {
   const Eigen::VectorXd lam = es.eigenvalues();
   cond_ = lam.minCoeff() > 0.0 ? std::sqrt(lam.maxCoeff() / lam.minCoeff())
                                : std::numeric_limits<double>::infinity();
-  if (!(cond_ <= 1e7)) {
-    if (why) *why = "the held-STE fit of the segment is rank deficient";
-    return false;
-  }
+  if (!(cond_ <= 1e7))
+    return gear_sim::Status::notIdentifiable("the held-STE fit of the segment is rank deficient");
   const Eigen::MatrixXd Ainv = d.asDiagonal() * es.eigenvectors() *
                                lam.cwiseInverse().asDiagonal() * es.eigenvectors().transpose() *
                                d.asDiagonal();
@@ -771,40 +768,52 @@ bool SteFit::solveHeld(const SteResult& ste, std::string* why) {
   for (int a = 0; a < n_a_; ++a)
     for (int b = 0; b < n_a_; ++b) cov_(idx[a], idx[b]) += prop(a, b);
   theta_var_of_C_ = prop(0, 0);
-  return prop.allFinite();
+  if (!prop.allFinite())
+    return gear_sim::Status::notIdentifiable(
+        "the held-STE fit: the STE covariance propagated into C is not finite");
+  return {};
 }
 
-// The input checks of identifyWithSte, in order; "" when the record can be used.
-std::string steInputError(const gear_sim::SignalTable& table, const GearConstants& gear,
-                          const IdentificationOptions& options, const SteModelOptions& so) {
-  if (auto e = options.validate(); !e.empty()) return e;
-  if (auto e = gear.validate(); !e.empty()) return e;
-  if (auto e = so.validate(); !e.empty()) return e;
-  if (auto e = steOptionsError(options); !e.empty()) return e;
+// The input checks of identifyWithSte, in order; ok when the record can be used.
+gear_sim::Status checkSteInput(const gear_sim::SignalTable& table, const GearConstants& gear,
+                               const IdentificationOptions& options, const SteModelOptions& so) {
+  using gear_sim::Status;
+  if (Status s = options.check(); !s.ok()) return s;
+  if (Status s = gear.check(); !s.ok()) return s;
+  if (Status s = so.check(); !s.ok()) return s;
+  if (Status s = checkSteOptions(options); !s.ok()) return s.withContext("--ste");
   using gear_sim::SignalTable;
   const bool greybox = options.formulation == Formulation::Greybox;
   if (!SignalTable::has(table.mesh_phase))
-    return "--ste needs the mesh_phase column (the STE is a function of the mesh phase)";
-  if (!SignalTable::has(table.torque)) return "--ste needs the torque column";
+    return Status::invalidInput(
+        "--ste needs the mesh_phase column (the STE is a function of the mesh phase)",
+        "mesh_phase");
+  if (!SignalTable::has(table.torque))
+    return Status::invalidInput("--ste needs the torque column", "torque");
   if (!greybox && !SignalTable::has(table.stiffness))
-    return "--ste with the known formulation needs the stiffness column";
+    return Status::invalidInput("--ste with the known formulation needs the stiffness column",
+                                "stiffness");
   if (greybox && !SignalTable::has(table.mesh_state))
-    return "--ste with the greybox formulation needs the mesh_state column";
+    return Status::invalidInput("--ste with the greybox formulation needs the mesh_state column",
+                                "mesh_state");
   return checkSignalTable(table, options.formulation, options.model, options.time_tolerance);
 }
 
 }  // namespace
 
-std::string steOptionsError(const IdentificationOptions& options) {
+gear_sim::Status checkSteOptions(const IdentificationOptions& options) {
+  using gear_sim::Status;
   const bool greybox = options.formulation == Formulation::Greybox;
   if (options.formulation != Formulation::Known && !greybox)
-    return "--ste: only the known and greybox formulations model the STE";
+    return Status::invalidArgument("only the known and greybox formulations model the STE",
+                                   "formulation");
   if (options.model == DampingModel::LoadLaw)
-    return "--ste: the load_law damping model is not available with the STE (use piecewise "
-           "or constant)";
+    return Status::invalidArgument(
+        "the load_law damping model is not available with the STE (use piecewise or constant)",
+        "model");
   if (greybox && options.stiffness_shape.kind != StiffnessShape::Kind::Square)
-    return "--ste: greybox needs the square stiffness shape";
-  return "";
+    return Status::invalidArgument("greybox needs the square stiffness shape", "stiffness_shape");
+  return {};
 }
 
 Eigen::Index nonFiniteSteInput(const SignalView& view, Formulation formulation) {
@@ -817,38 +826,34 @@ Eigen::Index nonFiniteSteInput(const SignalView& view, Formulation formulation) 
   return -1;
 }
 
-bool identifySteSegments(const SignalView& view, const SampleRanges& ranges,
-                         const GearConstants& gear, const IdentificationOptions& options,
-                         const SteModelOptions& so, IdentificationResult* result, SteResult* ste,
-                         std::string* error) {
+gear_sim::Status identifySteSegments(const SignalView& view, const SampleRanges& ranges,
+                                     const GearConstants& gear,
+                                     const IdentificationOptions& options,
+                                     const SteModelOptions& so, IdentificationResult* result,
+                                     SteResult* ste) {
   SteFit fit(view, gear, options, so);
-  if (!fit.addSegments(ranges)) {
-    if (error) *error = "--ste: no segment with enough samples";
-    return false;
-  }
-  if (!fit.solve(result, error)) return false;
+  if (!fit.addSegments(ranges))
+    return gear_sim::Status::notIdentifiable("--ste: no segment with enough samples");
+  if (gear_sim::Status s = fit.solve(result); !s.ok()) return s;
   fit.covariance();
   fit.fillDamping(result);
   fit.fillSte(ste, result);
   refineWithSte(view, fit.segmentRanges(), gear, options, fit.basis(), fit.relative(), result, ste);
-  return true;
+  return {};
 }
 
-bool identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& gear,
-                     const IdentificationOptions& options, const SteModelOptions& so,
-                     IdentificationResult* result, SteResult* ste, std::string* error) {
-  auto fail = [&](const std::string& e) {
-    if (error) *error = e;
-    return false;
-  };
-  if (auto e = steInputError(table, gear, options, so); !e.empty()) return fail(e);
+gear_sim::Status identifyWithSte(const gear_sim::SignalTable& table, const GearConstants& gear,
+                                 const IdentificationOptions& options, const SteModelOptions& so,
+                                 IdentificationResult* result, SteResult* ste) {
+  using gear_sim::Status;
+  if (Status s = checkSteInput(table, gear, options, so); !s.ok()) return s;
   const SignalView view = SignalView::of(table);
   if (const Eigen::Index i = nonFiniteSteInput(view, options.formulation); i >= 0)
-    return fail("--ste: non-finite input at sample " + std::to_string(i) +
-                " (the joint STE solve needs a clean record)");
+    return Status::invalidInput("--ste: non-finite input at sample " + std::to_string(i) +
+                                " (the joint STE solve needs a clean record)");
   const auto ranges = segmentRanges(view, options);
-  if (ranges.empty()) return fail("no samples in the analysed time range");
-  return identifySteSegments(view, ranges, gear, options, so, result, ste, error);
+  if (ranges.empty()) return Status::notIdentifiable("no samples in the analysed time range");
+  return identifySteSegments(view, ranges, gear, options, so, result, ste);
 }
 
 namespace {
@@ -904,16 +909,14 @@ struct HeldSteRecord {
 
 }  // namespace
 
-bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eigen::Index end,
-                                const GearConstants& gear, const IdentificationOptions& options,
-                                const SteResult& ste, IdentificationResult* result,
-                                std::string* error) {
+gear_sim::Status identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin,
+                                            Eigen::Index end, const GearConstants& gear,
+                                            const IdentificationOptions& options,
+                                            const SteResult& ste, IdentificationResult* result) {
   SteFit fit(view, gear, options, ste.options);
-  if (!fit.addSegments({{begin, end}})) {
-    if (error) *error = "--ste: the segment has too few samples";
-    return false;
-  }
-  if (!fit.solveHeld(ste, error)) return false;
+  if (!fit.addSegments({{begin, end}}))
+    return gear_sim::Status::notIdentifiable("--ste: the segment has too few samples");
+  if (gear_sim::Status s = fit.solveHeld(ste); !s.ok()) return s;
   fit.fillDamping(result);
   IdentificationResult& seg = *result;
   seg.estimator = "integral_ste_held";
@@ -921,7 +924,7 @@ bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eige
   applyQualityFlags(options, &flagged);
   if (!(seg.segments[0].C > 0.0) || !wantsRefinement(options, flagged)) {
     seg = std::move(flagged);
-    return true;
+    return {};
   }
   // Output error on the record with the held STE taken out; the dte form's C e' term uses the
   // current C, iterated until C moves by less than 1e-3 of its standard error.
@@ -929,18 +932,17 @@ bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eige
   IdentificationResult refined = seg;
   double C = seg.segments[0].C;
   const bool relative = ste.options.damping == gear_sim::SteDamping::Relative;
-  std::string why;
-  bool ok = false;
+  gear_sim::Status refine;
   for (int pass = 0; pass < (relative ? 1 : 4); ++pass) {
     const HeldSteRecord rec(view, begin, end, gear, ste, C);
     refined = seg;
-    ok = refineOutputError(rec.view, {{begin, end}}, gear, options, &refined, &why);
-    if (!ok) break;
+    refine = refineOutputError(rec.view, {{begin, end}}, gear, options, &refined);
+    if (!refine.ok()) break;
     const double moved = std::abs(refined.segments[0].C - C);
     C = refined.segments[0].C;
     if (moved <= 1e-3 * refined.segments[0].C_std) break;
   }
-  if (ok) {
+  if (refine.ok()) {
     keepIntegralEstimates(seg, &refined);
     SegmentEstimate& e = refined.segments[0];
     e.C_std = std::sqrt(e.C_std * e.C_std + std::max(prop_var, 0.0));
@@ -948,11 +950,11 @@ bool identifySegmentWithHeldSte(const SignalView& view, Eigen::Index begin, Eige
     seg.estimator = "output_error_ste_held";
   } else {
     seg.warnings.push_back(
-        {quality_code::kRefineFailed,
-         "output-error refinement failed (" + why + "): integral-method estimates reported"});
+        {quality_code::kRefineFailed, "output-error refinement failed (" + refine.message() +
+                                          "): integral-method estimates reported"});
   }
   applyQualityFlags(options, &seg);
-  return true;
+  return {};
 }
 
 }  // namespace gear_damping_id

@@ -12,12 +12,12 @@
 namespace gear_damping_id {
 namespace {
 
+using gear_sim::Status;
 using wavelet_detail::kNaN;
 using wavelet_detail::kPi;
 using wavelet_detail::median;
 using wavelet_detail::modulusOf;
 using wavelet_detail::num;
-using wavelet_detail::setError;
 
 // Automatic fit omega0: neighbours leak < kLeakTarget into a mode's row; a `close_modes`
 // warning is given when the leakage at the omega0 used exceeds kLeakWarn.
@@ -296,36 +296,34 @@ struct Analysis {
   double fs;
   const WaveletOptions& opt;
   WaveletResult& res;
-  std::string* error;
   std::vector<double> grid;
   MorletCwt scal;  // the scalogram's grid; its spectrum serves the peak spectrum too
 };
 
-bool checkInput(const Analysis& a) {
-  if (!a.y) return setError(a.error, "analyzeWavelet: null signal"), false;
+Status checkInput(const Analysis& a) {
+  if (!a.y) return Status::internal("analyzeWavelet: null signal");
   if (a.n < kMinSamples) {
-    return setError(a.error, "analyzeWavelet: n = " + std::to_string(a.n) + " samples; at least " +
-                                 std::to_string(kMinSamples) + " are needed"),
-           false;
+    return Status::invalidArgument("analyzeWavelet: n = " + std::to_string(a.n) +
+                                       " samples; at least " + std::to_string(kMinSamples) +
+                                       " are needed",
+                                   "n");
   }
   if (!(a.fs > 0.0) || !std::isfinite(a.fs)) {
-    return setError(a.error,
-                    "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0"),
-           false;
+    return Status::invalidArgument(
+        "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0", "sample_rate");
   }
   for (long j = 0; j < a.n; ++j) {
     if (!std::isfinite(a.y[j])) {
-      return setError(a.error, "analyzeWavelet: sample " + std::to_string(j) + " is not finite (" +
-                                   num(a.y[j]) + ")"),
-             false;
+      return Status::invalidInput("analyzeWavelet: sample " + std::to_string(j) +
+                                  " is not finite (" + num(a.y[j]) + ")");
     }
   }
-  return true;
+  return {};
 }
 
 // The frequency grid (explicit, or log-spaced from f_min to f_max) and the mode frequencies,
 // all below the Nyquist frequency.
-bool frequencyGrid(Analysis* a) {
+Status frequencyGrid(Analysis* a) {
   const WaveletOptions& o = a->opt;
   const double nyquist = 0.5 * a->fs;
   const std::string nyq = " the Nyquist frequency sample_rate/2 = " + num(nyquist) + " Hz";
@@ -334,26 +332,27 @@ bool frequencyGrid(Analysis* a) {
     const double f_min = o.f_min > 0.0 ? o.f_min : 10.0 * a->fs / static_cast<double>(a->n);
     const double f_max = o.f_max > 0.0 ? o.f_max : 0.4 * a->fs;
     if (!(f_max < nyquist)) {
-      return setError(a->error, "WaveletOptions.f_max = " + num(f_max) + " Hz must be below" + nyq),
-             false;
+      return Status::invalidArgument(
+          "WaveletOptions.f_max = " + num(f_max) + " Hz must be below" + nyq, "f_max");
     }
     if (!(f_min < f_max)) {
-      return setError(a->error, "WaveletOptions.f_min = " + num(f_min) + " Hz (" +
-                                    (o.f_min > 0.0 ? "given" : "auto: 10 cycles per record") +
-                                    ") must be < f_max = " + num(f_max) + " Hz"),
-             false;
+      return Status::invalidArgument("WaveletOptions.f_min = " + num(f_min) + " Hz (" +
+                                         (o.f_min > 0.0 ? "given" : "auto: 10 cycles per record") +
+                                         ") must be < f_max = " + num(f_max) + " Hz",
+                                     "f_min");
     }
     a->grid = logSpacedFrequencies(f_min, f_max, o.n_scales);
   } else if (!(a->grid.back() < nyquist)) {
-    return setError(a->error, "WaveletOptions.frequencies.back() = " + num(a->grid.back()) +
-                                  " Hz must be below" + nyq),
-           false;
+    return Status::invalidArgument(
+        "WaveletOptions.frequencies.back() = " + num(a->grid.back()) + " Hz must be below" + nyq,
+        "frequencies");
   }
   for (size_t i = 0; i < o.mode_frequencies.size(); ++i) {
     if (!(o.mode_frequencies[i] < nyquist)) {
-      return setError(a->error, "WaveletOptions.mode_frequencies[" + std::to_string(i) + "] = " +
-                                    num(o.mode_frequencies[i]) + " Hz must be below" + nyq),
-             false;
+      return Status::invalidArgument("WaveletOptions.mode_frequencies[" + std::to_string(i) +
+                                         "] = " + num(o.mode_frequencies[i]) + " Hz must be below" +
+                                         nyq,
+                                     "mode_frequencies");
     }
   }
   a->res.frequencies = a->grid;
@@ -362,18 +361,18 @@ bool frequencyGrid(Analysis* a) {
   for (size_t i = 0; i < a->grid.size(); ++i) {
     a->res.coi[i] = morletConeOfInfluence(a->grid[i], o.omega0);
   }
-  return true;
+  return {};
 }
 
 // One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
 // noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
 // the time-averaged scalogram.
-bool spectraAndNoise(Analysis* a) {
+Status spectraAndNoise(Analysis* a) {
   // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (!a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate, a->error) ||
-      !a->scal.setSignal(a->y, a->error)) {
-    return false;
-  }
+  if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
+      !s.ok())
+    return s;
+  if (Status s = a->scal.setSignal(a->y); !s.ok()) return s;
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
@@ -390,11 +389,11 @@ bool spectraAndNoise(Analysis* a) {
   res.noise_std = std::sqrt(median(std::move(p2)) / (static_cast<double>(a->n) * std::log(2.0)));
   res.scalogram_power.resize(a->grid.size());
   for (int i = 0; i < a->scal.rows(); ++i) res.scalogram_power[size_t(i)] = a->scal.meanPower(i);
-  return true;
+  return {};
 }
 
 // The full scalogram |W|, block-averaged in time to at most max_scalogram_columns columns.
-bool fullScalogram(Analysis* a) {
+Status fullScalogram(Analysis* a) {
   WaveletResult& res = a->res;
   const long n = a->n, maxc = a->opt.max_scalogram_columns;
   const long d = (maxc > 0 && n > maxc) ? (n + maxc - 1) / maxc : 1;
@@ -407,21 +406,18 @@ bool fullScalogram(Analysis* a) {
     res.scalogram_times[static_cast<size_t>(c)] = 0.5 * static_cast<double>(c * d + e - 1) / a->fs;
   }
   MorletScalogram rows;
-  if (!rows.configure(n, a->fs, a->grid, a->opt.omega0, a->opt.fft_planning, a->opt.threads,
-                      a->error)) {
-    return false;
-  }
-  return rows.forEachRow(
-      a->y,
-      [&](int i, const double* row) {
-        for (long c = 0; c < cols; ++c) {
-          const long b = c * d, e = std::min(n, b + d);
-          double sum = 0.0;
-          for (long j = b; j < e; ++j) sum += row[j];
-          res.modulus(i, c) = static_cast<float>(sum / static_cast<double>(e - b));
-        }
-      },
-      a->error);
+  if (Status s =
+          rows.configure(n, a->fs, a->grid, a->opt.omega0, a->opt.fft_planning, a->opt.threads);
+      !s.ok())
+    return s;
+  return rows.forEachRow(a->y, [&](int i, const double* row) {
+    for (long c = 0; c < cols; ++c) {
+      const long b = c * d, e = std::min(n, b + d);
+      double sum = 0.0;
+      for (long j = b; j < e; ++j) sum += row[j];
+      res.modulus(i, c) = static_cast<float>(sum / static_cast<double>(e - b));
+    }
+  });
 }
 
 // Peak-picking spectrum: time-averaged scalogram at peak_omega0 on a log grid fine enough
@@ -740,7 +736,7 @@ void overlapWarnings(std::vector<WaveletMode>* modes) {
 }
 
 // Per mode: the row at its omega0, the envelope fit and the trust checks.
-bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
+Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   const std::vector<double> need = separationOmega0(seeds, a->opt.max_fit_omega0);
   const bool auto_w = a->opt.fit_omega0 == 0.0;
   std::vector<double> fit_f(seeds.size()), fit_w(seeds.size());
@@ -756,10 +752,9 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   MorletCwt own;
   MorletCwt* fit = &a->scal;
   if (!reuse) {
-    if (!own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate, a->error) ||
-        !own.setSignal(a->y, a->error)) {
-      return false;
-    }
+    Status s = own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
+    if (s.ok()) s = own.setSignal(a->y);
+    if (!s.ok()) return s;
     fit = &own;
   }
   std::vector<double> env, work;
@@ -782,7 +777,7 @@ bool fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   }
   sharedDecayWarnings(orders, &a->res.modes);
   overlapWarnings(&a->res.modes);
-  return true;
+  return {};
 }
 
 }  // namespace
@@ -879,28 +874,31 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
 // ------------------------------------------------------------------------------------------
 // Analysis: a short loop over the named steps above.
 
-bool analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error) {
-  if (!result) return setError(error, "analyzeWavelet: null result"), false;
+Status analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOptions& options,
+                      WaveletResult* result) {
+  if (!result) return Status::internal("analyzeWavelet: null result");
   *result = WaveletResult{};
-  if (const auto s = options.check(); !s.ok()) return setError(error, s.message()), false;
-  Analysis a{y, n, sample_rate, options, *result, error, {}, MorletCwt{}};
-  if (!checkInput(a) || !frequencyGrid(&a) || !spectraAndNoise(&a)) return false;
-  if (options.full_scalogram && !fullScalogram(&a)) return false;
+  if (Status s = options.check(); !s.ok()) return s;
+  Analysis a{y, n, sample_rate, options, *result, {}, MorletCwt{}};
+  if (Status s = checkInput(a); !s.ok()) return s;
+  if (Status s = frequencyGrid(&a); !s.ok()) return s;
+  if (Status s = spectraAndNoise(&a); !s.ok()) return s;
+  if (options.full_scalogram)
+    if (Status s = fullScalogram(&a); !s.ok()) return s;
   peakSpectrum(&a);
   const std::vector<ModeSeed> seeds = pickModes(&a);
-  if (seeds.empty()) return true;
+  if (seeds.empty()) return {};
   return fitModes(&a, seeds);
 }
 
-bool analyzeWavelet(const std::vector<double>& y, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error) {
-  return analyzeWavelet(y.data(), static_cast<long>(y.size()), sample_rate, options, result, error);
+Status analyzeWavelet(const std::vector<double>& y, double sample_rate,
+                      const WaveletOptions& options, WaveletResult* result) {
+  return analyzeWavelet(y.data(), static_cast<long>(y.size()), sample_rate, options, result);
 }
 
-bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletOptions& options,
-                    WaveletResult* result, std::string* error) {
-  return analyzeWavelet(y.data(), static_cast<long>(y.size()), sample_rate, options, result, error);
+Status analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletOptions& options,
+                      WaveletResult* result) {
+  return analyzeWavelet(y.data(), static_cast<long>(y.size()), sample_rate, options, result);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -909,14 +907,14 @@ bool analyzeWavelet(const Eigen::VectorXd& y, double sample_rate, const WaveletO
 WaveletResult validateWavelet(const double* y, size_t n, double sample_rate,
                               const WaveletOptions& options) {
   WaveletResult result;
-  std::string error;
   if (n > static_cast<size_t>(std::numeric_limits<long>::max())) {
-    result.error = "validateWavelet: n = " + std::to_string(n) + " samples is too large";
+    result.status = Status::resourceLimit(
+        "validateWavelet: n = " + std::to_string(n) + " samples is too large", "n");
     return result;
   }
-  if (!analyzeWavelet(y, static_cast<long>(n), sample_rate, options, &result, &error)) {
+  if (Status s = analyzeWavelet(y, static_cast<long>(n), sample_rate, options, &result); !s.ok()) {
     result = WaveletResult{};
-    result.error = error.empty() ? std::string("validateWavelet: analysis failed") : error;
+    result.status = s;
   }
   return result;
 }

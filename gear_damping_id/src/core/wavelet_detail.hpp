@@ -17,10 +17,6 @@ namespace wavelet_detail {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-inline void setError(std::string* error, const std::string& message) {
-  if (error) *error = message;
-}
-
 inline std::string num(double v) {
   std::ostringstream s;
   s.precision(10);

@@ -272,29 +272,23 @@ void printWaveletTable(std::ostream& os, const WaveletResult& w) {
   os << "\n";
 }
 
-bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y, long n,
-                     double sample_rate, double t0, long max_points, std::string* error,
-                     OutputStage* stage) {
+gear_sim::Status writeWaveletCsv(const std::string& dir, const WaveletResult& w, const double* y,
+                                 long n, double sample_rate, double t0, long max_points,
+                                 OutputStage* stage) {
+  using gear_sim::Status;
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  if (ec) {
-    *error = dir + ": cannot create directory (" + ec.message() + ")";
-    return false;
-  }
-  auto check = [&](const std::string& e) {
-    if (!e.empty()) *error = e;
-    return e.empty();
-  };
+  if (ec) return Status::ioError(dir + ": cannot create directory (" + ec.message() + ")");
   std::ostringstream modes, spectrum, scalogram;
-  if (!check(writeModesCsv(w, modes)) || !check(writeSpectrumCsv(w, spectrum))) return false;
-  if (!writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), error, stage) ||
-      !writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), error, stage))
-    return false;
-  if (w.modulus.size() > 0) {
-    if (!check(writeScalogramCsv(w, scalogram)) ||
-        !writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), error, stage))
-      return false;
+  Status s = writeModesCsv(w, modes);
+  if (s.ok()) s = writeSpectrumCsv(w, spectrum);
+  if (s.ok()) s = writeFileAtomically(dir + "/wavelet_modes.csv", modes.str(), stage);
+  if (s.ok()) s = writeFileAtomically(dir + "/wavelet_spectrum.csv", spectrum.str(), stage);
+  if (s.ok() && w.modulus.size() > 0) {
+    s = writeScalogramCsv(w, scalogram);
+    if (s.ok()) s = writeFileAtomically(dir + "/wavelet_scalogram.csv", scalogram.str(), stage);
   }
+  if (!s.ok()) return s;
   // Envelopes of the fitted modes, each at the omega0 of its fit.
   std::vector<double> freqs, omegas;
   std::vector<int> index;
@@ -310,12 +304,9 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
   env << "mode,time,envelope\n";
   if (!freqs.empty()) {
     MorletCwt cwt;
-    std::string e;
-    if (!cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::Estimate, &e) ||
-        !cwt.setSignal(y, &e)) {
-      *error = "wavelet envelopes: " + e;
-      return false;
-    }
+    s = cwt.configure(n, sample_rate, freqs, omegas, FftPlanning::Estimate);
+    if (s.ok()) s = cwt.setSignal(y);
+    if (!s.ok()) return s.withContext("wavelet envelopes");
     std::vector<double> row(static_cast<size_t>(n));
     const long step = std::max<long>(1, (n + max_points - 1) / std::max<long>(1, max_points));
     for (size_t r = 0; r < freqs.size(); ++r) {
@@ -325,7 +316,7 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
             << csvNum(row[static_cast<size_t>(j)]) << "\n";
     }
   }
-  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), error, stage);
+  return writeFileAtomically(dir + "/wavelet_envelopes.csv", env.str(), stage);
 }
 
 OutputStage::~OutputStage() {
@@ -336,45 +327,41 @@ void OutputStage::add(const std::string& tmp, const std::string& path) {
   files_.emplace_back(tmp, path);
 }
 
-bool OutputStage::commit(std::string* error) {
-  bool ok = true;
+gear_sim::Status OutputStage::commit() {
+  gear_sim::Status s;
   for (const auto& [tmp, path] : files_) {
-    if (!ok) {
+    if (!s.ok())
       std::remove(tmp.c_str());
-    } else if (!gear_sim::commitFile(tmp, path, error)) {
-      ok = false;
-    }
+    else
+      s = gear_sim::commitFile(tmp, path);
   }
   files_.clear();
-  return ok;
+  return s;
 }
 
-bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
-                         OutputStage* stage) {
+gear_sim::Status writeFileAtomically(const std::string& path, const std::string& text,
+                                     OutputStage* stage) {
   const std::string tmp = path + ".partial";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
     if (!f || !(f << text) || !f.flush()) {
       std::remove(tmp.c_str());
-      *error = path + ": cannot write";
-      return false;
+      return gear_sim::Status::ioError(path + ": cannot write");
     }
   }
   if (stage) {
     stage->add(tmp, path);
-    return true;
+    return {};
   }
-  return gear_sim::commitFile(tmp, path, error);
+  return gear_sim::commitFile(tmp, path);
 }
 
-bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, std::string* error,
-                 OutputStage* stage) {
+gear_sim::Status writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs,
+                             OutputStage* stage) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  if (ec) {
-    *error = dir + ": cannot create directory (" + ec.message() + ")";
-    return false;
-  }
+  if (ec)
+    return gear_sim::Status::ioError(dir + ": cannot create directory (" + ec.message() + ")");
   std::ostringstream seg, sum;
   seg << "formulation,model,segment,t_start,t_end,C,C_std,c,xi,k_min,k_max,identifiable,reason,"
          "warnings,stiffness_curve\n";
@@ -411,12 +398,15 @@ bool writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs, s
         resp << csvNum(t) << "," << csvNum(run.response.observed[k]) << ","
              << csvNum(run.response.modeled[k]) << "\n";
       }
-      if (!writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), error, stage))
-        return false;
+      if (gear_sim::Status s =
+              writeFileAtomically(dir + "/response_" + run.name() + ".csv", resp.str(), stage);
+          !s.ok())
+        return s;
     }
   }
-  return writeFileAtomically(dir + "/segments.csv", seg.str(), error, stage) &&
-         writeFileAtomically(dir + "/summary.csv", sum.str(), error, stage);
+  if (gear_sim::Status s = writeFileAtomically(dir + "/segments.csv", seg.str(), stage); !s.ok())
+    return s;
+  return writeFileAtomically(dir + "/summary.csv", sum.str(), stage);
 }
 
 }  // namespace gear_damping_id

@@ -11,50 +11,42 @@ bool isRigInput(const std::string& csv, const RigInputOptions& o) {
   return !o.edges1.empty() || !o.edges2.empty() || gear_sim::isRigCsv(csv);
 }
 
-bool loadRigInput(const std::string& csv, const RigInputOptions& o,
-                  const gear_sim::GearModel& model, gear_sim::SignalTable* out,
-                  EncoderFrontEndReport* report, std::string* error) {
+gear_sim::Status loadRigInput(const std::string& csv, const RigInputOptions& o,
+                              const gear_sim::GearModel& model, gear_sim::SignalTable* out,
+                              EncoderFrontEndReport* report) {
+  using gear_sim::Status;
   gear_sim::SignalTable rig;
   std::string resampling = "none (uniform input at the output rate)";
-  if (o.edges1.empty() != o.edges2.empty()) {
-    *error = "edge times need both files (--edges1 and --edges2)";
-    return false;
-  }
+  if (o.edges1.empty() != o.edges2.empty())
+    return Status::invalidArgument("edge times need both files (--edges1 and --edges2)",
+                                   o.edges1.empty() ? "edges1" : "edges2");
   if (!o.edges1.empty()) {
-    if (o.edge_counts1 <= 0 || o.edge_counts2 <= 0) {
-      *error = "edge times need the counts per revolution (--edge-counts N or N1,N2)";
-      return false;
-    }
+    if (o.edge_counts1 <= 0 || o.edge_counts2 <= 0)
+      return Status::invalidArgument(
+          "edge times need the counts per revolution (--edge-counts N or N1,N2)", "edge_counts");
     gear_sim::SignalTable grid;
-    if (!gear_sim::readSignalCsv(csv, &grid, error, {"time", "torque"})) return false;
+    if (Status s = gear_sim::readSignalCsv(csv, &grid, {"time", "torque"}); !s.ok()) return s;
     std::vector<double> e1, e2;
-    if (!gear_sim::readEdgeCsv(o.edges1, &e1, error) ||
-        !gear_sim::readEdgeCsv(o.edges2, &e2, error))
-      return false;
-    std::string e;
-    if (!edgesToRigTable(e1, o.edge_counts1, e2, o.edge_counts2, grid, &rig, &resampling, &e)) {
-      *error = o.edges1 + ", " + o.edges2 + ": " + e;
-      return false;
-    }
-  } else if (!gear_sim::readRigCsv(csv, &rig, error)) {
-    return false;
+    if (Status s = gear_sim::readEdgeCsv(o.edges1, &e1); !s.ok()) return s;
+    if (Status s = gear_sim::readEdgeCsv(o.edges2, &e2); !s.ok()) return s;
+    if (Status s = edgesToRigTable(e1, o.edge_counts1, e2, o.edge_counts2, grid, &rig, &resampling);
+        !s.ok())
+      return s.withContext(o.edges1 + ", " + o.edges2);
+  } else if (Status s = gear_sim::readRigCsv(csv, &rig); !s.ok()) {
+    return s;
   }
-  if (!rigTableToSignalTable(rig, csv, o, model, out, report, error)) return false;
+  if (Status s = rigTableToSignalTable(rig, csv, o, model, out, report); !s.ok()) return s;
   if (report) report->resampling = resampling;
-  return true;
+  return {};
 }
 
-bool rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
-                           const RigInputOptions& o, const gear_sim::GearModel& model,
-                           gear_sim::SignalTable* out, EncoderFrontEndReport* report,
-                           std::string* error) {
-  std::string e;
-  if (!encoderToSignalTable(rig, model, o.front_end, out, report, &e)) {
-    *error = name + ": " + e;
-    return false;
-  }
+gear_sim::Status rigTableToSignalTable(const gear_sim::SignalTable& rig, const std::string& name,
+                                       const RigInputOptions& o, const gear_sim::GearModel& model,
+                                       gear_sim::SignalTable* out, EncoderFrontEndReport* report) {
+  if (gear_sim::Status s = encoderToSignalTable(rig, model, o.front_end, out, report); !s.ok())
+    return s.withContext(name);
   if (report) report->resampling = "none (uniform input at the output rate)";
-  return true;
+  return {};
 }
 
 nlohmann::json toJson(const EncoderFrontEndReport& r) {

@@ -25,7 +25,7 @@ double phase(const SteTerm& t) { return std::atan2(t.sin, t.cos); }
 
 nlohmann::json steJson(const SteResult& s) {
   nlohmann::json j;
-  j["damping"] = s.options.damping == gear_sim::SteDamping::Relative ? "relative" : "dte";
+  j["damping"] = gear_sim::steDampingName(s.options.damping);
   j["shared"] = true;
   j["offset"] = nullptr;
   j["mesh"] = nlohmann::json::array();
@@ -55,15 +55,14 @@ nlohmann::json steJson(const SteResult& s) {
   return j;
 }
 
-bool writeSteCsv(const std::string& dir, const SteResult& s, std::string* error,
-                 OutputStage* stage) {
+gear_sim::Status writeSteCsv(const std::string& dir, const SteResult& s, OutputStage* stage) {
   std::ostringstream os;
   os << "kind,order,cos,sin,cos_std,sin_std,amplitude,phase\n";
   for (const SteTerm& t : s.terms)
     os << t.kind << "," << t.order << "," << csvNumber(t.cos) << "," << csvNumber(t.sin) << ","
        << csvNumber(t.cos_std) << "," << csvNumber(t.sin_std) << "," << csvNumber(amplitude(t))
        << "," << csvNumber(phase(t)) << "\n";
-  return writeFileAtomically(dir + "/ste.csv", os.str(), error, stage);
+  return writeFileAtomically(dir + "/ste.csv", os.str(), stage);
 }
 
 }  // namespace gear_damping_id

@@ -26,15 +26,16 @@ void quoted(std::ostream& out, const std::string& text) {
   out << '"';
 }
 
+using gear_sim::Status;
+
 template <typename Writer>
-std::string writeToFile(const std::string& path, const char* what, Writer write) {
+Status writeToFile(const std::string& path, const char* what, Writer write) {
   std::ofstream out(path);
-  if (!out) return std::string(what) + ": cannot open '" + path + "' for writing";
-  const std::string e = write(out);
-  if (!e.empty()) return e;
+  if (!out) return Status::ioError(std::string(what) + ": cannot open '" + path + "' for writing");
+  if (Status s = write(out); !s.ok()) return s;
   out.flush();
-  if (!out) return std::string(what) + ": write to '" + path + "' failed";
-  return "";
+  if (!out) return Status::ioError(std::string(what) + ": write to '" + path + "' failed");
+  return {};
 }
 
 std::string csvNumber(double v, const char* format) {
@@ -46,16 +47,20 @@ std::string csvNumber(double v, const char* format) {
 
 }  // namespace
 
-std::string writeScalogramCsv(const WaveletResult& result, std::ostream& out, long max_columns) {
+gear_sim::Status writeScalogramCsv(const WaveletResult& result, std::ostream& out,
+                                   long max_columns) {
   const long rows = result.modulus.rows(), cols = result.modulus.cols();
-  if (rows == 0 || cols == 0) return "writeScalogramCsv: the result holds no scalogram";
+  if (rows == 0 || cols == 0)
+    return Status::invalidArgument("writeScalogramCsv: the result holds no scalogram");
   if (static_cast<size_t>(rows) != result.frequencies.size() ||
       static_cast<size_t>(cols) != result.scalogram_times.size()) {
-    return "writeScalogramCsv: inconsistent result (modulus is " + std::to_string(rows) + "x" +
-           std::to_string(cols) + ")";
+    return Status::invalidArgument("writeScalogramCsv: inconsistent result (modulus is " +
+                                   std::to_string(rows) + "x" + std::to_string(cols) + ")");
   }
   if (max_columns < 1) {
-    return "writeScalogramCsv: max_columns = " + std::to_string(max_columns) + " must be >= 1";
+    return Status::invalidArgument(
+        "writeScalogramCsv: max_columns = " + std::to_string(max_columns) + " must be >= 1",
+        "max_columns");
   }
   const long d = cols > max_columns ? (cols + max_columns - 1) / max_columns : 1;
   const long oc = (cols + d - 1) / d;
@@ -83,23 +88,24 @@ std::string writeScalogramCsv(const WaveletResult& result, std::ostream& out, lo
     }
     out << '\n';
   }
-  return out ? "" : "writeScalogramCsv: write failed";
+  return out ? Status() : Status::ioError("writeScalogramCsv: write failed");
 }
 
-std::string writeScalogramCsv(const WaveletResult& result, const std::string& path,
-                              long max_columns) {
+gear_sim::Status writeScalogramCsv(const WaveletResult& result, const std::string& path,
+                                   long max_columns) {
   return writeToFile(path, "writeScalogramCsv", [&](std::ostream& out) {
     return writeScalogramCsv(result, out, max_columns);
   });
 }
 
-std::string writeSpectrumCsv(const WaveletResult& result, std::ostream& out) {
+gear_sim::Status writeSpectrumCsv(const WaveletResult& result, std::ostream& out) {
   if (result.spectrum_freq.size() != result.spectrum_power.size() ||
       result.frequencies.size() != result.scalogram_power.size()) {
-    return "writeSpectrumCsv: inconsistent result (spectrum and frequency sizes differ)";
+    return Status::invalidArgument(
+        "writeSpectrumCsv: inconsistent result (spectrum and frequency sizes differ)");
   }
   if (result.spectrum_freq.empty() && result.frequencies.empty()) {
-    return "writeSpectrumCsv: the result holds no spectrum";
+    return Status::invalidArgument("writeSpectrumCsv: the result holds no spectrum");
   }
   const double f_top = result.frequencies.empty() ? std::numeric_limits<double>::infinity()
                                                   : result.frequencies.back();
@@ -113,15 +119,15 @@ std::string writeSpectrumCsv(const WaveletResult& result, std::ostream& out) {
     out << "scalogram," << csvNumber(result.frequencies[i], "%.9g") << ','
         << csvNumber(result.scalogram_power[i], "%.9g") << '\n';
   }
-  return out ? "" : "writeSpectrumCsv: write failed";
+  return out ? Status() : Status::ioError("writeSpectrumCsv: write failed");
 }
 
-std::string writeSpectrumCsv(const WaveletResult& result, const std::string& path) {
+gear_sim::Status writeSpectrumCsv(const WaveletResult& result, const std::string& path) {
   return writeToFile(path, "writeSpectrumCsv",
                      [&](std::ostream& out) { return writeSpectrumCsv(result, out); });
 }
 
-std::string writeModesCsv(const WaveletResult& result, std::ostream& out) {
+gear_sim::Status writeModesCsv(const WaveletResult& result, std::ostream& out) {
   out << "frequency_hz,spectrum_frequency_hz,damping_ratio,integral_damping_ratio,sigma_per_s,"
          "r2,t_start_s,t_end_s,omega0,peak_amplitude,noise_floor,free_decay,warning_codes,"
          "warnings\n";
@@ -137,10 +143,10 @@ std::string writeModesCsv(const WaveletResult& result, std::ostream& out) {
     quoted(out, warningText(m.warnings));
     out << '\n';
   }
-  return out ? "" : "writeModesCsv: write failed";
+  return out ? Status() : Status::ioError("writeModesCsv: write failed");
 }
 
-std::string writeModesCsv(const WaveletResult& result, const std::string& path) {
+gear_sim::Status writeModesCsv(const WaveletResult& result, const std::string& path) {
   return writeToFile(path, "writeModesCsv",
                      [&](std::ostream& out) { return writeModesCsv(result, out); });
 }

@@ -7,12 +7,15 @@
 #include <string>
 
 #include "gear_sim/encoders.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim {
 
 /// Fills `out` from the `encoder` mapping of `root` (absent: defaults, encoder disabled).
-/// Unknown keys and wrong types are errors naming the key; the result is validated.
-bool loadEncoderOptions(const YAML::Node& root, EncoderOptions* out, std::string* error);
-bool loadEncoderOptionsFile(const std::string& path, EncoderOptions* out, std::string* error);
+/// Unknown keys and wrong types are InvalidInput naming the key (field "encoder.<key>"); the
+/// result is validated (EncoderOptions::check, InvalidArgument). The file variant puts the path
+/// in front of the message; an unreadable file is IoError.
+Status loadEncoderOptions(const YAML::Node& root, EncoderOptions* out);
+Status loadEncoderOptionsFile(const std::string& path, EncoderOptions* out);
 
 }  // namespace gear_sim

@@ -35,7 +35,6 @@ struct EncoderOptions {
   double edge_clock = 0.0;     ///< [Hz] counter clock of edge times (0 = exact times)
   unsigned long seed = 7;      ///< torque-noise generator seed
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// Angles of the (noise-free) simulated record `sim` (time, dte, and dte_velocity for the edge

@@ -33,7 +33,6 @@ struct GearPair {
   /// The first rule broken, e.g. field "pinion.inertia", value "-1", rule "must be finite and > 0
   /// [kg*m^2]"; message() "`GearPair::pinion.inertia = -1`: violated `must be ...`".
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 }  // namespace gear_sim

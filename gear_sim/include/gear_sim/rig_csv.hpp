@@ -6,23 +6,24 @@
 #include <vector>
 
 #include "gear_sim/signal_table.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim {
 
 /// Writes time, theta1, theta2 and (when present) torque, shortest round-trip text.
-bool writeRigCsv(const std::string& path, const SignalTable& rig, std::string* error);
+Status writeRigCsv(const std::string& path, const SignalTable& rig);
 
 /// Reads a rig CSV: columns time, theta1, theta2 required, torque optional (the reader of
 /// signal_csv.hpp: same checks and messages). A `dte` column makes it an ordinary record, not a
 /// rig record: refused here.
-bool readRigCsv(const std::string& path, SignalTable* out, std::string* error);
+Status readRigCsv(const std::string& path, SignalTable* out);
 
 /// True when the CSV header names theta1 and theta2 and no dte (a rig record). False when the
 /// header cannot be read (the reader then reports why).
 bool isRigCsv(const std::string& path);
 
 /// Edge-time file: header `time`, one edge instant [s] per row, strictly increasing.
-bool writeEdgeCsv(const std::string& path, const std::vector<double>& edges, std::string* error);
-bool readEdgeCsv(const std::string& path, std::vector<double>* edges, std::string* error);
+Status writeEdgeCsv(const std::string& path, const std::vector<double>& edges);
+Status readEdgeCsv(const std::string& path, std::vector<double>* edges);
 
 }  // namespace gear_sim

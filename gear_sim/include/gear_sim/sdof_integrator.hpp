@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include "gear_sim/status.hpp"
+
 namespace gear_sim {
 
 enum class Integrator {
@@ -97,13 +99,18 @@ SdofState advanceSdof(const CoeffFn& coeffs, SdofState s, double t_begin, double
   return s;
 }
 
-/// The argument errors of integrateSdof and integrateSdofAffine (empty when none).
-inline std::string sdofArgumentsError(double dt, Eigen::Index n_samples, SdofState initial,
-                                      int substeps) {
-  if (!(dt > 0.0)) return "dt = " + std::to_string(dt) + ": must be > 0 [s]";
-  if (substeps < 1) return "substeps = " + std::to_string(substeps) + ": must be >= 1";
-  if (n_samples < 1) return "n_samples must be >= 1";
-  if (!std::isfinite(initial.y) || !std::isfinite(initial.v)) return "initial state is not finite";
+/// The argument checks of integrateSdof and integrateSdofAffine: ok, or InvalidArgument naming
+/// the argument as Status::field().
+inline Status checkSdofArguments(double dt, Eigen::Index n_samples, SdofState initial,
+                                 int substeps) {
+  if (!(dt > 0.0))
+    return Status::invalidArgument("dt = " + std::to_string(dt) + ": must be > 0 [s]", "dt");
+  if (substeps < 1)
+    return Status::invalidArgument("substeps = " + std::to_string(substeps) + ": must be >= 1",
+                                   "substeps");
+  if (n_samples < 1) return Status::invalidArgument("n_samples must be >= 1", "n_samples");
+  if (!std::isfinite(initial.y) || !std::isfinite(initial.v))
+    return Status::invalidArgument("initial state is not finite", "initial");
   return {};
 }
 
@@ -177,11 +184,11 @@ inline AffineStep affineOfStep(Integrator method, double h, double inv_h,
 /// `coeffs`. With `stage` equal to `coeffs` at those instants, the results equal
 /// integrateSdof's to rounding. Same arguments, outputs and errors otherwise.
 template <class CoeffFn, class StageFn>
-std::string integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
-                                std::vector<double> breakpoints, double t0, double dt,
-                                Eigen::Index n_samples, SdofState initial, Integrator method,
-                                int substeps, double* y_out, double* v_out) {
-  if (std::string e = sdofArgumentsError(dt, n_samples, initial, substeps); !e.empty()) return e;
+Status integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
+                           std::vector<double> breakpoints, double t0, double dt,
+                           Eigen::Index n_samples, SdofState initial, Integrator method,
+                           int substeps, double* y_out, double* v_out) {
+  if (Status e = checkSdofArguments(dt, n_samples, initial, substeps); !e.ok()) return e;
   std::sort(breakpoints.begin(), breakpoints.end());
   const auto bp_end = breakpoints.cend();
   auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
@@ -238,13 +245,13 @@ std::string integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
 /// or lose smoothness, in any order; those outside (t0, t_last) are ignored. Each output interval
 /// is divided into `substeps` equal steps and every step is split at the breakpoints it contains.
 ///
-/// Outputs: y_out[n], v_out[n] (v_out may be null). Returns an empty string, or an error naming
-/// the invalid argument (non-positive dt or substeps, non-finite initial state, too few samples).
+/// Outputs: y_out[n], v_out[n] (v_out may be null). Returns ok, or InvalidArgument naming the
+/// invalid argument (non-positive dt or substeps, non-finite initial state, too few samples).
 template <class CoeffFn>
-std::string integrateSdof(const CoeffFn& coeffs, std::vector<double> breakpoints, double t0,
-                          double dt, Eigen::Index n_samples, SdofState initial, Integrator method,
-                          int substeps, double* y_out, double* v_out) {
-  if (std::string e = sdofArgumentsError(dt, n_samples, initial, substeps); !e.empty()) return e;
+Status integrateSdof(const CoeffFn& coeffs, std::vector<double> breakpoints, double t0, double dt,
+                     Eigen::Index n_samples, SdofState initial, Integrator method, int substeps,
+                     double* y_out, double* v_out) {
+  if (Status e = checkSdofArguments(dt, n_samples, initial, substeps); !e.ok()) return e;
   std::sort(breakpoints.begin(), breakpoints.end());
   auto bp = breakpoints.cbegin();
   SdofState s = initial;

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "gear_sim/signal_table.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim {
 
@@ -15,8 +16,9 @@ const std::vector<std::string>& signalColumnNames();
 
 /// Writes the present columns of `table` (time and dte always) in canonical order with the
 /// shortest text that reads back to the same double (std::to_chars), so a write/read round trip
-/// is bit-exact. False with `*error` if the file cannot be written or columns differ in length.
-bool writeSignalCsv(const std::string& path, const SignalTable& table, std::string* error);
+/// is bit-exact. IoError if the file cannot be written, InvalidInput (field: the column) if
+/// columns differ in length.
+Status writeSignalCsv(const std::string& path, const SignalTable& table);
 
 /// Longest line readSignalCsv accepts [bytes] (a row of ten numbers needs about 250).
 constexpr size_t kMaxCsvLineBytes = 65536;
@@ -28,19 +30,20 @@ constexpr size_t kMaxCsvLineBytes = 65536;
 /// analysers that report the affected segments as not identifiable), time not strictly
 /// increasing, fewer than two rows, a line longer than kMaxCsvLineBytes. A UTF-8 byte-order
 /// mark before the header is skipped. Messages quote file text escaped and truncated. (Uniformity
-/// of the time step is the analysers' check.)
-bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
-                   const std::vector<std::string>& required = {"time", "dte"},
-                   bool allow_non_finite = false);
+/// of the time step is the analysers' check.) IoError when the file cannot be opened, else
+/// InvalidInput with the column concerned as the field when there is one.
+Status readSignalCsv(const std::string& path, SignalTable* out,
+                     const std::vector<std::string>& required = {"time", "dte"},
+                     bool allow_non_finite = false);
 
 /// Finishes an atomic write: renames the complete temporary file `tmp` over `path`. On failure
-/// removes `tmp` and sets `*error` ("<path>: cannot write"): no partial file is left looking
+/// removes `tmp` and returns IoError ("<path>: cannot write"): no partial file is left looking
 /// complete.
-bool commitFile(const std::string& tmp, const std::string& path, std::string* error);
+Status commitFile(const std::string& tmp, const std::string& path);
 
 /// A load-torque file for the simulator's `load.profile: csv`: columns time and torque.
-inline bool readTorqueCsv(const std::string& path, SignalTable* out, std::string* error) {
-  return readSignalCsv(path, out, error, {"time", "torque"});
+inline Status readTorqueCsv(const std::string& path, SignalTable* out) {
+  return readSignalCsv(path, out, {"time", "torque"});
 }
 
 }  // namespace gear_sim

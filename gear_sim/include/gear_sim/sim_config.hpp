@@ -34,7 +34,6 @@ struct MeshOptions {
   std::vector<double> fourier_sin;    ///< [N/m] b_h, h = 1.. (fourier model)
   double initial_phase = 0.0;         ///< [mesh cycles] mesh phase at t = 0, in [0, 1)
   OptionStatus check() const;         ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class SpeedProfile {
@@ -48,7 +47,6 @@ struct SpeedOptions {
   double end_rpm = 3000.0;     ///< [rev/min] ramp: final speed, > 0
   double ramp_time = 0.01;     ///< [s] ramp: duration of the linear change, > 0
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class LoadProfile {
@@ -80,7 +78,6 @@ struct LoadOptions {
   std::vector<double> times;   ///< [s] table, strictly increasing
   std::vector<double> values;  ///< [N*m] table
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// How the simulated (true) damping varies over the run, like SpeedProfile and LoadProfile: a
@@ -108,7 +105,6 @@ struct DampingOptions {
   double c0 = 0.0;                ///< [N*s/m] load_linear
   double c1 = 0.0;                ///< [N*s/m per N*m] load_linear
   OptionStatus check() const;     ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 enum class DynamicsModel {
@@ -136,7 +132,6 @@ struct SimulationOptions {
   double noise_snr_db = std::numeric_limits<double>::infinity();  ///< [dB]; inf = no noise
   unsigned long seed = 1;                                         ///< noise generator seed
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// The gear model alone (what `analyze --params` needs): gears, mesh and speed.
@@ -145,7 +140,6 @@ struct GearModel {
   MeshOptions mesh;
   SpeedOptions speed;
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 struct SimConfig {
@@ -162,7 +156,6 @@ struct SimConfig {
   /// cross-section rules too (sample rate >= 20x the natural frequency, mesh frequency
   /// <= sample rate, load period >= sample step) and the size limits above.
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// YAML names of the enums ("square", "trapezoid", "fourier", "constant"; "constant", "ramp";

@@ -7,6 +7,7 @@
 
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim {
 
@@ -16,8 +17,9 @@ namespace gear_sim {
 /// holding from each sample's instant on), torque, mesh_state, mesh_phase, damping (true c(t));
 /// theta1, theta2 for the torsional model. Samples n = 0..N-1, N = round(duration*fs), at
 /// t = n/fs. `out` is resized only when its size differs, so a caller can reuse its buffers.
-/// Returns false with `*error` set (naming the YAML key) when the configuration is invalid.
-bool simulate(const SimConfig& config, SignalTable* out, std::string* error);
+/// InvalidArgument (message and Status::field() naming the YAML key) when the configuration is
+/// invalid or the integration diverges.
+Status simulate(const SimConfig& config, SignalTable* out);
 
 /// Natural frequency sqrt(k_mean/Me) / (2 pi) [Hz] of the gear model.
 double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh);

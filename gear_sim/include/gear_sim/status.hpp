@@ -9,6 +9,7 @@
 #pragma once
 
 #include <optional>
+#include <ostream>
 #include <string>
 #include <utility>
 
@@ -98,6 +99,14 @@ class Status {
   std::string field_;
   std::string message_;
 };
+
+/// "ok", or "<code> [field]: message" (logs, test failure output).
+inline std::ostream& operator<<(std::ostream& os, const Status& s) {
+  if (s.ok()) return os << "ok";
+  os << toString(s.code());
+  if (!s.field().empty()) os << " [" << s.field() << "]";
+  return os << ": " << s.message();
+}
 
 /// A value or the Status saying why there is none.
 template <class T>

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "gear_sim/option_status.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim {
 
@@ -25,6 +26,11 @@ enum class SteDamping {
   Relative,  ///< c (y' - e'): damping on the tooth deflection rate (default)
   Dte        ///< c y': damping on the DTE rate alone
 };
+
+/// "relative" or "dte": the one spelling of SteDamping in YAML, JSON, the CLI and the nodes.
+const char* steDampingName(SteDamping d);
+/// The SteDamping named `name`; InvalidArgument "unknown name 'x' (one of: relative, dte)".
+Result<SteDamping> parseSteDamping(const std::string& name);
 
 /// STE amplitudes [m]; every list may be empty (all empty and offset 0: no STE, the simulator
 /// is bit-identical to one without the section).
@@ -36,7 +42,6 @@ struct SteOptions {
   SteDamping damping = SteDamping::Relative;
   bool active() const;
   OptionStatus check() const;  ///< ok, or the first rule broken (option_status.hpp)
-  std::string validate() const { return check().message(); }  ///< empty when valid
 };
 
 /// The harmonic structure of an STE model: how many mesh orders and pinion/gear shaft orders.

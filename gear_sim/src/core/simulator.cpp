@@ -250,13 +250,13 @@ class Simulation {
 
   /// The model (false: the damping law cannot be built for this load), its breakpoints, the
   /// output columns and the initial state.
-  bool setUp(std::string* error) {
-    if (!buildModel(error)) return false;
+  Status setUp() {
+    if (Status s = buildModel(); !s.ok()) return s;
     collectBreakpoints();
     allocateColumns();
     fillSampledColumns();
     initialState();
-    return true;
+    return {};
   }
 
   /// Samples n0 + 1 .. n1 (n1 - n0 <= kBlock).
@@ -270,22 +270,21 @@ class Simulation {
   }
 
   /// The last sample's columns, the divergence check and the measurement noise.
-  bool finish(std::string* error) {
+  Status finish() {
     sampleColumns(n_samples_ - 1);
-    if (!checkFinite(error)) return false;
+    if (Status s = checkFinite(); !s.ok()) return s;
     if (std::isfinite(so_.noise_snr_db)) addNoise(&o_.dte, so_.noise_snr_db, so_.seed);
-    return true;
+    return {};
   }
 
  private:
-  bool buildModel(std::string* error) {
+  Status buildModel() {
     LoadTorque load(cfg_.load);
     const double t1_mean = load.mean(so_.duration);
-    if (cfg_.damping.model == DampingProfile::LoadDependent && !(std::abs(t1_mean) > 0.0)) {
-      if (error)
-        *error = "damping.model = load_dependent: needs a non-zero time-mean load (load.* gives 0)";
-      return false;
-    }
+    if (cfg_.damping.model == DampingProfile::LoadDependent && !(std::abs(t1_mean) > 0.0))
+      return Status::invalidArgument(
+          "damping.model = load_dependent: needs a non-zero time-mean load (load.* gives 0)",
+          "damping.model");
     const double me = cfg_.gears.equivalentMass();
     model_.emplace(Model{
         stiffness_, MeshTiming(cfg_.speed, cfg_.gears.pinion.teeth, cfg_.mesh.initial_phase), load,
@@ -294,7 +293,7 @@ class Simulation {
       model_->ste = &ste_;
       model_->ste_relative = cfg_.ste.damping == SteDamping::Relative;
     }
-    return true;
+    return {};
   }
 
   // Every instant where a coefficient jumps or kinks: stiffness switches (from the mesh
@@ -531,18 +530,17 @@ class Simulation {
 
   // An unstable integration (a damping or stiffness far beyond the step's stability region)
   // ends in Inf/NaN: refused, never written as a record.
-  bool checkFinite(std::string* error) const {
+  Status checkFinite() const {
     for (Eigen::Index n = 0; n < n_samples_; ++n)
       if (!std::isfinite(o_.dte[n]) || !std::isfinite(o_.dte_velocity[n]) ||
-          !(std::abs(o_.dte[n]) <= kMaxFiniteDte)) {
-        if (error)
-          *error = "the integration diverged at t = " + formatNumber(o_.time[n]) +
-                   " s (|dte| beyond 1 m or not finite): the time step 1/(simulation.sample_rate "
-                   "x simulation.substeps) is too long for this damping and stiffness; raise "
-                   "simulation.substeps or simulation.sample_rate";
-        return false;
-      }
-    return true;
+          !(std::abs(o_.dte[n]) <= kMaxFiniteDte))
+        return Status::invalidArgument(
+            "the integration diverged at t = " + formatNumber(o_.time[n]) +
+                " s (|dte| beyond 1 m or not finite): the time step 1/(simulation.sample_rate "
+                "x simulation.substeps) is too long for this damping and stiffness; raise "
+                "simulation.substeps or simulation.sample_rate",
+            "simulation.substeps");
+    return {};
   }
 
   const SimConfig& cfg_;
@@ -567,17 +565,14 @@ class Simulation {
 
 }  // namespace
 
-bool simulate(const SimConfig& cfg, SignalTable* out, std::string* error) {
-  if (std::string e = cfg.validate(); !e.empty()) {
-    if (error) *error = e;
-    return false;
-  }
+Status simulate(const SimConfig& cfg, SignalTable* out) {
+  if (Status s = cfg.check(); !s.ok()) return s;
   Simulation run(cfg, out);
-  if (!run.setUp(error)) return false;
+  if (Status s = run.setUp(); !s.ok()) return s;
   constexpr Eigen::Index kBlock = Simulation::kBlock;
   for (Eigen::Index n0 = 0; n0 + 1 < run.samples(); n0 += kBlock)
     run.integrateBlock(n0, std::min(run.samples() - 1, n0 + kBlock));
-  return run.finish(error);
+  return run.finish();
 }
 
 }  // namespace gear_sim

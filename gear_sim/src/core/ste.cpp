@@ -8,6 +8,15 @@
 
 namespace gear_sim {
 
+const char* steDampingName(SteDamping d) { return d == SteDamping::Dte ? "dte" : "relative"; }
+
+Result<SteDamping> parseSteDamping(const std::string& name) {
+  for (SteDamping d : {SteDamping::Relative, SteDamping::Dte})
+    if (name == steDampingName(d)) return d;
+  return Status::invalidArgument("unknown name " + quoteForMessage(name) +
+                                 " (one of: relative, dte)");
+}
+
 bool SteOptions::active() const {
   return offset != 0.0 || !mesh_cos.empty() || !mesh_sin.empty() || !pinion_cos.empty() ||
          !pinion_sin.empty() || !gear_cos.empty() || !gear_sin.empty();

@@ -34,24 +34,24 @@ std::string keyForMessage(const std::string& key) {
 
 // A mapping key for a message and a lookup: its name when it is a scalar; a sequence or a
 // mapping used as a key (`? [a, b]`) is an error naming it, not an exception.
-bool keyName(const YAML::Node& key, const std::string& where, std::string* name,
-             std::string* error) {
+bool keyName(const YAML::Node& key, const std::string& where, std::string* name, Status* status) {
   if (key.IsScalar()) {
     *name = key.Scalar();
     return true;
   }
-  if (error->empty())
-    *error = where + quoted(key) + ": a key must be a plain name, not a sequence or mapping";
+  if (status->ok())
+    *status = Status::invalidInput(where + quoted(key) +
+                                   ": a key must be a plain name, not a sequence or mapping");
   return false;
 }
 
 // Reads one section: checks its keys against the known list and converts values, recording
-// the first error with the full key name.
+// the first error with the full key name (message and Status::field()).
 class Section {
  public:
   // (Copy-constructed: assigning a missing child to an existing YAML::Node throws.)
-  Section(const YAML::Node& root, const std::string& name, std::string* error)
-      : name_(name), error_(error), node_(root[name]) {
+  Section(const YAML::Node& root, const std::string& name, Status* status)
+      : name_(name), status_(status), node_(root[name]) {
     if (node_ && !node_.IsMap()) fail(name_, "must be a mapping of keys");
   }
   bool present() const { return node_ && node_.IsMap(); }
@@ -62,7 +62,7 @@ class Section {
     std::set<std::string> k(known.begin(), known.end());
     for (const auto& kv : node_) {
       std::string key;
-      if (!keyName(kv.first, name_ + ".", &key, error_)) return;
+      if (!keyName(kv.first, name_ + ".", &key, status_)) return;
       if (!k.count(key)) {
         std::string list;
         for (const std::string& s : known) list += (list.empty() ? "" : ", ") + s;
@@ -95,9 +95,9 @@ class Section {
 
   bool has(const char* key) const { return present() && node_[key]; }
   void fail(const std::string& key, const std::string& what) {
-    if (ok()) *error_ = key + ": " + what;
+    if (ok()) *status_ = Status::invalidInput(key + ": " + what, key);
   }
-  bool ok() const { return error_->empty(); }
+  bool ok() const { return status_->ok(); }
 
  private:
   template <class T>
@@ -108,7 +108,7 @@ class Section {
     return "a list of numbers";
   }
   std::string name_;
-  std::string* error_;
+  Status* status_;
   const YAML::Node node_;
 };
 
@@ -209,15 +209,15 @@ void readSpeed(Section& s, SpeedOptions* o) {
 
 // load.profile csv: a CSV file with columns time [s] and torque [N*m] becomes a piecewise-linear
 // table; `base_dir` resolves a relative load.file.
-void readLoadCsv(Section& l, const std::string& base_dir, const std::string* err, LoadOptions* o) {
+void readLoadCsv(Section& l, const std::string& base_dir, LoadOptions* o) {
   std::string file;
   l.get("file", &file);
-  if (err->empty() && file.empty()) l.fail("load.file", "required with load.profile = csv");
-  if (!err->empty()) return;
+  if (l.ok() && file.empty()) l.fail("load.file", "required with load.profile = csv");
+  if (!l.ok()) return;
   const std::string path = (!file.empty() && file[0] == '/') ? file : base_dir + "/" + file;
   SignalTable t;
-  std::string e;
-  if (!readTorqueCsv(path, &t, &e)) {
+  if (const Status read = readTorqueCsv(path, &t); !read.ok()) {
+    std::string e = read.message();
     // The path comes from the file: quoted in the message (the reader's starts with it).
     if (e.compare(0, path.size(), path) == 0) e = quoteForMessage(path) + e.substr(path.size());
     l.fail("load.file", e);
@@ -228,15 +228,14 @@ void readLoadCsv(Section& l, const std::string& base_dir, const std::string* err
   o->values.assign(t.torque.data(), t.torque.data() + t.torque.size());
 }
 
-void readLoad(const YAML::Node& root, const std::string& base_dir, std::string* err,
-              LoadOptions* o) {
+void readLoad(const YAML::Node& root, const std::string& base_dir, Status* err, LoadOptions* o) {
   Section l(root, "load", err);
   l.allow(keyNames({"profile"}, kLoadKeys, {"file"}));
   std::string profile = "sine";
   l.get("profile", &profile);
   if (profile == "csv") {
-    readLoadCsv(l, base_dir, err, o);
-  } else if (err->empty() && !parse(profile, &o->profile)) {
+    readLoadCsv(l, base_dir, o);
+  } else if (l.ok() && !parse(profile, &o->profile)) {
     l.fail("load.profile", "unknown name " + quoteForMessage(profile) +
                                " (one of: constant, sine, step, ramp, trapezoid, table, csv)");
   }
@@ -245,7 +244,7 @@ void readLoad(const YAML::Node& root, const std::string& base_dir, std::string* 
       readKey(l, k, o);
 }
 
-void readDamping(const YAML::Node& root, std::string* err, DampingOptions* o) {
+void readDamping(const YAML::Node& root, Status* err, DampingOptions* o) {
   Section d(root, "damping", err);
   d.allow(keyNames({"model", "ratio", "coefficient"}, kDampingKeys));
   std::string model = "load_dependent";
@@ -270,7 +269,7 @@ void readDamping(const YAML::Node& root, std::string* err, DampingOptions* o) {
   readKeys(d, kDampingKeys, o);
 }
 
-void readSimulation(const YAML::Node& root, std::string* err, SimulationOptions* o) {
+void readSimulation(const YAML::Node& root, Status* err, SimulationOptions* o) {
   Section s(root, "simulation", err);
   s.allow(keyNames({"integrator", "dynamics"}, kSimulationKeys));
   s.getEnum("integrator", &o->integrator, "rk2, rk4");
@@ -279,40 +278,39 @@ void readSimulation(const YAML::Node& root, std::string* err, SimulationOptions*
 }
 
 // Static transmission error (docs/ste.md): absent = none.
-void readSte(const YAML::Node& root, std::string* err, SteOptions* o) {
+void readSte(const YAML::Node& root, Status* err, SteOptions* o) {
   Section st(root, "ste", err);
   st.allow(keyNames({}, kSteKeys, {"damping"}));
   readKeys(st, kSteKeys, o);
-  std::string ste_damping = "relative";
+  std::string ste_damping = steDampingName(o->damping);
   st.get("damping", &ste_damping);
-  if (ste_damping == "relative") {
-    o->damping = SteDamping::Relative;
-  } else if (ste_damping == "dte") {
-    o->damping = SteDamping::Dte;
-  } else {
-    st.fail("ste.damping",
-            "unknown name " + quoteForMessage(ste_damping) + " (one of: relative, dte)");
-  }
+  if (!st.ok()) return;
+  if (const Result<SteDamping> d = parseSteDamping(ste_damping); d.ok())
+    o->damping = *d;
+  else
+    st.fail("ste.damping", d.status().message());
 }
 
 // `encoder` is read by loadEncoderOptions (encoder_yaml.hpp).
-void checkSections(const YAML::Node& root, std::string* err) {
+void checkSections(const YAML::Node& root, Status* err) {
   const std::set<std::string> sections{"pinion",  "gear",       "mesh", "speed",  "load",
                                        "damping", "simulation", "ste",  "encoder"};
   for (const auto& kv : root) {
     std::string key;
     if (!keyName(kv.first, "", &key, err)) return;
     if (!sections.count(key)) {
-      *err = keyForMessage(key) +
-             ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
-             "ste, encoder)";
+      *err = Status::invalidInput(
+          keyForMessage(key) +
+              ": unknown section (known: pinion, gear, mesh, speed, load, damping, simulation, "
+              "ste, encoder)",
+          key);
       return;
     }
   }
 }
 
 // pinion, gear, mesh and speed into `m`.
-void readGearModel(const YAML::Node& root, std::string* err, GearModel* m) {
+void readGearModel(const YAML::Node& root, Status* err, GearModel* m) {
   Section p(root, "pinion", err), g(root, "gear", err), me(root, "mesh", err),
       sp(root, "speed", err);
   readGear(p, &m->gears.pinion);
@@ -328,30 +326,29 @@ std::string dirOf(const std::string& path) {
 
 }  // namespace
 
-static bool loadGearModelImpl(const YAML::Node& root, GearModel* out, std::string* error) {
-  std::string err;
-  if (!root || !root.IsMap()) err = "the parameter file must be a YAML mapping of sections";
+static Status loadGearModelImpl(const YAML::Node& root, GearModel* out) {
+  if (!root || !root.IsMap())
+    return Status::invalidInput("the parameter file must be a YAML mapping of sections");
   for (const char* sec : {"pinion", "gear", "mesh", "speed"})
-    if (err.empty() && !root[sec])
-      err = std::string(sec) + ": missing section (pinion, gear, mesh and speed are required)";
+    if (!root[sec])
+      return Status::invalidInput(
+          std::string(sec) + ": missing section (pinion, gear, mesh and speed are required)", sec);
   GearModel m;
-  if (err.empty()) readGearModel(root, &err, &m);
-  if (err.empty()) err = m.validate();
-  if (!err.empty()) {
-    if (error) *error = err;
-    return false;
-  }
-  *out = m;
-  return true;
+  Status err;
+  readGearModel(root, &err, &m);
+  if (err.ok()) err = m.check();
+  if (err.ok()) *out = m;
+  return err;
 }
 
-static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::string* error,
-                              const std::string& base_dir) {
-  std::string err;
+static Status loadSimConfigImpl(const YAML::Node& root, SimConfig* out,
+                                const std::string& base_dir) {
+  if (!root || !root.IsMap())
+    return Status::invalidInput("the configuration must be a YAML mapping of sections");
+  Status err;
   SimConfig c;
-  if (!root || !root.IsMap()) err = "the configuration must be a YAML mapping of sections";
-  if (err.empty()) checkSections(root, &err);
-  if (err.empty()) {
+  checkSections(root, &err);
+  if (err.ok()) {
     GearModel m = c.gearModel();
     readGearModel(root, &err, &m);
     c.gears = m.gears;
@@ -362,75 +359,52 @@ static bool loadSimConfigImpl(const YAML::Node& root, SimConfig* out, std::strin
     readSimulation(root, &err, &c.simulation);
     readSte(root, &err, &c.ste);
   }
-  if (err.empty()) err = c.validate();
-  if (!err.empty()) {
-    if (error) *error = err;
-    return false;
-  }
-  *out = c;
-  return true;
+  if (err.ok()) err = c.check();
+  if (err.ok()) *out = c;
+  return err;
 }
 
 // yaml-cpp throws on some malformed documents the checks above do not foresee (a conversion of
 // an unusual node): every such exception becomes an error, never an abort.
-bool loadGearModel(const YAML::Node& root, GearModel* out, std::string* error) {
+Status loadGearModel(const YAML::Node& root, GearModel* out) {
   try {
-    return loadGearModelImpl(root, out, error);
+    return loadGearModelImpl(root, out);
   } catch (const YAML::Exception& e) {
-    if (error) *error = "malformed YAML: " + quoteForMessage(e.what());
-    return false;
+    return Status::invalidInput("malformed YAML: " + quoteForMessage(e.what()));
   }
 }
 
-bool loadSimConfig(const YAML::Node& root, SimConfig* out, std::string* error,
-                   const std::string& base_dir) {
+Status loadSimConfig(const YAML::Node& root, SimConfig* out, const std::string& base_dir) {
   try {
-    return loadSimConfigImpl(root, out, error, base_dir);
+    return loadSimConfigImpl(root, out, base_dir);
   } catch (const YAML::Exception& e) {
-    if (error) *error = "malformed YAML: " + quoteForMessage(e.what());
-    return false;
+    return Status::invalidInput("malformed YAML: " + quoteForMessage(e.what()));
   }
 }
 
 namespace {
-bool loadFile(const std::string& path, YAML::Node* root, std::string* error) {
+Result<YAML::Node> loadFile(const std::string& path) {
   std::ifstream f(path);
-  if (!f) {
-    if (error) *error = path + ": cannot open";
-    return false;
-  }
+  if (!f) return Status::ioError(path + ": cannot open");
   try {
-    *root = YAML::Load(f);
+    return YAML::Load(f);
   } catch (const YAML::Exception& e) {
-    if (error)
-      *error = path + ": YAML syntax error at line " + std::to_string(e.mark.line + 1) + ": " +
-               quoteForMessage(e.msg);
-    return false;
+    return Status::invalidInput(path + ": YAML syntax error at line " +
+                                std::to_string(e.mark.line + 1) + ": " + quoteForMessage(e.msg));
   }
-  return true;
 }
 }  // namespace
 
-bool loadSimConfigFile(const std::string& path, SimConfig* out, std::string* error) {
-  YAML::Node root;
-  if (!loadFile(path, &root, error)) return false;
-  std::string e;
-  if (!loadSimConfig(root, out, &e, dirOf(path))) {
-    if (error) *error = path + ": " + e;
-    return false;
-  }
-  return true;
+Status loadSimConfigFile(const std::string& path, SimConfig* out) {
+  const Result<YAML::Node> root = loadFile(path);
+  if (!root.ok()) return root.status();
+  return loadSimConfig(*root, out, dirOf(path)).withContext(path);
 }
 
-bool loadGearModelFile(const std::string& path, GearModel* out, std::string* error) {
-  YAML::Node root;
-  if (!loadFile(path, &root, error)) return false;
-  std::string e;
-  if (!loadGearModel(root, out, &e)) {
-    if (error) *error = path + ": " + e;
-    return false;
-  }
-  return true;
+Status loadGearModelFile(const std::string& path, GearModel* out) {
+  const Result<YAML::Node> root = loadFile(path);
+  if (!root.ok()) return root.status();
+  return loadGearModel(*root, out).withContext(path);
 }
 
 YAML::Node toYaml(const SimConfig& c) {
@@ -460,7 +434,7 @@ YAML::Node toYaml(const SimConfig& c) {
   writeKeys(kSimulationKeys, c.simulation, n["simulation"]);
   if (c.ste.active()) {
     writeKeys(kSteKeys, c.ste, n["ste"]);
-    n["ste"]["damping"] = c.ste.damping == SteDamping::Relative ? "relative" : "dte";
+    n["ste"]["damping"] = steDampingName(c.ste.damping);
   }
   return n;
 }

@@ -7,31 +7,32 @@
 namespace gear_sim {
 
 namespace {
-bool loadImpl(const YAML::Node& root, EncoderOptions* out, std::string* error) {
+Status loadImpl(const YAML::Node& root, EncoderOptions* out) {
   EncoderOptions e;
   const YAML::Node node = root["encoder"];
   if (node) {
-    if (!node.IsMap()) {
-      *error = "encoder: must be a mapping of keys";
-      return false;
-    }
+    if (!node.IsMap()) return Status::invalidInput("encoder: must be a mapping of keys", "encoder");
     const std::set<std::string> known{"enabled", "counts_per_rev1", "counts_per_rev2", "zero1",
                                       "zero2",   "torque_noise",    "edge_clock",      "seed"};
     for (const auto& kv : node) {
       if (!kv.first.IsScalar() || !known.count(kv.first.Scalar())) {
-        *error = "encoder." + quoteForMessage(kv.first.IsScalar() ? kv.first.Scalar() : "?") +
-                 ": unknown key (known: enabled, counts_per_rev1, counts_per_rev2, zero1, zero2, "
-                 "torque_noise, edge_clock, seed)";
-        return false;
+        const std::string key = kv.first.IsScalar() ? kv.first.Scalar() : "?";
+        return Status::invalidInput(
+            "encoder." + quoteForMessage(key) +
+                ": unknown key (known: enabled, counts_per_rev1, counts_per_rev2, zero1, zero2, "
+                "torque_noise, edge_clock, seed)",
+            "encoder." + key);
       }
     }
+    Status s;
     auto get = [&](const char* key, auto* v) {
       if (!node[key]) return true;
       try {
         *v = node[key].as<std::decay_t<decltype(*v)>>();
         return true;
       } catch (const YAML::Exception&) {
-        *error = std::string("encoder.") + key + ": wrong type";
+        const std::string field = std::string("encoder.") + key;
+        s = Status::invalidInput(field + ": wrong type", field);
         return false;
       }
     };
@@ -39,45 +40,32 @@ bool loadImpl(const YAML::Node& root, EncoderOptions* out, std::string* error) {
         !get("counts_per_rev2", &e.counts_per_rev2) || !get("zero1", &e.zero1) ||
         !get("zero2", &e.zero2) || !get("torque_noise", &e.torque_noise) ||
         !get("edge_clock", &e.edge_clock) || !get("seed", &e.seed))
-      return false;
+      return s;
   }
-  if (std::string v = e.validate(); !v.empty()) {
-    *error = v;
-    return false;
-  }
+  if (Status v = e.check(); !v.ok()) return v;
   *out = e;
-  return true;
+  return {};
 }
 }  // namespace
 
-bool loadEncoderOptions(const YAML::Node& root, EncoderOptions* out, std::string* error) {
-  std::string e;
-  bool ok = false;
+Status loadEncoderOptions(const YAML::Node& root, EncoderOptions* out) {
   try {
-    ok = root && root.IsMap() && loadImpl(root, out, &e);
-    if (!ok && e.empty()) e = "the configuration must be a YAML mapping of sections";
+    if (!root || !root.IsMap())
+      return Status::invalidInput("the configuration must be a YAML mapping of sections");
+    return loadImpl(root, out);
   } catch (const YAML::Exception& x) {
-    e = "malformed YAML: " + quoteForMessage(x.what());
-    ok = false;
+    return Status::invalidInput("malformed YAML: " + quoteForMessage(x.what()));
   }
-  if (!ok && error) *error = e;
-  return ok;
 }
 
-bool loadEncoderOptionsFile(const std::string& path, EncoderOptions* out, std::string* error) {
+Status loadEncoderOptionsFile(const std::string& path, EncoderOptions* out) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
   } catch (const YAML::Exception& x) {
-    if (error) *error = path + ": " + quoteForMessage(x.what());
-    return false;
+    return Status::ioError(path + ": " + quoteForMessage(x.what()));
   }
-  std::string e;
-  if (!loadEncoderOptions(root, out, &e)) {
-    if (error) *error = path + ": " + e;
-    return false;
-  }
-  return true;
+  return loadEncoderOptions(root, out).withContext(path);
 }
 
 }  // namespace gear_sim

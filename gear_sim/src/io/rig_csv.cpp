@@ -14,10 +14,9 @@ void put(std::string* line, double v) {
   const auto r = std::to_chars(buf, buf + sizeof buf, v);
   line->append(buf, r.ptr);
 }
-// Writes `header` and the rows row(i), i < n, to `path`; false with `*error` when it cannot.
+// Writes `header` and the rows row(i), i < n, to `path`; IoError when it cannot.
 template <class Row>
-bool writeRows(const std::string& path, const char* header, Eigen::Index n, Row&& row,
-               std::string* error) {
+Status writeRows(const std::string& path, const char* header, Eigen::Index n, Row&& row) {
   std::ofstream f(path);
   if (f) {
     f << header;
@@ -30,36 +29,30 @@ bool writeRows(const std::string& path, const char* header, Eigen::Index n, Row&
     }
     f.close();
   }
-  if (!f) {
-    if (error) *error = path + ": cannot write";
-    return false;
-  }
-  return true;
+  if (!f) return Status::ioError(path + ": cannot write");
+  return {};
 }
 
 }  // namespace
 
-bool writeRigCsv(const std::string& path, const SignalTable& t, std::string* error) {
+Status writeRigCsv(const std::string& path, const SignalTable& t) {
   const Eigen::Index n = t.size();
   const bool torque = t.torque.size() == n;
-  if (t.theta1.size() != n || t.theta2.size() != n) {
-    if (error) *error = path + ": a rig record needs theta1 and theta2 as long as time";
-    return false;
-  }
-  return writeRows(
-      path, torque ? "time,theta1,theta2,torque\n" : "time,theta1,theta2\n", n,
-      [&](Eigen::Index i, std::string* line) {
-        put(line, t.time[i]);
-        *line += ',';
-        put(line, t.theta1[i]);
-        *line += ',';
-        put(line, t.theta2[i]);
-        if (torque) {
-          *line += ',';
-          put(line, t.torque[i]);
-        }
-      },
-      error);
+  if (t.theta1.size() != n || t.theta2.size() != n)
+    return Status::invalidInput(path + ": a rig record needs theta1 and theta2 as long as time",
+                                t.theta1.size() != n ? "theta1" : "theta2");
+  return writeRows(path, torque ? "time,theta1,theta2,torque\n" : "time,theta1,theta2\n", n,
+                   [&](Eigen::Index i, std::string* line) {
+                     put(line, t.time[i]);
+                     *line += ',';
+                     put(line, t.theta1[i]);
+                     *line += ',';
+                     put(line, t.theta2[i]);
+                     if (torque) {
+                       *line += ',';
+                       put(line, t.torque[i]);
+                     }
+                   });
 }
 
 bool isRigCsv(const std::string& path) {
@@ -83,30 +76,27 @@ bool isRigCsv(const std::string& path) {
   return t1 && t2 && !dte;
 }
 
-bool readRigCsv(const std::string& path, SignalTable* out, std::string* error) {
-  if (!readSignalCsv(path, out, error, {"time", "theta1", "theta2"})) return false;
-  if (out->dte.size() > 0) {
-    if (error) *error = path + ": has a dte column: an ordinary record, not a rig record";
-    return false;
-  }
-  return true;
+Status readRigCsv(const std::string& path, SignalTable* out) {
+  if (Status s = readSignalCsv(path, out, {"time", "theta1", "theta2"}); !s.ok()) return s;
+  if (out->dte.size() > 0)
+    return Status::invalidInput(path + ": has a dte column: an ordinary record, not a rig record",
+                                "dte");
+  return {};
 }
 
-bool writeEdgeCsv(const std::string& path, const std::vector<double>& edges, std::string* error) {
+Status writeEdgeCsv(const std::string& path, const std::vector<double>& edges) {
   return writeRows(
       path, "time\n", static_cast<Eigen::Index>(edges.size()),
-      [&](Eigen::Index i, std::string* line) { put(line, edges[static_cast<size_t>(i)]); }, error);
+      [&](Eigen::Index i, std::string* line) { put(line, edges[static_cast<size_t>(i)]); });
 }
 
-bool readEdgeCsv(const std::string& path, std::vector<double>* edges, std::string* error) {
+Status readEdgeCsv(const std::string& path, std::vector<double>* edges) {
   SignalTable t;
-  if (!readSignalCsv(path, &t, error, {"time"})) return false;
-  if (t.dte.size() > 0 || t.theta1.size() > 0 || t.theta2.size() > 0 || t.torque.size() > 0) {
-    if (error) *error = path + ": an edge-time file has the one column time";
-    return false;
-  }
+  if (Status s = readSignalCsv(path, &t, {"time"}); !s.ok()) return s;
+  if (t.dte.size() > 0 || t.theta1.size() > 0 || t.theta2.size() > 0 || t.torque.size() > 0)
+    return Status::invalidInput(path + ": an edge-time file has the one column time");
   edges->assign(t.time.data(), t.time.data() + t.time.size());
-  return true;
+  return {};
 }
 
 }  // namespace gear_sim

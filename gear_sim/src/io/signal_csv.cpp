@@ -49,7 +49,7 @@ LineRead readLine(std::istream& f, std::vector<char>& buf, std::string* line) {
 
 }  // namespace
 
-bool writeSignalCsv(const std::string& path, const SignalTable& table, std::string* error) {
+Status writeSignalCsv(const std::string& path, const SignalTable& table) {
   SignalTable& t = const_cast<SignalTable&>(table);  // columns() only reads through it here
   const auto cols = columns(t);
   const auto& names = signalColumnNames();
@@ -57,20 +57,15 @@ bool writeSignalCsv(const std::string& path, const SignalTable& table, std::stri
   std::string header;
   for (size_t c = 0; c < cols.size(); ++c) {
     if (c >= 2 && cols[c]->size() == 0) continue;
-    if (cols[c]->size() != table.time.size()) {
-      if (error)
-        *error = "column " + names[c] + " has " + std::to_string(cols[c]->size()) +
-                 " values, time has " + std::to_string(table.time.size());
-      return false;
-    }
+    if (cols[c]->size() != table.time.size())
+      return Status::invalidInput("column " + names[c] + " has " + std::to_string(cols[c]->size()) +
+                                      " values, time has " + std::to_string(table.time.size()),
+                                  names[c]);
     present.push_back(cols[c]);
     header += (header.empty() ? "" : ",") + names[c];
   }
   std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
-  if (!f) {
-    if (error) *error = path + ": cannot open for writing";
-    return false;
-  }
+  if (!f) return Status::ioError(path + ": cannot open for writing");
   std::fputs((header + "\n").c_str(), f.get());
   std::string line;
   char buf[32];
@@ -84,28 +79,25 @@ bool writeSignalCsv(const std::string& path, const SignalTable& table, std::stri
     line += '\n';
     std::fwrite(line.data(), 1, line.size(), f.get());
   }
-  if (std::fflush(f.get()) != 0 || std::ferror(f.get())) {
-    if (error) *error = path + ": write failed";
-    return false;
-  }
-  return true;
+  if (std::fflush(f.get()) != 0 || std::ferror(f.get()))
+    return Status::ioError(path + ": write failed");
+  return {};
 }
 
-bool commitFile(const std::string& tmp, const std::string& path, std::string* error) {
-  if (std::rename(tmp.c_str(), path.c_str()) == 0) return true;
+Status commitFile(const std::string& tmp, const std::string& path) {
+  if (std::rename(tmp.c_str(), path.c_str()) == 0) return {};
   std::remove(tmp.c_str());
-  if (error) *error = path + ": cannot write";
-  return false;
+  return Status::ioError(path + ": cannot write");
 }
 
-bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error,
-                   const std::vector<std::string>& required, bool allow_non_finite) {
-  auto fail = [&](const std::string& what) {
-    if (error) *error = path + ": " + what;
-    return false;
+Status readSignalCsv(const std::string& path, SignalTable* out,
+                     const std::vector<std::string>& required, bool allow_non_finite) {
+  // Every failure past opening is the file's content; `column` names the CSV column concerned.
+  auto fail = [&](const std::string& what, const std::string& column = {}) {
+    return Status::invalidInput(path + ": " + what, column);
   };
   std::ifstream f(path);
-  if (!f) return fail("cannot open");
+  if (!f) return Status::ioError(path + ": cannot open");
   std::string line;
   long line_no = 0;
   std::vector<char> buf(kMaxCsvLineBytes + 1);
@@ -138,11 +130,13 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
         std::string list;
         for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
         return fail("line " + std::to_string(line_no) + ", column " + std::to_string(field) +
-                    ": unknown column " + quoteForMessage(name) + " (known: " + list + ")");
+                        ": unknown column " + quoteForMessage(name) + " (known: " + list + ")",
+                    name);
       }
       if (seen[c])
-        return fail("line " + std::to_string(line_no) + ": duplicate column " +
-                    quoteForMessage(name));
+        return fail(
+            "line " + std::to_string(line_no) + ": duplicate column " + quoteForMessage(name),
+            name);
       seen[c] = true;
       map.push_back(static_cast<int>(c));
     }
@@ -150,7 +144,7 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
       size_t c = 0;
       while (c < names.size() && names[c] != r) ++c;
       if (c == names.size() || !seen[c])
-        return fail("missing required column " + quoteForMessage(r));
+        return fail("missing required column " + quoteForMessage(r), r);
     }
   }
   std::vector<std::vector<double>> data(names.size());
@@ -171,10 +165,11 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
       if (r.ec != std::errc() || (r.ptr < end && *r.ptr != ',' && *r.ptr != ' ')) {
         const char* q = p;
         while (q < end && *q != ',') ++q;
-        return fail(where + ": malformed number " + quoteForMessage(std::string_view(p, q - p)));
+        return fail(where + ": malformed number " + quoteForMessage(std::string_view(p, q - p)),
+                    names[map[field]]);
       }
       if (!std::isfinite(v) && (!allow_non_finite || map[field] == 0))
-        return fail(where + ": value is not finite (" + formatNumber(v) + ")");
+        return fail(where + ": value is not finite (" + formatNumber(v) + ")", names[map[field]]);
       data[map[field]].push_back(v);
       p = r.ptr;
       while (p < end && *p == ' ') ++p;
@@ -195,15 +190,16 @@ bool readSignalCsv(const std::string& path, SignalTable* out, std::string* error
   for (size_t i = 1; i < time.size(); ++i)
     if (!(time[i] > time[i - 1]))
       return fail("line " + std::to_string(row_line[i]) + ": time " + formatNumber(time[i]) +
-                  " is not greater than the previous " + formatNumber(time[i - 1]) +
-                  " (time must be strictly increasing)");
+                      " is not greater than the previous " + formatNumber(time[i - 1]) +
+                      " (time must be strictly increasing)",
+                  "time");
   SignalTable t;
   const auto cols = columns(t);
   for (size_t c = 0; c < names.size(); ++c)
     if (!data[c].empty())
       *cols[c] = Eigen::Map<const Eigen::VectorXd>(data[c].data(), data[c].size());
   *out = std::move(t);
-  return true;
+  return {};
 }
 
 }  // namespace gear_sim

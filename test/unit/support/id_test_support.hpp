@@ -17,6 +17,7 @@
 #include "gear_damping_id/output_error.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/simulator.hpp"
+#include "status_support.hpp"
 
 namespace gear_id_test {
 
@@ -32,8 +33,8 @@ using gear_sim::SimConfig;
 inline SimConfig table1Config() {
   SimConfig c;
   std::string e;
-  EXPECT_TRUE(
-      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c, &e))
+  EXPECT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml", &c), &e))
       << e;
   return c;
 }
@@ -84,7 +85,7 @@ inline SimConfig heldOutCase() {
 inline SignalTable simulateOrFail(const SimConfig& c) {
   SignalTable t;
   std::string e;
-  EXPECT_TRUE(gear_sim::simulate(c, &t, &e)) << e;
+  EXPECT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
   return t;
 }
 
@@ -93,8 +94,8 @@ inline IdentificationResult identifyOrFail(const SignalTable& t, const SimConfig
                                            const IdentificationOptions& o) {
   IdentificationResult r;
   std::string e;
-  EXPECT_TRUE(
-      gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r, &e))
+  EXPECT_TRUE(gear_test::ok(
+      gear_damping_id::identify(t, gear_damping_id::gearConstants(c.gearModel()), o, &r), &e))
       << e;
   return r;
 }

@@ -10,6 +10,7 @@
 
 #include "gear_damping_id/ste_model.hpp"
 #include "id_test_support.hpp"
+#include "status_support.hpp"
 
 namespace gear_ste_test {
 
@@ -63,8 +64,9 @@ inline IdentificationOptions idOptions(Formulation f = Formulation::Known) {
 inline bool runSte(const SignalTable& t, const SimConfig& c, const IdentificationOptions& o,
                    const SteModelOptions& so, IdentificationResult* r, SteResult* s) {
   std::string e;
-  const bool ok = gear_damping_id::identifyWithSte(t, gear_damping_id::gearConstants(c.gearModel()),
-                                                   o, so, r, s, &e);
+  const bool ok = gear_test::ok(gear_damping_id::identifyWithSte(
+                                    t, gear_damping_id::gearConstants(c.gearModel()), o, so, r, s),
+                                &e);
   EXPECT_TRUE(ok) << e;
   return ok;
 }

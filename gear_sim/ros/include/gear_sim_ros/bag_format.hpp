@@ -20,6 +20,8 @@
 
 #include <string>
 
+#include "gear_sim/status.hpp"
+
 namespace gear_sim_ros {
 
 /// Largest record header or connection header accepted [bytes] (ROS refuses fields above 1e6).
@@ -27,8 +29,8 @@ constexpr unsigned kMaxBagHeaderBytes = 16u << 20;
 /// Largest uncompressed chunk accepted [bytes] (rosbag allocates it; its default is 768 KiB).
 constexpr unsigned kMaxBagChunkBytes = 1u << 30;
 
-/// True when `path` is a structurally sound bag of format 2.0; else false with a one-line
-/// `*error` ("<path>: cannot read as a bag (<reason> at byte N)").
-bool checkBagStructure(const std::string& path, std::string* error);
+/// Ok when `path` is a structurally sound bag of format 2.0; else InvalidInput (IoError when it
+/// cannot be opened) with a one-line message ("<path>: cannot read as a bag (<reason> at byte N)").
+gear_sim::Status checkBagStructure(const std::string& path);
 
 }  // namespace gear_sim_ros

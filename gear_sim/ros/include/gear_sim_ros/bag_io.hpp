@@ -12,6 +12,7 @@
 
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace rosbag {
 class MessageInstance;
@@ -90,53 +91,54 @@ struct BagSignalInfo {
 /// Limits: indices below kMaxSampleIndex, gaps at most kMaxGapRatio x the samples present;
 /// the plausibility counts of BagSignalInfo are filled and warned about.
 /// The gear parameters come from the latest GearParams message on any topic.
-/// False with a one-line `*error`: cannot open / not a bag / corrupt or truncated, no such
-/// topic, wrong message type, no chunks, inconsistent chunks.
-bool scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info,
-                   std::string* error);
+/// InvalidInput with a one-line message: cannot open / not a bag / corrupt or truncated, no
+/// such topic, wrong message type, no chunks, inconsistent chunks (field: the channel concerned,
+/// when one is).
+gear_sim::Status scanSignalBag(const std::string& path, const std::string& topic,
+                               BagSignalInfo* info);
 
 /// Streams the record scanned into `info` as SignalTable blocks, one per range [begin, end) of
 /// sample numbers counted from info.first_index (ascending, non-overlapping, within
 /// [0, info.samples)): sink(table, range_index) gets the samples of each range (gaps as NaN,
-/// time = global index / sample_rate). Samples outside the ranges are skipped. The sink returns
-/// false to stop (then this returns false with its message in *error, if it set one).
-bool streamSignalBag(const BagSignalInfo& info,
-                     const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                     const std::function<bool(const gear_sim::SignalTable&, size_t)>& sink,
-                     std::string* error);
+/// time = global index / sample_rate). Samples outside the ranges are skipped. A failed Status
+/// from the sink stops the stream and is returned as is.
+gear_sim::Status streamSignalBag(
+    const BagSignalInfo& info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
 
 /// The whole record as one table (gaps as NaN).
-bool readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out, std::string* error);
+gear_sim::Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out);
 
 /// Latest sample time a bag can stamp [s]: ros::Time holds 32-bit seconds and the stamps are
 /// 1 s + the sample time.
 constexpr double kMaxBagTime = 4294967294.0;
 
-/// Why `table` cannot be written as a bag at `sample_rate` (empty when it can): times outside
-/// [0, kMaxBagTime] s or sample indices beyond kMaxSampleIndex. Checked by writeSignalBag too.
-std::string bagTimeError(const gear_sim::SignalTable& table, double sample_rate);
+/// Whether `table` can be written as a bag at `sample_rate`: InvalidInput (field "time") for
+/// times outside [0, kMaxBagTime] s or sample indices beyond kMaxSampleIndex. Checked by
+/// writeSignalBag too.
+gear_sim::Status checkBagTimes(const gear_sim::SignalTable& table, double sample_rate);
 
 /// Writes a bag staged: into PATH.partial, first the gear parameters on `params_topic` (when
 /// `params` is not null) stamped at the base time 1 s, then what `fill` writes (given the bag and
 /// that base time); renamed onto PATH only when everything succeeded, removed otherwise.
-/// False with `*error`.
-bool writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
-                    const std::string& params_topic,
-                    const std::function<void(rosbag::Bag&, const ros::Time&)>& fill,
-                    std::string* error);
+/// IoError when it cannot be written.
+gear_sim::Status writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
+                                const std::string& params_topic,
+                                const std::function<void(rosbag::Bag&, const ros::Time&)>& fill);
 
 /// Writes `table` (uniform time) as SignalChunk messages of `chunk_size` samples on
 /// `topic` (first_index = round(time[0] * sample_rate) + i) and, when `params` is not null, the
 /// gear parameters on `params_topic` first. Bag time stamps are 1 s + the sample time. Writes a
-/// temporary file renamed on success. False with `*error`.
-bool writeSignalBag(const std::string& path, const gear_sim::SignalTable& table, double sample_rate,
-                    const gear_sim::GearModel* params, long chunk_size, std::string* error,
-                    const std::string& topic = "/gear/signal",
-                    const std::string& params_topic = "/gear/params");
+/// temporary file renamed on success. InvalidInput for a record a bag cannot hold, IoError when
+/// the file cannot be written.
+gear_sim::Status writeSignalBag(const std::string& path, const gear_sim::SignalTable& table,
+                                double sample_rate, const gear_sim::GearModel* params,
+                                long chunk_size, const std::string& topic = "/gear/signal",
+                                const std::string& params_topic = "/gear/params");
 
 /// Where a serialized SignalChunk, sensor_msgs/JointState or geometry_msgs/WrenchStamped in a bag
 /// claims an array or string longer than its bytes (ROS would allocate the claimed length before
-/// noticing): the problem, empty when the layout fits (and for other types).
-std::string messageLayoutError(const rosbag::MessageInstance& m);
+/// noticing): InvalidInput naming the problem, ok when the layout fits (and for other types).
+gear_sim::Status checkMessageLayout(const rosbag::MessageInstance& m);
 
 }  // namespace gear_sim_ros

@@ -13,6 +13,7 @@
 
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim_ros {
 
@@ -22,17 +23,17 @@ void toChunk(const gear_sim::SignalTable& table, Eigen::Index begin, Eigen::Inde
              double sample_rate, std::uint64_t first_index, gear_damping::SignalChunk* msg);
 
 /// Concatenates consecutive chunks into a table, time = first_index / sample_rate + i /
-/// sample_rate. False with `*error` naming the chunk if the sample rate changes, indices are not
+/// sample_rate. InvalidInput naming the chunk if the sample rate changes, indices are not
 /// contiguous, an optional channel has the wrong length or is present in some chunks only.
-bool chunksToTable(const std::vector<gear_damping::SignalChunk>& chunks, gear_sim::SignalTable* out,
-                   std::string* error);
+gear_sim::Status chunksToTable(const std::vector<gear_damping::SignalChunk>& chunks,
+                               gear_sim::SignalTable* out);
 
 /// Gear model -> latched parameters message (with the derived Me, force factor, natural frequency).
 gear_damping::GearParams toMsg(const gear_sim::GearModel& model);
 
 /// Parameters message -> gear model (square/trapezoid/constant/fourier without harmonics);
-/// validated, false with `*error` naming the field.
-bool fromMsg(const gear_damping::GearParams& msg, gear_sim::GearModel* out, std::string* error);
+/// validated: InvalidInput/InvalidArgument naming the field (Status::field()).
+gear_sim::Status fromMsg(const gear_damping::GearParams& msg, gear_sim::GearModel* out);
 
 /// A parameter tree (e.g. the node's private namespace after `rosparam load`) as YAML, so the
 /// node goes through exactly the same loader and validation as the YAML file.

@@ -7,6 +7,7 @@
 
 #include "gear_sim/signal_table.hpp"
 #include "gear_sim/sim_config.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_sim_ros {
 
@@ -21,8 +22,8 @@ struct RigBagTopics {
 
 /// Writes `rig` (time, theta1, theta2, torque) as JointState + WrenchStamped messages (and the
 /// gear parameters when `params` is not null). Temporary file renamed on success.
-bool writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
-                 const gear_sim::GearModel* params, const RigBagTopics& topics, std::string* error);
+gear_sim::Status writeRigBag(const std::string& path, const gear_sim::SignalTable& rig,
+                             const gear_sim::GearModel* params, const RigBagTopics& topics);
 
 /// Whether the bag at `path` holds sensor_msgs/JointState messages on `topics.joints` (a rig bag,
 /// for `analyze --input`). False for an unreadable or corrupt file (checked record by record
@@ -32,9 +33,9 @@ bool isRigBag(const std::string& path, const RigBagTopics& topics);
 /// Reads a rig bag: per JointState message on `topics.joints` the positions of the joints named
 /// `joint1`, `joint2`, and the torque with the same stamp on `topics.torque`
 /// (geometry_msgs/WrenchStamped, component `axis`, or std_msgs/Float64); time = stamp minus the
-/// first JointState stamp. Stamps must increase. False with `*error` naming the bag and the
-/// reason (a missing joint or torque, a corrupt file).
-bool readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig,
-                std::string* error);
+/// first JointState stamp. Stamps must increase. InvalidInput naming the bag and the reason (a
+/// missing joint or torque, a corrupt file).
+gear_sim::Status readRigBag(const std::string& path, const RigBagTopics& topics,
+                            gear_sim::SignalTable* rig);
 
 }  // namespace gear_sim_ros
