@@ -110,7 +110,7 @@ class IntegralMethod {
   /// Most columns of the least-squares rows (unknowns of one problem).
   static constexpr int kMaxColumns = 2 + 2 * StiffnessShape::kMaxHarmonics + 1;
 
-  /// `options` and `gear` must be valid (validate()); window_length 0 is resolved by the caller
+  /// `options` and `gear` must be valid (check()); window_length 0 is resolved by the caller
   /// (defaultWindowLength) or, if still 0 at the first segment, from that segment's data.
   IntegralMethod(const IdentificationOptions& options, const GearConstants& gear);
 

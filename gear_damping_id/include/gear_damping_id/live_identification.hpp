@@ -39,7 +39,7 @@ struct LiveLimits {
 
 class LiveIdentification {
  public:
-  /// `options` and `gear` must be valid (validate()); limits fields >= 1.
+  /// `options` and `gear` must be valid (check()); limits fields >= 1.
   LiveIdentification(const IdentificationOptions& options, const GearConstants& gear,
                      const LiveLimits& limits = LiveLimits());
 

@@ -75,7 +75,7 @@ struct DriverLimits {
 
 class SegmentDriver {
  public:
-  /// `options` and `gear` must be valid (validate()); a window_length of 0 is resolved from the
+  /// `options` and `gear` must be valid (check()); a window_length of 0 is resolved from the
   /// first view given (defaultWindowLength), so callers that want the record's default resolve
   /// it first.
   SegmentDriver(const IdentificationOptions& options, const GearConstants& gear,

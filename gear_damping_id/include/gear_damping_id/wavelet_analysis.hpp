@@ -19,7 +19,7 @@
 namespace gear_damping_id {
 
 /// Options of analyzeWavelet. Defaults suit free decays sampled at >= 10 samples per period of
-/// the highest mode. validate() checks everything that does not depend on the data.
+/// the highest mode. check() checks everything that does not depend on the data.
 struct WaveletOptions {
   /// Scalogram / spectrum frequency grid [Hz], log-spaced. 0 = automatic: f_min = 10 cycles
   /// over the record (10*fs/n), f_max = 0.4*fs. Must satisfy f_min < f_max < fs/2.
@@ -217,7 +217,7 @@ gear_sim::Status analyzeWavelet(const Eigen::VectorXd& y, double sample_rate,
 
 /// High-level entry point (the `analyze --wavelet` tool and the nodes): analyzeWavelet on
 /// y[0..n) sampled at sample_rate [Hz], returning the result by value. Never throws for bad
-/// input and never returns silent NaNs: on invalid input (options.validate() failing, a null
+/// input and never returns silent NaNs: on invalid input (options.check() failing, a null
 /// or too short signal (n < 64), a NaN/Inf sample (its index is named), a sample rate that is
 /// not finite and > 0, a frequency grid or mode frequency at or above the Nyquist frequency)
 /// the result has ok() == false, `status` says which field or sample is wrong and everything
