@@ -34,15 +34,10 @@ std::string keyForMessage(const std::string& key) {
 
 // A mapping key for a message and a lookup: its name when it is a scalar; a sequence or a
 // mapping used as a key (`? [a, b]`) is an error naming it, not an exception.
-bool keyName(const YAML::Node& key, const std::string& where, std::string* name, Status* status) {
-  if (key.IsScalar()) {
-    *name = key.Scalar();
-    return true;
-  }
-  if (status->ok())
-    *status = Status::invalidInput(where + quoted(key) +
-                                   ": a key must be a plain name, not a sequence or mapping");
-  return false;
+Result<std::string> keyName(const YAML::Node& key, const std::string& where) {
+  if (key.IsScalar()) return key.Scalar();
+  return Status::invalidInput(where + quoted(key) +
+                              ": a key must be a plain name, not a sequence or mapping");
 }
 
 // Reads one section: checks its keys against the known list and converts values, recording
@@ -61,8 +56,12 @@ class Section {
     if (!present() || !ok()) return;
     std::set<std::string> k(known.begin(), known.end());
     for (const auto& kv : node_) {
-      std::string key;
-      if (!keyName(kv.first, name_ + ".", &key, status_)) return;
+      const Result<std::string> name = keyName(kv.first, name_ + ".");
+      if (!name.ok()) {
+        if (ok()) *status_ = name.status();
+        return;
+      }
+      const std::string& key = *name;
       if (!k.count(key)) {
         std::string list;
         for (const std::string& s : known) list += (list.empty() ? "" : ", ") + s;
@@ -296,8 +295,12 @@ void checkSections(const YAML::Node& root, Status* err) {
   const std::set<std::string> sections{"pinion",  "gear",       "mesh", "speed",  "load",
                                        "damping", "simulation", "ste",  "encoder"};
   for (const auto& kv : root) {
-    std::string key;
-    if (!keyName(kv.first, "", &key, err)) return;
+    const Result<std::string> name = keyName(kv.first, "");
+    if (!name.ok()) {
+      *err = name.status();
+      return;
+    }
+    const std::string& key = *name;
     if (!sections.count(key)) {
       *err = Status::invalidInput(
           keyForMessage(key) +
