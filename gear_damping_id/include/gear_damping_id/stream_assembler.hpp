@@ -62,6 +62,7 @@
 
 #include "gear_damping_id/signal_view.hpp"
 #include "gear_sim/option_status.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -245,13 +246,14 @@ class StreamAssembler {
 
   static unsigned channelMask(const ChunkData& c);
   ChunkStatus reject(ChunkStatus status, const ChunkData& c, unsigned long* counter);
-  // push's named steps (stream_assembler.cpp).
-  bool malformed(const ChunkData& c, std::string* why);
-  bool allFinite(const ChunkData& c, std::string* why) const;
+  // push's named steps (stream_assembler.cpp): the input checks (ok, or InvalidInput naming the
+  // channel), then the classification of a valid chunk (its ChunkStatus and detail).
+  gear_sim::Status checkWellFormed(const ChunkData& c);
+  gear_sim::Status checkFinite(const ChunkData& c) const;
+  gear_sim::Status checkPlausible(const ChunkData& c) const;
   void startOver(std::string* why);
   ChunkStatus holdSuspect(const ChunkData& c, std::string* why);
   ChunkStatus place(const ChunkData& c, std::string* why);
-  bool implausibleValue(const ChunkData& c, std::string* why) const;
   void updateScales(const ChunkData& c);
   bool isJump(const ChunkData& c) const;
   void decideSuspect(const ChunkData& next);

@@ -203,15 +203,14 @@ ChunkStatus StreamAssembler::reject(ChunkStatus status, const ChunkData& c,
   return status;
 }
 
-bool StreamAssembler::implausibleValue(const ChunkData& c, std::string* why) const {
+gear_sim::Status StreamAssembler::checkPlausible(const ChunkData& c) const {
   std::ostringstream m;
   if (c.mesh_state) {
     for (size_t i = 0; i < c.n; ++i) {
       if (c.mesh_state[i] != 0.0 && c.mesh_state[i] != 1.0) {
         m << "chunk at index " << c.first_index << ": mesh_state[" << i << "] = " << c.mesh_state[i]
           << " (must be 0 or 1)";
-        *why = m.str();
-        return true;
+        return gear_sim::Status::invalidInput(m.str(), "mesh_state");
       }
     }
   }
@@ -225,8 +224,7 @@ bool StreamAssembler::implausibleValue(const ChunkData& c, std::string* why) con
     if (k == 0 && peak > options_.max_abs_dte) {
       m << "chunk at index " << c.first_index << ": |dte| up to " << peak
         << " m (above max_abs_dte " << options_.max_abs_dte << " m)";
-      *why = m.str();
-      return true;
+      return gear_sim::Status::invalidInput(m.str(), "dte");
     }
     if (options_.magnitude_factor > 0.0 && !recent_max_[k].empty()) {
       std::vector<double> r(recent_max_[k].begin(), recent_max_[k].end());
@@ -236,12 +234,11 @@ bool StreamAssembler::implausibleValue(const ChunkData& c, std::string* why) con
         m << "chunk at index " << c.first_index << ": |" << channels[k].second << "| up to " << peak
           << ", " << peak / scale << " times the stream's running scale " << scale
           << " (magnitude_factor " << options_.magnitude_factor << ")";
-        *why = m.str();
-        return true;
+        return gear_sim::Status::invalidInput(m.str(), channels[k].second);
       }
     }
   }
-  return false;
+  return {};
 }
 
 void StreamAssembler::updateScales(const ChunkData& c) {
@@ -302,14 +299,14 @@ void StreamAssembler::decideSuspect(const ChunkData& c) {
 
 // push's first check: a chunk the assembler cannot place at all (no samples, no dte, a rate that
 // is not a positive finite number or above 1e12 Hz, an index beyond 2^52, fewer than 4 samples per
-// segment). Counts it and returns true with *why.
-bool StreamAssembler::malformed(const ChunkData& c, std::string* why) {
+// segment): InvalidInput saying why, and counted.
+gear_sim::Status StreamAssembler::checkWellFormed(const ChunkData& c) {
   const bool short_segments =
       !wholeRun() && !(options_.segment_length * c.sample_rate >= kMinSegmentSamples);
   const bool rate_too_high = c.sample_rate > kMaxSampleRate;
   if (!(c.n == 0 || c.dte == nullptr || !std::isfinite(c.sample_rate) || !(c.sample_rate > 0.0) ||
         rate_too_high || c.n > kMaxIndex || c.first_index > kMaxIndex - c.n || short_segments))
-    return false;
+    return {};
   ++counters_.rejected_malformed;
   if (c.dte != nullptr && c.n <= kMaxIndex) {
     counters_.samples_received += c.n;
@@ -321,12 +318,12 @@ bool StreamAssembler::malformed(const ChunkData& c, std::string* why) {
     << (c.n > kMaxIndex || c.first_index > kMaxIndex - c.n ? ", index beyond 2^52" : "")
     << (short_segments ? ", fewer than 4 samples per segment" : "")
     << (rate_too_high ? ", sample rate above 1e12 Hz" : "");
-  *why = m.str();
-  return true;
+  return gear_sim::Status::invalidInput(m.str());
 }
 
-// The first non-finite sample of any channel the chunk has: false with *why naming it.
-bool StreamAssembler::allFinite(const ChunkData& c, std::string* why) const {
+// The first non-finite sample of any channel the chunk has: InvalidInput naming it (field: the
+// channel).
+gear_sim::Status StreamAssembler::checkFinite(const ChunkData& c) const {
   const std::pair<const double*, const char*> channels[] = {{c.dte, "dte"},
                                                             {c.stiffness, "stiffness"},
                                                             {c.torque, "torque"},
@@ -339,12 +336,11 @@ bool StreamAssembler::allFinite(const ChunkData& c, std::string* why) const {
         std::ostringstream m;
         m << "chunk at index " << c.first_index << ": " << ch.second << "[" << i
           << "] = " << ch.first[i];
-        *why = m.str();
-        return false;
+        return gear_sim::Status::invalidInput(m.str(), ch.second);
       }
     }
   }
-  return true;
+  return {};
 }
 
 // The publisher started over (index 0 after later ones): finish the old record, start a new
@@ -421,11 +417,18 @@ ChunkStatus StreamAssembler::push(const ChunkData& c, std::string* detail) {
   std::string& why = detail ? *detail : scratch;
   why.clear();
   ++counters_.chunks_received;
-  if (malformed(c, &why)) return ChunkStatus::RejectedMalformed;
+  // The input checks: a failed one classifies the chunk, its message is the detail.
+  if (const gear_sim::Status s = checkWellFormed(c); !s.ok()) {
+    why = s.message();
+    return ChunkStatus::RejectedMalformed;
+  }
   counters_.samples_received += c.n;
-  if (!allFinite(c, &why))
+  if (const gear_sim::Status s = checkFinite(c); !s.ok()) {
+    why = s.message();
     return reject(ChunkStatus::RejectedNonFinite, c, &counters_.rejected_nonfinite);
-  if (implausibleValue(c, &why)) {
+  }
+  if (const gear_sim::Status s = checkPlausible(c); !s.ok()) {
+    why = s.message();
     return reject(ChunkStatus::RejectedValue, c, &counters_.rejected_value);
   }
   decideSuspect(c);  // a pending suspect is confirmed by this chunk or dropped
