@@ -46,6 +46,7 @@ void flagEstimate(SegmentEstimate* e) {
     e->C_integral = e->C_integral_std = kNaN;
     e->variation_z = e->C_mean_load = e->C_mean_load_std = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
+    e->C_torque_std = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
     return;
