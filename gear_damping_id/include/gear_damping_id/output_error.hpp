@@ -37,11 +37,12 @@
 // torque-meter noise: the model takes the torque as the exact forcing, so white noise w on the
 // torque samples (level estimated per segment by torqueNoiseEstimate) moves the estimate by the
 // Gauss-Newton solve map applied to the response G w of the model to it. Its covariance
-// A G Sigma_w G^T A^T is estimated from random draws of w (the response of the converged model,
-// zero initial state, through the same prewhitening and Schur-complement solve; seeded by the
-// segment's first sample, so the same on every path), in batches of 16 until the Monte Carlo
-// standard error of the added variance is below 5 % of C's total variance (at most 256 draws:
-// the added variance then within sqrt(2/256) = 8.8 % relative). Not for the load_law model.
+// A G Sigma_w G^T A^T is estimated from random draws of w (Rademacher +-sigma; the response of
+// the converged model, zero initial state, through the same prewhitening and Schur-complement
+// solve; seeded by the segment's first sample, so the same on every path), in batches of 16
+// until the Monte Carlo standard error of the added variance is below 10 % of C's total
+// variance (at most 64 draws: the added variance then within sqrt(2/64) = 18 % relative, the
+// Gaussian-draw bound; less with Rademacher draws). Not for the load_law model.
 #pragma once
 
 #include <Eigen/Core>
