@@ -51,6 +51,7 @@
 
 #include "damping_id_params.hpp"
 #include "gear_damping_id/live_identification.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim_ros/conversions.hpp"
@@ -190,6 +191,7 @@ class DampingIdNode {
 
   void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
     noteRecordStart(*msg);
+    noteUnstampedTorque(*msg);
     if (!gear_) {  // keep until the gear parameters arrive
       if (early_.size() >= static_cast<size_t>(o_.intake.queue_size)) {
         early_.pop_front();
@@ -238,6 +240,18 @@ class DampingIdNode {
   // --- time series (gear/damping_series) -------------------------------------------------------
   // The record's start on the ROS clock: the stamp of a chunk minus its samples' offset. Taken
   // from the first chunk of the stream, again after a restart (index 0) or a reset.
+  // Chunks whose torque was paired without stamps (rig_frontend_node, Float64 torque): their
+  // segments carry torque_unstamped. A new record (first_index 0) starts over.
+  void noteUnstampedTorque(const gear_damping::SignalChunk& m) {
+    if (m.first_index == 0) unstamped_.clear();
+    if (m.header.frame_id != gear_sim_ros::kTorqueUnstampedFrame || !(m.sample_rate > 0.0) ||
+        m.dte.empty())
+      return;
+    const double t0 = static_cast<double>(m.first_index) / m.sample_rate;
+    const double t1 = static_cast<double>(m.first_index + m.dte.size() - 1) / m.sample_rate;
+    unstamped_.add(t0, t1, 1.5 / m.sample_rate);
+  }
+
   void noteRecordStart(const gear_damping::SignalChunk& m) {
     if ((have_record_start_ && m.first_index != 0) || !(m.sample_rate > 0.0)) return;
     const double offset = static_cast<double>(m.first_index) / m.sample_rate;
@@ -333,14 +347,17 @@ class DampingIdNode {
     const gd::SignalView v = s.view();
     // Refinement only while it keeps up with real time (see LoadGovernor); else the integral
     // estimate is published at once and the skip is counted and flagged.
-    const gd::LiveIdentification::SegmentOutput out =
-        live_->add(v, s.begin, s.end, refine_.allow());
+    gd::LiveIdentification::SegmentOutput out = live_->add(v, s.begin, s.end, refine_.allow());
+    unstamped_.mark(&out.estimate);
+    unstamped_.mark(&out.result);
     if (out.refinement_skipped) ++refine_skipped_;
     const gd::SegmentEstimate& est = out.estimate;
     const gd::IdentificationResult& seg = out.result;
     if (!out.warning.empty()) ROS_WARN_THROTTLE(5.0, "%s", out.warning.c_str());
     if (est.identifiable) {
       ++identified_;
+    } else if (out.ste_pending) {
+      ++pending_ste_;  // buffered for the STE calibration: not a failure
     } else {
       ++not_identifiable_;
       last_reason_ = est.reason;
@@ -389,8 +406,12 @@ class DampingIdNode {
   }
   // The last `last` segments (at most ~history_segments).
   gear_damping::DampingArray cumulative(size_t last) const {
-    gear_damping::DampingArray a =
-        live_ ? gear_damping_ros::toMsg(live_->cumulative(last)) : gear_damping::DampingArray();
+    gear_damping::DampingArray a;
+    if (live_) {
+      gd::IdentificationResult r = live_->cumulative(last);
+      unstamped_.mark(&r);
+      a = gear_damping_ros::toMsg(r);
+    }
     a.header.stamp = ros::Time::now();
     return a;
   }
@@ -413,7 +434,8 @@ class DampingIdNode {
     have_record_start_ = false;
     epoch_ = 0;
     clearEstimates();
-    identified_ = not_identifiable_ = partial_ = 0;
+    identified_ = not_identifiable_ = partial_ = pending_ste_ = 0;
+    unstamped_.clear();
     last_reason_.clear();
     publishCumulative(true);
     ROS_INFO("damping_id_node: reset");
@@ -433,7 +455,7 @@ class DampingIdNode {
   }
 
   void diagnoseIdentification(diagnostic_updater::DiagnosticStatusWrapper& s) {
-    const unsigned long n = identified_ + not_identifiable_;
+    const unsigned long n = identified_ + not_identifiable_ + pending_ste_;
     s.summary(diagnostic_msgs::DiagnosticStatus::OK, "identifying");
     if (not_identifiable_ != reported_not_identifiable_) {
       s.summary(diagnostic_msgs::DiagnosticStatus::WARN,
@@ -456,6 +478,7 @@ class DampingIdNode {
     s.add("model", gd::toString(o_.id.model));
     s.add("segments identified", identified_);
     s.add("segments not identifiable", not_identifiable_);
+    s.add("segments pending (STE calibration)", pending_ste_);
     s.add("last not identifiable reason", last_reason_);
     s.add("partial segments (cut by gap/restart/end)", partial_);
     s.add("segments in current estimate", live_ ? live_->segmentCount() : 0);
@@ -491,6 +514,8 @@ class DampingIdNode {
   unsigned long refine_skipped_ = 0;
   gd::SegmentEstimate latest_;
   unsigned long epoch_ = 0, identified_ = 0, not_identifiable_ = 0, partial_ = 0;
+  unsigned long pending_ste_ = 0;       // segments buffered for the STE calibration
+  gd::UnstampedTorqueSpans unstamped_;  // record spans with an unstamped torque
   unsigned long reported_not_identifiable_ = 0, dropped_early_ = 0;
   std::string last_reason_;
   double last_fit_ = gd::kNaN;

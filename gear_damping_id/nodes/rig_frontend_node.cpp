@@ -117,6 +117,10 @@ class RigFrontEndNode {
           nh.subscribe("rig/joint_states", queue, &RigFrontEndNode::onJoints, this, hints);
       float_sub_ = nh.subscribe("rig/torque", queue, &RigFrontEndNode::onFloat, this, hints);
       ROS_WARN("%s", kFloat64Warning);
+      unstamped_ = true;
+      // Once a minute while joint states arrive (a wall timer: no check per message).
+      warn_timer_ =
+          nh.createWallTimer(ros::WallDuration(60.0), &RigFrontEndNode::onWarnTimer, this);
     } else {
       ROS_FATAL("~torque_type = '%s': wrench or float64", torque_type.c_str());
       return false;
@@ -152,8 +156,13 @@ class RigFrontEndNode {
       ++skipped_;
       return;
     }
-    ROS_WARN_THROTTLE(60.0, "%s", kFloat64Warning);
+    joints_since_warning_ = true;
     add(*js, torque_);
+  }
+  void onWarnTimer(const ros::WallTimerEvent&) {
+    if (!joints_since_warning_) return;
+    joints_since_warning_ = false;
+    ROS_WARN("%s", kFloat64Warning);
   }
   void onFloat(const std_msgs::Float64::ConstPtr& f) { torque_ = f->data; }
   // Float64 carries no stamp: measured on a 20-bit rig bag relayed as Float64, live C was off the
@@ -162,7 +171,8 @@ class RigFrontEndNode {
       "rig_frontend: torque_type float64: std_msgs/Float64 has no time stamp, each joint state "
       "is paired with the latest torque received (one to several samples late, jittering). "
       "With a torque that varies within a mesh period C can be biased (measured up to 10 %); "
-      "use geometry_msgs/WrenchStamped (torque_type wrench) for such torques";
+      "use geometry_msgs/WrenchStamped (torque_type wrench) for such torques. The chunks are "
+      "marked and damping_id_node flags their segments torque_unstamped";
 
   void add(const sensor_msgs::JointState& js, double torque) {
     last_wall_ = ros::WallTime::now();
@@ -239,6 +249,8 @@ class RigFrontEndNode {
         gear_damping::SignalChunk msg;
         gear_sim_ros::toChunk(t, b, n, rate_, first + static_cast<std::uint64_t>(b), &msg);
         msg.header.stamp = ros::Time::now();
+        // The segments built from these samples are flagged by damping_id_node.
+        if (unstamped_) msg.header.frame_id = gear_sim_ros::kTorqueUnstampedFrame;
         signal_pub_.publish(msg);
       }
     }
@@ -268,6 +280,8 @@ class RigFrontEndNode {
          torque_ = std::numeric_limits<double>::quiet_NaN();
   size_t chunk_ = 1000, skipped_ = 0;
   bool started_ = false, finished_ = false, refused_ = false, reported_ = false;
+  bool unstamped_ = false;             // Float64 torque: chunks marked kTorqueUnstampedFrame
+  bool joints_since_warning_ = false;  // joint states since the last Float64 warning
   std::uint64_t next_ = 0, pending_first_ = 0;
   std::vector<std::array<double, 3>> pending_;
   ros::WallTime last_wall_;
@@ -276,7 +290,7 @@ class RigFrontEndNode {
   message_filters::Subscriber<sensor_msgs::JointState> joints_sub_;
   message_filters::Subscriber<geometry_msgs::WrenchStamped> wrench_sub_;
   std::unique_ptr<message_filters::Synchronizer<SyncPolicy>> sync_;
-  ros::WallTimer timer_;
+  ros::WallTimer timer_, warn_timer_;
 };
 
 }  // namespace

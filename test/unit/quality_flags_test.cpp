@@ -334,4 +334,37 @@ TEST(QualityFlags, PhysicalRangeFlags) {
   EXPECT_EQ(gd::joinCodes(r.segments[0].warnings), qc::kBelowNoise);
 }
 
+// Issue 19 (b): the spans of a live record whose torque was paired without stamps (chunks marked
+// by rig_frontend_node): adjacent chunks merge into one span, a segment overlapping a span gets
+// torque_unstamped once (marking twice adds nothing), one outside it stays clean, a recomputation
+// of the owned flags keeps it, and clear() forgets the spans.
+TEST(QualityFlags, UnstampedTorqueSpansFlagTheirSegments) {
+  gd::UnstampedTorqueSpans spans;
+  const double dt = 1e-6;
+  for (int k = 0; k < 5; ++k) spans.add(k * 1000 * dt, (k * 1000 + 999) * dt, 1.5 * dt);
+  spans.add(0.010, 0.011, 1.5 * dt);  // a later, separate span
+  gd::IdentificationResult r;
+  const double edges[][2] = {{0.0, 0.001}, {0.004, 0.005}, {0.006, 0.007}, {0.0105, 0.0115}};
+  for (const auto& e : edges) {
+    SegmentEstimate s;
+    s.t_start = e[0], s.t_end = e[1];
+    s.identifiable = true, s.C = 5000.0, s.C_std = 10.0, s.xi = 0.05;
+    r.segments.push_back(s);
+  }
+  spans.mark(&r);
+  spans.mark(&r);
+  const bool expected[] = {true, true, false, true};
+  for (size_t i = 0; i < r.segments.size(); ++i) {
+    EXPECT_EQ(gd::joinCodes(r.segments[i].warnings), expected[i] ? qc::kTorqueUnstamped : "") << i;
+  }
+  gd::applyQualityFlags(gd::IdentificationOptions(), &r);
+  EXPECT_TRUE(gd::hasCode(r.segments[0].warnings, qc::kTorqueUnstamped));
+  spans.clear();
+  EXPECT_TRUE(spans.empty());
+  SegmentEstimate later;
+  later.t_start = 0.0, later.t_end = 0.001;
+  spans.mark(&later);
+  EXPECT_TRUE(later.warnings.empty());
+}
+
 }  // namespace

@@ -11,7 +11,7 @@
 #include "gear_damping_id/ste_model.hpp"
 #include "id_test_support.hpp"
 #include "rig_test_support.hpp"
-#include "status_support.hpp"
+#include "ste_rig_support.hpp"
 #include "ste_test_support.hpp"
 
 using namespace gear_ste_test;
@@ -19,24 +19,6 @@ using namespace gear_ste_test;
 namespace {
 
 namespace gd = gear_damping_id;
-
-// A rig record of case `k` (its STE in the simulation) through the encoder front end.
-struct RigRun {
-  SignalTable table;
-  gd::EncoderFrontEndReport report;
-  double du = 0.0;  // front-end mesh phase minus the simulated one [mesh cycles]
-};
-RigRun rigRun(const SimConfig& c, const SignalTable& sim, const gear_sim::EncoderOptions& enc,
-              const gd::EncoderFrontEndOptions& fo) {
-  RigRun r;
-  const SignalTable rig = gear_sim::rigRecord(c, enc, sim);
-  std::string e;
-  EXPECT_TRUE(
-      gear_test::ok(gd::encoderToSignalTable(rig, c.gearModel(), fo, &r.table, &r.report), &e))
-      << e;
-  if (r.table.size() > 0) r.du = r.table.mesh_phase[0] - sim.mesh_phase[0];
-  return r;
-}
 
 // Acceptance, noise-free encoder input (uniform samples, no quantisation), known stiffness, STE
 // with 3 mesh harmonics and a run-out of each shaft: C within 0.05 % per 1 ms segment and the STE
@@ -88,65 +70,6 @@ TEST(SteRig, NoiseFreeEncodersRecoverDampingAndSte) {
                 << " over " << err.size() << " segments; max STE error " << ste_err << "\n";
     }
   }
-}
-
-// Acceptance, quantised encoders (16 and 20 bit) and torque-meter noise (white, 0.1 % of the
-// mean load: 0.1 N*m on the 100 N*m Table 1 case, 0.08 N*m on the 80 N*m held-out pair), STE
-// modelled (3 mesh harmonics, run-out), offsets estimated, default refinement (output error):
-// C within 2x its reported SE in >= 90 % of the reported segments over 30 seeds (the cases
-// rotate with the seed; each seed draws new encoder zeros and torque noise). Segments flagged
-// below the noise report no C and are counted apart.
-struct Coverage {
-  long inside = 0, reported = 0, total = 0;
-  std::vector<double> z;
-};
-Coverage steCoverage(long counts, int seeds, bool given_mesh_offset,
-                     IdentificationOptions::Refine refine = IdentificationOptions::Refine::Auto) {
-  const std::vector<Case> all = cases();
-  std::vector<SimConfig> configs;
-  std::vector<SignalTable> sims;
-  for (const Case& k : all) {
-    configs.push_back(withDuration(k, 0.01));
-    sims.push_back(simulateOrFail(configs.back()));
-  }
-  std::mt19937_64 rng(counts + 19);
-  std::uniform_real_distribution<double> zero(0.0, 2 * M_PI);
-  Coverage cv;
-  for (int seed = 1; seed <= seeds; ++seed) {
-    const size_t ci = static_cast<size_t>(seed) % all.size();
-    const SimConfig& c = configs[ci];
-    gear_sim::EncoderOptions enc = encoder(counts, static_cast<unsigned long>(seed));
-    enc.zero1 = zero(rng);
-    enc.zero2 = zero(rng);
-    enc.torque_noise = 1e-3 * c.load.mean;
-    gd::EncoderFrontEndOptions fo;
-    fo.counts_per_rev1 = fo.counts_per_rev2 = counts;
-    if (given_mesh_offset) fo.mesh_offset = expectedMeshOffset(c, enc);
-    fo.model_ste = true;
-    fo.ste = steOptions(c, 3, 1);
-    const RigRun rr = rigRun(c, sims[ci], enc, fo);
-    IdentificationOptions o;  // default: refinement when the data are noisy
-    o.formulation = Formulation::Known;
-    o.refine = refine;
-    IdentificationResult r;
-    SteResult s;
-    if (!runSte(rr.table, c, o, steOptions(c, 3, 1), &r, &s)) continue;
-    for (const auto& e : r.segments) {
-      ++cv.total;
-      if (!e.identifiable) continue;
-      const double truth = trueC(sims[ci], c, e.t_start, e.t_end);
-      ++cv.reported;
-      cv.inside += std::abs(e.C - truth) <= 2.0 * e.C_std;
-      cv.z.push_back(std::abs(e.C - truth) / e.C_std);
-    }
-  }
-  std::cout << "[ measured ] STE rig, " << counts << " counts/rev, torque noise 0.1 % of the load, "
-            << seeds << " seeds, mesh offset " << (given_mesh_offset ? "given" : "estimated")
-            << (refine == IdentificationOptions::Refine::Never ? ", integral method alone" : "")
-            << ": " << cv.inside << " of " << cv.reported << " reported segments within 2 SE ("
-            << 100.0 * cv.inside / std::max<long>(cv.reported, 1) << " %), " << cv.reported
-            << " of " << cv.total << " reported, median |error|/SE " << median(cv.z) << "\n";
-  return cv;
 }
 
 TEST(SteRig, Encoder20BitCoverage) {

@@ -159,6 +159,13 @@ struct SegmentEstimate {
   /// The refinement's constant-C fit [1/s] and its standard error: a mean of C(t) weighted by
   /// the response's sensitivity to it (C and C_std where C_mean_load is NaN).
   double C_weighted = kNaN, C_weighted_std = kNaN;
+  /// Torque-meter noise (refined segments with a torque channel; NaN otherwise): the model-free
+  /// estimate of the white noise on the segment's torque samples [N*m] (torqueNoiseEstimate,
+  /// output_error.hpp), and the part of C_std it causes [1/s]: the refinement treats the torque
+  /// as the exact forcing, so its response to the torque noise is propagated into C_std (and the
+  /// stiffness and STE standard errors) as C_std^2 = C_std_dte^2 + C_torque_std^2.
+  double torque_noise_std = kNaN;
+  double C_torque_std = kNaN;
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).

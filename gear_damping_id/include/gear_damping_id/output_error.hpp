@@ -33,7 +33,16 @@
 // state's RK4 step is taken first and each sensitivity pair stepped from its stage values (same
 // numbers to rounding; the generic RK4 with per-stage look-ups is kept as the reference path).
 // Standard errors: sigma^2 (J^T J)^-1 of the prewhitened problem, sigma^2 = prewhitened RSS /
-// (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones).
+// (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones), plus the
+// torque-meter noise: the model takes the torque as the exact forcing, so white noise w on the
+// torque samples (level estimated per segment by torqueNoiseEstimate) moves the estimate by the
+// Gauss-Newton solve map applied to the response G w of the model to it. Its covariance
+// A G Sigma_w G^T A^T is estimated from random draws of w (Rademacher +-sigma; the response of
+// the converged model, zero initial state, through the same prewhitening and Schur-complement
+// solve; seeded by the segment's first sample, so the same on every path), in batches of 16
+// until the Monte Carlo standard error of the added variance is below 10 % of C's total
+// variance (at most 64 draws: the added variance then within sqrt(2/64) = 18 % relative, the
+// Gaussian-draw bound; less with Rademacher draws). Not for the load_law model.
 #pragma once
 
 #include <Eigen/Core>
@@ -82,6 +91,13 @@ gear_sim::Status refineOutputError(const SignalView& signal,
                                    const GearConstants& gear, const IdentificationOptions& options,
                                    IdentificationResult* result, bool reference_integration = false,
                                    SteRefinement* ste = nullptr);
+
+/// Model-free estimate [N*m] of white noise on `n` torque samples: a robust scale (1.4826 x the
+/// median absolute value) of the fourth differences, over sqrt(70) (white noise: the fourth
+/// difference has variance 70 sigma^2; a smooth load contributes (omega dt)^4 of its amplitude,
+/// nothing at the sampling rates the method needs, and the median ignores isolated steps). NaN
+/// for fewer than 5 samples.
+double torqueNoiseEstimate(const double* torque, Eigen::Index n);
 
 /// Whether options.refine asks for refinement of this result (Auto: the median relative standard
 /// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.

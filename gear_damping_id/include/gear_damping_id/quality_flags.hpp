@@ -31,11 +31,18 @@
 //                        constant-C fit, a weighted mean of C(t), need not be)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
+// Live input code (added by damping_id_node, not by applyQualityFlags):
+//   torque_unstamped     the segment's torque was paired with the joint states without time
+//                        stamps (rig_frontend_node with a std_msgs/Float64 torque marks its
+//                        chunks): C can be biased by the pairing's lag (measured up to 10 %)
 // Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
 // stopped without converging), refine_failed (it diverged: integral estimates reported),
 // refine_skipped (a streamed shared-damping run is not refined), switches_unlocated (stiffness
 // switches that mesh_phase could not locate).
 #pragma once
+
+#include <utility>
+#include <vector>
 
 #include "gear_damping_id/identification_types.hpp"
 
@@ -53,6 +60,7 @@ inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
 inline constexpr const char* kSwitchesUnlocated = "switches_unlocated";
+inline constexpr const char* kTorqueUnstamped = "torque_unstamped";
 }  // namespace quality_code
 
 /// Limits of the tests (documented in docs/trust.md).
@@ -109,6 +117,27 @@ void applyQualityFlags(const IdentificationOptions& options, IdentificationResul
 /// integral method's C and C_std in C_integral / C_integral_std of every refined segment that
 /// does not already carry them.
 void keepIntegralEstimates(const IdentificationResult& integral, IdentificationResult* refined);
+
+/// The spans of a live record [s, record time] whose torque was paired without time stamps
+/// (SignalChunk header.frame_id kTorqueUnstampedFrame); mark() adds torque_unstamped to every
+/// segment overlapping one. Adjacent spans merge, so a record marked throughout keeps one span;
+/// at most kMaxSpans are kept (the oldest dropped).
+class UnstampedTorqueSpans {
+ public:
+  static constexpr size_t kMaxSpans = 1000;
+  /// Samples [t0, t1] [s] (t1 >= t0) were paired without stamps; `gap` [s]: spans closer than
+  /// this merge (e.g. 1.5 sample intervals).
+  void add(double t0, double t1, double gap);
+  /// Adds the warning to the segments of `result` that overlap a span (once per segment).
+  void mark(IdentificationResult* result) const;
+  void mark(SegmentEstimate* e) const;
+  bool overlaps(double t0, double t1) const;
+  bool empty() const { return spans_.empty(); }
+  void clear() { spans_.clear(); }
+
+ private:
+  std::vector<std::pair<double, double>> spans_;  // sorted by start
+};
 
 /// Whether `warnings` holds `code`.
 bool hasCode(const QualityWarnings& warnings, const std::string& code);

@@ -99,6 +99,10 @@ class SegmentDriver {
     IdentificationResult result;
     std::string warning;  ///< e.g. a refinement that failed (the integral estimate is kept)
     bool refinement_skipped = false;  ///< the options asked for it, refine_allowed was false
+    /// Pending: buffered for the STE calibration (setSte), not yet identified; the estimate is
+    /// not identifiable with the reason "awaiting the STE calibration (...)" until then. Not a
+    /// failure: diagnostics count these apart from the segments that are not identifiable.
+    bool ste_pending = false;
   };
 
   /// Identifies samples [begin, end) of `view` as the next damping segment. Never throws on any

@@ -3,7 +3,9 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "gear_damping_id/damping_units.hpp"
@@ -623,6 +625,18 @@ double shapeStiffness(const StiffnessShape& shape, const std::vector<double>& cu
   return k;
 }
 
+double torqueNoiseEstimate(const double* torque, Index n) {
+  if (torque == nullptr || n < 5) return kNaN;
+  std::vector<double> d(static_cast<size_t>(n - 4));
+  for (Index k = 0; k + 4 < n; ++k) {
+    const double* t = torque + k;
+    d[static_cast<size_t>(k)] = std::abs(t[0] - 4.0 * t[1] + 6.0 * t[2] - 4.0 * t[3] + t[4]);
+  }
+  auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
+  std::nth_element(d.begin(), mid, d.end());
+  return 1.482602218505602 * *mid / std::sqrt(70.0);
+}
+
 bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult& r) {
   if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return false;
   if (o.refine == IdentificationOptions::Refine::Never) return false;
@@ -673,6 +687,7 @@ class Refinement {
     if (gear_sim::Status s = startValues(); !s.ok()) return s;
     if (gear_sim::Status s = iterate(); !s.ok()) return s;
     if (gear_sim::Status s = covariances(); !s.ok()) return s;
+    torqueNoise();
     fillSegments();
     fillShared();
     return {};
@@ -1122,6 +1137,170 @@ class Refinement {
     return {};
   }
 
+  // sigma^2 of segment i's covariance (per segment for the piecewise model, else pooled) and
+  // the covariance of its locals, sigma^2 (Nll^-1 + B A^-1 B^T) (B = Nll^-1 Nls^T).
+  double sigma2Of(size_t i) const {
+    const Normal& nm = normals_[i];
+    return piecewise_ ? nm.cost / static_cast<double>(nm.rows - nl_) : sigma2_pooled_;
+  }
+  Eigen::MatrixXd localCovariance(size_t i) const {
+    const Normal& nm = normals_[i];
+    const Eigen::MatrixXd Nsl = nm.N.block(nl_, 0, ns_, nl_);
+    const Eigen::MatrixXd B = Nll_inv_[i] * Nsl.transpose();
+    return sigma2Of(i) * (Nll_inv_[i] + B * Ainv_of_[i] * B.transpose());
+  }
+  // The variance of segment i's C in a covariance pair (locals, shared).
+  double cVariance(const Eigen::MatrixXd& ll, const Eigen::MatrixXd& ss) const {
+    return piecewise_ ? ll(2, 2) : ss(0, 0);
+  }
+
+  // Rows n >= p of `M` (one row per sample of a segment) filtered by the AR model as the
+  // residuals are (Accumulator): e_n = M_n + sum_k a_k M_{n-k}.
+  static Eigen::MatrixXd whiten(const Eigen::MatrixXd& M, const NoiseModel& nm) {
+    const Index rows = std::max<Index>(M.rows() - nm.p, 0);
+    Eigen::MatrixXd out(rows, M.cols());
+    for (Index n = 0; n < rows; ++n) {
+      out.row(n) = M.row(n + nm.p);
+      for (int k = 0; k < nm.p; ++k) out.row(n) += nm.a[k] * M.row(n + nm.p - k - 1);
+    }
+    return out;
+  }
+
+  // The splitmix64 sequence: the next 64 random bits of the state `x`.
+  static std::uint64_t splitmix64(std::uint64_t* x) {
+    std::uint64_t z = (*x += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+  }
+
+  // Segment i's sensitivities at the solution, prewhitened (rows x m).
+  Eigen::MatrixXd whitenedSensitivities(size_t i) const {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    Eigen::MatrixXd J(e - b, m_);
+    const int m = m_;
+    sim_.run(b, e, makeParams(loc_[i], sh_), substeps_, [&](Index n, const double* z) {
+      for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
+    });
+    return whiten(J, noise_of_[i]);
+  }
+
+  // The converged model's response (zero initial state, no STE forcing: linear in the torque)
+  // to one draw of white torque noise of segment i's level, prewhitened. `tab`: the segment's
+  // look-ups on the noise record (buildTable), its stage torques refilled here: the affine
+  // maps of the held stiffness then step the response (no sensitivities) at a few flops per
+  // sample.
+  Eigen::VectorXd responseToNoise(size_t i, std::uint64_t* rng, SegmentTable* tab) {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    // Rademacher draws (+-sigma, independent, zero mean, variance sigma^2): the covariance of a
+    // linear response is the same as for Gaussian draws, its Monte Carlo estimate scatters less
+    // (no fourth-moment excess) and 64 signs come from one splitmix64 number.
+    const double sd = torque_sigma_[i];
+    std::uint64_t bits = 0;
+    for (Index n = b; n < e; ++n) {
+      if ((n - b) % 64 == 0) bits = splitmix64(rng);
+      noise_torque_[static_cast<size_t>(n)] = (bits & 1u) ? sd : -sd;
+      bits >>= 1;
+    }
+    Params p = makeParams(loc_[i], sh_);
+    p.m = 0, p.nste = 0, p.y0 = 0.0, p.v0 = 0.0;
+    Eigen::MatrixXd g(e - b, 1);
+    auto visit = [&](Index n, const double* z) { g(n - b, 0) = z[0]; };
+    if (noise_sim_->tableApplies(substeps_)) {
+      for (Index n = b; n < e; ++n) tab->T[n - b] = noise_torque_[static_cast<size_t>(n)];
+      for (Index j = b; j + 1 < e; ++j) tab->T_mid[j - b] = noise_fm_->torque(j, 0.5, b, e);
+      noise_sim_->runTable<0>(*tab, p, visit);
+    } else {
+      noise_sim_->run(b, e, p, substeps_, visit);
+    }
+    return whiten(g, noise_of_[i]).col(0);
+  }
+
+  // Torque-meter noise (output_error.hpp): each segment's estimated level, and the covariance
+  // its response adds to the unknowns: tcov_ll_ (locals) and tcov_ss_ (shared, of the segment's
+  // problem). Zero where the torque is exact to rounding.
+  void torqueNoise() {
+    tcov_ll_.assign(nseg_, Eigen::MatrixXd::Zero(nl_, nl_));
+    tcov_ss_.assign(nseg_, Eigen::MatrixXd::Zero(ns_, ns_));
+    torque_sigma_.assign(nseg_, 0.0);
+    if (s_.torque == nullptr || load_) return;
+    bool any = false;
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      const Index b = ranges_[i].first, e = ranges_[i].second;
+      const double sd = torqueNoiseEstimate(s_.torque + b, e - b);
+      res_->segments[i].torque_noise_std = sd;
+      double peak = 0.0;
+      for (Index n = b; n < e; ++n) peak = std::max(peak, std::abs(s_.torque[n]));
+      if (std::isfinite(sd) && sd > 1e-12 * peak) torque_sigma_[i] = sd, any = true;
+    }
+    if (!any) return;
+    noise_torque_.assign(static_cast<size_t>(s_.n), 0.0);
+    noise_view_ = s_;
+    noise_view_.torque = noise_torque_.data();
+    noise_fm_ = std::make_unique<ForwardModel>(noise_view_, fm_.gear(), o_.formulation, ranges_);
+    noise_sim_ = std::make_unique<SegmentSimulator>(
+        *noise_fm_, true, shape_ ? &o_.stiffness_shape : nullptr, nullptr);
+    draw_normals_.assign(nseg_, Normal{});
+    for (const auto& set : problems_) torqueNoiseOf(set);
+  }
+
+  // The Monte Carlo of torqueNoise on one problem: each draw's residual change -G w through
+  // the solve map of the converged problem (solveStep with the converged normal matrices).
+  void torqueNoiseOf(const Set& set) {
+    constexpr int kBatch = 16, kMaxDraws = 64;
+    constexpr double kMonteCarloTol = 0.1;  // of C's total variance
+    bool noisy = false;
+    for (size_t i : set) noisy = noisy || torque_sigma_[i] > 0.0;
+    if (!noisy) return;
+    std::vector<Eigen::MatrixXd> Jw(set.size());
+    std::vector<SegmentTable> tab(set.size());
+    std::vector<std::uint64_t> rng(set.size());
+    std::vector<Eigen::MatrixXd> Sll(set.size(), Eigen::MatrixXd::Zero(nl_, nl_));
+    Eigen::MatrixXd Sss = Eigen::MatrixXd::Zero(ns_, ns_);
+    std::vector<double> base(set.size());
+    for (size_t q = 0; q < set.size(); ++q) {
+      const size_t i = set[q];
+      draw_normals_[i] = normals_[i];
+      base[q] = cVariance(localCovariance(i), sigma2_pooled_ * Ainv_of_[i]);
+      if (!(torque_sigma_[i] > 0.0)) continue;
+      Jw[q] = whitenedSensitivities(i);
+      if (noise_sim_->tableApplies(substeps_))
+        noise_sim_->buildTable(ranges_[i].first, ranges_[i].second, &tab[q]);
+      // Seeded by the segment's first sample: the same draws whatever path refines it.
+      const double first = s_.time(ranges_[i].first) / s_.dt;
+      rng[q] = 0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(std::llround(first));
+    }
+    Locals& dl = dl_scratch_;
+    Eigen::VectorXd dg;
+    int draws = 0;
+    while (draws < kMaxDraws) {
+      for (int d = 0; d < kBatch; ++d) {
+        for (size_t q = 0; q < set.size(); ++q) {
+          Normal& nm = draw_normals_[set[q]];
+          nm.rhs.setZero(m_);
+          if (Jw[q].size() > 0)
+            nm.rhs = Jw[q].transpose() * responseToNoise(set[q], &rng[q], &tab[q]);
+        }
+        solveStep(set, draw_normals_, &dl, &dg, nullptr, nullptr);
+        for (size_t q = 0; q < set.size(); ++q) Sll[q] += dl[set[q]] * dl[set[q]].transpose();
+        if (ns_ > 0) Sss += dg * dg.transpose();
+      }
+      draws += kBatch;
+      bool settled = true;
+      for (size_t q = 0; q < set.size(); ++q) {
+        const double vt = cVariance(Sll[q], Sss) / draws;
+        settled = settled && std::sqrt(2.0 / draws) * vt <= kMonteCarloTol * (base[q] + vt);
+      }
+      if (settled) break;
+    }
+    for (size_t q = 0; q < set.size(); ++q) {
+      tcov_ll_[set[q]] = Sll[q] / draws;
+      tcov_ss_[set[q]] = Sss / draws;
+      draw_normals_[set[q]] = Normal{};
+    }
+  }
+
   // Within-segment variation of the damping with the load (piecewise model): the converged
   // constant-C problem plus the unknown C1 of C(t) = C0 + C1 (T1(t) - mean T1), evaluated once
   // at C1 = 0 with the segment's noise model; one Gauss-Newton step gives C1 and C0, the damping
@@ -1232,14 +1411,12 @@ class Refinement {
       SegmentEstimate& e = res_->segments[i];
       const Eigen::VectorXd& x = loc_[i];
       const Normal& nm = normals_[i];
-      const double sigma2 =
-          piecewise_ ? nm.cost / static_cast<double>(nm.rows - nl_) : sigma2_pooled_;
-      const Eigen::MatrixXd& Ainv = Ainv_of_[i];
-      // Covariance of this segment's unknowns [locals, shared].
-      const Eigen::MatrixXd Nsl = nm.N.block(nl_, 0, ns_, nl_);
-      const Eigen::MatrixXd B = Nll_inv_[i] * Nsl.transpose();
-      const Eigen::MatrixXd cov_ll = sigma2 * (Nll_inv_[i] + B * Ainv * B.transpose());
-      const Eigen::MatrixXd cov_ss = sigma2 * Ainv;
+      const double sigma2 = sigma2Of(i);
+      // Covariance of this segment's unknowns [locals, shared], with the torque noise's.
+      const Eigen::MatrixXd cov_ll = localCovariance(i) + tcov_ll_[i];
+      const Eigen::MatrixXd cov_ss = sigma2 * Ainv_of_[i] + tcov_ss_[i];
+      if (std::isfinite(e.torque_noise_std))
+        e.C_torque_std = std::sqrt(std::max(cVariance(tcov_ll_[i], tcov_ss_[i]), 0.0));
       int k = 2;
       if (piecewise_) {
         // The constant-C fit is a weighted mean of C(t) over the segment; the reported C is the
@@ -1247,9 +1424,11 @@ class Refinement {
         e.C_weighted = x[k];
         e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
         variationTest(i, sigma2, &e);
-        if (std::isfinite(e.C_mean_load))
+        if (std::isfinite(e.C_mean_load)) {
+          const double t = std::isfinite(e.C_torque_std) ? e.C_torque_std : 0.0;
+          e.C_mean_load_std = std::hypot(e.C_mean_load_std, t);
           fillC(&e, e.C_mean_load, e.C_mean_load_std * e.C_mean_load_std);
-        else
+        } else
           fillC(&e, x[k], cov_ll(k, k));
         ++k;
       } else if (load_) {
@@ -1282,8 +1461,9 @@ class Refinement {
   // The shared estimates: constant C, the load law, the STE; the run's convergence warning.
   void fillShared() {
     const Eigen::MatrixXd& Ainv = Ainv_of_[problems_[0][0]];
+    const Eigen::MatrixXd& tcov = tcov_ss_[problems_[0][0]];  // torque noise (zero: none)
     if (res_->constant && !piecewise_ && !load_) {
-      fillC(&*res_->constant, sh_[0], sigma2_pooled_ * Ainv(0, 0));
+      fillC(&*res_->constant, sh_[0], sigma2_pooled_ * Ainv(0, 0) + tcov(0, 0));
       if (!all_converged_)
         res_->constant->warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
     }
@@ -1299,7 +1479,7 @@ class Refinement {
       for (int k = 0; k < nste_; ++k) {
         const int a = ste_shared_ + k;
         ste_->theta[k] = sh_[a];
-        ste_->theta_std[k] = std::sqrt(std::max(sigma2_pooled_ * Ainv(a, a), 0.0));
+        ste_->theta_std[k] = std::sqrt(std::max(sigma2_pooled_ * Ainv(a, a) + tcov(a, a), 0.0));
       }
     }
     if (!all_converged_)
@@ -1337,6 +1517,15 @@ class Refinement {
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
   mutable SegmentTable scratch_;
   mutable size_t cached_ = 0;
+  // Torque noise (torqueNoise): per-segment level and added covariances, and the draws' model
+  // (the record with the torque channel replaced by one draw of noise).
+  std::vector<double> torque_sigma_;
+  std::vector<Eigen::MatrixXd> tcov_ll_, tcov_ss_;
+  std::vector<double> noise_torque_;
+  SignalView noise_view_;
+  std::unique_ptr<ForwardModel> noise_fm_;
+  std::unique_ptr<SegmentSimulator> noise_sim_;
+  std::vector<Normal> draw_normals_;
 };
 
 }  // namespace

@@ -46,6 +46,7 @@ void flagEstimate(SegmentEstimate* e) {
     e->C_integral = e->C_integral_std = kNaN;
     e->variation_z = e->C_mean_load = e->C_mean_load_std = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
+    e->C_torque_std = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
     return;
@@ -147,6 +148,38 @@ void keepIntegralEstimates(const IdentificationResult& integral, IdentificationR
     refined->constant->C_integral = integral.constant->C;
     refined->constant->C_integral_std = integral.constant->C_std;
   }
+}
+
+void UnstampedTorqueSpans::add(double t0, double t1, double gap) {
+  if (!(t1 >= t0)) return;
+  if (!spans_.empty() && t0 <= spans_.back().second + gap && t0 >= spans_.back().first) {
+    spans_.back().second = std::max(spans_.back().second, t1);
+    return;
+  }
+  auto at = std::lower_bound(spans_.begin(), spans_.end(), std::make_pair(t0, t1));
+  spans_.insert(at, {t0, t1});
+  if (spans_.size() > kMaxSpans) spans_.erase(spans_.begin());
+}
+
+bool UnstampedTorqueSpans::overlaps(double t0, double t1) const {
+  for (const auto& s : spans_)
+    if (s.first <= t1 && t0 <= s.second) return true;
+  return false;
+}
+
+void UnstampedTorqueSpans::mark(IdentificationResult* result) const {
+  for (SegmentEstimate& e : result->segments) mark(&e);
+}
+
+void UnstampedTorqueSpans::mark(SegmentEstimate* e) const {
+  if (spans_.empty() || !overlaps(e->t_start, e->t_end) ||
+      hasCode(e->warnings, quality_code::kTorqueUnstamped))
+    return;
+  e->warnings.push_back(
+      {quality_code::kTorqueUnstamped,
+       "the torque was paired with the joint states without time stamps (std_msgs/Float64): "
+       "C can be biased by the pairing's lag (measured up to 10 %); use "
+       "geometry_msgs/WrenchStamped"});
 }
 
 }  // namespace gear_damping_id

@@ -214,8 +214,10 @@ SegmentDriver::SegmentOutput SegmentDriver::addSte(const SignalView& v, Eigen::I
   e.reason = pendingReason(calib_.ranges.size(), ste_calibration_,
                            calib_.phase_max - calib_.phase_min, calibrationCycles());
   out.estimate = e;
+  out.ste_pending = true;
   keep({e, {}});
   if (calibrationComplete()) {
+    out.ste_pending = false;
     calibrate();
     out.estimate = kept_.back().estimate;
     out.result.segments = {out.estimate};

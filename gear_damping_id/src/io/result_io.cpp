@@ -83,6 +83,8 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
     j["C_weighted"] = s.C_weighted;
     j["C_weighted_std"] = num(s.C_weighted_std);
   }
+  if (std::isfinite(s.torque_noise_std)) j["torque_noise_std"] = s.torque_noise_std;
+  if (std::isfinite(s.C_torque_std)) j["C_torque_std"] = s.C_torque_std;
   if (!s.stiffness_curve.empty()) {
     json k = json::array(), ks = json::array();
     for (size_t i = 0; i < s.stiffness_curve.size(); ++i) {

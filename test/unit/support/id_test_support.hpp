@@ -187,4 +187,8 @@ inline double maxOf(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::max_element(v.begin(), v.end());
 }
 
+inline double minOf(const std::vector<double>& v) {
+  return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
+}
+
 }  // namespace gear_id_test

@@ -20,6 +20,12 @@ constexpr char kDampingCTopic[] = "gear/damping_C";                // std_msgs/F
 constexpr char kDampingXiTopic[] = "gear/damping_xi";              // std_msgs/Float64 [-]
 constexpr char kWaveletModesTopic[] = "gear/wavelet_modes";        // WaveletModes
 
+/// SignalChunk header.frame_id of a chunk whose torque channel was paired with the angles without
+/// time stamps (rig_frontend_node, std_msgs/Float64 torque); damping_id_node flags the segments
+/// built from such chunks `torque_unstamped`. Any other frame_id (empty by default): stamped or
+/// simulated.
+constexpr char kTorqueUnstampedFrame[] = "torque_unstamped";
+
 /// The absolute name a bag written outside any namespace uses for `topic` ("/gear/signal").
 inline std::string bagTopic(const char* topic) { return std::string("/") + topic; }
 
