@@ -958,8 +958,11 @@ int Analysis::write() {
     }
   }
   gd::OutputStage stage;  // every output renamed only once all are written
-  if (!output.empty() && !gd::writeFileAtomically(output, doc.dump(2) + "\n", &error, &stage))
-    return fail(kExitOutput, error);
+  if (!output.empty()) {
+    const gear_sim::Status written = gd::writeJsonAtomically(output, doc, &stage);
+    if (!written.ok()) return fail(kExitOutput, written.message());
+  }
+  doc = nullptr;  // the tables below and the bag do not need the document
   if (!csv_out.empty()) {
     if (!runs.empty() && !gd::writeRunCsv(csv_out, runs, &error, &stage))
       return fail(kExitOutput, error);

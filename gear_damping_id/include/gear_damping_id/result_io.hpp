@@ -11,6 +11,7 @@
 #include "gear_damping_id/identification_types.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_sim/status.hpp"
 
 namespace gear_damping_id {
 
@@ -96,5 +97,10 @@ bool writeWaveletCsv(const std::string& dir, const WaveletResult& w, const doubl
 /// complete temporary file is registered there instead of renamed.
 bool writeFileAtomically(const std::string& path, const std::string& text, std::string* error,
                          OutputStage* stage = nullptr);
+
+/// writeFileAtomically of `doc.dump(2)` and a newline, serialised straight into the file (the
+/// text is never held in memory). ioError (field "path") when the file cannot be written.
+gear_sim::Status writeJsonAtomically(const std::string& path, const nlohmann::json& doc,
+                                     OutputStage* stage = nullptr);
 
 }  // namespace gear_damping_id
