@@ -980,7 +980,8 @@ int Analysis::write() {
   }
   gd::OutputStage stage;  // every output renamed only once all are written
   gear_sim::Status s;
-  if (!output.empty()) s = gd::writeFileAtomically(output, doc.dump(2) + "\n", &stage);
+  if (!output.empty()) s = gd::writeJsonAtomically(output, doc, &stage);
+  doc = nullptr;  // the tables below and the bag do not need the document
   if (s.ok() && !csv_out.empty()) {
     if (!runs.empty()) s = gd::writeRunCsv(csv_out, runs, &stage);
     if (s.ok() && !ste_results.empty()) s = gd::writeSteCsv(csv_out, ste_results.front(), &stage);

@@ -1,6 +1,7 @@
 // What `analyze` prints and records about a run: the clean/flagged count that ends every run's
 // table, the summary that replaces long tables, no progress line when stderr is not a
-// terminal, and the `metadata` object of the JSON (checked against the files themselves).
+// terminal, the `metadata` object of the JSON (checked against the files themselves), and the
+// document's shape (analysisJson) and its streamed writer (writeJsonAtomically).
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -8,6 +9,7 @@
 #include <regex>
 #include <string>
 
+#include "gear_damping_id/result_io.hpp"
 #include "tool_runner.hpp"
 
 namespace fs = std::filesystem;
@@ -118,6 +120,64 @@ TEST_F(AnalyzeOutput, JsonRecordsVersionCommandLineInputAndOptions) {
   EXPECT_EQ(meta.at("options").at("--segment"), nlohmann::json::array({"2e-3"}));
   EXPECT_TRUE(std::regex_match(meta.at("date").get<std::string>(),
                                std::regex("[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9:]{8}Z")));
+}
+
+gear_damping_id::AnalysisRun fakeRun(gear_damping_id::Formulation f,
+                                     gear_damping_id::DampingModel m, int segments) {
+  gear_damping_id::AnalysisRun run;
+  run.options.formulation = run.result.formulation = f;
+  run.options.model = run.result.model = m;
+  for (int i = 0; i < segments; ++i) {
+    gear_damping_id::SegmentEstimate s;
+    s.t_start = 1e-3 * i;
+    s.t_end = 1e-3 * (i + 1);
+    s.C = 100.0 + i;
+    s.identifiable = true;
+    run.result.segments.push_back(s);
+  }
+  run.response.nrmse = 0.01 * (segments + 1);
+  run.response.fit_percent = 99.0 - segments;
+  return run;
+}
+
+// Two runs of one formulation (piecewise with 3 segments, then load_law with its block) and a
+// constant run of another: `identification` is the primary run without its `response`, with
+// the load_law block of the run that computed it (same formulation) and no constant block (that
+// run's formulation differs); `response` is the primary run's; `runs` holds every run in full.
+// writeJsonAtomically writes exactly dump(2) and a newline, and reports an unwritable path.
+TEST(AnalysisJson, IdentificationIsThePrimaryRunPlusSharedBlocksAndTheWriterStreamsDump2) {
+  namespace gd = gear_damping_id;
+  std::vector<gd::AnalysisRun> runs{
+      fakeRun(gd::Formulation::Known, gd::DampingModel::Piecewise, 3),
+      fakeRun(gd::Formulation::Known, gd::DampingModel::LoadLaw, 2),
+      fakeRun(gd::Formulation::Greybox, gd::DampingModel::Constant, 1)};
+  gd::LoadLawEstimate law;
+  law.c0 = 3.0;
+  law.identifiable = false;
+  law.reason = "why not";
+  runs[1].result.load_law = law;
+  runs[2].result.constant = runs[2].result.segments.front();
+  const nlohmann::json input = {{"file", "x"}};
+  const nlohmann::json doc = gd::analysisJson(runs, input);
+  ASSERT_EQ(doc.at("runs").size(), 3u);
+  for (size_t k = 0; k < runs.size(); ++k) EXPECT_EQ(doc["runs"][k], gd::runJson(runs[k])) << k;
+  nlohmann::json id = gd::runJson(runs[0]);
+  EXPECT_EQ(doc.at("response"), id.at("response"));
+  id.erase("response");
+  id["load_law"] = gd::runJson(runs[1]).at("load_law");
+  EXPECT_EQ(id["load_law"].at("reason"), "why not");
+  EXPECT_EQ(doc.at("identification"), id);
+  EXPECT_FALSE(doc["identification"].contains("constant"));
+  EXPECT_EQ(doc.at("input"), input);
+  EXPECT_EQ(gd::analysisJson({}, input), nlohmann::json({{"input", input}}));
+
+  gear_test::ScratchDir dir("analysis_json_writer");
+  const fs::path out = dir.path() / "doc.json";
+  ASSERT_TRUE(gd::writeJsonAtomically(out.string(), doc).ok());
+  EXPECT_EQ(gear_test::readText(out), doc.dump(2) + "\n");
+  const gear_sim::Status bad = gd::writeJsonAtomically((out / "not_a_dir.json").string(), doc);
+  EXPECT_EQ(bad.code(), gear_sim::StatusCode::IoError);
+  EXPECT_EQ(bad.field(), "path");
 }
 
 }  // namespace

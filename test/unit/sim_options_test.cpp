@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <tuple>
+#include <vector>
 
 #include "gear_sim/models.hpp"
 #include "gear_sim/simulator.hpp"
@@ -52,6 +54,55 @@ TEST(MeshStiffness, TrapezoidKeepsTheSquareWaveMeanAndIsContinuous) {
   for (int i = 0; i < 100000; ++i)
     max_jump = std::max(max_jump, std::abs(k.at((i + 1) * 1e-5) - k.at(i * 1e-5)));
   EXPECT_LT(max_jump, 2e8 * 1e-5 / 0.1 * 1.01);  // slope dk/w per unit phase
+}
+
+// The simulator's block fills (issue 18): a table load filled interval by interval equals at()
+// at every point (to rounding: at() divides per point), including points before, on and after
+// the table's knots and a grid whose points fall exactly on knots; the sine load and the Fourier
+// stiffness with a rotation table kept across calls give exactly the values of a fresh table,
+// also after the step changes (the table is recomputed) and back.
+TEST(LoadTorque, BlockFillsEqualTheirDefinitionsAndKeptRotationTablesChangeNothing) {
+  gear_sim::LoadOptions o;
+  o.profile = gear_sim::LoadProfile::Table;
+  for (int i = 0; i <= 40; ++i) {
+    o.times.push_back(1e-3 + 2.5e-4 * i);
+    o.values.push_back(100.0 + 30.0 * std::sin(0.37 * i));
+  }
+  const gear_sim::LoadTorque tb(o);
+  for (const auto& [t0, dt, n] : {std::tuple<double, double, long>{0.0, 1e-5, 1200},
+                                  {0.0, 2.5e-4, 60},  // every knot on a grid point
+                                  {1.3e-3, 3.7e-6, 2000},
+                                  {0.0, 7e-4, 5}}) {
+    std::vector<double> fast(static_cast<size_t>(n));
+    tb.fillUniform(t0, dt, n, fast.data());
+    for (long i = 0; i < n; ++i)
+      ASSERT_NEAR(fast[i], tb.at(t0 + static_cast<double>(i) * dt), 1e-12 * 130.0)
+          << "t0 " << t0 << " dt " << dt << " i " << i;
+  }
+  o.profile = gear_sim::LoadProfile::Sine;
+  o.mean = 100;
+  o.amplitude = 50;
+  o.frequency = 130;
+  const gear_sim::LoadTorque sine(o);
+  gear_sim::MeshOptions m;
+  m.model = gear_sim::StiffnessModel::Fourier;
+  m.k_mean = 3e8;
+  m.fourier_cos = {4e7, -1e7, 5e6};
+  m.fourier_sin = {2e7, 8e6, -3e6};
+  const gear_sim::MeshStiffness k(m);
+  gear_sim::RotationTable load_table, k_table;
+  std::vector<double> kept(4097), fresh(4097), u(4097);
+  for (double step : {5e-7, 5e-7, 2.5e-7, 5e-7}) {
+    sine.fillUniform(0.37, step, 4097, kept.data(), &load_table);
+    sine.fillUniform(0.37, step, 4097, fresh.data());
+    ASSERT_EQ(kept, fresh) << step;
+    const double du = 1e3 * step;  // mesh cycles per point at 1 kHz
+    for (size_t j = 0; j < u.size(); ++j) u[j] = 12.3 + du * static_cast<double>(j);
+    k.fillPiece(12.3, u.data(), 4097, du, kept.data(), &k_table);
+    k.fillPiece(12.3, u.data(), 4097, du, fresh.data());
+    ASSERT_EQ(kept, fresh) << step;
+    for (size_t j = 0; j < u.size(); j += 97) ASSERT_NEAR(kept[j], k.at(u[j]), 1e-6 * 3e8);
+  }
 }
 
 TEST(MeshStiffness, FourierSeriesHasItsMeanAndHarmonic) {

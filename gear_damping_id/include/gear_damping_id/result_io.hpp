@@ -100,4 +100,9 @@ gear_sim::Status writeWaveletCsv(const std::string& dir, const WaveletResult& w,
 gear_sim::Status writeFileAtomically(const std::string& path, const std::string& text,
                                      OutputStage* stage = nullptr);
 
+/// writeFileAtomically of `doc.dump(2)` and a newline, serialised straight into the file (the
+/// text is never held in memory). ioError (field "path") when the file cannot be written.
+gear_sim::Status writeJsonAtomically(const std::string& path, const nlohmann::json& doc,
+                                     OutputStage* stage = nullptr);
+
 }  // namespace gear_damping_id

@@ -101,6 +101,20 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
   return j;
 }
 
+namespace {
+
+json loadLawJson(const LoadLawEstimate& l) {
+  json j = {{"c0", num(l.c0)},
+            {"c0_std", num(l.c0_std)},
+            {"c1", num(l.c1)},
+            {"c1_std", num(l.c1_std)},
+            {"identifiable", l.identifiable}};
+  if (!l.identifiable) j["reason"] = l.reason;
+  return j;
+}
+
+}  // namespace
+
 json runJson(const AnalysisRun& run) {
   const IdentificationResult& r = run.result;
   json j;
@@ -119,15 +133,7 @@ json runJson(const AnalysisRun& run) {
   j["segments"] = json::array();
   for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
-  if (r.load_law) {
-    const LoadLawEstimate& l = *r.load_law;
-    j["load_law"] = {{"c0", num(l.c0)},
-                     {"c0_std", num(l.c0_std)},
-                     {"c1", num(l.c1)},
-                     {"c1_std", num(l.c1_std)},
-                     {"identifiable", l.identifiable}};
-    if (!l.identifiable) j["load_law"]["reason"] = l.reason;
-  }
+  if (r.load_law) j["load_law"] = loadLawJson(*r.load_law);
   j["warnings"] = warningsJson(r.warnings);
   if (run.response_error.empty()) {
     j["response"] = {{"nrmse", num(run.response.nrmse)},
@@ -142,20 +148,22 @@ json analysisJson(const std::vector<AnalysisRun>& runs, const json& input) {
   json doc;
   doc["input"] = input;
   if (runs.empty()) return doc;
-  json primary = runJson(runs.front());
-  json id = primary;
+  // Each run's JSON is built once; `identification` is the primary run's copy (a record of 1e7
+  // samples has 1e4 segments: every extra copy of their DOM costs ~20 MB of peak memory).
+  json& all = doc["runs"] = json::array();
+  for (const auto& run : runs) all.push_back(runJson(run));
+  json id = all.front();
+  doc["response"] = id["response"];
   id.erase("response");
   // The constant / load-law blocks of docs/method.md §6 come from the run that computed them.
   for (const auto& run : runs) {
     if (run.options.formulation != runs.front().options.formulation) continue;
-    json rj = runJson(run);
-    if (!id.contains("constant") && rj.contains("constant")) id["constant"] = rj["constant"];
-    if (!id.contains("load_law") && rj.contains("load_law")) id["load_law"] = rj["load_law"];
+    const IdentificationResult& r = run.result;
+    const SegmentEstimate* c = sharedEstimate(r);
+    if (!id.contains("constant") && c) id["constant"] = segmentJson(*c, r.formulation);
+    if (!id.contains("load_law") && r.load_law) id["load_law"] = loadLawJson(*r.load_law);
   }
-  doc["identification"] = id;
-  doc["response"] = primary["response"];
-  doc["runs"] = json::array();
-  for (const auto& run : runs) doc["runs"].push_back(runJson(run));
+  doc["identification"] = std::move(id);
   return doc;
 }
 
@@ -349,6 +357,24 @@ gear_sim::Status writeFileAtomically(const std::string& path, const std::string&
     if (!f || !(f << text) || !f.flush()) {
       std::remove(tmp.c_str());
       return gear_sim::Status::ioError(path + ": cannot write");
+    }
+  }
+  if (stage) {
+    stage->add(tmp, path);
+    return {};
+  }
+  return gear_sim::commitFile(tmp, path);
+}
+
+gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, OutputStage* stage) {
+  const std::string tmp = path + ".partial";
+  {
+    // Serialised straight into the file: the text of a long record's document (tens of MB) is
+    // never held in memory. `<< std::setw(2)` is dump(2).
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f || !(f << std::setw(2) << doc << '\n') || !f.flush()) {
+      std::remove(tmp.c_str());
+      return gear_sim::Status::ioError(path + ": cannot write", "path");
     }
   }
   if (stage) {

@@ -11,6 +11,16 @@
 
 namespace gear_sim {
 
+/// A table of rotations cos/sin(j * step), j < kSize, for one step, kept by a caller that fills
+/// many blocks with the same step (the simulator): the sine load's of LoadTorque::fillUniform
+/// (step w dt, key w dt) and the Fourier stiffness's of MeshStiffness::fillPiece (step 2 pi du,
+/// key du).
+struct RotationTable {
+  static constexpr long kSize = 256;
+  double key = 0.0;  ///< the table holds the rotations of this key (0: none yet)
+  double c[kSize], s[kSize];
+};
+
 /// k as a function of the cumulative mesh phase u [mesh cycles] (u = 0 at a switch into the
 /// double-contact phase).
 class MeshStiffness {
@@ -37,6 +47,10 @@ class MeshStiffness {
   /// formula). When du > 0 the phases are uniform, u[i] = u[0] + i du, and the Fourier model
   /// rotates exact anchors instead of calling cos/sin per point (agrees to ~1e-15 relative).
   void fillPiece(double u_ref, const double* u, long n, double du, double* out) const;
+  /// The same values, the Fourier series' rotation table kept in *table (recomputed when du
+  /// changes).
+  void fillPiece(double u_ref, const double* u, long n, double du, double* out,
+                 RotationTable* table) const;
 
  private:
   MeshOptions o_;
@@ -72,6 +86,8 @@ class LoadTorque {
   double at(double t) const;
   /// T1 at t_n = t0 + n*dt for n = 0..n-1 (sine: phasor recurrence, exact to ~1e-15).
   void fillUniform(double t0, double dt, long n, double* out) const;
+  /// The same values, the sine's rotation table kept in *table (recomputed when dt changes).
+  void fillUniform(double t0, double dt, long n, double* out, RotationTable* table) const;
   /// Kinks/jumps in (0, duration).
   std::vector<double> breakpoints(double duration) const;
   /// Time-mean of T1 over [0, duration] (exact for the piecewise-linear profiles and the sine).

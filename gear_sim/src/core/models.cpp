@@ -76,6 +76,12 @@ bool MeshStiffness::constantOnPiece(double u_ref, double* k) const {
 }
 
 void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, double* out) const {
+  RotationTable table;
+  fillPiece(u_ref, u, n, du, out, &table);
+}
+
+void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, double* out,
+                              RotationTable* table) const {
   switch (o_.model) {
     case StiffnessModel::Square:
     case StiffnessModel::Constant: {
@@ -128,18 +134,40 @@ void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, 
       };
       constexpr long kAnchor = 64;
       if (du > 0.0 && n > kAnchor) {
-        double rc[kAnchor], rs[kAnchor];
-        for (long j = 0; j < kAnchor; ++j) {
-          const double a = 2.0 * M_PI * (du * static_cast<double>(j));
-          rc[j] = std::cos(a);
-          rs[j] = std::sin(a);
+        static_assert(kAnchor <= RotationTable::kSize, "the anchor table fits");
+        if (!(table->key == du)) {
+          for (long j = 0; j < kAnchor; ++j) {
+            const double a = 2.0 * M_PI * (du * static_cast<double>(j));
+            table->c[j] = std::cos(a);
+            table->s[j] = std::sin(a);
+          }
+          table->key = du;
         }
+        const double* rc = table->c;
+        const double* rs = table->s;
+        // sum() for the kAnchor points at once, harmonic by harmonic: the same operations per
+        // point in the same order (so the same values), with the points in the inner loop so
+        // that it vectorises.
+        double zc[kAnchor], zs[kAnchor], pc[kAnchor], ps[kAnchor], k[kAnchor];
         for (long i0 = 0; i0 < n; i0 += kAnchor) {
           const double f = u[i0] - std::floor(u[i0]);
           const double c0 = std::cos(2.0 * M_PI * f), s0 = std::sin(2.0 * M_PI * f);
           const long m = std::min(n - i0, kAnchor);
-          for (long j = 0; j < m; ++j)
-            out[i0 + j] = sum(c0 * rc[j] - s0 * rs[j], s0 * rc[j] + c0 * rs[j]);
+          for (long j = 0; j < m; ++j) {
+            zc[j] = pc[j] = c0 * rc[j] - s0 * rs[j];
+            zs[j] = ps[j] = s0 * rc[j] + c0 * rs[j];
+            k[j] = o_.k_mean;
+          }
+          for (size_t h = 0; h < nh; ++h) {
+            const double a = ac[h], b = as[h];
+            for (long j = 0; j < m; ++j) {
+              k[j] += a * pc[j] + b * ps[j];
+              const double qc = pc[j] * zc[j] - ps[j] * zs[j];
+              ps[j] = pc[j] * zs[j] + ps[j] * zc[j];
+              pc[j] = qc;
+            }
+          }
+          std::copy(k, k + m, out + i0);
         }
       } else {
         for (long i = 0; i < n; ++i) {
@@ -227,21 +255,30 @@ void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
     const auto& v = o_.values;
     // The slope of the current interval is computed once per interval (at() divides per
     // point; the values agree to rounding).
+    // Each table interval's points are then filled by a branch-free loop (vectorised) up to
+    // the first point at or past its end, found from the times' formula and checked on it.
+    auto time = [t0, dt](long i) { return t0 + static_cast<double>(i) * dt; };
     size_t k = 0;  // first table time > t (upper_bound), advanced monotonically
-    double slope = 0.0;
-    for (long i = 0; i < n; ++i) {
-      const double t = t0 + static_cast<double>(i) * dt;
+    for (long i = 0; i < n;) {
+      const double t = time(i);
       if (t <= x.front()) {
-        out[i] = v.front();
-      } else if (t >= x.back()) {
-        out[i] = v.back();
-      } else {
-        if (k == 0 || x[k] <= t) {
-          while (k < x.size() && x[k] <= t) ++k;
-          slope = (v[k] - v[k - 1]) / (x[k] - x[k - 1]);
-        }
-        out[i] = v[k - 1] + (t - x[k - 1]) * slope;
+        out[i++] = v.front();
+        continue;
       }
+      if (t >= x.back()) {
+        out[i++] = v.back();
+        continue;
+      }
+      while (k < x.size() && x[k] <= t) ++k;
+      const double slope = (v[k] - v[k - 1]) / (x[k] - x[k - 1]);
+      const double xk = x[k], base = x[k - 1], v0 = v[k - 1];
+      // end: the first index >= i + 1 whose time reaches x[k] (t < x[k] <= x.back() before it).
+      const double guess = std::ceil((xk - t0) / dt);
+      long end = guess > static_cast<double>(n) ? n : std::max(i + 1, static_cast<long>(guess));
+      while (end > i + 1 && time(end - 1) >= xk) --end;
+      while (end < n && time(end) < xk) ++end;
+      for (long j = i; j < end; ++j) out[j] = v0 + (time(j) - base) * slope;
+      i = end;
     }
     return;
   }
@@ -249,16 +286,31 @@ void LoadTorque::fillUniform(double t0, double dt, long n, double* out) const {
     for (long i = 0; i < n; ++i) out[i] = at(t0 + static_cast<double>(i) * dt);
     return;
   }
+  RotationTable table;
+  fillUniform(t0, dt, n, out, &table);
+}
+
+void LoadTorque::fillUniform(double t0, double dt, long n, double* out,
+                             RotationTable* table) const {
+  if (o_.profile != LoadProfile::Sine) {
+    fillUniform(t0, dt, n, out);
+    return;
+  }
   // sin(th0 + j w dt) = sin(th0) cos(j w dt) + cos(th0) sin(j w dt): exact sin/cos once per
   // block of kBlock samples and a table of the rotations cos/sin(j w dt), so the samples of a
-  // block are independent of each other (no recurrence chain, no accumulated rounding).
-  constexpr long kBlock = 256;
+  // block are independent of each other (no recurrence chain, no accumulated rounding). The
+  // table depends on dt only: kept in *table between calls with the same dt.
+  constexpr long kBlock = RotationTable::kSize;
   const double w = 2.0 * M_PI * o_.frequency;
-  double rc[kBlock], rs[kBlock];
-  for (long j = 0; j < kBlock; ++j) {
-    rc[j] = std::cos(w * dt * j);
-    rs[j] = std::sin(w * dt * j);
+  if (!(table->key == w * dt)) {
+    for (long j = 0; j < kBlock; ++j) {
+      table->c[j] = std::cos(w * dt * j);
+      table->s[j] = std::sin(w * dt * j);
+    }
+    table->key = w * dt;
   }
+  const double* rc = table->c;
+  const double* rs = table->s;
   for (long i0 = 0; i0 < n; i0 += kBlock) {
     const double th = w * (t0 + i0 * dt) + o_.phase;
     const double c = o_.amplitude * std::cos(th), s = o_.amplitude * std::sin(th);

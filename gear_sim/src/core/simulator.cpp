@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <random>
 #include <vector>
@@ -190,18 +191,48 @@ void affineRk4KernelVaryingK(Eigen::Index n, double h, double ca, double cb, dou
   }
 }
 
-// affineRk4Block with a stiffness that varies over the step: K at the stages on the half-step
-// grid Kh, like T.
-void affineRk4BlockVaryingK(Eigen::Index n, double h, const double* Kh, double ca, double cb,
-                            double ff, const double* T, AffineBlock* out, Eigen::Index offset) {
+// affineRk4Block with a stiffness that varies over the step: K = scale * kh at the stages, kh on
+// the half-step grid like T.
+void affineRk4BlockVaryingK(Eigen::Index n, double h, const double* kh, double scale, double ca,
+                            double cb, double ff, const double* T, AffineBlock* out,
+                            Eigen::Index offset) {
   std::fill(out->split.begin() + offset, out->split.begin() + offset + n, 0);
   deinterleave(T, n, out->t_start.data(), out->t_mid.data());
-  deinterleave(Kh, n, out->k_start.data(), out->k_mid.data());
+  double* __restrict ks = out->k_start.data();
+  double* __restrict km = out->k_mid.data();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    ks[i] = kh[2 * i] * scale;
+    km[i] = kh[2 * i + 1] * scale;
+  }
+  ks[n] = kh[2 * n] * scale;
   affineRk4KernelVaryingK(n, h, ca, cb, ff, out->t_start.data(), out->t_mid.data(),
                           out->k_start.data(), out->k_mid.data(), out->m11.data() + offset,
                           out->m12.data() + offset, out->m21.data() + offset,
                           out->m22.data() + offset, out->g1.data() + offset,
                           out->g2.data() + offset);
+}
+
+// The 2x2 multiply-add of the block's intervals [j0, j1) (none split) from state s, writing the
+// states after each into y[j], v[j]. A free function over raw arrays so that the state stays in
+// registers: inlined into the loop that also calls the split path, GCC kept it on the stack, a
+// store and a load on the dependency chain of every sample.
+SdofState affineRun(const AffineBlock& m, Eigen::Index j0, Eigen::Index j1, SdofState s,
+                    double* __restrict y, double* __restrict v) {
+  const double* __restrict m11 = m.m11.data();
+  const double* __restrict m12 = m.m12.data();
+  const double* __restrict m21 = m.m21.data();
+  const double* __restrict m22 = m.m22.data();
+  const double* __restrict g1 = m.g1.data();
+  const double* __restrict g2 = m.g2.data();
+  double sy = s.y, sv = s.v;
+  for (Eigen::Index j = j0; j < j1; ++j) {
+    const double ny = m11[j] * sy + m12[j] * sv + g1[j];
+    sv = m21[j] * sy + m22[j] * sv + g2[j];
+    sy = ny;
+    y[j] = sy;
+    v[j] = sv;
+  }
+  return {sy, sv};
 }
 
 // One simulate() run of a validated configuration: the model, its breakpoints, the output table
@@ -261,10 +292,11 @@ class Simulation {
 
   /// Samples n0 + 1 .. n1 (n1 - n0 <= kBlock).
   void integrateBlock(Eigen::Index n0, Eigen::Index n1) {
-    model_->load.fillUniform(o_.time[n0], 0.5 * h_, 2 * m_ * (n1 - n0) + 1, T_.data());
+    model_->load.fillUniform(o_.time[n0], 0.5 * h_, 2 * m_ * (n1 - n0) + 1, T_.data(), &rotation_);
     affineMaps(n0, n1);
     const auto bp_block = bp_;
     recurrence(n0, n1);
+    if (first_bad_ < 0) checkBlock(n0 + 1, n1 + 1);
     if (torsional_) rigidCombination(n0, n1, bp_block);
     while (bp_ != bps_.cend() && *bp_ <= o_.time[n1]) ++bp_;
   }
@@ -331,13 +363,16 @@ class Simulation {
     Kh_.resize(pc_ ? 0 : grid);
   }
 
-  // Sampled columns (value holding from each sample's instant on).
+  // Sampled columns (value holding from each sample's instant on). Loops over raw restrict
+  // pointers, so they vectorise.
   void fillSampledColumns() {
     model_->load.fillUniform(0.0, dt_, n_samples_, o_.torque.data());
-    for (Eigen::Index n = 0; n < n_samples_; ++n) {
-      o_.time[n] = static_cast<double>(n) / fs_;
-      o_.mesh_phase[n] = model_->timing.phase(o_.time[n]);
-    }
+    double* __restrict t = o_.time.data();
+    double* __restrict u = o_.mesh_phase.data();
+    const double fs = fs_;
+    for (Eigen::Index n = 0; n < n_samples_; ++n) t[n] = static_cast<double>(n) / fs;
+    const MeshTiming& timing = model_->timing;
+    for (Eigen::Index n = 0; n < n_samples_; ++n) u[n] = timing.phase(t[n]);
   }
 
   // Stiffness, mesh state and damping of sample n: the values holding from t_n on. The pieces
@@ -429,19 +464,26 @@ class Simulation {
       return;
     }
     const Eigen::Index cnt = 2 * m_ * (n_end - n) + 1;
-    const double t_piece = o_.time[n0];
+    const double t_piece = o_.time[n0], hh = 0.5 * h_;
+    const MeshTiming& timing = model.timing;
+    double* __restrict U = U_.data();
     for (Eigen::Index j = 0; j < cnt; ++j)
-      U_[j] = model.timing.phase(t_piece + static_cast<double>(j0 + j) * (0.5 * h_));
-    double* Kp = Kh_.data() + j0;
-    stiffness_.fillPiece(model.timing.phase(mid), U_.data(), cnt, du_, Kp);
+      U[j] = timing.phase(t_piece + static_cast<double>(j0 + j) * hh);
+    double* __restrict Kp = Kh_.data() + j0;
+    stiffness_.fillPiece(timing.phase(mid), U, cnt, du_, Kp, &fourier_rotation_);
+    const int stride = 2 * m_;
+    double* __restrict k_col = o_.stiffness.data();
+    double* __restrict state_col = o_.mesh_state.data();
+    const double* __restrict u_col = o_.mesh_phase.data();
     for (Eigen::Index i = n; i < n_end; ++i) {
-      o_.stiffness[i] = Kp[2 * m_ * (i - n)];
-      o_.mesh_state[i] = stiffness_.state(o_.mesh_phase[i] + kPhaseNudge);
+      k_col[i] = Kp[stride * (i - n)];
+      state_col[i] = stiffness_.state(u_col[i] + kPhaseNudge);
     }
-    for (Eigen::Index j = 0; j < cnt; ++j) Kp[j] *= inv_me_;
-    if (fast_) {
-      affineRk4BlockVaryingK(n_end - n, h_, Kp, ca, cb, ff_, Tp, &maps_, n - n0);
+    if (fast_) {  // K = k / Me scaled while de-interleaved
+      affineRk4BlockVaryingK(n_end - n, h_, Kp, inv_me_, ca, cb, ff_, Tp, &maps_, n - n0);
     } else {
+      const double inv_me = inv_me_;
+      for (Eigen::Index j = 0; j < cnt; ++j) Kp[j] *= inv_me;
       for (Eigen::Index i = n; i < n_end; ++i)
         maps_.set(i - n0, affineStep(so_.integrator, h_, m_, 0.0, Kp + 2 * m_ * (i - n), ca, cb,
                                      ff_, Tp + 2 * m_ * (i - n)));
@@ -452,31 +494,24 @@ class Simulation {
   void recurrence(Eigen::Index n0, Eigen::Index n1) {
     const Model& model = *model_;
     auto coeffs = [&model](double t, double t_ref) { return model.sdof(t, t_ref); };
-    const double* __restrict m11 = maps_.m11.data();
-    const double* __restrict m12 = maps_.m12.data();
-    const double* __restrict m21 = maps_.m21.data();
-    const double* __restrict m22 = maps_.m22.data();
-    const double* __restrict g1 = maps_.g1.data();
-    const double* __restrict g2 = maps_.g2.data();
-    const char* __restrict split = maps_.split.data();
-    double* __restrict y = o_.dte.data() + n0 + 1;
-    double* __restrict v = o_.dte_velocity.data() + n0 + 1;
-    double sy = s_.y, sv = s_.v;
-    for (Eigen::Index j = 0; j < n1 - n0; ++j) {
-      if (split[j]) {
-        const SdofState a = advanceSdof(coeffs, {sy, sv}, o_.time[n0 + j], o_.time[n0 + j + 1], m_,
-                                        bp_, bps_.cend(), so_.integrator);
-        sy = a.y;
-        sv = a.v;
-      } else {
-        const double ny = m11[j] * sy + m12[j] * sv + g1[j];
-        sv = m21[j] * sy + m22[j] * sv + g2[j];
-        sy = ny;
+    const char* split = maps_.split.data();
+    double* y = o_.dte.data() + n0 + 1;
+    double* v = o_.dte_velocity.data() + n0 + 1;
+    SdofState s = s_;
+    for (Eigen::Index j = 0; j < n1 - n0;) {
+      Eigen::Index e = j;
+      while (e < n1 - n0 && !split[e]) ++e;
+      s = affineRun(maps_, j, e, s, y, v);
+      if (e < n1 - n0) {  // split interval e
+        s = advanceSdof(coeffs, s, o_.time[n0 + e], o_.time[n0 + e + 1], m_, bp_, bps_.cend(),
+                        so_.integrator);
+        y[e] = s.y;
+        v[e] = s.v;
+        ++e;
       }
-      y[j] = sy;
-      v[j] = sv;
+      j = e;
     }
-    s_ = {sy, sv};
+    s_ = s;
   }
 
   // One RK step of the rigid combination q'' = g.
@@ -500,37 +535,62 @@ class Simulation {
     double* __restrict th2 = o_.theta2.data();
     const double a1 = r1_ * j2_ / det_, b1 = r2_ / det_, a2 = -r2_ * j1_ / det_, b2 = r1_ / det_;
     const double h6 = h * h / 6.0, hs6 = h / 6.0;
+    const double* __restrict T = T_.data();  // T[2 m (i - n0)]: interval i's start
     double qy = q_.y, qv = q_.v;
     for (Eigen::Index i = n0; i < n1; ++i) {
-      const double* Ti = T_.data() + 2 * m * (i - n0);
       if (fast_ && !maps_.split[i - n0]) {
-        const double g0 = q_gain * Ti[0], gm = q_gain * Ti[1], g1 = q_gain * Ti[2];
-        qy = qy + h * qv + h6 * (g0 + 2.0 * gm);
-        qv = qv + hs6 * (g0 + 4.0 * gm + g1);
-      } else {
-        q_ = {qy, qv};
-        if (maps_.split[i - n0]) {
-          forEachStep(o_.time[i], o_.time[i + 1], m, bq, bp_end,
-                      [&](double a, double e, double md) {
-                        qStep(e - a, q_gain * model.load.at(a), q_gain * model.load.at(md),
-                              q_gain * model.load.at(e));
-                      });
-        } else {
-          for (int k = 0; k < m; ++k)
-            qStep(h, q_gain * Ti[2 * k], q_gain * Ti[2 * k + 1], q_gain * Ti[2 * k + 2]);
+        // The run of unsplit intervals from i, the state in registers.
+        Eigen::Index e = i + 1;
+        while (e < n1 && !maps_.split[e - n0]) ++e;
+        for (; i < e; ++i) {
+          const double* Ti = T + 2 * (i - n0);  // m == 1 on the fast path
+          const double g0 = q_gain * Ti[0], gm = q_gain * Ti[1], g1 = q_gain * Ti[2];
+          qy = qy + h * qv + h6 * (g0 + 2.0 * gm);
+          qv = qv + hs6 * (g0 + 4.0 * gm + g1);
+          th1[i + 1] = a1 * y[i + 1] + b1 * qy;
+          th2[i + 1] = a2 * y[i + 1] + b2 * qy;
         }
-        qy = q_.y;
-        qv = q_.v;
+        --i;  // the run's last interval: the loop's ++i moves past it
+        continue;
       }
+      q_ = {qy, qv};
+      if (maps_.split[i - n0]) {
+        forEachStep(o_.time[i], o_.time[i + 1], m, bq, bp_end, [&](double a, double e, double md) {
+          qStep(e - a, q_gain * model.load.at(a), q_gain * model.load.at(md),
+                q_gain * model.load.at(e));
+        });
+      } else {
+        const double* Ti = T + 2 * m * (i - n0);
+        for (int k = 0; k < m; ++k)
+          qStep(h, q_gain * Ti[2 * k], q_gain * Ti[2 * k + 1], q_gain * Ti[2 * k + 2]);
+      }
+      qy = q_.y;
+      qv = q_.v;
       th1[i + 1] = a1 * y[i + 1] + b1 * qy;
       th2[i + 1] = a2 * y[i + 1] + b2 * qy;
     }
     q_ = {qy, qv};
   }
 
+  // Samples [a, b): is any not finite (or beyond kMaxFiniteDte)? Checked block by block while
+  // the block is in cache, as one branch-free pass (vectorised); the first such block is noted.
+  void checkBlock(Eigen::Index a, Eigen::Index b) {
+    const double* __restrict y = o_.dte.data();
+    const double* __restrict v = o_.dte_velocity.data();
+    constexpr double kMax = std::numeric_limits<double>::max();
+    bool bad = false;
+    for (Eigen::Index n = a; n < b; ++n)
+      bad |= !(std::abs(y[n]) <= kMaxFiniteDte) | !(std::abs(v[n]) <= kMax);  // NaN: false
+    if (bad) first_bad_ = a;
+  }
+
   // An unstable integration (a damping or stiffness far beyond the step's stability region)
-  // ends in Inf/NaN: refused, never written as a record.
-  Status checkFinite() const {
+  // ends in Inf/NaN: refused, never written as a record. The blocks were checked as they were
+  // integrated (checkBlock); only a failed run scans for the first bad sample, named in the
+  // message.
+  Status checkFinite() {
+    checkBlock(0, 1);  // the initial state
+    if (first_bad_ < 0) return {};
     for (Eigen::Index n = 0; n < n_samples_; ++n)
       if (!std::isfinite(o_.dte[n]) || !std::isfinite(o_.dte_velocity[n]) ||
           !(std::abs(o_.dte[n]) <= kMaxFiniteDte))
@@ -557,8 +617,11 @@ class Simulation {
   std::vector<double> bps_;
   std::vector<double>::const_iterator bp_;
   std::vector<double> T_, U_, Kh_;
+  RotationTable rotation_;          // the sine load's, for T_'s half-step grid
+  RotationTable fourier_rotation_;  // the Fourier stiffness's, for Kh_
   AffineBlock maps_;
   SdofState s_, q_;
+  Eigen::Index first_bad_ = -1;  // first sample of the first block holding a bad sample
   double ff_ = 0.0, inv_me_ = 0.0, du_ = 0.0;
   double r1_ = 0.0, r2_ = 0.0, j1_ = 0.0, j2_ = 0.0, q_gain_ = 0.0, det_ = 0.0;
 };
