@@ -71,17 +71,9 @@ TEST(SteCli, AnalyzeWritesTheSteSpectrumAndTheReportDrawsIt) {
             std::string::npos);
 }
 
-// `analyze --ste` on a bag beyond --max-in-memory streams through the segment driver's STE mode
-// (docs/ste.md "The STE in the segment pipeline"). With a calibration span covering the record
-// the streamed run is the in-memory joint fit: the same segments (C, C_std within 1e-9 relative:
-// the same arithmetic on the same samples, only the buffers differ) and the same STE keys and
-// values. With a short span the later segments hold the STE and the run says so (`ste_held`, the
-// `calibration` key); the constant model, whose calibration would be the whole record, is refused.
-TEST(SteCli, AnalyzeStreamsABagBeyondMaxInMemoryWithTheSte) {
-  gear_test::ScratchDir scratch("ste_cli_stream");
-  const fs::path dir = scratch.path();
-  // The shipped STE case without its shaft orders (a calibration needs no shaft revolution then),
-  // 6 ms at 40 dB: six 1 ms segments, refined by Auto.
+// Writes `yaml` and its bag: the shipped STE case without its shaft orders (a calibration needs
+// no shaft revolution then), 6 ms at 40 dB: six 1 ms segments, refined by Auto.
+void writeMeshSteBag(const fs::path& yaml, const fs::path& bag) {
   gear_sim::SimConfig c;
   std::string e;
   ASSERT_TRUE(gear_sim::loadSimConfigFile(kSte, &c, &e)) << e;
@@ -92,12 +84,61 @@ TEST(SteCli, AnalyzeStreamsABagBeyondMaxInMemoryWithTheSte) {
   c.simulation.duration = 0.006;
   c.simulation.noise_snr_db = 40.0;
   c.simulation.seed = 7;
-  const fs::path yaml = dir / "ste_mesh.yaml", bag = dir / "ste.bag";
   gear_test::writeText(yaml, YAML::Dump(gear_sim::toYaml(c)));
-  ASSERT_EQ(gear_test::runTool("simulate",
-                               "-q --config " + yaml.string() + " --output " + bag.string(), dir)
-                .code,
-            0);
+  ASSERT_EQ(
+      gear_test::runTool("simulate", "-q --config " + yaml.string() + " --output " + bag.string(),
+                         yaml.parent_path())
+          .code,
+      0);
+}
+
+// The streamed run calibrated on 2 of 6 segments (`held`, written to `run_dir`) against the
+// in-memory one (`mem`).
+void expectHeldRun(const nlohmann::json& held, const nlohmann::json& mem, const fs::path& run_dir) {
+  // Calibrated on 2 segments, held for 4: stated in the run warnings and the calibration key.
+  const auto& hste = held["identification"]["ste"];
+  EXPECT_EQ(hste["calibration"]["segments"], 2);
+  EXPECT_EQ(hste["calibration"]["held_segments"], 4);
+  EXPECT_FALSE(hste["calibration"]["whole_record"].get<bool>());
+  for (const auto& [key, value] : mem["identification"]["ste"].items())
+    EXPECT_TRUE(hste.contains(key)) << key;
+  bool stated = false;
+  for (const auto& w : held["runs"][0]["warnings"]) stated = stated || w["code"] == "ste_held";
+  EXPECT_TRUE(stated) << held["runs"][0]["warnings"].dump();
+  const auto& hs = held["identification"]["segments"];
+  ASSERT_EQ(hs.size(), 6u);
+  for (size_t i = 0; i < hs.size(); ++i) {
+    ASSERT_TRUE(hs[i]["identifiable"].get<bool>()) << i << hs[i].dump();
+    // Held or jointly fitted, the estimate agrees with the whole record's joint fit within the
+    // two standard errors combined (the same data; the held STE's covariance is in C_std).
+    const double d =
+        hs[i]["C"].get<double>() - mem["identification"]["segments"][i]["C"].get<double>();
+    EXPECT_LT(std::abs(d),
+              3.0 * std::hypot(hs[i]["C_std"].get<double>(),
+                               mem["identification"]["segments"][i]["C_std"].get<double>()))
+        << i;
+  }
+
+  // The report draws the held run's STE from its JSON, the span in the title.
+  const gear_test::ToolRun r =
+      gear_test::runShell("/usr/bin/python3 " + std::string(GEAR_SOURCE_DIR) +
+                              "/gear_damping_id/scripts/report -q " + run_dir.string(),
+                          run_dir, "report");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::is_regular_file(run_dir / "report" / "fig13_ste.png"));
+}
+
+// `analyze --ste` on a bag beyond --max-in-memory streams through the segment driver's STE mode
+// (docs/ste.md "The STE in the segment pipeline"). With a calibration span covering the record
+// the streamed run is the in-memory joint fit: the same segments (C, C_std within 1e-9 relative:
+// the same arithmetic on the same samples, only the buffers differ) and the same STE keys and
+// values. With a short span the later segments hold the STE and the run says so (`ste_held`, the
+// `calibration` key); the constant model, whose calibration would be the whole record, is refused.
+TEST(SteCli, AnalyzeStreamsABagBeyondMaxInMemoryWithTheSte) {
+  gear_test::ScratchDir scratch("ste_cli_stream");
+  const fs::path dir = scratch.path();
+  const fs::path yaml = dir / "ste_mesh.yaml", bag = dir / "ste.bag";
+  ASSERT_NO_FATAL_FAILURE(writeMeshSteBag(yaml, bag));
   const auto analyze = [&](const std::string& extra, const std::string& name) {
     const fs::path out = dir / name / "result.json";
     fs::create_directories(dir / name);
@@ -162,34 +203,7 @@ TEST(SteCli, AnalyzeStreamsABagBeyondMaxInMemoryWithTheSte) {
   // Whole span: no held segment, no ste_held.
   for (const auto& w : all["runs"][0]["warnings"]) EXPECT_NE(w["code"], "ste_held");
 
-  // Calibrated on 2 segments, held for 4: stated in the run warnings and the calibration key.
-  const auto& hste = held["identification"]["ste"];
-  EXPECT_EQ(hste["calibration"]["segments"], 2);
-  EXPECT_EQ(hste["calibration"]["held_segments"], 4);
-  EXPECT_FALSE(hste["calibration"]["whole_record"].get<bool>());
-  for (const auto& [key, value] : mste.items()) EXPECT_TRUE(hste.contains(key)) << key;
-  bool stated = false;
-  for (const auto& w : held["runs"][0]["warnings"]) stated = stated || w["code"] == "ste_held";
-  EXPECT_TRUE(stated) << held["runs"][0]["warnings"].dump();
-  const auto& hs = held["identification"]["segments"];
-  ASSERT_EQ(hs.size(), 6u);
-  for (size_t i = 0; i < hs.size(); ++i) {
-    ASSERT_TRUE(hs[i]["identifiable"].get<bool>()) << i << hs[i].dump();
-    // Held or jointly fitted, the estimate agrees with the whole record's joint fit within the
-    // two standard errors combined (the same data; the held STE's covariance is in C_std).
-    const double d = hs[i]["C"].get<double>() - ms[i]["C"].get<double>();
-    EXPECT_LT(std::abs(d),
-              3.0 * std::hypot(hs[i]["C_std"].get<double>(), ms[i]["C_std"].get<double>()))
-        << i;
-  }
-
-  // The report draws the held run's STE from its JSON, the span in the title.
-  const gear_test::ToolRun r = gear_test::runShell(
-      "/usr/bin/python3 " + std::string(GEAR_SOURCE_DIR) + "/gear_damping_id/scripts/report -q " +
-          (dir / "stream_held").string(),
-      dir, "report");
-  ASSERT_EQ(r.code, 0) << r.err;
-  EXPECT_TRUE(fs::is_regular_file(dir / "stream_held" / "report" / "fig13_ste.png"));
+  expectHeldRun(held, mem, dir / "stream_held");
 
   // The constant model shares C with the STE: a streamed calibration would hold the whole record.
   const gear_test::ToolRun k =
