@@ -15,7 +15,8 @@
 // --wavelet adds the Morlet wavelet validation (docs/method.md §5: modes, their damping ratios
 // beside the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
-// Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
+// Bags longer than --max-in-memory samples are analysed streaming, one segment at a time (with
+// --ste: the STE calibrated on the first segments and held, docs/ste.md).
 // Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
 // (statistics, flags, worst segments) replaces the rows. A progress line is drawn on stderr when
 // it is a terminal and the job takes more than a second (--quiet: never).
@@ -166,12 +167,6 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
   return primary ? std::string("/gear/") + leaf : "/gear/" + run.name() + "/" + leaf;
 }
 
-// Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
-// pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
-// their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
-// equal those of the record read whole. Memory: a group of segments per read. The piecewise
-// modeled response is per segment (from its identified state); shared-unknown runs are not
-// refined and have no modeled response (both need the whole record), with a warning.
 // Legacy forcing of a streamed bag: the mean load over the analysed range (one extra pass,
 // summed in order). NaN without a legacy run or a torque channel.
 gear_sim::Status streamedLegacyForcing(const gear_sim_ros::BagSignalInfo& info,
@@ -242,6 +237,13 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
           {"whole_record", cal == n}};
 }
 
+// Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
+// pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
+// their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
+// equal those of the record read whole. Memory: a group of segments per read. The piecewise
+// modeled response is per segment (from its identified state); shared-unknown runs are not
+// refined and have no modeled response (both need the whole record), with a warning. With
+// --ste each driver calibrates the STE on the first segments and holds it (StreamSte).
 bool analyzeStreaming(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
                       int threads, std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                       std::vector<double>* wavelet_dte, size_t wavelet_max, const StreamSte& ste,
