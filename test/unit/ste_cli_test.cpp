@@ -19,6 +19,13 @@ namespace {
 
 const std::string kSte = std::string(GEAR_SOURCE_DIR) + "/config/ste_example.yaml";
 
+// The report script on the result directory `res` (run in `dir`).
+gear_test::ToolRun runReport(const fs::path& res, const fs::path& dir) {
+  return gear_test::runShell("/usr/bin/python3 " + std::string(GEAR_SOURCE_DIR) +
+                                 "/gear_damping_id/scripts/report -q " + res.string(),
+                             dir, "report");
+}
+
 TEST(SteCli, AnalyzeWritesTheSteSpectrumAndTheReportDrawsIt) {
   gear_test::ScratchDir scratch("ste_cli_test");
   const fs::path dir = scratch.path(), res = dir / "result";
@@ -60,10 +67,7 @@ TEST(SteCli, AnalyzeWritesTheSteSpectrumAndTheReportDrawsIt) {
   EXPECT_EQ(csv.rfind("kind,order,cos,sin,cos_std,sin_std,amplitude,phase\n", 0), 0u) << csv;
   EXPECT_NE(csv.find("\npinion,1,"), std::string::npos) << csv;
 
-  const gear_test::ToolRun r =
-      gear_test::runShell("/usr/bin/python3 " + std::string(GEAR_SOURCE_DIR) +
-                              "/gear_damping_id/scripts/report -q " + res.string(),
-                          dir, "report");
+  const gear_test::ToolRun r = runReport(res, dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::is_regular_file(res / "report" / "fig13_ste.png"));
   EXPECT_GT(fs::file_size(res / "report" / "fig13_ste.png"), 10000u);
@@ -120,10 +124,7 @@ void expectHeldRun(const nlohmann::json& held, const nlohmann::json& mem, const 
   }
 
   // The report draws the held run's STE from its JSON, the span in the title.
-  const gear_test::ToolRun r =
-      gear_test::runShell("/usr/bin/python3 " + std::string(GEAR_SOURCE_DIR) +
-                              "/gear_damping_id/scripts/report -q " + run_dir.string(),
-                          run_dir, "report");
+  const gear_test::ToolRun r = runReport(run_dir, run_dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::is_regular_file(run_dir / "report" / "fig13_ste.png"));
 }
