@@ -481,7 +481,12 @@ class Report:
         a.set_xticklabels(labels, fontsize=8)
         a.set_ylabel("amplitude [µm] (±2 SE)")
         flag = "" if ste.get("separable", True) else "  — NOT SEPARABLE from the damping"
-        a.set_title(f"STE spectrum, shared by the record ({ste.get('damping')} damping){flag}",
+        cal = ste.get("calibration") or {}  # a streamed run (docs/ste.md)
+        span = "shared by the record" if cal.get("whole_record", True) else (
+            f"calibrated on {cal.get('segments')} segments "
+            f"({fmt(1e3 * fval(cal.get('t_start')), '.3f')}–{fmt(1e3 * fval(cal.get('t_end')), '.3f')} ms), "
+            f"held for {cal.get('held_segments')}")
+        a.set_title(f"STE spectrum, {span} ({ste.get('damping')} damping){flag}",
                     fontsize=9, color="black" if not flag else "red")
         u = np.linspace(0.0, 2.0, 400)
         e = np.zeros_like(u)

@@ -15,7 +15,8 @@
 // --wavelet adds the Morlet wavelet validation (docs/method.md §5: modes, their damping ratios
 // beside the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
-// Bags longer than --max-in-memory samples are analysed streaming, one segment at a time.
+// Bags longer than --max-in-memory samples are analysed streaming, one segment at a time (with
+// --ste: the STE calibrated on the first segments and held, docs/ste.md).
 // Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
 // (statistics, flags, worst segments) replaces the rows. A progress line is drawn on stderr when
 // it is a terminal and the job takes more than a second (--quiet: never).
@@ -30,6 +31,7 @@
 #include <rosbag/bag.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -55,6 +57,7 @@
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/status.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/rig_bag_io.hpp"
@@ -165,17 +168,88 @@ std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) 
   return primary ? std::string("/gear/") + leaf : "/gear/" + run.name() + "/" + leaf;
 }
 
+// Legacy forcing of a streamed bag: the mean load over the analysed range (one extra pass,
+// summed in order). NaN without a legacy run or a torque channel.
+gear_sim::Status streamedLegacyForcing(const gear_sim_ros::BagSignalInfo& info,
+                                       const gd::GearConstants& gear,
+                                       const std::vector<gd::AnalysisRun>& runs,
+                                       const Ranges& ranges, double* fbar) {
+  *fbar = gd::kNaN;
+  bool legacy = false;
+  for (const auto& r : runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
+  if (!legacy || !info.torque) return gear_sim::Status();
+  double sum = 0.0;
+  if (gear_sim::Status s =
+          gear_sim_ros::streamSignalBag(info, {{ranges.front().first, ranges.back().second}},
+                                        [&](const gear_sim::SignalTable& t, size_t) {
+                                          for (Eigen::Index i = 0; i < t.torque.size(); ++i)
+                                            sum += t.torque[i];
+                                          return gear_sim::Status();
+                                        });
+      !s.ok())
+    return s;
+  *fbar =
+      gear.force_factor * sum / static_cast<double>(ranges.back().second - ranges.front().first);
+  return gear_sim::Status();
+}
+
+// --ste on a streamed bag (docs/ste.md "The STE in the segment pipeline"): each run's driver
+// calibrates the STE on its first `calibration` segments and holds it; `results` gets each run's
+// STE and calibration span.
+struct StreamSte {
+  const gd::SteModelOptions* options = nullptr;  // null: no STE
+  size_t calibration = 10;
+  std::vector<gd::SteResult>* results = nullptr;
+  std::vector<gd::SegmentDriver::SteCalibration>* spans = nullptr;
+};
+
+// A streamed STE run's closing: its STE and span collected, the modeled response (no STE
+// forcing, as in memory) and, when segments were held, a run warning saying so (docs/ste.md).
+void finishStreamedSte(const gd::SegmentDriver& driver, const StreamSte& ste,
+                       gd::AnalysisRun* run) {
+  ste.results->push_back(driver.steResult() ? *driver.steResult() : gd::SteResult{});
+  const gd::SegmentDriver::SteCalibration span = driver.steCalibration();
+  ste.spans->push_back(span);
+  run->response = gd::ModeledResponse{};
+  run->response_error = "the modeled response does not include the STE (--ste)";
+  const size_t held =
+      run->result.segments.size() - std::min(span.segments, run->result.segments.size());
+  if (held == 0) return;
+  using gear_sim::formatNumber;
+  run->result.warnings.push_back(
+      {gd::quality_code::kSteHeld,
+       "the record was analysed streaming (beyond --max-in-memory): the STE was identified "
+       "jointly with C on the first " +
+           std::to_string(span.segments) + " segments (" + formatNumber(span.t_start) + " to " +
+           formatNumber(span.t_end) + " s, --ste-calibration-segments) and held for the other " +
+           std::to_string(held) + "; the whole record's joint fit needs the record in memory"});
+}
+
+// The `calibration` key of a streamed run's STE (docs/ste.md): the span the STE was identified
+// on and how many segments held it.
+nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
+                                  const gd::IdentificationResult& result) {
+  const auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+  const size_t n = result.segments.size(), cal = std::min(span.segments, n);
+  return {{"segments", cal},
+          {"t_start", num(span.t_start)},
+          {"t_end", num(span.t_end)},
+          {"held_segments", n - cal},
+          {"whole_record", cal == n}};
+}
+
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
 // pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
 // their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
 // equal those of the record read whole. Memory: a group of segments per read. The piecewise
 // modeled response is per segment (from its identified state); shared-unknown runs are not
-// refined and have no modeled response (both need the whole record), with a warning.
+// refined and have no modeled response (both need the whole record), with a warning. With
+// --ste each driver calibrates the STE on the first segments and holds it (StreamSte).
 gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
                                   const gd::GearConstants& gear, int threads,
                                   std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                                   std::vector<double>* wavelet_dte, size_t wavelet_max,
-                                  gear_sim::ProgressBar* progress) {
+                                  const StreamSte& ste, gear_sim::ProgressBar* progress) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
@@ -183,24 +257,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   const Ranges ranges = gd::segmentRanges(whole, runs->front().options);
   if (ranges.empty())
     return gear_sim::Status::invalidInput("no samples in the analysed time range");
-  // Legacy forcing: the mean load over the analysed range (one extra pass, summed in order).
   double fbar = gd::kNaN;
-  bool legacy = false;
-  for (const auto& r : *runs) legacy = legacy || r.options.formulation == gd::Formulation::Legacy;
-  if (legacy && info.torque) {
-    double sum = 0.0;
-    if (gear_sim::Status s =
-            gear_sim_ros::streamSignalBag(info, {{ranges.front().first, ranges.back().second}},
-                                          [&](const gear_sim::SignalTable& t, size_t) {
-                                            for (Eigen::Index i = 0; i < t.torque.size(); ++i)
-                                              sum += t.torque[i];
-                                            return gear_sim::Status();
-                                          });
-        !s.ok())
-      return s;
-    fbar =
-        gear.force_factor * sum / static_cast<double>(ranges.back().second - ranges.front().first);
-  }
+  if (const gear_sim::Status st = streamedLegacyForcing(info, gear, *runs, ranges, &fbar); !st)
+    return st;
   // The default window from the record's mean stiffness, as for a record read whole.
   double window = runs->front().options.window_length;
   if (!(window > 0.0)) {
@@ -219,6 +278,12 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     drivers.emplace_back(o, gear, limits);
     if (o.formulation == gd::Formulation::Legacy && info.torque)
       drivers.back().setLegacyForcing(fbar);
+    if (ste.options != nullptr) {
+      if (std::string e = drivers.back().setSte(*ste.options, ste.calibration); !e.empty()) {
+        *error = "--ste: " + e;
+        return false;
+      }
+    }
   }
   // Reads of kStreamGroup segments whatever --threads is: the views (and so every time stamp)
   // are the same for any number of threads, so the output is too.
@@ -235,7 +300,7 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     }
     for (size_t k = 0; k < runs->size(); ++k) {
       const auto outs = drivers[k].addAll(view, segs);
-      if (drivers[k].sharedModel()) continue;
+      if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
       for (size_t j = 0; j < outs.size(); ++j) {
         gd::ModeledResponse resp;
         if (!outs[j].estimate.identifiable ||
@@ -264,8 +329,11 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     return s;
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
+    if (ste.options != nullptr) drivers[k].completeSteCalibration();
     run.result = drivers[k].finish();
-    if (!drivers[k].sharedModel()) {
+    if (ste.options != nullptr) {
+      finishStreamedSte(drivers[k], ste, &run);
+    } else if (!drivers[k].sharedModel()) {
       fits[k].finish(&run.response);
       run.response.observed.resize(0);
     } else {
@@ -337,6 +405,16 @@ class Analysis {
   void declareWaveletOptions(CLI::App& app);
   void declareTerminalOptions(CLI::App& app);
   // load's steps, each returning kContinue or the exit code.
+  // --ste on a streamed bag: the options the streaming analysis needs (null options: none).
+  StreamSte streamSte() {
+    StreamSte s;
+    if (ste_spec.empty()) return s;
+    s.options = &ste_options;
+    s.calibration = static_cast<size_t>(ste_calibration_segments);
+    s.results = &ste_results;
+    s.spans = &ste_spans;
+    return s;
+  }
   int readRecord();
   int readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_topics);
   int readGearParameters();
@@ -358,6 +436,8 @@ class Analysis {
   std::string ste_spec, ste_damping = gear_sim::steDampingName(gear_sim::SteDamping::Relative);
   gd::SteModelOptions ste_options;
   std::vector<gd::SteResult> ste_results;
+  long ste_calibration_segments = 10;                        // streamed bags (docs/ste.md)
+  std::vector<gd::SegmentDriver::SteCalibration> ste_spans;  // streamed: each run's span
   bool quiet = false, summary = false, table_mode = false;
   nlohmann::json given = nlohmann::json::object();  // the options set on the command line
   std::vector<std::string> command_line;
@@ -501,6 +581,11 @@ void Analysis::declareSteOptions(CLI::App& app) {
       ->check([](const std::string& name) {
         return gear_sim::parseSteDamping(name).ok() ? "" : "must be relative or dte";
       });
+  app.add_option("--ste-calibration-segments", ste_calibration_segments,
+                 "with --ste on a bag beyond --max-in-memory (analysed streaming): identify the "
+                 "STE jointly on the first N segments, and more until they span a revolution of "
+                 "each shaft whose orders are modelled, then hold it (default 10; docs/ste.md)")
+      ->check(CLI::PositiveNumber);
 }
 
 // The Morlet wavelet validation (docs/method.md §5).
@@ -711,7 +796,12 @@ int Analysis::readGearParameters() {
   gear = identification ? gd::gearConstants(model) : gd::GearConstants{};
   if (!ste_spec.empty()) {  // docs/ste.md
     if (!identification) return fail(kExitUsage, "--ste needs --params GEAR.yaml");
-    if (streaming) return fail(kExitUsage, "--ste: a bag beyond --max-in-memory is not supported");
+    for (const auto& o : runs_options)  // streamed: the calibration must be bounded
+      if (streaming && o.model == gd::DampingModel::Constant)
+        return fail(kExitUsage,
+                    "--ste with the constant model on a bag beyond --max-in-memory: the "
+                    "constant model shares C with the STE, so its calibration would be the whole "
+                    "record; use the piecewise model or a larger --max-in-memory (docs/ste.md)");
     ste_options.pinion_teeth = model.gears.pinion.teeth;
     ste_options.gear_teeth = model.gears.gear.teeth;
     if (const gear_sim::Status s = ste_options.check(); !s.ok()) return fail(kExitUsage, s);
@@ -816,7 +906,7 @@ int Analysis::identify() {
   if (streaming && identification) {
     if (const gear_sim::Status s = analyzeStreaming(bag_info, gear, threads, &runs, &bag,
                                                     wavelet_on_record ? &wavelet_dte : nullptr,
-                                                    wavelet_n_record, &progress);
+                                                    wavelet_n_record, streamSte(), &progress);
         !s.ok())
       return fail(kExitInput, s.withContext(input));
   } else if (streaming && wavelet_on_record) {
@@ -966,8 +1056,12 @@ int Analysis::write() {
   nlohmann::json doc = gd::analysisJson(runs, in);
   if (!ste_results.empty()) {  // the STE of the primary run, and of every run (docs/ste.md)
     doc["identification"]["ste"] = gd::steJson(ste_results.front());
-    for (size_t k = 0; k < ste_results.size() && k < doc["runs"].size(); ++k)
+    for (size_t k = 0; k < ste_results.size() && k < doc["runs"].size(); ++k) {
       doc["runs"][k]["ste"] = gd::steJson(ste_results[k]);
+      if (k < ste_spans.size())  // streamed: the span the STE was identified on
+        doc["runs"][k]["ste"]["calibration"] = steCalibrationJson(ste_spans[k], runs[k].result);
+    }
+    if (!doc["runs"].empty()) doc["identification"]["ste"] = doc["runs"][0]["ste"];
   }
   doc["metadata"] = gd::runMetadata(command_line, input, given, GEAR_DAMPING_VERSION);
   if (wavelet) {

@@ -90,6 +90,18 @@ class SegmentDriver {
   gear_sim::Status setSte(const SteModelOptions& ste, size_t calibration_segments);
   /// The STE once calibrated (else null).
   const SteResult* steResult() const { return ste_ready_ ? &ste_ : nullptr; }
+  /// The STE's calibration span once calibrated: the segments it was identified on (the first
+  /// usable ones) and their time span [s] (t_start of the first, t_end of the last).
+  struct SteCalibration {
+    size_t segments = 0;
+    double t_start = kNaN, t_end = kNaN;
+  };
+  const SteCalibration& steCalibration() const { return ste_calibrated_; }
+  /// STE mode, a record that ended before the calibration span: calibrates on the segments that
+  /// arrived now (finish() does it on a copy), so that steResult() has the record's STE.
+  void completeSteCalibration() {
+    if (ste_on_ && !ste_ready_) calibrate();
+  }
 
   struct SegmentOutput {
     SegmentEstimate estimate;  ///< final for piecewise; shared: the current shared value when
@@ -182,6 +194,7 @@ class SegmentDriver {
   SteModelOptions ste_options_;
   size_t ste_calibration_ = 0;
   SteResult ste_;
+  SteCalibration ste_calibrated_;
   struct Calibration {
     std::vector<double> col[5];  // dte, stiffness, torque, mesh_state, mesh_phase
     bool present[5] = {false, false, false, false, false};

@@ -43,6 +43,9 @@ namespace quality_code {
 /// The damping and the STE coefficients cannot be told apart on this record (condition number
 /// or a damping-STE correlation above the limits).
 inline constexpr const char* kSteNotSeparable = "ste_not_separable";
+/// Run code: the STE was identified on a calibration span of a streamed record and held for the
+/// later segments (SegmentDriver::setSte), not jointly on the whole record.
+inline constexpr const char* kSteHeld = "ste_held";
 }  // namespace quality_code
 
 /// What STE to identify.

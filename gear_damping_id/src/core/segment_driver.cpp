@@ -71,6 +71,7 @@ void SegmentDriver::reset() {
   added_ = 0;
   ste_ready_ = false;
   ste_ = SteResult();
+  ste_calibrated_ = SteCalibration();
   calib_ = Calibration();
 }
 

@@ -146,6 +146,7 @@ void SegmentDriver::calibrate() {
     if (back <= kept_.size()) kept_[kept_.size() - back] = {e, {}};
   }
   if (joint.constant) shared_solve_ = joint;
+  ste_calibrated_ = {n_cal, c.times.front().first, c.times.back().second};
   c = Calibration();
 }
 
