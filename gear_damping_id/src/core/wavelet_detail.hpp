@@ -46,12 +46,18 @@ inline void modulusOf(const double* w, long n, T* out) {
     out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
 }
 
+// Median (upper middle element) of *v, reordering *v in place (no copy).
+template <typename T>
+inline double medianInPlace(std::vector<T>* v) {
+  if (v->empty()) return kNaN;
+  const auto mid = v->begin() + static_cast<long>(v->size() / 2);
+  std::nth_element(v->begin(), mid, v->end());
+  return static_cast<double>(*mid);
+}
+
 template <typename T>
 inline double median(std::vector<T> v) {
-  if (v.empty()) return kNaN;
-  const auto mid = v.begin() + static_cast<long>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return static_cast<double>(*mid);
+  return medianInPlace(&v);
 }
 }  // namespace wavelet_detail
 }  // namespace gear_damping_id
