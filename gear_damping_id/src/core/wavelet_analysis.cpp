@@ -149,6 +149,14 @@ struct RowEnvelope {
   long j_peak = 0;
 };
 
+// Decimation D of a row's fits and noise median on the per-mode path (see envelopeFit):
+// floor(s*fs/kFitSamplesPerScale), at least 1; 1 with the full scalogram (fits unchanged).
+constexpr double kFitSamplesPerScale = 4.0;
+long fitDecimation(const RowEnvelope& r, const WaveletOptions& opt) {
+  if (opt.full_scalogram) return 1;
+  return std::max(1L, static_cast<long>(r.s * r.fs / kFitSamplesPerScale));
+}
+
 // Noise floor of |W| on a row (RMS of |W| for noise alone): the smaller of the spectral estimate
 // sqrt(gain) * sigma_n and the Rayleigh median of |W| outside the COI (right once the mode has
 // decayed into the noise).
@@ -160,7 +168,11 @@ double rowNoiseFloor(const RowEnvelope& r, const std::vector<double>& env, doubl
   const long a = static_cast<long>(std::ceil(std::max(0.0, lo) * r.fs));
   const long b = static_cast<long>(std::floor(std::max(0.0, hi) * r.fs));
   if (b <= a) return floor_spec;
-  work->assign(env.begin() + a, env.begin() + b + 1);
+  // Per-mode path: the median of every D-th sample (|W| of noise is correlated over ~s, so the
+  // D = s*fs/4 spaced samples hold nearly all its independent values).
+  const long D = fitDecimation(r, opt);
+  work->clear();
+  for (long j = a; j <= b; j += D) work->push_back(env[static_cast<size_t>(j)]);
   return std::min(floor_spec, medianInPlace(work) / std::sqrt(std::log(2.0)));
 }
 
@@ -215,9 +227,7 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
 // weights, whose spectra are a few times that wide) are summed by the trapezoid rule on the
 // decimated samples as accurately as by the full sum, up to the end corrections (the quadrature
 // weights below) and a relative (D^2/12) * (sigma/fs)^2-order term (< 1e-7 for every mode of
-// the tests and the benchmark).
-constexpr double kFitSamplesPerScale = 4.0;
-
+// the tests and the benchmark). See fitDecimation.
 // Quadrature points of the region [j0, j0 + m): j0 + i*D (i = 0..I) with weights D (ends
 // (D+1)/2: the trapezoid rule plus the half samples the full sum has at its ends), then the
 // < D samples after the last one, each with weight 1 (sum of weights: m).
@@ -349,9 +359,7 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
               " and >= one wavelet scale " + num(r.s) + " s)";
     return out;
   }
-  const long D =
-      opt.full_scalogram ? 1 : std::max(1L, static_cast<long>(r.s * r.fs / kFitSamplesPerScale));
-  envelopeFit(r, env, j0, m, D, work, &out);
+  envelopeFit(r, env, j0, m, fitDecimation(r, opt), work, &out);
   return out;
 }
 
