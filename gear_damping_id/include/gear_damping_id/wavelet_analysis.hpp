@@ -70,7 +70,10 @@ struct WaveletOptions {
   /// floor (there ln|W| is biased by < 1e-5; see analyzeWavelet). Rule: >= 1.
   double floor_factor = 3.0;
   /// Compute and keep the full scalogram (for figures). false: only the rows the damping fits
-  /// need are transformed, and the spectra come from the signal's FFT alone.
+  /// need are transformed, and the spectra come from the signal's FFT alone; the wide rows'
+  /// Parseval sums are binned (within 1e-6) and the envelope fits and noise medians use every
+  /// floor(s*fs/4)-th sample (xi within 1e-4, f_d within 1e-6 of the full path, relative; see
+  /// docs/wavelet.md, "Speed").
   bool full_scalogram = true;
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
