@@ -72,8 +72,8 @@ struct WaveletOptions {
   /// Compute and keep the full scalogram (for figures). false: only the rows the damping fits
   /// need are transformed, and the spectra come from the signal's FFT alone; the wide rows'
   /// Parseval sums are binned (within 1e-6) and the envelope fits and noise medians use every
-  /// floor(s*fs/4)-th sample (xi within 1e-4, f_d within 1e-6 of the full path, relative; see
-  /// docs/wavelet.md, "Speed").
+  /// floor(s*fs/16)-th sample (xi within 1e-6, f_d within 1e-8 of the full path, relative, on
+  /// free decays; see docs/wavelet.md, "Speed").
   bool full_scalogram = true;
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.

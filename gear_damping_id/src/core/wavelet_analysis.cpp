@@ -151,7 +151,8 @@ struct RowEnvelope {
 
 // Decimation D of a row's fits and noise median on the per-mode path (see envelopeFit):
 // floor(s*fs/kFitSamplesPerScale), at least 1; 1 with the full scalogram (fits unchanged).
-constexpr double kFitSamplesPerScale = 4.0;
+// 16 samples per scale: 4 gave 8e-6 (xi) on the paper's modes and 4e-4 on the gear case.
+constexpr double kFitSamplesPerScale = 16.0;
 long fitDecimation(const RowEnvelope& r, const WaveletOptions& opt) {
   if (opt.full_scalogram) return 1;
   return std::max(1L, static_cast<long>(r.s * r.fs / kFitSamplesPerScale));
@@ -169,7 +170,7 @@ double rowNoiseFloor(const RowEnvelope& r, const std::vector<double>& env, doubl
   const long b = static_cast<long>(std::floor(std::max(0.0, hi) * r.fs));
   if (b <= a) return floor_spec;
   // Per-mode path: the median of every D-th sample (|W| of noise is correlated over ~s, so the
-  // D = s*fs/4 spaced samples hold nearly all its independent values).
+  // D = s*fs/16 spaced samples hold all its independent values).
   const long D = fitDecimation(r, opt);
   work->clear();
   for (long j = a; j <= b; j += D) work->push_back(env[static_cast<size_t>(j)]);
@@ -222,12 +223,13 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
 // Decimation of the envelope fits on the per-mode path: every D-th sample of the region with
 // D = floor(s*fs/kFitSamplesPerScale) (1 with the full scalogram, whose fits are unchanged).
 // The row is the signal filtered by the wavelet, whose spectrum is a Gaussian of standard
-// deviation 1/s in omega: sampled every s/4 seconds, its Nyquist frequency 4*pi/s lies 12.6
-// standard deviations out, so the smooth integrands of the line fits (ln|W|, the phase and the
-// weights, whose spectra are a few times that wide) are summed by the trapezoid rule on the
-// decimated samples as accurately as by the full sum, up to the end corrections (the quadrature
-// weights below) and a relative (D^2/12) * (sigma/fs)^2-order term (< 1e-7 for every mode of
-// the tests and the benchmark). See fitDecimation.
+// deviation 1/s in omega: sampled every s/16 seconds, its Nyquist frequency 16*pi/s lies 50
+// standard deviations out, so the integrands of the line fits (ln|W|, the phase and the
+// weights: nonlinear in W, their spectra wider than W's, much wider when the envelope jumps as
+// in the parametrically excited gear case) are summed by the trapezoid rule on the decimated
+// points (with the end weights below) as the full sum does: measured 7e-8 (xi) and 8e-10 (f_d)
+// relative on the paper's three modes, 2e-5 (f_d) on the gear case's jumping envelope.
+// See fitDecimation.
 // Quadrature points of the region [j0, j0 + m): j0 + i*D (i = 0..I) with weights D (ends
 // (D+1)/2: the trapezoid rule plus the half samples the full sum has at its ends), then the
 // < D samples after the last one, each with weight 1 (sum of weights: m).
@@ -377,8 +379,8 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
 constexpr double kBinnedSigmaPerGroup = 32.0;
 constexpr double kBinnedMinSigma = 4.0 * kBinnedSigmaPerGroup;  // h >= 4
 constexpr int kBinnedMinLevel = 2;
-constexpr double kPowerBandHalfWidth = 6.07;  // as MorletCwt: Psi^2 < 1e-16 of its peak beyond
-constexpr long kRecurrenceBlock = 64;
+using wavelet_detail::kPowerBandHalfWidth;
+using wavelet_detail::kSumRecurrenceBlock;
 
 class BinnedPower {
  public:
@@ -437,8 +439,8 @@ class BinnedPower {
     const double dh = static_cast<double>(h), a2 = a * a;
     const double q = std::exp(-2.0 * a2 * dh * dh);
     double sum = 0.0;
-    for (long g0 = g_lo; g0 <= g_hi; g0 += kRecurrenceBlock) {
-      const long g1 = std::min(g_hi + 1, g0 + kRecurrenceBlock);
+    for (long g0 = g_lo; g0 <= g_hi; g0 += kSumRecurrenceBlock) {
+      const long g1 = std::min(g_hi + 1, g0 + kSumRecurrenceBlock);
       double x = a * (static_cast<double>(g0) * dh + 0.5 * (dh - 1.0)) - omega0;
       double G = 4.0 * std::exp(-x * x);
       double r = std::exp(-2.0 * a * dh * x - a2 * dh * dh);  // G(c + h) / G(c)
@@ -463,22 +465,9 @@ class BinnedPower {
     const double* y = reinterpret_cast<const double*>(Y_);
     return y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1];
   }
-  // The bin-by-bin sum, in MorletCwt's order and recurrence (bit-identical to it).
+  // The bin-by-bin sum, MorletCwt's (bit-identical to it).
   double exactSum(double a, double omega0, long lo, long hi) const {
-    const double q = std::exp(-2.0 * a * a);
-    double sum = 0.0;
-    for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
-      const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
-      const double x = a * static_cast<double>(k0) - omega0;
-      double g = 4.0 * std::exp(-x * x);
-      double r = std::exp(-2.0 * a * x - a * a);
-      for (long k = k0; k < k1; ++k) {
-        sum += weight(k) * g;
-        g *= r;
-        r *= q;
-      }
-    }
-    return sum;
+    return wavelet_detail::psi2Sum(a, omega0, lo, hi, [this](long k) { return weight(k); });
   }
 
   const std::complex<double>* Y_ = nullptr;
