@@ -27,9 +27,7 @@ using wavelet_detail::num;
 // Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
 // (exp(-8.6^2/2) = 8.7e-17): those bins are set to zero, not multiplied.
 constexpr double kBandHalfWidth = 8.6;
-// Psi(s*w)^2 = 4*exp(-(s*w - omega0)^2) is below 1e-16 of its peak when |s*w - omega0| > 6.07
-// (exp(-6.07^2) = 1e-16): the band of the Parseval sums (meanPower, noiseGain).
-constexpr double kPowerBandHalfWidth = 6.07;
+using wavelet_detail::kPowerBandHalfWidth;
 // Zero padding of 8 scales after the record: the wavelet's Gaussian exp(-u^2/2) is exp(-32) =
 // 1.3e-14 where it would wrap around the circular convolution.
 constexpr double kPadScales = 8.0;
@@ -719,26 +717,13 @@ Status MorletCwt::transformModulus(const double* y, float* out) {
 }
 
 namespace {
-// sum_k weight_k * Psi(a*k)^2 over the band, Psi(x)^2 = 4 exp(-(x - omega0)^2), advanced by the
-// same blocked recurrence as the row multiplier. weight(k) is |Y_k|^2 or 1.
+// sum_k weight_k * Psi(a*k)^2 over the band (wavelet_detail::psi2Sum). weight(k) is |Y_k|^2
+// or 1.
 template <typename Weight>
 double bandSumPsi2(double a, double omega0, long n_fft, Weight weight) {
   long lo = 0, hi = 0;
   bandOf(a, omega0, n_fft, &lo, &hi, kPowerBandHalfWidth);
-  const double q = std::exp(-2.0 * a * a);
-  double sum = 0.0;
-  for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
-    const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
-    const double x = a * static_cast<double>(k0) - omega0;
-    double g = 4.0 * std::exp(-x * x);
-    double r = std::exp(-2.0 * a * x - a * a);
-    for (long k = k0; k < k1; ++k) {
-      sum += weight(k) * g;
-      g *= r;
-      r *= q;
-    }
-  }
-  return sum;
+  return wavelet_detail::psi2Sum(a, omega0, lo, hi, weight);
 }
 }  // namespace
 

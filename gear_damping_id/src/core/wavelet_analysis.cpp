@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <memory>
 
 #include "wavelet_detail.hpp"
 
@@ -16,6 +17,7 @@ using gear_sim::Status;
 using wavelet_detail::kNaN;
 using wavelet_detail::kPi;
 using wavelet_detail::median;
+using wavelet_detail::medianInPlace;
 using wavelet_detail::modulusOf;
 using wavelet_detail::num;
 
@@ -147,6 +149,15 @@ struct RowEnvelope {
   long j_peak = 0;
 };
 
+// Decimation D of a row's fits and noise median on the per-mode path (see envelopeFit):
+// floor(s*fs/kFitSamplesPerScale), at least 1; 1 with the full scalogram (fits unchanged).
+// 16 samples per scale: 4 gave 8e-6 (xi) on the paper's modes and 4e-4 on the gear case.
+constexpr double kFitSamplesPerScale = 16.0;
+long fitDecimation(const RowEnvelope& r, const WaveletOptions& opt) {
+  if (opt.full_scalogram) return 1;
+  return std::max(1L, static_cast<long>(r.s * r.fs / kFitSamplesPerScale));
+}
+
 // Noise floor of |W| on a row (RMS of |W| for noise alone): the smaller of the spectral estimate
 // sqrt(gain) * sigma_n and the Rayleigh median of |W| outside the COI (right once the mode has
 // decayed into the noise).
@@ -158,8 +169,12 @@ double rowNoiseFloor(const RowEnvelope& r, const std::vector<double>& env, doubl
   const long a = static_cast<long>(std::ceil(std::max(0.0, lo) * r.fs));
   const long b = static_cast<long>(std::floor(std::max(0.0, hi) * r.fs));
   if (b <= a) return floor_spec;
-  work->assign(env.begin() + a, env.begin() + b + 1);
-  return std::min(floor_spec, median(*work) / std::sqrt(std::log(2.0)));
+  // Per-mode path: the median of every D-th sample (|W| of noise is correlated over ~s, so the
+  // D = s*fs/16 spaced samples hold all its independent values).
+  const long D = fitDecimation(r, opt);
+  work->clear();
+  for (long j = a; j <= b; j += D) work->push_back(env[static_cast<size_t>(j)]);
+  return std::min(floor_spec, medianInPlace(work) / std::sqrt(std::log(2.0)));
 }
 
 // Decay region [t0, t1] of a row: the given one (clipped to the record), or from
@@ -205,15 +220,49 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
   return true;
 }
 
+// Decimation of the envelope fits on the per-mode path: every D-th sample of the region with
+// D = floor(s*fs/kFitSamplesPerScale) (1 with the full scalogram, whose fits are unchanged).
+// The row is the signal filtered by the wavelet, whose spectrum is a Gaussian of standard
+// deviation 1/s in omega: sampled every s/16 seconds, its Nyquist frequency 16*pi/s lies 50
+// standard deviations out, so the integrands of the line fits (ln|W|, the phase and the
+// weights: nonlinear in W, their spectra wider than W's, much wider when the envelope jumps as
+// in the parametrically excited gear case) are summed by the trapezoid rule on the decimated
+// points (with the end weights below) as the full sum does: measured 7e-8 (xi) and 8e-10 (f_d)
+// relative on the paper's three modes, 2e-5 (f_d) on the gear case's jumping envelope.
+// See fitDecimation.
+// Quadrature points of the region [j0, j0 + m): j0 + i*D (i = 0..I) with weights D (ends
+// (D+1)/2: the trapezoid rule plus the half samples the full sum has at its ends), then the
+// < D samples after the last one, each with weight 1 (sum of weights: m).
+void regionPoints(long j0, long m, long D, std::vector<long>* idx, std::vector<double>* q) {
+  idx->clear();
+  q->clear();
+  const long I = (m - 1) / D;
+  for (long i = 0; i <= I; ++i) {
+    idx->push_back(j0 + i * D);
+    q->push_back(I == 0 ? 1.0 : (i == 0 || i == I ? 0.5 * static_cast<double>(D + 1) : double(D)));
+  }
+  for (long j = j0 + I * D + 1; j < j0 + m; ++j) {
+    idx->push_back(j);
+    q->push_back(1.0);
+  }
+}
+
 // Weighted line fits over [t0, t1]: ln|W| = a - sigma*t (weights |W|^2, the inverse variance
-// of ln|W| under additive noise) and the unwrapped phase (slope 2*pi*f_d).
-void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, long m,
+// of ln|W| under additive noise) and the unwrapped phase (slope 2*pi*f_d), on the samples of
+// the region (D = 1) or on its decimated quadrature points (D > 1; the phase is unwrapped about
+// the advance 2*pi*f*step/fs of the row's frequency f, which the ridge phase follows within
+// its bandwidth f/omega0, far inside the half turn unwrapping allows).
+void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, long m, long D,
                  std::vector<double>* work, RowFit* out) {
-  work->resize(static_cast<size_t>(4 * m));
+  std::vector<long> idx;
+  std::vector<double> q;
+  if (D > 1) regionPoints(j0, m, D, &idx, &q);
+  const long np = D > 1 ? static_cast<long>(idx.size()) : m;
+  work->resize(static_cast<size_t>(4 * np));
   double* x = work->data();
-  double* ly = x + m;
-  double* ph = ly + m;
-  double* wt = ph + m;
+  double* ly = x + np;
+  double* ph = ly + np;
+  double* wt = ph + np;
   double emax = 0.0;
   for (long i = 0; i < m; ++i) emax = std::max(emax, env[static_cast<size_t>(j0 + i)]);
   if (!(emax > 0.0)) {
@@ -224,15 +273,28 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   // region's tail (by 6 % in ln|W| at 3x the floor) and biases sigma low. The fit uses the
   // noise-corrected envelope sqrt(|W|^2 - floor^2).
   const double floor2 = std::isfinite(out->floor) ? out->floor * out->floor : 0.0;
+  const double turn = 2.0 * kPi * r.f / r.fs;  // phase advance of the row's frequency per sample
   double prev = 0.0, offset = 0.0;
-  for (long i = 0; i < m; ++i) {
-    const long j = j0 + i;
+  for (long i = 0; i < np; ++i) {
+    const long j = D > 1 ? idx[static_cast<size_t>(i)] : j0 + i;
     const double e = env[static_cast<size_t>(j)];
     const double e2 = std::max(e * e - floor2, 1e-300);
     x[i] = static_cast<double>(j) / r.fs;
     ly[i] = 0.5 * std::log(e2);
-    wt[i] = e2 / (emax * emax);
+    wt[i] = e2 / (emax * emax) * (D > 1 ? q[static_cast<size_t>(i)] : 1.0);
     const double p = std::arg(r.w[j]);
+    if (D > 1) {
+      if (i > 0) {
+        const double pred = turn * static_cast<double>(j - idx[static_cast<size_t>(i - 1)]);
+        double d = p - prev - pred;
+        d -= 2.0 * kPi * std::round(d / (2.0 * kPi));
+        ph[i] = ph[i - 1] + pred + d;
+      } else {
+        ph[i] = p;
+      }
+      prev = p;
+      continue;
+    }
     if (i > 0) {
       const double d = p - prev;
       if (d > kPi) offset -= 2.0 * kPi;
@@ -241,8 +303,8 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
     prev = p;
     ph[i] = p + offset;
   }
-  const LineFit amp = fitLine(x, ly, wt, m);
-  const LineFit phase = fitLine(x, ph, wt, m);
+  const LineFit amp = fitLine(x, ly, wt, np);
+  const LineFit phase = fitLine(x, ph, wt, np);
   out->sigma = -amp.slope;
   out->r2 = amp.r2;
   out->fd = phase.slope / (2.0 * kPi);
@@ -259,19 +321,36 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   out->ok = true;
 }
 
-// Decay region and fits on one row W (n samples at fs), for frequency f, omega0.
-RowFit fitRow(const RowEnvelope& r, double sigma_guess, const std::pair<double, double>* region,
-              double noise_gain, double noise_std, const WaveletOptions& opt,
-              std::vector<double>* env_scratch, std::vector<double>* work) {
-  RowFit out;
+// One row's envelope |W|, its peak and noise floor: what every fit on that row shares (the
+// two passes of fitAt reuse it instead of recomputing |W|, its maximum and its median).
+struct PreparedRow {
+  RowEnvelope row;
+  double peak = kNaN, floor = kNaN;
+};
+
+PreparedRow prepareRow(const RowEnvelope& r, double noise_gain, double noise_std,
+                       const WaveletOptions& opt, std::vector<double>* env_scratch,
+                       std::vector<double>* work) {
+  PreparedRow p;
   std::vector<double>& env = *env_scratch;
   env.resize(static_cast<size_t>(r.n));
   modulusOf(reinterpret_cast<const double*>(r.w), r.n, env.data());
-  RowEnvelope row = r;
-  row.j_peak = static_cast<long>(std::max_element(env.begin(), env.end()) - env.begin());
-  out.peak = env[static_cast<size_t>(row.j_peak)];
-  out.floor = rowNoiseFloor(row, env, noise_gain, noise_std, opt, work);
-  if (!decayRegion(row, env, sigma_guess, region, opt, &out)) return out;
+  p.row = r;
+  p.row.j_peak = static_cast<long>(std::max_element(env.begin(), env.end()) - env.begin());
+  p.peak = env[static_cast<size_t>(p.row.j_peak)];
+  p.floor = rowNoiseFloor(p.row, env, noise_gain, noise_std, opt, work);
+  return p;
+}
+
+// Decay region and fits on a prepared row (env: its |W| from prepareRow).
+RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma_guess,
+              const std::pair<double, double>* region, const WaveletOptions& opt,
+              std::vector<double>* work) {
+  RowFit out;
+  const RowEnvelope& r = p.row;
+  out.peak = p.peak;
+  out.floor = p.floor;
+  if (!decayRegion(r, env, sigma_guess, region, opt, &out)) return out;
   const long j0 = std::max(0L, static_cast<long>(std::ceil(out.t0 * r.fs)));
   const long j1 = std::min(r.n - 1, static_cast<long>(std::floor(out.t1 * r.fs)));
   const long m = j1 - j0 + 1;
@@ -282,9 +361,119 @@ RowFit fitRow(const RowEnvelope& r, double sigma_guess, const std::pair<double, 
               " and >= one wavelet scale " + num(r.s) + " s)";
     return out;
   }
-  envelopeFit(row, env, j0, m, work, &out);
+  envelopeFit(r, env, j0, m, fitDecimation(r, opt), work, &out);
   return out;
 }
+
+// Parseval sums sum_k w_k Psi(a*k)^2 (the time-averaged scalogram, MorletCwt::meanPowerAt, and
+// the noise gain) of the per-mode path. A row whose Gaussian spans sigma_k = 1/(a sqrt 2) bins
+// is summed bin by bin (bit-identical to MorletCwt) when sigma_k < kBinnedMinSigma; wider rows
+// sum groups of h = 2^L <= sigma_k/kBinnedSigmaPerGroup bins through the second-order Taylor
+// expansion of Psi^2 about each group's centre c, with the group's moments
+// S0 = sum w, S1 = sum w (k - c), S2 = sum w (k - c)^2:
+//   sum_{k in g} w_k G(k) = S0 G(c) + S1 G'(c) + S2 G''(c)/2 + R,  |R| <= |G'''| (h/2)^3 S0 / 6,
+// i.e. |R| < 1e-6 of S0 * max G for h <= sigma_k/32 (|d^3/dx^3 exp(-x^2)| <= 3.5, a =
+// 1/(sigma_k sqrt 2)). The wide rows (most of the peak spectrum's 850 rows span up to 6e5
+// bins each) then cost ~1000 groups instead of ~1e5 bins. The groups' moments are built once
+// per signal in O(N) (a pyramid: level L from level L-1).
+constexpr double kBinnedSigmaPerGroup = 32.0;
+constexpr double kBinnedMinSigma = 4.0 * kBinnedSigmaPerGroup;  // h >= 4
+constexpr int kBinnedMinLevel = 2;
+using wavelet_detail::kPowerBandHalfWidth;
+using wavelet_detail::kSumRecurrenceBlock;
+
+class BinnedPower {
+ public:
+  // w_k = |Y_k|^2 (Y non-null) or 1 (Y null) for k = 1..K-1 (w_0 = 0: the analytic cut).
+  void build(const std::complex<double>* Y, long K, int max_level) {
+    Y_ = Y;
+    K_ = K;
+    levels_.resize(static_cast<size_t>(std::max(0, max_level - kBinnedMinLevel + 1)));
+    for (size_t l = 0; l < levels_.size(); ++l) {
+      const long h = 1L << (kBinnedMinLevel + static_cast<int>(l));
+      std::vector<Moments>& m = levels_[l];
+      m.assign(static_cast<size_t>((K + h - 1) / h), Moments{});
+      if (l == 0) {
+        const double c0 = 0.5 * static_cast<double>(h - 1);
+        for (long k = 1; k < K; ++k) {
+          const double w = weight(k);
+          const double d = static_cast<double>(k % h) - c0;
+          Moments& g = m[static_cast<size_t>(k / h)];
+          g.s0 += w;
+          g.s1 += w * d;
+          g.s2 += w * d * d;
+        }
+      } else {
+        // Children of half the width, centred at c -+ h/4.
+        const std::vector<Moments>& c = levels_[l - 1];
+        const double q = 0.25 * static_cast<double>(h);
+        for (size_t g = 0; g < m.size(); ++g) {
+          for (int side = 0; side < 2; ++side) {
+            const size_t ci = 2 * g + static_cast<size_t>(side);
+            if (ci >= c.size()) break;
+            const double d = side == 0 ? -q : q;
+            m[g].s0 += c[ci].s0;
+            m[g].s1 += c[ci].s1 + d * c[ci].s0;
+            m[g].s2 += c[ci].s2 + 2.0 * d * c[ci].s1 + d * d * c[ci].s0;
+          }
+        }
+      }
+    }
+  }
+
+  // sum_k w_k 4 exp(-(a k - omega0)^2) over the band |a k - omega0| <= kPowerBandHalfWidth.
+  double sum(double a, double omega0) const {
+    const long lo = static_cast<long>(std::max(1.0, std::ceil((omega0 - kPowerBandHalfWidth) / a)));
+    const long hi = static_cast<long>(
+        std::min(static_cast<double>(K_ - 1), std::floor((omega0 + kPowerBandHalfWidth) / a)));
+    const double sigma_k = 1.0 / (a * std::sqrt(2.0));
+    int level = -1;
+    while (level + 1 < static_cast<int>(levels_.size()) &&
+           static_cast<double>(1L << (kBinnedMinLevel + level + 1)) * kBinnedSigmaPerGroup <=
+               sigma_k)
+      ++level;
+    if (level < 0) return exactSum(a, omega0, lo, hi);
+    const std::vector<Moments>& m = levels_[static_cast<size_t>(level)];
+    const long h = 1L << (kBinnedMinLevel + level);
+    const long g_lo = lo / h, g_hi = hi / h;
+    const double dh = static_cast<double>(h), a2 = a * a;
+    const double q = std::exp(-2.0 * a2 * dh * dh);
+    double sum = 0.0;
+    for (long g0 = g_lo; g0 <= g_hi; g0 += kSumRecurrenceBlock) {
+      const long g1 = std::min(g_hi + 1, g0 + kSumRecurrenceBlock);
+      double x = a * (static_cast<double>(g0) * dh + 0.5 * (dh - 1.0)) - omega0;
+      double G = 4.0 * std::exp(-x * x);
+      double r = std::exp(-2.0 * a * dh * x - a2 * dh * dh);  // G(c + h) / G(c)
+      for (long g = g0; g < g1; ++g) {
+        const Moments& s = m[static_cast<size_t>(g)];
+        // G'(c) = -2 a x G, G''(c) = (4 a^2 x^2 - 2 a^2) G.
+        sum += G * (s.s0 - 2.0 * a * x * s.s1 + (2.0 * a2 * x * x - a2) * s.s2);
+        G *= r;
+        r *= q;
+        x += a * dh;
+      }
+    }
+    return sum;
+  }
+
+ private:
+  struct Moments {
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+  };
+  double weight(long k) const {
+    if (!Y_) return 1.0;
+    const double* y = reinterpret_cast<const double*>(Y_);
+    return y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1];
+  }
+  // The bin-by-bin sum, MorletCwt's (bit-identical to it).
+  double exactSum(double a, double omega0, long lo, long hi) const {
+    return wavelet_detail::psi2Sum(a, omega0, lo, hi, [this](long k) { return weight(k); });
+  }
+
+  const std::complex<double>* Y_ = nullptr;
+  long K_ = 0;
+  std::vector<std::vector<Moments>> levels_;
+};
 
 // ------------------------------------------------------------------------------------------
 // The steps of analyzeWavelet.
@@ -297,8 +486,23 @@ struct Analysis {
   const WaveletOptions& opt;
   WaveletResult& res;
   std::vector<double> grid;
-  MorletCwt scal;  // the scalogram's grid; its spectrum serves the peak spectrum too
+  MorletCwt& scal;            // the scalogram's grid; its spectrum serves the peak spectrum too
+  MorletCwt& own;             // the fit rows' own transform when scal's padding does not hold them
+  std::vector<double>& env;   // scratch: |W| of a row
+  std::vector<double>& work;  // scratch: fits, medians
+  BinnedPower& power;         // per-mode path: the Parseval sums of the wide rows (see above)
 };
+
+// Whether cwt is configured for exactly these signals and rows (then configure is skipped:
+// its plans and buffers are reused, and the results are those of a fresh configure).
+bool sameConfiguration(const MorletCwt& cwt, long n, double fs, const std::vector<double>& f,
+                       const std::vector<double>& w) {
+  if (!(cwt.configured() && cwt.size() == n && cwt.sampleRate() == fs && cwt.frequencies() == f))
+    return false;
+  const std::vector<double>& have = cwt.omega0s();  // one per row
+  if (w.size() != 1) return have == w;
+  return std::all_of(have.begin(), have.end(), [&](double x) { return x == w[0]; });
+}
 
 Status checkInput(const Analysis& a) {
   if (!a.y) return Status::internal("analyzeWavelet: null signal");
@@ -364,21 +568,32 @@ Status frequencyGrid(Analysis* a) {
   return {};
 }
 
+// Time-averaged scalogram at (f, omega0) (MorletCwt::meanPowerAt): exact with the full
+// scalogram; through the binned sums of the wide rows on the per-mode path (within 1e-6).
+double meanPowerOf(const Analysis& a, double f, double omega0) {
+  if (a.opt.full_scalogram) return a.scal.meanPowerAt(f, omega0);
+  const double N = static_cast<double>(a.scal.paddedSize());
+  return a.power.sum(omega0 * a.fs / (f * N), omega0) / (static_cast<double>(a.n) * N);
+}
+
 // One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
 // noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
 // the time-averaged scalogram.
 Status spectraAndNoise(Analysis* a) {
   // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
-      !s.ok())
-    return s;
+  if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
+    if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
+        !s.ok())
+      return s;
+  }
   if (Status s = a->scal.setSignal(a->y); !s.ok()) return s;
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
   res.spectrum_freq.resize(static_cast<size_t>(kmax + 1));
   res.spectrum_power.resize(static_cast<size_t>(kmax + 1));
-  std::vector<double> p2(static_cast<size_t>(kmax));
+  std::vector<double>& p2 = a->work;
+  p2.resize(static_cast<size_t>(kmax));
   for (long k = 0; k <= kmax; ++k) {
     const double p = std::norm(Y[k]);
     const bool edge = k == 0 || (N % 2 == 0 && k == kmax);
@@ -386,9 +601,18 @@ Status spectraAndNoise(Analysis* a) {
     res.spectrum_power[static_cast<size_t>(k)] = (edge ? 1.0 : 2.0) * p / (a->n * a->fs);
     if (k >= 1) p2[static_cast<size_t>(k - 1)] = p;
   }
-  res.noise_std = std::sqrt(median(std::move(p2)) / (static_cast<double>(a->n) * std::log(2.0)));
+  res.noise_std = std::sqrt(medianInPlace(&p2) / (static_cast<double>(a->n) * std::log(2.0)));
   res.scalogram_power.resize(a->grid.size());
-  for (int i = 0; i < a->scal.rows(); ++i) res.scalogram_power[size_t(i)] = a->scal.meanPower(i);
+  if (!a->opt.full_scalogram) {
+    // Largest sigma_k of any row: f < fs/2, omega0 >= 3 (a > 6/N).
+    const double sigma_max = static_cast<double>(N) / (6.0 * std::sqrt(2.0));
+    a->power.build(Y, kmax + 1,
+                   static_cast<int>(std::floor(std::log2(sigma_max / kBinnedSigmaPerGroup))));
+  }
+  for (int i = 0; i < a->scal.rows(); ++i) {
+    res.scalogram_power[size_t(i)] =
+        meanPowerOf(*a, a->grid[static_cast<size_t>(i)], a->opt.omega0);
+  }
   return {};
 }
 
@@ -429,7 +653,7 @@ void peakSpectrum(Analysis* a) {
   a->res.peak_freq = logSpacedFrequencies(f0, f1, m);
   a->res.peak_power.resize(a->res.peak_freq.size());
   for (size_t i = 0; i < a->res.peak_freq.size(); ++i) {
-    a->res.peak_power[i] = a->scal.meanPowerAt(a->res.peak_freq[i], wp);
+    a->res.peak_power[i] = meanPowerOf(*a, a->res.peak_freq[i], wp);
   }
 }
 
@@ -548,7 +772,7 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
   env->resize(static_cast<size_t>(a->n));
   modulusOf(reinterpret_cast<const double*>(w), a->n, env->data());
   work->assign(env->begin() + lo, env->begin() + hi + 1);
-  const double hf = median(*work) / std::sqrt(std::log(2.0) * fit->noiseGainAt(f_hf, w0));
+  const double hf = medianInPlace(work) / std::sqrt(std::log(2.0) * fit->noiseGainAt(f_hf, w0));
   if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
 }
 
@@ -571,9 +795,10 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
   row.s = morletScale(f, omega);
   row.coi = std::sqrt(2.0) * row.s;
   const double gain = fit->noiseGainAt(f, omega), sn = a->res.noise_std;
-  RowFit r = fitRow(row, sigma_guess, seed.region, gain, sn, a->opt, env, work);
+  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env, work);
+  RowFit r = fitRow(p, *env, sigma_guess, seed.region, a->opt, work);
   if (r.ok && !seed.region && r.sigma > 0.0) {
-    RowFit r2 = fitRow(row, r.sigma, nullptr, gain, sn, a->opt, env, work);
+    RowFit r2 = fitRow(p, *env, r.sigma, nullptr, a->opt, work);
     if (r2.ok) r = r2;
   }
   return r;
@@ -749,15 +974,17 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   bool reuse = true;
   for (size_t i = 0; i < seeds.size(); ++i)
     reuse = reuse && a->scal.fitsPadding(fit_f[i], fit_w[i]);
-  MorletCwt own;
   MorletCwt* fit = &a->scal;
   if (!reuse) {
-    Status s = own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
-    if (s.ok()) s = own.setSignal(a->y);
+    Status s;
+    if (!sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w))
+      s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
+    if (s.ok()) s = a->own.setSignal(a->y);
     if (!s.ok()) return s;
-    fit = &own;
+    fit = &a->own;
   }
-  std::vector<double> env, work;
+  std::vector<double>& env = a->env;
+  std::vector<double>& work = a->work;
   highFrequencyNoise(a, fit, seeds, &env, &work);
   const std::vector<double> orders = resolvedOrders(a);
   for (size_t i = 0; i < seeds.size(); ++i) {
@@ -874,12 +1101,49 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
 // ------------------------------------------------------------------------------------------
 // Analysis: a short loop over the named steps above.
 
-Status analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOptions& options,
-                      WaveletResult* result) {
+// What a WaveletAnalyzer keeps between calls: the transforms (FFTW plans, FFT buffers) and
+// the scratch vectors, so a repeated analysis neither re-plans nor faults in fresh pages.
+struct WaveletAnalyzer::Workspace {
+  MorletCwt scal, own;
+  std::vector<double> env, work;
+  BinnedPower power;
+};
+
+WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
+WaveletAnalyzer::~WaveletAnalyzer() = default;
+WaveletAnalyzer::WaveletAnalyzer(WaveletAnalyzer&&) noexcept = default;
+WaveletAnalyzer& WaveletAnalyzer::operator=(WaveletAnalyzer&&) noexcept = default;
+
+namespace {
+// Empties *r like WaveletResult{} but keeps its vectors' capacity (a reused result's large
+// spectra then need no fresh pages).
+void clearKeepingCapacity(WaveletResult* r) {
+  r->frequencies.clear();
+  r->coi.clear();
+  r->omega0 = 0.0;
+  r->modulus.resize(0, 0);
+  r->scalogram_times.clear();
+  r->scalogram_decimation = 1;
+  r->spectrum_freq.clear();
+  r->spectrum_power.clear();
+  r->scalogram_power.clear();
+  r->peak_freq.clear();
+  r->peak_power.clear();
+  r->noise_std = 0.0;
+  r->modes.clear();
+  r->warnings.clear();
+  r->status = Status{};
+}
+}  // namespace
+
+Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
+                                const WaveletOptions& options, WaveletResult* result) {
   if (!result) return Status::internal("analyzeWavelet: null result");
-  *result = WaveletResult{};
+  if (!ws_) ws_ = std::make_unique<Workspace>();
+  clearKeepingCapacity(result);
   if (Status s = options.check(); !s.ok()) return s;
-  Analysis a{y, n, sample_rate, options, *result, {}, MorletCwt{}};
+  Workspace& w = *ws_;
+  Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.env, w.work, w.power};
   if (Status s = checkInput(a); !s.ok()) return s;
   if (Status s = frequencyGrid(&a); !s.ok()) return s;
   if (Status s = spectraAndNoise(&a); !s.ok()) return s;
@@ -889,6 +1153,13 @@ Status analyzeWavelet(const double* y, long n, double sample_rate, const Wavelet
   const std::vector<ModeSeed> seeds = pickModes(&a);
   if (seeds.empty()) return {};
   return fitModes(&a, seeds);
+}
+
+Status analyzeWavelet(const double* y, long n, double sample_rate, const WaveletOptions& options,
+                      WaveletResult* result) {
+  if (result) *result = WaveletResult{};
+  WaveletAnalyzer analyzer;
+  return analyzer.analyze(y, n, sample_rate, options, result);
 }
 
 Status analyzeWavelet(const std::vector<double>& y, double sample_rate,
