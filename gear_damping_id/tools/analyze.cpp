@@ -279,10 +279,8 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     if (o.formulation == gd::Formulation::Legacy && info.torque)
       drivers.back().setLegacyForcing(fbar);
     if (ste.options != nullptr) {
-      if (std::string e = drivers.back().setSte(*ste.options, ste.calibration); !e.empty()) {
-        *error = "--ste: " + e;
-        return false;
-      }
+      if (const gear_sim::Status s = drivers.back().setSte(*ste.options, ste.calibration); !s)
+        return s.withContext("--ste");
     }
   }
   // Reads of kStreamGroup segments whatever --threads is: the views (and so every time stamp)
