@@ -549,7 +549,8 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
                  "relative tolerance on the uniformity of the time column (default 1e-6)");
   app.add_option("--max-in-memory", max_in_memory,
                  "bags with more samples are analysed streaming, one segment at a time "
-                 "(default 1e6)")
+                 "(default 1e6); a rig bag (JointState), read whole, with more messages "
+                 "per topic is refused")
       ->check(CLI::PositiveNumber);
   app.add_option("--threads", threads,
                  "identify this many segments in parallel, and compute the wavelet scalogram's "
@@ -746,7 +747,8 @@ int Analysis::readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_
   }
   if (rig_bag) {
     gear_sim::SignalTable rig;
-    gear_sim::Status s = gear_sim_ros::readRigBag(input, rig_topics, &rig);
+    gear_sim::Status s =
+        gear_sim_ros::readRigBag(input, rig_topics, &rig, static_cast<size_t>(max_in_memory));
     if (s.ok()) s = gd::rigTableToSignalTable(rig, input, rig_opts, rig_model, &table, &rig_report);
     if (!s.ok()) return fail(kExitInput, s);
     bag_info.topic = rig_topics.joints;

@@ -87,7 +87,20 @@ bool isRigBag(const std::string& path, const RigBagTopics& topics) {
   return false;
 }
 
-Status readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig) {
+// ResourceLimit when `view` (the messages of `topic`) holds more than `max_messages` (View::size
+// is not const).
+Status checkMessageCount(const std::string& path, const std::string& topic, rosbag::View& view,
+                         size_t max_messages) {
+  if (view.size() <= max_messages) return {};
+  return Status::resourceLimit(path + ": " + std::to_string(view.size()) + " messages on " +
+                                   gear_sim::quoteForMessage(topic) + ", more than the " +
+                                   std::to_string(max_messages) +
+                                   " a rig bag may hold (it is read whole; --max-in-memory)",
+                               "max_in_memory");
+}
+
+Status readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim::SignalTable* rig,
+                  size_t max_messages) {
   if (Status s = checkBagStructure(path); !s.ok()) return s;
   std::vector<ros::Time> stamps;
   std::vector<double> th1, th2, tq;
@@ -96,6 +109,9 @@ Status readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim:
     bag.open(path, rosbag::bagmode::Read);
     std::map<ros::Time, double> torque;  // by stamp
     rosbag::View tv(bag, rosbag::TopicQuery(topics.torque));
+    rosbag::View jv(bag, rosbag::TopicQuery(topics.joints));
+    if (Status s = checkMessageCount(path, topics.torque, tv, max_messages); !s.ok()) return s;
+    if (Status s = checkMessageCount(path, topics.joints, jv, max_messages); !s.ok()) return s;
     for (const rosbag::MessageInstance& m : tv) {
       if (Status s = layoutFits(path, m); !s.ok()) return s;
       if (const auto w = m.instantiate<geometry_msgs::WrenchStamped>()) {
@@ -104,7 +120,6 @@ Status readRigBag(const std::string& path, const RigBagTopics& topics, gear_sim:
         torque[m.getTime()] = f->data;  // no header: the bag's receipt time
       }
     }
-    rosbag::View jv(bag, rosbag::TopicQuery(topics.joints));
     for (const rosbag::MessageInstance& m : jv) {
       if (Status s = layoutFits(path, m); !s.ok()) return s;
       const auto js = m.instantiate<sensor_msgs::JointState>();

@@ -337,6 +337,16 @@ TEST_F(Hostile, RigBagArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
                                        std::string(GEAR_SOURCE_DIR) + "/config/rig_example.yaml");
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_TRUE(has(r.err, "position claims")) << r.err;
+  // A rig bag is read whole: more messages per topic than the bound (analyze: --max-in-memory)
+  // is refused before reading, naming the bound, and analyze exits 2 as for any invalid input.
+  e.clear();
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::readRigBag(good, topics, &rig, 2), &e));
+  EXPECT_TRUE(has(e, "3 messages on") && has(e, "more than the 2")) << e;
+  const ToolRun small =
+      run("analyze", "--input " + good + " --max-in-memory 2 --params " +
+                         std::string(GEAR_SOURCE_DIR) + "/config/rig_example.yaml");
+  EXPECT_EQ(small.code, 2) << small.err;
+  EXPECT_TRUE(has(small.err, "more than the 2")) << small.err;
 }
 
 // A compressed chunk is decompressed and its records checked the same way.

@@ -11,6 +11,9 @@
 
 namespace gear_sim_ros {
 
+/// Default bound on the messages per topic readRigBag holds in memory (about 100 bytes each).
+constexpr size_t kMaxRigBagMessages = 20000000;
+
 struct RigBagTopics {
   std::string joints = "/rig/joint_states";
   std::string torque = "/rig/torque";
@@ -34,8 +37,10 @@ bool isRigBag(const std::string& path, const RigBagTopics& topics);
 /// `joint1`, `joint2`, and the torque with the same stamp on `topics.torque`
 /// (geometry_msgs/WrenchStamped, component `axis`, or std_msgs/Float64); time = stamp minus the
 /// first JointState stamp. Stamps must increase. InvalidInput naming the bag and the reason (a
-/// missing joint or torque, a corrupt file).
+/// missing joint or torque, a corrupt file). The bag is read whole: ResourceLimit (field
+/// "max_in_memory"), before anything is read, when either topic holds more than `max_messages`
+/// messages (analyze passes --max-in-memory).
 gear_sim::Status readRigBag(const std::string& path, const RigBagTopics& topics,
-                            gear_sim::SignalTable* rig);
+                            gear_sim::SignalTable* rig, size_t max_messages = kMaxRigBagMessages);
 
 }  // namespace gear_sim_ros
