@@ -349,14 +349,19 @@ gear_sim::Status OutputStage::commit() {
   return s;
 }
 
-gear_sim::Status writeFileAtomically(const std::string& path, const std::string& text,
-                                     OutputStage* stage) {
+namespace {
+
+// Writes `path` + ".partial" with `write(stream)` (false or a failed stream: IoError with `field`,
+// the partial file removed), then stages it in `stage` or, without one, renames it into place.
+template <class Write>
+gear_sim::Status writeThroughPartial(const std::string& path, OutputStage* stage,
+                                     const std::string& field, Write write) {
   const std::string tmp = path + ".partial";
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f || !(f << text) || !f.flush()) {
+    if (!f || !write(f) || !f.flush()) {
       std::remove(tmp.c_str());
-      return gear_sim::Status::ioError(path + ": cannot write");
+      return gear_sim::Status::ioError(path + ": cannot write", field);
     }
   }
   if (stage) {
@@ -366,22 +371,20 @@ gear_sim::Status writeFileAtomically(const std::string& path, const std::string&
   return gear_sim::commitFile(tmp, path);
 }
 
+}  // namespace
+
+gear_sim::Status writeFileAtomically(const std::string& path, const std::string& text,
+                                     OutputStage* stage) {
+  return writeThroughPartial(path, stage, "",
+                             [&](std::ostream& f) { return static_cast<bool>(f << text); });
+}
+
 gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, OutputStage* stage) {
-  const std::string tmp = path + ".partial";
-  {
-    // Serialised straight into the file: the text of a long record's document (tens of MB) is
-    // never held in memory. `<< std::setw(2)` is dump(2).
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f || !(f << std::setw(2) << doc << '\n') || !f.flush()) {
-      std::remove(tmp.c_str());
-      return gear_sim::Status::ioError(path + ": cannot write", "path");
-    }
-  }
-  if (stage) {
-    stage->add(tmp, path);
-    return {};
-  }
-  return gear_sim::commitFile(tmp, path);
+  // Serialised straight into the file: the text of a long record's document (tens of MB) is
+  // never held in memory. `<< std::setw(2)` is dump(2).
+  return writeThroughPartial(path, stage, "path", [&](std::ostream& f) {
+    return static_cast<bool>(f << std::setw(2) << doc << '\n');
+  });
 }
 
 gear_sim::Status writeRunCsv(const std::string& dir, const std::vector<AnalysisRun>& runs,
