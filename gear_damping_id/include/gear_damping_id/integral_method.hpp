@@ -205,6 +205,7 @@ class IntegralMethod {
   Eigen::MatrixXd rows_;                  // one window's rows (scratch, reused)
   Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)
   std::vector<QuadratureBreak> breaks_;   // current segment's breaks (forward_model.hpp)
+  std::vector<Eigen::Index> changes_;     // current segment: intervals where a held value changes
   bool held_k_ = false;                   // current segment's known stiffness is held
   bool shape_ = false;                    // greybox fourier/table stiffness shape
   int n_basis_ = 0;                       // its unknowns

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 
@@ -13,10 +14,37 @@
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
 
+// Hot loops compiled for AVX2 as well as the baseline, chosen at load time. Without FMA
+// contraction or reassociation both clones compute the same bits (each loop's accumulators are
+// independent lanes, summed in the same order by either).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define GD_AVX2_CLONES
+#endif
+
 namespace gear_damping_id {
 
 // ----------------------------------------------------------------------------------------------
 // Inputs
+
+namespace {
+
+// The first step i in [1, n) from which the steps of tt may not all be within tol of ref:
+// blocks of 64 steps are checked branch-free (vectorised); the caller searches on from the
+// returned index for the first bad step (n when every block passed).
+GD_AVX2_CLONES
+Eigen::Index uniformStepsUpTo(const double* tt, Eigen::Index n, double ref, double tol) {
+  Eigen::Index i0 = 1;
+  for (; i0 + 64 <= n; i0 += 64) {
+    long good = 0;  // an integer count vectorises (a bool reduction does not)
+    for (int k = 0; k < 64; ++k) good += std::abs(tt[i0 + k] - tt[i0 + k - 1] - ref) <= tol;
+    if (good != 64) break;
+  }
+  return i0;
+}
+
+}  // namespace
 
 gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
                                   double rel_tolerance, Eigen::Index first_line) {
@@ -54,14 +82,7 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f,
   // Blocks of 64 steps are checked branch-free (vectorisable); a failing block is searched
   // for its first bad step.
   const double tol = rel_tolerance * ref;
-  const double* tt = t.time.data();
-  Eigen::Index i0 = 1;
-  for (; i0 + 64 <= n; i0 += 64) {
-    bool ok = true;
-    for (int k = 0; k < 64; ++k) ok &= std::abs(tt[i0 + k] - tt[i0 + k - 1] - ref) <= tol;
-    if (!ok) break;
-  }
-  for (Eigen::Index i = i0; i < n; ++i) {
+  for (Eigen::Index i = uniformStepsUpTo(t.time.data(), n, ref, tol); i < n; ++i) {
     const double d = t.time[i] - t.time[i - 1];
     if (!(std::abs(d - ref) <= tol)) {
       e << "time is not uniformly sampled at ";
@@ -154,6 +175,7 @@ namespace {
 
 // Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
 // full; a non-finite term makes the sum non-finite).
+GD_AVX2_CLONES
 double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   Eigen::Index i = lo;
@@ -170,19 +192,25 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
 // the method needs), and the standard deviation about the mean.
 // One pass for both sums, four independent accumulators each (a single add chain per sum is
 // latency-bound; the sums agree with the sequential ones to ~1e-16 relative).
+GD_AVX2_CLONES
 void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, double* signal) {
   if (n < 4) return;
+  // Lane k of the vectors is accumulator k (a GCC vector: one AVX register, or two SSE2 ones).
+  typedef double V4 __attribute__((vector_size(32)));
   const double mean = sum / static_cast<double>(n);
-  double d3[4] = {0, 0, 0, 0}, var[4] = {0, 0, 0, 0};
+  V4 d3 = {0, 0, 0, 0}, var = {0, 0, 0, 0};
   const Eigen::Index m = n - 3;  // third differences d_i, i in [0, m)
   Eigen::Index i = 0;
   for (; i + 4 <= m; i += 4) {
-    for (int k = 0; k < 4; ++k) {
-      const double d = y[i + k + 3] - 3.0 * y[i + k + 2] + 3.0 * y[i + k + 1] - y[i + k];
-      const double c = y[i + k] - mean;
-      d3[k] += d * d;
-      var[k] += c * c;
-    }
+    V4 y0, y1, y2, y3;
+    std::memcpy(&y0, y + i, sizeof(V4));
+    std::memcpy(&y1, y + i + 1, sizeof(V4));
+    std::memcpy(&y2, y + i + 2, sizeof(V4));
+    std::memcpy(&y3, y + i + 3, sizeof(V4));
+    const V4 d = y3 - 3.0 * y2 + 3.0 * y1 - y0;
+    const V4 c = y0 - mean;
+    d3 += d * d;
+    var += c * c;
   }
   for (; i < m; ++i) {
     const double d = y[i + 3] - 3.0 * y[i + 2] + 3.0 * y[i + 1] - y[i];
@@ -193,6 +221,40 @@ void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, d
   const double var_sum = (var[0] + var[1]) + (var[2] + var[3]);
   *noise = std::sqrt(d3_sum / (20.0 * static_cast<double>(n - 3)));
   *signal = std::sqrt(var_sum / static_cast<double>(n));
+}
+
+// One pass over a held channel's samples [lo, hi) for what channelIsHeld and findBreaks (held)
+// find in two: appends every interval j (lo <= j < hi - 1) on which the value changes to
+// *changes, in order. With check_pairs, returns false at the first two adjacent changing
+// intervals (the channel is then smooth, not held, and *changes incomplete). Blocks of 16
+// intervals without a change are passed branch-free (vectorised).
+GD_AVX2_CLONES
+bool heldChanges(const double* k, Eigen::Index lo, Eigen::Index hi, bool check_pairs,
+                 std::vector<Eigen::Index>* changes) {
+  const Eigen::Index last = hi - 1;  // intervals j < last
+  bool prev = false;                 // interval j - 1 changes
+  Eigen::Index j = lo;
+  for (; j + 16 <= last; j += 16) {
+    long changed = 0;  // an integer count vectorises (a bool reduction does not)
+    for (int q = 0; q < 16; ++q) changed += k[j + q] != k[j + q + 1];
+    if (changed == 0) {
+      prev = false;
+      continue;
+    }
+    for (int q = 0; q < 16; ++q) {
+      const bool c = k[j + q] != k[j + q + 1];
+      if (c && check_pairs && prev) return false;
+      if (c) changes->push_back(j + q);
+      prev = c;
+    }
+  }
+  for (; j < last; ++j) {
+    const bool c = k[j] != k[j + 1];
+    if (c && check_pairs && prev) return false;
+    if (c) changes->push_back(j);
+    prev = c;
+  }
+  return true;
 }
 
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
@@ -325,9 +387,7 @@ namespace {
 // area/moment increments of y (ay, my) and of K y - F (ag, mg), with yb, Tb pointing one
 // sample before the interval's left end and kb at it. Compiled for AVX2 as well as the baseline
 // (chosen at load time): without FMA contraction or reassociation both give the same bits.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_AVX2_CLONES
 void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
                              const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
                              const double* wa, const double* wm, double inv_me, double ff,
@@ -616,6 +676,36 @@ struct RowColumns {
   int b;                   // the right-hand side
 };
 
+// Pass 2 of the known and the greybox square formulations (GREY), any damping model (LOAD: the
+// load law's column): prefix sums -> rows, the same sums as generalRows with the formulation's
+// choices compiled in (no per-row branches).
+template <bool GREY, bool LOAD>
+void forcedRows(const WindowPass& p, const RowColumns& c, Eigen::MatrixXd* rows) {
+  const double h = p.h, T_c = p.T_c;
+  const double *ay = p.ay, *my = p.my, *ag = p.ag, *mg = p.mg, *as = p.as, *ms = p.ms, *dS = p.dS;
+  const double* y = p.y + p.w0;
+  double* colb = &(*rows)(0, c.b);
+  double* colC = &(*rows)(0, c.C);
+  double* colL = LOAD ? &(*rows)(0, c.L) : nullptr;
+  double* colK0 = GREY ? &(*rows)(0, c.K0) : nullptr;
+  double* colDK = GREY ? &(*rows)(0, c.DK) : nullptr;
+  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0, Dr = 0.0;
+  for (Eigen::Index r = 0; r < p.L; ++r) {
+    if (r > 0) {
+      const Eigen::Index i = r - 1;
+      if (GREY) Qy += h * Gy + my[i], Gy += ay[i];
+      Qkf += h * Gkf + mg[i], Gkf += ag[i];
+      if (GREY) Qs += h * Gs + ms[i], Gs += as[i];
+      if (LOAD) Dr += h * (Sr + 0.5 * dS[i]), Sr += dS[i];
+      P += ay[i];
+    }
+    colb[r] = y[r] + Qkf;  // known: + IIKy - IIF; greybox: - IIF
+    colC[r] = -P;
+    if (LOAD) colL[r] = -(T_c * P + Dr);
+    if (GREY) colK0[r] = -Qy, colDK[r] = -Qs;
+  }
+}
+
 // Pass 2, generic: prefix sums -> rows, every column (the nb shape basis columns from
 // basis_inc); fbar: the legacy formulation's known mean forcing (NaN: a column).
 void generalRows(const WindowPass& p, const RowColumns& c, const Eigen::MatrixXd& basis_inc, int nb,
@@ -691,6 +781,13 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
                      columnIndex(Column::ForceConst),
                      columnIndex(Column::StiffBasis),
                      q};
+  if (nb == 0 && (p.known || p.grey)) {
+    if (p.grey)
+      p.load ? forcedRows<true, true>(p, c, &rows_) : forcedRows<true, false>(p, c, &rows_);
+    else
+      p.load ? forcedRows<false, true>(p, c, &rows_) : forcedRows<false, false>(p, c, &rows_);
+    return;
+  }
   generalRows(p, c, basis_inc_, nb, fbar, &rows_);
 }
 
@@ -875,14 +972,27 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   // Breaks of the stiffness (held or smooth, decided from the segment's samples) or of the
   // greybox mesh state on the segment's intervals (forward_model.hpp), shared with the
   // refinement's forward model.
-  held_k_ = f == Formulation::Known && s.stiffness && channelIsHeld(s.stiffness, begin, end);
+  // One scan finds whether the stiffness is held and, if so, where it switches (what
+  // channelIsHeld and findBreaks find); a smooth stiffness is searched for jumps and kinks.
   const double* brk = f == Formulation::Known                  ? s.stiffness
                       : (f == Formulation::Greybox && !shape_) ? s.mesh_state
                                                                : nullptr;
+  held_k_ = false;
   breaks_.clear();
+  changes_.clear();
   if (brk != nullptr) {
-    unlocated_switches_ += findBreaks(s, brk, f == Formulation::Greybox || held_k_,
-                                      gear_.contact_ratio, begin, end, &breaks_);
+    const bool held = heldChanges(brk, begin, end, f == Formulation::Known, &changes_);
+    held_k_ = f == Formulation::Known && held;
+    if (held) {
+      for (const Eigen::Index j : changes_) {
+        const double th =
+            switchFractionFromPhase(s.mesh_phase, j, s.n, brk[j + 1] > brk[j], gear_.contact_ratio);
+        if (std::isnan(th)) ++unlocated_switches_;
+        breaks_.push_back({static_cast<long>(j), std::isnan(th) ? 1.0 : th});
+      }
+    } else {
+      unlocated_switches_ += findBreaks(s, brk, false, gear_.contact_ratio, begin, end, &breaks_);
+    }
   }
   if (s.stiffness) {
     double sum = needsStiffness(f) ? channel_sum[1] : blockSum(s.stiffness, begin, end);
