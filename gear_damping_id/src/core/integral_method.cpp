@@ -235,9 +235,17 @@ bool heldChanges(const double* k, Eigen::Index lo, Eigen::Index hi, bool check_p
   bool prev = false;                 // interval j - 1 changes
   Eigen::Index j = lo;
   for (; j + 16 <= last; j += 16) {
-    long changed = 0;  // an integer count vectorises (a bool reduction does not)
-    for (int q = 0; q < 16; ++q) changed += k[j + q] != k[j + q + 1];
-    if (changed == 0) {
+    // Four compares of four lanes (GCC vectors: -1 where the values differ), or-ed.
+    typedef double V4 __attribute__((vector_size(32)));
+    typedef long M4 __attribute__((vector_size(32)));
+    M4 changed = {0, 0, 0, 0};
+    for (int q = 0; q < 16; q += 4) {
+      V4 a, b;
+      std::memcpy(&a, k + j + q, sizeof(V4));
+      std::memcpy(&b, k + j + q + 1, sizeof(V4));
+      changed |= a != b;
+    }
+    if ((changed[0] | changed[1] | changed[2] | changed[3]) == 0) {
       prev = false;
       continue;
     }
@@ -406,6 +414,30 @@ void heldStiffnessIncrements(const double* __restrict__ yb, const double* __rest
   }
 }
 
+// Interior intervals [lo, hi) of the greybox formulation: the increments of y (ay, my), of -F
+// (ag, mg) and of s y (as, ms), yb and Tb pointing one sample before the interval's left end and
+// sb at it (the same expressions as the generic path, in one loop; AVX2 clone as above).
+GD_AVX2_CLONES
+void greyIncrements(const double* __restrict__ yb, const double* __restrict__ Tb,
+                    const double* __restrict__ sb, Eigen::Index lo, Eigen::Index hi,
+                    const double* wa, const double* wm, double ff, double* __restrict__ ay,
+                    double* __restrict__ my, double* __restrict__ ag, double* __restrict__ mg,
+                    double* __restrict__ as, double* __restrict__ ms) {
+  const double a0 = wa[0], a1 = wa[1], a2 = wa[2], a3 = wa[3];
+  const double m0 = wm[0], m1 = wm[1], m2 = wm[2], m3 = wm[3];
+  for (Eigen::Index i = lo; i < hi; ++i) {
+    const double A = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
+    const double Mo = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
+    ay[i] = A;
+    my[i] = Mo;
+    ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
+    mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
+    as[i] = sb[i] * A;
+    ms[i] = sb[i] * Mo;
+  }
+}
+
 // One window's row computation (IntegralMethod::windowRows) in named steps over the state they
 // share: the window, the step, the gear constants, which integrals the formulation needs, the
 // channels, and the per-interval increment arrays over the L - 1 intervals j = w0 + i (columns
@@ -485,6 +517,11 @@ void interiorIncrements(const WindowPass& p) {
     const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
     heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
                             ag, mg);
+  } else if (p.grey) {
+    const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
+    greyIncrements(yb, p.T + w0 - 1, p.st + w0, i_lo, i_hi, wa4, wm4, ff, ay, my, ag, mg, p.as,
+                   p.ms);
+    return;
   } else {
     for (Eigen::Index i = i_lo; i < i_hi; ++i) {
       ay[i] = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
@@ -502,17 +539,6 @@ void interiorIncrements(const WindowPass& p) {
         ag[i] = a0 * g[0] + a1 * g[1] + a2 * g[2] + a3 * g[3];
         mg[i] = m0 * g[0] + m1 * g[1] + m2 * g[2] + m3 * g[3];
       }
-    }
-  } else if (p.grey) {
-    const double* Tb = p.T + w0 - 1;
-    const double* sb = p.st + w0;
-    double *const as = p.as, *const ms = p.ms;
-    for (Eigen::Index i = i_lo; i < i_hi; ++i) {
-      const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
-      ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
-      mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
-      as[i] = sb[i] * ay[i];
-      ms[i] = sb[i] * my[i];
     }
   }
 }
