@@ -289,6 +289,18 @@ bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, doubl
     }
     d[i] = 1.0 / std::sqrt(G(i, i));
   }
+  if (q == 1) {
+    // One unknown (the piecewise known problem): the general path's operations without its
+    // allocations (the eigendecomposition of a 1x1 matrix is itself, vector 1).
+    const double s = (d[0] * G(0, 0)) * d[0];
+    *condition = s > 0.0 ? std::sqrt(s / s) : std::numeric_limits<double>::infinity();
+    if (!(*condition <= max_condition)) return false;
+    const double sinv = 1.0 / s;
+    x->resize(1);
+    (*x)[0] = d[0] * (sinv * (d[0] * r[0]));
+    if (inverse) inverse->setConstant(1, 1, (d[0] * sinv) * d[0]);
+    return true;
+  }
   const Eigen::MatrixXd S = d.asDiagonal() * G * d.asDiagonal();
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
   if (es.info() != Eigen::Success) return false;
