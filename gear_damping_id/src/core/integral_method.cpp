@@ -19,8 +19,10 @@
 // independent lanes, summed in the same order by either).
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#define GD_ALWAYS_INLINE __attribute__((always_inline))
 #else
 #define GD_AVX2_CLONES
+#define GD_ALWAYS_INLINE
 #endif
 
 namespace gear_damping_id {
@@ -841,73 +843,119 @@ namespace {
 // NC = 0: the column count is the run-time `n_dyn` (at most CAP), for the greybox shapes' many
 // columns; otherwise NC is compiled in (the common small cases).
 template <int NC, int CAP = NC>
-void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col, double* mean,
-                   double* slope, double* raw_norm, Eigen::MatrixXd* gram, int n_dyn = NC) {
+GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::Index L, int raw_col,
+                                           double* mean, double* slope, double* raw_norm,
+                                           Eigen::MatrixXd* gram, int n_dyn = NC) {
   const int n = NC > 0 ? NC : n_dyn;
   const double half = 0.5 * static_cast<double>(L - 1);
   const double Ld = static_cast<double>(L);
   const double sp2 = Ld * (Ld * Ld - 1.0) / 12.0;  // sum of p1^2
-  const double* col[CAP] = {};
-  double d0[CAP], d1[CAP];
+  const double* col[CAP + 1] = {};
+  double d0[CAP + 1] = {}, d1[CAP + 1] = {};
   for (int c = 0; c < n; ++c) {
     col[c] = &rows(0, c);
     d0[c] = col[c][0];
     d1[c] = L > 1 ? (col[c][L - 1] - col[c][0]) / static_cast<double>(L - 1) : 0.0;
   }
-  // Two lanes (even and odd rows), lane index innermost: rows r and r + 1 of a column are
-  // adjacent in memory, so each lane pair is one packed operation, and the two lanes are
-  // independent add chains. Combined at the end.
-  using P2 = Eigen::Array2d;  // one SSE2 register: rows r and r + 1
-  P2 S2[CAP], SP2[CAP], M2[CAP][CAP];
-  for (int a = 0; a < n; ++a) {
-    S2[a].setZero();
-    SP2[a].setZero();
-    for (int b = 0; b < n; ++b) M2[a][b].setZero();
+  // Two lanes per column (even and odd rows: rows r and r + 1 are adjacent in memory), two
+  // columns per vector V4 = [a even, a odd, b even, b odd] (one AVX register): every lane is the
+  // add chain of one column and one parity, whichever vector holds it, so the sums are the same
+  // as with one column per SSE2 pair. Products of columns a, b: z_k * z_l (a = 2k, b = 2l and
+  // a = 2k + 1, b = 2l + 1) and z_k * swap(z_l) (halves swapped: a = 2k, b = 2l + 1 and
+  // a = 2k + 1, b = 2l). Combined (even + odd) at the end.
+  typedef double V4 __attribute__((vector_size(32)));
+  typedef long I4 __attribute__((vector_size(32)));
+  constexpr int KC = (CAP + 1) / 2;
+  const int nk = (n + 1) / 2;  // column pairs (an odd count pads with a zero column)
+  V4 S4[KC], SP4[KC], Md[KC][KC], Ms[KC][KC];
+  for (int k = 0; k < nk; ++k) {
+    S4[k] = SP4[k] = V4{0, 0, 0, 0};
+    for (int l = 0; l < nk; ++l) Md[k][l] = Ms[k][l] = V4{0, 0, 0, 0};
   }
-  P2 raw2 = P2::Zero();
-  P2 rl(0.0, 1.0);
-  const P2 two = P2::Constant(2.0);
-  // Adds one pair of rows (z: the detrended columns, p: p1, rc: the raw damping column).
-  auto accumulate = [&](const P2* z, const P2& p, const P2& rc) {
-    for (int c = 0; c < n; ++c) {
-      S2[c] += z[c];
-      SP2[c] += p * z[c];
+  V4 raw4 = {0, 0, 0, 0};  // lanes 0, 1: the raw damping column's even and odd rows
+  const I4 swap = {2, 3, 0, 1};
+  auto accumulate = [&](const V4* z, const V4& p, const V4& rc) {
+    for (int k = 0; k < nk; ++k) {
+      S4[k] += z[k];
+      SP4[k] += p * z[k];
     }
-    for (int a = 0; a < n; ++a) {
-      for (int b = a; b < n; ++b) M2[a][b] += z[a] * z[b];
+    for (int k = 0; k < nk; ++k) {
+      for (int l = k; l < nk; ++l) {
+        Md[k][l] += z[k] * z[l];
+        Ms[k][l] += z[k] * __builtin_shuffle(z[l], swap);
+      }
     }
-    raw2 += rc * rc;
+    raw4 += rc * rc;
   };
   Eigen::Index r = 0;
-  for (; r + 2 <= L; r += 2, rl += two) {
-    P2 z[CAP];
-    for (int c = 0; c < n; ++c) z[c] = Eigen::Map<const P2>(col[c] + r) - d0[c] - d1[c] * rl;
-    accumulate(z, rl - half, Eigen::Map<const P2>(col[raw_col] + r));
+  V4 rl = {0.0, 1.0, 0.0, 1.0};
+  for (; r + 2 <= L; r += 2, rl += 2.0) {
+    V4 z[KC];
+    for (int k = 0; k < nk; ++k) {
+      const int a = 2 * k, b = 2 * k + 1;
+      const double* cb = b < n ? col[b] + r : col[a] + r;  // (padding: multiplied by 0)
+      const double bmask = b < n ? 1.0 : 0.0;
+      const V4 x = {col[a][r], col[a][r + 1], cb[0] * bmask, cb[1] * bmask};
+      const V4 o = {d0[a], d0[a], d0[b], d0[b]}, s = {d1[a], d1[a], d1[b], d1[b]};
+      z[k] = x - o - s * rl;
+    }
+    const V4 rc = {col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
+    accumulate(z, rl - half, rc);
   }
-  if (r < L) {  // odd L: the last row in lane 0, lane 1 zero (adds nothing)
+  if (r < L) {  // odd L: the last row in the even lanes, the odd lanes zero (add nothing)
     const double rd = static_cast<double>(r);
-    P2 z[CAP];
-    for (int c = 0; c < n; ++c) z[c] = P2(col[c][r] - d0[c] - d1[c] * rd, 0.0);
-    accumulate(z, P2(rd - half, 0.0), P2(col[raw_col][r], 0.0));
+    V4 z[KC];
+    for (int k = 0; k < nk; ++k) {
+      const int a = 2 * k, b = 2 * k + 1;
+      const double zb = b < n ? col[b][r] - d0[b] - d1[b] * rd : 0.0;
+      z[k] = V4{col[a][r] - d0[a] - d1[a] * rd, 0.0, zb, 0.0};
+    }
+    accumulate(z, V4{rd - half, 0.0, rd - half, 0.0}, V4{col[raw_col][r], 0.0, 0.0, 0.0});
   }
-  double S[CAP], SP[CAP], M[CAP][CAP];
+  // Lane sums: column a's lanes are 2 (a % 2) and 2 (a % 2) + 1 of vector a / 2.
+  auto laneSum = [](const V4& v, int half_index) {
+    return v[2 * half_index] + v[2 * half_index + 1];
+  };
+  double S[CAP], SP[CAP];
   for (int a = 0; a < n; ++a) {
-    S[a] = S2[a][0] + S2[a][1];
-    SP[a] = SP2[a][0] + SP2[a][1];
-    for (int b = a; b < n; ++b) M[a][b] = M2[a][b][0] + M2[a][b][1];
+    S[a] = laneSum(S4[a / 2], a % 2);
+    SP[a] = laneSum(SP4[a / 2], a % 2);
   }
-  const double raw = raw2[0] + raw2[1];
-  *raw_norm += raw;
+  *raw_norm += laneSum(raw4, 0);
   for (int c = 0; c < n; ++c) {
     mean[c] = S[c] / Ld + d0[c] + d1[c] * half;
     slope[c] = (sp2 > 0.0 ? SP[c] / sp2 : 0.0) + d1[c];
   }
   for (int a = 0; a < n; ++a) {
     for (int b = a; b < n; ++b) {
-      const double g = M[a][b] - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
+      // z_a z_b: same parity from Md (lanes of a), else Ms (lanes of a: z_a * z_b swapped in).
+      const int k = a / 2, l = b / 2;
+      const double m = (a % 2 == b % 2) ? laneSum(Md[k][l], a % 2) : laneSum(Ms[k][l], a % 2);
+      const double g = m - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
       (*gram)(a, b) += g;
       if (a != b) (*gram)(b, a) += g;
     }
+  }
+}
+
+// projectedGram for nc columns (the compiled-in counts 2-6, else run-time), AVX2 clone.
+GD_AVX2_CLONES
+void gramOf(int nc, const Eigen::MatrixXd& rows, Eigen::Index L, int rc, double* mean,
+            double* slope, double* raw, Eigen::MatrixXd* gram) {
+  switch (nc) {
+    case 2:
+      return projectedGram<2>(rows, L, rc, mean, slope, raw, gram);
+    case 3:
+      return projectedGram<3>(rows, L, rc, mean, slope, raw, gram);
+    case 4:
+      return projectedGram<4>(rows, L, rc, mean, slope, raw, gram);
+    case 5:
+      return projectedGram<5>(rows, L, rc, mean, slope, raw, gram);
+    case 6:
+      return projectedGram<6>(rows, L, rc, mean, slope, raw, gram);
+    default:
+      return projectedGram<0, IntegralMethod::kMaxColumns + 1>(rows, L, rc, mean, slope, raw, gram,
+                                                               nc);
   }
 }
 
@@ -1098,26 +1146,7 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
     double raw = 0.0;
     double* mean = wr.mean.data();
     double* slope = wr.slope.data();
-    switch (nc) {
-      case 2:
-        projectedGram<2>(rows_, L, rc, mean, slope, &raw, &rec->gram);
-        break;
-      case 3:
-        projectedGram<3>(rows_, L, rc, mean, slope, &raw, &rec->gram);
-        break;
-      case 4:
-        projectedGram<4>(rows_, L, rc, mean, slope, &raw, &rec->gram);
-        break;
-      case 5:
-        projectedGram<5>(rows_, L, rc, mean, slope, &raw, &rec->gram);
-        break;
-      case 6:
-        projectedGram<6>(rows_, L, rc, mean, slope, &raw, &rec->gram);
-        break;
-      default:
-        projectedGram<0, kMaxColumns + 1>(rows_, L, rc, mean, slope, &raw, &rec->gram, nc);
-        break;
-    }
+    gramOf(nc, rows_, L, rc, mean, slope, &raw, &rec->gram);
     raw_c += raw;
     rec->window_records.push_back(std::move(wr));
   }
