@@ -1460,6 +1460,10 @@ IdentificationResult IntegralMethod::finishRange(size_t s_begin, size_t s_end) c
   double omega0 = kNaN;
   const std::vector<SegmentParams> params = segmentParams(s_begin, s_end, sh, &omega0);
   res.omega0 = omega0;
+  size_t n_windows = 0;
+  for (size_t i = s_begin; i < s_end; ++i) n_windows += segments_[i].window_records.size();
+  res.windows.reserve(n_windows);
+  res.segments.reserve(s_end - s_begin);
   for (size_t i = s_begin; i < s_end; ++i)
     res.segments.push_back(
         segmentEstimate(segments_[i], params[i - s_begin], sh, omega0, &res.windows));
