@@ -8,7 +8,10 @@
 
 #include <cmath>
 #include <iostream>
+#include <random>
 #include <vector>
+
+#include "gear_damping_id/forward_model.hpp"
 
 namespace {
 
@@ -195,3 +198,47 @@ TEST(CubicRules, SampleAndHoldAcrossTheSwitchIsFirstOrderAndFarWorseThanTheSplit
 }
 
 }  // namespace
+
+// heldChanges (the integral method's one-pass scan) finds what channelIsHeld and findBreaks
+// (held) find in two passes: over seeds, channels held with switches at every density (adjacent
+// switches included, so some are smooth by channelIsHeld's rule), switches on the edges of the
+// scan's 16-interval blocks, and sub-ranges [lo, hi) at every offset.
+TEST(HeldChanges, AgreesWithChannelIsHeldAndFindBreaks) {
+  int held_cases = 0, smooth_cases = 0;
+  for (unsigned seed = 1; seed <= 400; ++seed) {
+    std::mt19937 rng(seed);
+    const long n = std::uniform_int_distribution<long>(3, 300)(rng);
+    const double p_switch =
+        std::uniform_real_distribution<double>(0.0, seed % 4 == 0 ? 0.6 : 0.1)(rng);
+    std::vector<double> k(static_cast<size_t>(n));
+    double level = 2e8;
+    for (long i = 0; i < n; ++i) {
+      if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < p_switch)
+        level = level == 2e8 ? 4e8 : 2e8;
+      k[static_cast<size_t>(i)] = level;
+    }
+    const long lo = std::uniform_int_distribution<long>(0, n / 3)(rng);
+    const long hi = std::uniform_int_distribution<long>(std::min(n, lo + 2), n)(rng);
+    std::vector<long> changes;
+    const bool held = gear_damping_id::heldChanges(k.data(), lo, hi, true, &changes);
+    ASSERT_EQ(held, gear_damping_id::channelIsHeld(k.data(), lo, hi)) << "seed " << seed;
+    // Without the pair check every change is listed (the greybox mesh state).
+    std::vector<long> all;
+    EXPECT_TRUE(gear_damping_id::heldChanges(k.data(), lo, hi, false, &all));
+    gear_damping_id::SignalView v;
+    v.n = n;
+    v.dt = 1e-6;
+    std::vector<gear_damping_id::QuadratureBreak> breaks;
+    gear_damping_id::findBreaks(v, k.data(), true, 1.6, lo, hi, &breaks);
+    ASSERT_EQ(all.size(), breaks.size()) << "seed " << seed;
+    for (size_t b = 0; b < breaks.size(); ++b) EXPECT_EQ(all[b], breaks[b].j) << "seed " << seed;
+    if (held) {
+      EXPECT_EQ(changes, all) << "seed " << seed;
+      ++held_cases;
+    } else {
+      ++smooth_cases;
+    }
+  }
+  EXPECT_GT(held_cases, 100);
+  EXPECT_GT(smooth_cases, 50);
+}

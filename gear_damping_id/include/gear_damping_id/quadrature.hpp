@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <vector>
 
 namespace gear_damping_id {
 
@@ -46,6 +47,13 @@ struct QuadratureBreak {
   long j = 0;
   double th = 1.0;
 };
+
+/// One pass over the samples [lo, hi) of a channel for what channelIsHeld and findBreaks (held)
+/// (forward_model.hpp) find in two: appends every interval j (lo <= j < hi - 1) on which the
+/// value changes to *changes, in order. With check_pairs, returns false at the first two adjacent
+/// changing intervals (the channel is then smooth, not held, and *changes incomplete); else true.
+bool heldChanges(const double* channel, long lo, long hi, bool check_pairs,
+                 std::vector<long>* changes);
 
 /// One part [u0, u1] of a sample interval, integrated with `rule`; `right`: the part lies after
 /// the interval's break (a held channel takes the value of sample j+1 there).

@@ -225,48 +225,6 @@ void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, d
   *signal = std::sqrt(var_sum / static_cast<double>(n));
 }
 
-// One pass over a held channel's samples [lo, hi) for what channelIsHeld and findBreaks (held)
-// find in two: appends every interval j (lo <= j < hi - 1) on which the value changes to
-// *changes, in order. With check_pairs, returns false at the first two adjacent changing
-// intervals (the channel is then smooth, not held, and *changes incomplete). Blocks of 16
-// intervals without a change are passed branch-free (vectorised).
-GD_AVX2_CLONES
-bool heldChanges(const double* k, Eigen::Index lo, Eigen::Index hi, bool check_pairs,
-                 std::vector<Eigen::Index>* changes) {
-  const Eigen::Index last = hi - 1;  // intervals j < last
-  bool prev = false;                 // interval j - 1 changes
-  Eigen::Index j = lo;
-  for (; j + 16 <= last; j += 16) {
-    // Four compares of four lanes (GCC vectors: -1 where the values differ), or-ed.
-    typedef double V4 __attribute__((vector_size(32)));
-    typedef long M4 __attribute__((vector_size(32)));
-    M4 changed = {0, 0, 0, 0};
-    for (int q = 0; q < 16; q += 4) {
-      V4 a, b;
-      std::memcpy(&a, k + j + q, sizeof(V4));
-      std::memcpy(&b, k + j + q + 1, sizeof(V4));
-      changed |= a != b;
-    }
-    if ((changed[0] | changed[1] | changed[2] | changed[3]) == 0) {
-      prev = false;
-      continue;
-    }
-    for (int q = 0; q < 16; ++q) {
-      const bool c = k[j + q] != k[j + q + 1];
-      if (c && check_pairs && prev) return false;
-      if (c) changes->push_back(j + q);
-      prev = c;
-    }
-  }
-  for (; j < last; ++j) {
-    const bool c = k[j] != k[j + 1];
-    if (c && check_pairs && prev) return false;
-    if (c) changes->push_back(j);
-    prev = c;
-  }
-  return true;
-}
-
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
 constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
 

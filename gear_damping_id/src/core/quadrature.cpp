@@ -1,6 +1,52 @@
 #include "gear_damping_id/quadrature.hpp"
 
+#include <cstring>
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define GD_AVX2_CLONES
+#endif
+
 namespace gear_damping_id {
+
+// Blocks of 16 intervals without a change are passed branch-free (vectorised; AVX2 clone, chosen
+// at load time).
+GD_AVX2_CLONES
+bool heldChanges(const double* k, long lo, long hi, bool check_pairs, std::vector<long>* changes) {
+  const long last = hi - 1;  // intervals j < last
+  bool prev = false;         // interval j - 1 changes
+  long j = lo;
+  for (; j + 16 <= last; j += 16) {
+    // Four compares of four lanes (GCC vectors: -1 where the values differ), or-ed.
+    typedef double V4 __attribute__((vector_size(32)));
+    typedef long M4 __attribute__((vector_size(32)));
+    M4 changed = {0, 0, 0, 0};
+    for (int q = 0; q < 16; q += 4) {
+      V4 a, b;
+      std::memcpy(&a, k + j + q, sizeof(V4));
+      std::memcpy(&b, k + j + q + 1, sizeof(V4));
+      changed |= a != b;
+    }
+    if ((changed[0] | changed[1] | changed[2] | changed[3]) == 0) {
+      prev = false;
+      continue;
+    }
+    for (int q = 0; q < 16; ++q) {
+      const bool c = k[j + q] != k[j + q + 1];
+      if (c && check_pairs && prev) return false;
+      if (c) changes->push_back(j + q);
+      prev = c;
+    }
+  }
+  for (; j < last; ++j) {
+    const bool c = k[j] != k[j + 1];
+    if (c && check_pairs && prev) return false;
+    if (c) changes->push_back(j);
+    prev = c;
+  }
+  return true;
+}
 
 namespace {
 
