@@ -363,6 +363,14 @@ int IntegralMethod::columnIndex(Column c) const {
 
 namespace {
 
+// A four-point rule's weights applied to x[0..3], summed left to right (as every hot loop did
+// inline: the same bits).
+struct Taps4 {
+  double w0, w1, w2, w3;
+  explicit Taps4(const double* w) : w0(w[0]), w1(w[1]), w2(w[2]), w3(w[3]) {}
+  double operator()(const double* x) const { return w0 * x[0] + w1 * x[1] + w2 * x[2] + w3 * x[3]; }
+};
+
 // Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
 // area/moment increments of y (ay, my) and of K y - F (ag, mg), with yb, Tb pointing one
 // sample before the interval's left end and kb at it. Compiled for AVX2 as well as the baseline
@@ -373,16 +381,14 @@ void heldStiffnessIncrements(const double* __restrict__ yb, const double* __rest
                              const double* wa, const double* wm, double inv_me, double ff,
                              double* __restrict__ ay, double* __restrict__ my,
                              double* __restrict__ ag, double* __restrict__ mg) {
-  const double a0 = wa[0], a1 = wa[1], a2 = wa[2], a3 = wa[3];
-  const double m0 = wm[0], m1 = wm[1], m2 = wm[2], m3 = wm[3];
+  const Taps4 a(wa), m(wm);
   for (Eigen::Index i = lo; i < hi; ++i) {
-    const double A = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
-    const double Mo = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
+    const double A = a(yb + i), Mo = m(yb + i);
     const double K = kb[i] * inv_me;
     ay[i] = A;
     my[i] = Mo;
-    ag[i] = K * A - ff * (a0 * Tb[i] + a1 * Tb[i + 1] + a2 * Tb[i + 2] + a3 * Tb[i + 3]);
-    mg[i] = K * Mo - ff * (m0 * Tb[i] + m1 * Tb[i + 1] + m2 * Tb[i + 2] + m3 * Tb[i + 3]);
+    ag[i] = K * A - ff * a(Tb + i);
+    mg[i] = K * Mo - ff * m(Tb + i);
   }
 }
 
@@ -395,16 +401,14 @@ void greyIncrements(const double* __restrict__ yb, const double* __restrict__ Tb
                     const double* wa, const double* wm, double ff, double* __restrict__ ay,
                     double* __restrict__ my, double* __restrict__ ag, double* __restrict__ mg,
                     double* __restrict__ as, double* __restrict__ ms) {
-  const double a0 = wa[0], a1 = wa[1], a2 = wa[2], a3 = wa[3];
-  const double m0 = wm[0], m1 = wm[1], m2 = wm[2], m3 = wm[3];
+  const Taps4 a(wa), m(wm);
   for (Eigen::Index i = lo; i < hi; ++i) {
-    const double A = a0 * yb[i] + a1 * yb[i + 1] + a2 * yb[i + 2] + a3 * yb[i + 3];
-    const double Mo = m0 * yb[i] + m1 * yb[i + 1] + m2 * yb[i + 2] + m3 * yb[i + 3];
-    const double F0 = ff * Tb[i], F1 = ff * Tb[i + 1], F2 = ff * Tb[i + 2], F3 = ff * Tb[i + 3];
+    const double A = a(yb + i), Mo = m(yb + i);
+    const double F[4] = {ff * Tb[i], ff * Tb[i + 1], ff * Tb[i + 2], ff * Tb[i + 3]};
     ay[i] = A;
     my[i] = Mo;
-    ag[i] = -(a0 * F0 + a1 * F1 + a2 * F2 + a3 * F3);
-    mg[i] = -(m0 * F0 + m1 * F1 + m2 * F2 + m3 * F3);
+    ag[i] = -a(F);
+    mg[i] = -m(F);
     as[i] = sb[i] * A;
     ms[i] = sb[i] * Mo;
   }
