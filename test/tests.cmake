@@ -7,7 +7,8 @@ target_include_directories(gear_test_main PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/tes
 # GEAR_TEST_PCH: one precompiled header of what nearly every test includes (GoogleTest, Eigen,
 # the simulator and the integral method's headers, nlohmann-json), built once and reused by every
 # unit test. It roughly halves the test targets' compile time in scripts/sanitize.sh's ASan build
-# (which turns it on); off by default because ccache does not cache compiles that use a PCH.
+# (which turns it on) and in .ci/run's Release build (GEAR_TEST_PCH=ON in the environment of
+# scripts/test.sh); off by default because ccache does not cache compiles that use a PCH.
 option(GEAR_TEST_PCH "precompile the unit tests' common headers once" OFF)
 set(GEAR_TEST_PCH_FIRST "")
 foreach(src IN LISTS GEAR_UNIT_TESTS)
