@@ -191,6 +191,7 @@ class MorletCwt {
  private:
   struct Fftw;
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
+  bool rowAtAllowed(double frequency_hz, double omega0) const;
   bool fillRow(double frequency_hz, double omega0);
   template <typename R, typename T>
   bool prunedRow(T* out);

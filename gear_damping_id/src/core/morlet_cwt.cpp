@@ -642,12 +642,13 @@ const std::complex<double>* MorletCwt::row(int i) {
   return computeRow(frequencies_[static_cast<size_t>(i)], omega0s_[static_cast<size_t>(i)]);
 }
 
+bool MorletCwt::rowAtAllowed(double frequency_hz, double omega0) const {
+  if (!has_signal_ || !(frequency_hz > 0.0 && frequency_hz < 0.5 * fs_)) return false;
+  return omega0 >= kMinOmega0 && omega0 <= kMaxOmega0 && fitsPadding(frequency_hz, omega0);
+}
+
 const std::complex<double>* MorletCwt::rowAt(double frequency_hz, double omega0) {
-  if (!has_signal_ || !(frequency_hz > 0.0 && frequency_hz < 0.5 * fs_)) return nullptr;
-  if (!(omega0 >= kMinOmega0 && omega0 <= kMaxOmega0) || !fitsPadding(frequency_hz, omega0)) {
-    return nullptr;
-  }
-  return computeRow(frequency_hz, omega0);
+  return rowAtAllowed(frequency_hz, omega0) ? computeRow(frequency_hz, omega0) : nullptr;
 }
 
 template <typename T>
@@ -669,11 +670,7 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
 }
 
 bool MorletCwt::rowModulusSingleAt(double frequency_hz, double omega0, float* out) {
-  if (!out || !has_signal_ || !(frequency_hz > 0.0 && frequency_hz < 0.5 * fs_)) return false;
-  if (!(omega0 >= kMinOmega0 && omega0 <= kMaxOmega0) || !fitsPadding(frequency_hz, omega0)) {
-    return false;
-  }
-  if (!fillRow(frequency_hz, omega0)) return false;
+  if (!out || !rowAtAllowed(frequency_hz, omega0) || !fillRow(frequency_hz, omega0)) return false;
   if (pruned_ && prunedRow<float>(out)) return true;
   if (!fullRowSingle()) return false;
   modulusOfFloats(reinterpret_cast<const float*>(fftw_->out_f), n_, out);

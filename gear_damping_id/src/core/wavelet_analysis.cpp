@@ -806,6 +806,10 @@ std::vector<double> separationOmega0(const std::vector<ModeSeed>& seeds, double 
   return need;
 }
 
+// The per-mode path's single-precision noise row is kept when its median is at least this
+// fraction of its RMS (noise-dominated; see highFrequencyNoise).
+constexpr double kNoiseRowMedianPerRms = 0.5;
+
 // Noise estimate from the wavelet row at 0.45*fs (far above the modes for omega0 >= 3: a mode at
 // <= 0.3*fs leaks < exp(-4.5) into it): the median of its modulus outside its COI is the Rayleigh
 // median sqrt(ln 2) * sqrt(gain) * sigma_n for white noise. Skipped when a mode lies within 3
@@ -819,18 +823,24 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
   const long lo = static_cast<long>(std::ceil(edge)), hi = a->n - 1 - lo;
   if (!clear || hi - lo < kMinRegionSamples) return;
   double med = kNaN;
-  if (a->opt.full_scalogram) {
+  if (!a->opt.full_scalogram) {
+    // Per-mode path: the row in single precision (half the inverse FFT's time). Its rounding
+    // (~3e-7 of the row's RMS) moves the median by ~1e-7 relative, the damping ratios by less
+    // (PerModePathMatchesTheFullPathOnThreeModes), when noise dominates the row (median >=
+    // kNoiseRowMedianPerRms of its RMS; white noise: 0.83). Otherwise (a clean record: the
+    // float rounding would be taken for its noise) the row is computed again in double.
+    a->env_f.resize(static_cast<size_t>(a->n));
+    if (fit->rowModulusSingleAt(f_hf, w0, a->env_f.data())) {
+      med = medianOfNonNegative(a->env_f.data() + lo, hi - lo + 1, 1);
+      if (!(med >= kNoiseRowMedianPerRms * std::sqrt(meanPowerOf(*a, f_hf, w0)))) med = kNaN;
+    }
+  }
+  if (std::isnan(med)) {
     const std::complex<double>* w = fit->rowAt(f_hf, w0);
     if (!w) return;
     env->resize(static_cast<size_t>(a->n));
     modulusOf(reinterpret_cast<const double*>(w), a->n, env->data());
     med = medianOfNonNegative(env->data() + lo, hi - lo + 1, 1);
-  } else {
-    // Per-mode path: the row in single precision (half the inverse FFT's time; the median moves
-    // by ~1e-7 relative, the damping ratios by less: PerModePathMatchesTheFullPathOnThreeModes).
-    a->env_f.resize(static_cast<size_t>(a->n));
-    if (!fit->rowModulusSingleAt(f_hf, w0, a->env_f.data())) return;
-    med = medianOfNonNegative(a->env_f.data() + lo, hi - lo + 1, 1);
   }
   const double hf = med / std::sqrt(std::log(2.0) * fit->noiseGainAt(f_hf, w0));
   if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
