@@ -346,9 +346,9 @@ TEST(MorletCwt, SinglePrecisionModulusAtAnyFrequencyMatchesTheDoubleRow) {
   const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
   std::string error;
-  ASSERT_TRUE(gear_test::ok(cwt.configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0,
-                                          FftPlanning::Estimate),
-                            &error))
+  ASSERT_TRUE(gear_test::ok(
+      cwt.configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
+      &error))
       << error;
   ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
   std::vector<float> single(static_cast<size_t>(n));

@@ -1214,7 +1214,8 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   clearKeepingCapacity(result);
   if (Status s = options.check(); !s.ok()) return s;
   Workspace& w = *ws_;
-  Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.env, w.env_f, w.work, w.power};
+  Analysis a{y,      n,     sample_rate, options, *result, {},
+             w.scal, w.own, w.env,       w.env_f, w.work,  w.power};
   if (Status s = checkInput(a); !s.ok()) return s;
   if (Status s = frequencyGrid(&a); !s.ok()) return s;
   if (Status s = spectraAndNoise(&a); !s.ok()) return s;
