@@ -1039,11 +1039,13 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
     fit_f[i] = seeds[i].f_spec;
     fit_w[i] = auto_w ? std::max(a->opt.omega0, need[i]) : a->opt.fit_omega0;
   }
-  // The fit rows come from the spectrum already computed (a->scal) when its padding holds
-  // them (the usual case: the modes lie above the grid's lowest row); else from their own.
-  bool reuse = a->opt.full_scalogram;
-  for (size_t i = 0; i < seeds.size(); ++i)
-    reuse = reuse && a->scal.fitsPadding(fit_f[i], fit_w[i]);
+  // The full path's fit rows come from the spectrum already computed (a->scal) when its
+  // padding holds them (the usual case: the modes lie above the grid's lowest row); else, and
+  // always on the per-mode path (docs/wavelet.md "Speed"), from their own transform, padded
+  // for the fit rows alone. The noise row comes from a->scal whenever it holds the fit rows.
+  bool held = true;
+  for (size_t i = 0; i < seeds.size(); ++i) held = held && a->scal.fitsPadding(fit_f[i], fit_w[i]);
+  const bool reuse = held && a->opt.full_scalogram;
   MorletCwt* fit = &a->scal;
   if (!reuse) {
     Status s;
@@ -1055,7 +1057,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   }
   std::vector<double>& env = a->env;
   std::vector<double>& work = a->work;
-  highFrequencyNoise(a, &a->scal, seeds, &env);
+  highFrequencyNoise(a, held ? &a->scal : fit, seeds, &env);
   const std::vector<double> orders = resolvedOrders(a);
   for (size_t i = 0; i < seeds.size(); ++i) {
     WaveletMode m;
