@@ -229,13 +229,7 @@ class SegmentSimulator {
       } else {
         Stage st;
         st.T[0] = T[i], st.T[1] = t.T_mid[i], st.T[2] = T[i + 1];
-        double sv = 0.0;
-        if (t.smooth) {
-          for (int q = 0; q < 3; ++q) st.K[q] = t.K3[3 * i + q];
-        } else {
-          if (grey) sv = t.key_sv[key];
-          st.K[0] = st.K[1] = st.K[2] = heldK(key);
-        }
+        const double sv = tabledStiffness(t, static_cast<size_t>(i), p, &st);
         stepLinear<M>(z, m, p, lr, st, sv, h);
       }
       visit(j + 1, z);
@@ -270,13 +264,7 @@ class SegmentSimulator {
         continue;
       }
       Stage st;
-      double sv = 0.0;
-      if (t.smooth) {
-        for (int q = 0; q < 3; ++q) st.K[q] = t.K3[3 * i + q];
-      } else {
-        if (grey) sv = t.key_sv[key];
-        st.K[0] = st.K[1] = st.K[2] = heldK(key);
-      }
+      const double sv = tabledStiffness(t, i, p, &st);
       for (int col = 0; col < 5; ++col) {  // unit state (2), unit stage torque (3)
         double z[2] = {col == 0 ? 1.0 : 0.0, col == 1 ? 1.0 : 0.0};
         for (int q = 0; q < 3; ++q) st.T[q] = col == 2 + q ? 1.0 : 0.0;
@@ -304,6 +292,19 @@ class SegmentSimulator {
     const double* E[3] = {0, 0, 0};
     const double* dE[3] = {0, 0, 0};
   };
+
+  // The tabled stiffness of interval i of segment t at its three stages into st->K; returns the
+  // greybox mesh state (0 otherwise).
+  double tabledStiffness(const SegmentTable& t, size_t i, const Params& p, Stage* st) const {
+    if (t.smooth) {
+      for (int q = 0; q < 3; ++q) st->K[q] = t.K3[3 * i + q];
+      return 0.0;
+    }
+    const int key = t.key[i];
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    st->K[0] = st->K[1] = st->K[2] = grey ? p.K0 + p.dK * t.key_sv[key] : t.key_K[key];
+    return grey ? t.key_sv[key] : 0.0;
+  }
 
   // The STE basis and its time derivative at u of interval j into stage q of `st`: the mesh
   // phase is the local cubic of its samples, its rate the chord over up to 16 samples on either
@@ -1408,17 +1409,20 @@ class Refinement {
   Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
     const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
     const NoiseModel& nm = noise_of_[i];
-    Eigen::MatrixXd U = Eigen::MatrixXd::Zero(n, m_);  // W^T Jw
+    // Scratch reused over the segments (first touch of fresh pages is slow here).
+    Eigen::MatrixXd& U = adj_U_;  // W^T Jw
+    U.setZero(n, m_);
     for (Index r = 0; r < Jw.rows(); ++r) {
       U.row(r + nm.p) += Jw.row(r);
       for (int k = 0; k < nm.p; ++k) U.row(r + nm.p - k - 1) += nm.a[k] * Jw.row(r);
     }
     const Params p = noiseParams(i);
-    SegmentTable tab;
+    SegmentTable& tab = adj_tab_;
     noise_sim_->buildTable(b, e, &tab);
-    std::vector<SegmentSimulator::StateMap> maps;
+    std::vector<SegmentSimulator::StateMap>& maps = adj_maps_;
     noise_sim_->stateMaps(tab, p, &maps);
-    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n, m_);  // its transpose
+    Eigen::MatrixXd& M = adj_M_;  // its transpose
+    M.setZero(n, m_);
     using Row = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxParams>;
     using Pair = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxParams>;
     Pair lam = Pair::Zero(2, m_), next(2, m_);
@@ -1781,6 +1785,10 @@ class Refinement {
   std::unique_ptr<ForwardModel> noise_fm_;
   std::unique_ptr<SegmentSimulator> noise_sim_;
   std::vector<Normal> draw_normals_;
+  // torqueResponseGram's scratch.
+  Eigen::MatrixXd adj_U_, adj_M_;
+  SegmentTable adj_tab_;
+  std::vector<SegmentSimulator::StateMap> adj_maps_;
 };
 
 }  // namespace
