@@ -7,12 +7,16 @@
 // stiffness: the tabled RK4 step instead of the affine maps). The piecewise cases include the
 // within-segment load test (its enlarged fit iterated where the damping varies, as it does in
 // this case). "Reference" runs the generic RK4 of the state and sensitivities with per-stage
-// look-ups everywhere (the slow path the tables and affine maps replace).
+// look-ups everywhere (the slow path the tables and affine maps replace). `TorqueNoise`: the
+// known piecewise case with white noise of 0.2 % of the mean load on the torque samples, whose
+// response the refinement propagates into C_std (output_error.hpp: the adjoint pass).
 #include <benchmark/benchmark.h>
 
 #include <map>
+#include <random>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 #include "../test/unit/support/status_support.hpp"
 #include "gear_damping_id/integral_method.hpp"
@@ -31,9 +35,9 @@ struct Case {
   gear_damping_id::GearConstants gear;
 };
 
-const Case& data(long n, bool trapezoid) {
-  static std::map<std::pair<long, bool>, Case> cache;
-  auto it = cache.find({n, trapezoid});
+const Case& data(long n, bool trapezoid, bool torque_noise = false) {
+  static std::map<std::tuple<long, bool, bool>, Case> cache;
+  auto it = cache.find({n, trapezoid, torque_noise});
   if (it != cache.end()) return it->second;
   Case d;
   d.config.simulation.sample_rate = 1e6;
@@ -46,13 +50,18 @@ const Case& data(long n, bool trapezoid) {
   std::string e;
   if (!gear_test::ok(gear_sim::simulate(d.config, &d.table), &e)) throw std::runtime_error(e);
   d.gear = gear_damping_id::gearConstants(d.config.gearModel());
-  return cache.emplace(std::make_pair(n, trapezoid), std::move(d)).first->second;
+  if (torque_noise) {
+    std::mt19937_64 gen(18);
+    std::normal_distribution<double> nd(0.0, 2e-3 * d.config.load.mean);
+    for (Eigen::Index i = 0; i < d.table.size(); ++i) d.table.torque[i] += nd(gen);
+  }
+  return cache.emplace(std::make_tuple(n, trapezoid, torque_noise), std::move(d)).first->second;
 }
 
 void runRefine(benchmark::State& state, Formulation f, DampingModel m, bool trapezoid,
-               bool reference) {
+               bool reference, bool torque_noise = false) {
   const long n = state.range(0);
-  const Case& d = data(n, trapezoid);
+  const Case& d = data(n, trapezoid, torque_noise);
   const auto view = gear_damping_id::SignalView::of(d.table);
   IdentificationOptions o;
   o.formulation = f;
@@ -100,6 +109,9 @@ void BM_RefineKnownLoadLaw(benchmark::State& s) {
 void BM_RefineTrapezoidKnownPiecewise(benchmark::State& s) {
   runRefine(s, Formulation::Known, DampingModel::Piecewise, true, false);
 }
+void BM_RefineKnownPiecewiseTorqueNoise(benchmark::State& s) {
+  runRefine(s, Formulation::Known, DampingModel::Piecewise, false, false, true);
+}
 
 }  // namespace
 
@@ -109,4 +121,5 @@ BENCHMARK(BM_RefineGreyboxPiecewise)->Arg(1000000)->Unit(benchmark::kMillisecond
 BENCHMARK(BM_RefineKnownConstant)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_RefineKnownLoadLaw)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_RefineTrapezoidKnownPiecewise)->Arg(1000000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_RefineKnownPiecewiseTorqueNoise)->Arg(1000000)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -11,9 +11,11 @@
 #include <random>
 #include <vector>
 
+#include "gear_damping_id/integral_method.hpp"
 #include "gear_damping_id/output_error.hpp"
 #include "id_test_support.hpp"
 #include "rig_test_support.hpp"
+#include "status_support.hpp"
 #include "ste_rig_support.hpp"
 #include "ste_test_support.hpp"
 
@@ -90,6 +92,68 @@ TEST(TorqueNoise, PlainRefinementCoverage) {
               << " within 2 SE (without the torque noise's part of C_std: " << inside_without
               << "); median C_torque_std / C_std " << median(share) << "\n";
     EXPECT_GE(inside, 0.9 * total) << frac;
+  }
+}
+
+// The torque noise's covariance in closed form (one backward pass per unknown through the
+// converged model's step maps, output_error.hpp) equals the reference path's brute-force sum
+// over unit impulses of the torque, one per sample (each response by the generic RK4, each
+// through the solve map): C, C_std and C_torque_std to 1e-9 relative (rounding through ~1e3
+// steps and the solve), piecewise (per-segment problems), constant (one joint problem: the
+// segments' cross terms) and greybox.
+TEST(TorqueNoise, ExactPropagationEqualsTheImpulseSum) {
+  struct Run {
+    Formulation f;
+    DampingModel m;
+  };
+  for (const Run& run : {Run{Formulation::Known, DampingModel::Piecewise},
+                         Run{Formulation::Known, DampingModel::Constant},
+                         Run{Formulation::Greybox, DampingModel::Piecewise}}) {
+    SimConfig c = table1Config();
+    c.simulation.duration = 0.003;
+    if (run.m == DampingModel::Piecewise) setPiecewiseTruth(&c, 1e-3);
+    SignalTable t = simulateOrFail(c);
+    addWhiteNoise(&t.dte, 40.0, 77);
+    std::mt19937_64 gen(78);
+    std::normal_distribution<double> nd(0.0, 5e-3 * c.load.mean);
+    for (Eigen::Index i = 0; i < t.size(); ++i) t.torque[i] += nd(gen);
+    const auto gear = gd::gearConstants(c.gearModel());
+    const auto view = gd::SignalView::of(t);
+    IdentificationOptions o;
+    o.formulation = run.f;
+    o.model = run.m;
+    o.refine = IdentificationOptions::Refine::Never;
+    o.window_length = gd::defaultWindowLength(view, gear);
+    IdentificationResult start;
+    std::string e;
+    ASSERT_TRUE(gear_test::ok(gd::identify(t, gear, o, &start), &e)) << e;
+    const auto ranges = gd::segmentRanges(view, o);
+    IdentificationResult fast = start, reference = start;
+    ASSERT_TRUE(gear_test::ok(gd::refineOutputError(view, ranges, gear, o, &fast, false), &e)) << e;
+    ASSERT_TRUE(gear_test::ok(gd::refineOutputError(view, ranges, gear, o, &reference, true), &e))
+        << e;
+    const std::string label = gd::toString(run.f) + " " + gd::toString(run.m);
+    auto same = [&](double a, double b, const std::string& what) {
+      EXPECT_LE(std::abs(a - b), 1e-9 * std::abs(b))
+          << label << " " << what << ": " << a << " vs " << b;
+    };
+    ASSERT_EQ(fast.segments.size(), reference.segments.size());
+    double share = 0.0;
+    for (size_t i = 0; i < fast.segments.size(); ++i) {
+      const gd::SegmentEstimate& a = fast.segments[i];
+      const gd::SegmentEstimate& b = reference.segments[i];
+      ASSERT_TRUE(a.refined && b.refined) << label;
+      ASSERT_GT(b.C_torque_std, 0.0) << label;
+      same(a.C, b.C, "C");
+      same(a.C_std, b.C_std, "C_std");
+      same(a.C_torque_std, b.C_torque_std, "C_torque_std");
+      share = std::max(share, b.C_torque_std / b.C_std);
+    }
+    if (run.m == DampingModel::Constant) {
+      same(fast.constant->C, reference.constant->C, "constant C");
+      same(fast.constant->C_std, reference.constant->C_std, "constant C_std");
+    }
+    std::cout << "[ measured ] " << label << ": largest C_torque_std / C_std " << share << "\n";
   }
 }
 

@@ -32,14 +32,19 @@
 // per held K value and applied in its block structure; with a smooth K or a load-varying C the
 // state's RK4 step is taken first and each sensitivity pair stepped from its stage values (same
 // numbers to rounding; the generic RK4 with per-stage look-ups is kept as the reference path).
+// With an STE the basis values at the stages of every whole sample interval are tabled per
+// segment on first use (within a memory budget), not re-evaluated per iteration.
 // Standard errors: sigma^2 (J^T J)^-1 of the prewhitened problem, sigma^2 = prewhitened RSS /
 // (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones), plus the
 // torque-meter noise: the model takes the torque as the exact forcing, so white noise w on the
 // torque samples (level estimated per segment by torqueNoiseEstimate) moves the estimate by the
 // Gauss-Newton solve map applied to the response G w of the model to it. Its covariance
-// A G Sigma_w G^T A^T is estimated from random draws of w (Rademacher +-sigma; the response of
-// the converged model, zero initial state, through the same prewhitening and Schur-complement
-// solve; seeded by the segment's first sample, so the same on every path), in batches of 16
+// A G Sigma_w G^T A^T is exact: the segments' right-hand sides Jw^T W G w (W the prewhitening)
+// are independent with covariance sigma^2 M M^T, M = Jw^T W G from one backward (adjoint) pass
+// through the converged model's per-step maps (zero initial state, no STE forcing), and the
+// Schur-complement solve is linear. Where the per-step maps are not tabled (a greybox stiffness
+// shape, several RK4 steps per sample) it is estimated from random draws of w (Rademacher
+// +-sigma, seeded by the segment's first sample, so the same on every path), in batches of 16
 // until the Monte Carlo standard error of the added variance is below 10 % of C's total
 // variance (at most 64 draws: the added variance then within sqrt(2/64) = 18 % relative, the
 // Gaussian-draw bound; less with Rademacher draws). Not for the load_law model.
@@ -83,7 +88,9 @@ struct SteRefinement {
 /// NotIdentifiable when the iteration diverges or nothing can be refined (the integral estimate
 /// is then kept); InvalidArgument/InvalidInput when options or channels do not allow it.
 /// `reference_integration` (for tests): step every sample interval with the generic RK4 of the
-/// state and sensitivities instead of the closed-form affine maps (same numbers to rounding).
+/// state and sensitivities instead of the closed-form affine maps, and sum the torque noise's
+/// covariance over one torque impulse per sample instead of the adjoint (same numbers to
+/// rounding; the impulses cost O(samples^2) per segment: short records only).
 /// `ste` (null: no STE): identify the STE coefficients jointly (SteRefinement); the square
 /// stiffness (known or greybox) and piecewise or constant damping only.
 gear_sim::Status refineOutputError(const SignalView& signal,

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -228,17 +229,59 @@ class SegmentSimulator {
       } else {
         Stage st;
         st.T[0] = T[i], st.T[1] = t.T_mid[i], st.T[2] = T[i + 1];
-        double sv = 0.0;
-        if (t.smooth) {
-          for (int q = 0; q < 3; ++q) st.K[q] = t.K3[3 * i + q];
-        } else {
-          if (grey) sv = t.key_sv[key];
-          st.K[0] = st.K[1] = st.K[2] = heldK(key);
-        }
+        const double sv = tabledStiffness(t, static_cast<size_t>(i), p, &st);
         stepLinear<M>(z, m, p, lr, st, sv, h);
       }
       visit(j + 1, z);
     }
+  }
+
+  // The state-only RK4 step of every interval of segment t (p.m = 0, no load law: the response
+  // to the torque, Refinement::torqueNoiseExact): x_{j+1} = A x_j + c (T_j, T_{j+1/2}, T_{j+1})
+  // with the arithmetic of runTable's step (the affine map of the held stiffness, else the
+  // tabled RK4 step on unit inputs); intervals stepped in parts (kSplit) are left untouched.
+  struct StateMap {
+    double A[2][2], c[2][3];
+  };
+  void stateMaps(const SegmentTable& t, const Params& p, std::vector<StateMap>* out) const {
+    const double h = fm_.signal().dt;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    const bool maps_ok = !t.smooth && constantC(p);
+    auto heldK = [&](int k) { return grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k]; };
+    StateMap held[kMaxMaps];
+    for (int k = 0; maps_ok && k < t.n_keys; ++k) {
+      const AffineMap a = affineMap(2, p, heldK(k), t.key_sv[k], h);
+      std::copy(&a.R[0][0], &a.R[0][0] + 4, &held[k].A[0][0]);
+      std::copy(&a.G[0][0], &a.G[0][0] + 6, &held[k].c[0][0]);
+    }
+    const LinearRoles lr = linearRoles(p);
+    out->resize(t.intervals());
+    for (size_t i = 0; i < t.intervals(); ++i) {
+      const unsigned char key = t.key[i];
+      if (key == SegmentTable::kSplit) continue;
+      if (maps_ok) {
+        (*out)[i] = held[key];
+        continue;
+      }
+      Stage st;
+      const double sv = tabledStiffness(t, i, p, &st);
+      for (int col = 0; col < 5; ++col) {  // unit state (2), unit stage torque (3)
+        double z[2] = {col == 0 ? 1.0 : 0.0, col == 1 ? 1.0 : 0.0};
+        for (int q = 0; q < 3; ++q) st.T[q] = col == 2 + q ? 1.0 : 0.0;
+        stepLinear<0>(z, 0, p, lr, st, sv, h);
+        for (int r = 0; r < 2; ++r) {
+          if (col < 2)
+            (*out)[i].A[r][col] = z[r];
+          else
+            (*out)[i].c[r][col - 2] = z[r];
+        }
+      }
+    }
+  }
+
+  // Interval j of segment [b, e) by the generic RK4 (the state only: p.m = 0).
+  void stepGeneric(Index j, Index b, Index e, const Params& p, double* z) const {
+    genericInterval(j, fm_.heldSplit(j), b, e, p, 1, fm_.smoothStiffness(b), z, 2);
   }
 
  private:
@@ -249,6 +292,19 @@ class SegmentSimulator {
     const double* E[3] = {0, 0, 0};
     const double* dE[3] = {0, 0, 0};
   };
+
+  // The tabled stiffness of interval i of segment t at its three stages into st->K; returns the
+  // greybox mesh state (0 otherwise).
+  double tabledStiffness(const SegmentTable& t, size_t i, const Params& p, Stage* st) const {
+    if (t.smooth) {
+      for (int q = 0; q < 3; ++q) st->K[q] = t.K3[3 * i + q];
+      return 0.0;
+    }
+    const int key = t.key[i];
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    st->K[0] = st->K[1] = st->K[2] = grey ? p.K0 + p.dK * t.key_sv[key] : t.key_K[key];
+    return grey ? t.key_sv[key] : 0.0;
+  }
 
   // The STE basis and its time derivative at u of interval j into stage q of `st`: the mesh
   // phase is the local cubic of its samples, its rate the chord over up to 16 samples on either
@@ -264,6 +320,35 @@ class SegmentSimulator {
     for (int k = 0; k < ste_->basis.size(); ++k) dE[k] *= rate;
     st->E[q] = E;
     st->dE[q] = dE;
+  }
+
+  // The STE basis and its rate at the three stages u = 0, 1/2, 1 of a whole interval j of
+  // segment [b, e) (steStage's values, which depend on no unknown), tabled per segment on first
+  // use while the tables stay within kSteBudget doubles (rig records of tens of ms) (the evaluation
+  // of a sine per harmonic, stage and iteration dominated the joint STE refinement); null beyond it
+  // (computed per step).
+  const double* steCached(Index j, Index b, Index e) const {
+    constexpr size_t kSteBudget = size_t{1} << 22;  // doubles: 32 MB
+    const int nb = ste_->basis.size();
+    const size_t per = 6 * static_cast<size_t>(nb);  // 3 stages x (E, dE)
+    auto it = ste_cache_.find(b);
+    if (it == ste_cache_.end()) {
+      const size_t need = static_cast<size_t>(std::max<Index>(e - b - 1, 0)) * per;
+      if (ste_cached_ + need > kSteBudget) return nullptr;
+      std::vector<double> tab(need);
+      Stage st;
+      for (Index i = b; i + 1 < e; ++i) {
+        for (int q = 0; q < 3; ++q) {
+          steStage(i, 0.5 * q, b, e, q, &st);
+          double* dst = tab.data() + static_cast<size_t>(i - b) * per + 2 * nb * q;
+          std::copy(st.E[q], st.E[q] + nb, dst);
+          std::copy(st.dE[q], st.dE[q] + nb, dst + nb);
+        }
+      }
+      ste_cached_ += need;
+      it = ste_cache_.emplace(b, std::move(tab)).first;
+    }
+    return it->second.data() + static_cast<size_t>(j - b) * per;
   }
 
   // Greybox fourier/table shape: K(t) = sum_k theta_k b_k(u(t)) with the mesh phase u(t) the
@@ -358,8 +443,16 @@ class SegmentSimulator {
         st.T[1] = fm_.torque(j, um, b, e);
         st.T[2] = fm_.torque(j, ub, b, e);
         if (ste_ != nullptr) {
+          const double* cached = ua == 0.0 && ub == 1.0 ? steCached(j, b, e) : nullptr;
           const double u3[3] = {ua, um, ub};
-          for (int s = 0; s < 3; ++s) steStage(j, u3[s], b, e, s, &st);
+          for (int s = 0; s < 3; ++s) {
+            if (cached != nullptr) {
+              st.E[s] = cached + 2 * ste_->basis.size() * s;
+              st.dE[s] = st.E[s] + ste_->basis.size();
+            } else {
+              steStage(j, u3[s], b, e, s, &st);
+            }
+          }
         }
         if (smooth) {
           st.K[0] = fm_.knownStiffness(j, ua, right, b, e);
@@ -553,6 +646,8 @@ class SegmentSimulator {
   const StiffnessShape* shape_;
   const SteRefinement* ste_;
   mutable double ste_buf_[3][2 * kMaxSte];  // steStage: E and dE of the three stages
+  mutable std::map<Index, std::vector<double>> ste_cache_;  // steCached: by the segment's start
+  mutable size_t ste_cached_ = 0;
 };
 
 // Substeps per sample so that omega * h_step <= 0.1 (RK4 error well below the bars).
@@ -680,7 +775,8 @@ class Refinement {
         fm_(s, gear, o.formulation, ranges),
         sim_(fm_, !reference_integration && ste == nullptr, shape_ ? &o.stiffness_shape : nullptr,
              ste),
-        substeps_(substepsFor(res->omega0, s.dt)) {}
+        substeps_(substepsFor(res->omega0, s.dt)),
+        reference_(reference_integration) {}
 
   gear_sim::Status run() {
     setUnknowns();
@@ -1186,26 +1282,14 @@ class Refinement {
   }
 
   // The converged model's response (zero initial state, no STE forcing: linear in the torque)
-  // to one draw of white torque noise of segment i's level, prewhitened. `tab`: the segment's
-  // look-ups on the noise record (buildTable), its stage torques refilled here: the affine
-  // maps of the held stiffness then step the response (no sensitivities) at a few flops per
-  // sample.
-  Eigen::VectorXd responseToNoise(size_t i, std::uint64_t* rng, SegmentTable* tab) {
+  // to the torque in noise_torque_ over segment i, prewhitened. `tab`: the segment's look-ups on
+  // the noise record (buildTable), its stage torques refilled here: the affine maps of the held
+  // stiffness then step the response (no sensitivities) at a few flops per sample.
+  Eigen::VectorXd responseToTorque(size_t i, SegmentTable* tab) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
-    // Rademacher draws (+-sigma, independent, zero mean, variance sigma^2): the covariance of a
-    // linear response is the same as for Gaussian draws, its Monte Carlo estimate scatters less
-    // (no fourth-moment excess) and 64 signs come from one splitmix64 number.
-    const double sd = torque_sigma_[i];
-    std::uint64_t bits = 0;
-    for (Index n = b; n < e; ++n) {
-      if ((n - b) % 64 == 0) bits = splitmix64(rng);
-      noise_torque_[static_cast<size_t>(n)] = (bits & 1u) ? sd : -sd;
-      bits >>= 1;
-    }
-    Params p = makeParams(loc_[i], sh_);
-    p.m = 0, p.nste = 0, p.y0 = 0.0, p.v0 = 0.0;
     Eigen::MatrixXd g(e - b, 1);
     auto visit = [&](Index n, const double* z) { g(n - b, 0) = z[0]; };
+    const Params p = noiseParams(i);
     if (noise_sim_->tableApplies(substeps_)) {
       for (Index n = b; n < e; ++n) tab->T[n - b] = noise_torque_[static_cast<size_t>(n)];
       for (Index j = b; j + 1 < e; ++j) tab->T_mid[j - b] = noise_fm_->torque(j, 0.5, b, e);
@@ -1214,6 +1298,28 @@ class Refinement {
       noise_sim_->run(b, e, p, substeps_, visit);
     }
     return whiten(g, noise_of_[i]).col(0);
+  }
+
+  // The converged model of segment i for its response to the torque: state only, from rest.
+  Params noiseParams(size_t i) const {
+    Params p = makeParams(loc_[i], sh_);
+    p.m = 0, p.nste = 0, p.y0 = 0.0, p.v0 = 0.0;
+    return p;
+  }
+
+  // One draw of white torque noise of segment i's level into noise_torque_: Rademacher draws
+  // (+-sigma, independent, zero mean, variance sigma^2): the covariance of a linear response is
+  // the same as for Gaussian draws, its Monte Carlo estimate scatters less (no fourth-moment
+  // excess) and 64 signs come from one splitmix64 number.
+  void drawTorqueNoise(size_t i, std::uint64_t* rng) {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    const double sd = torque_sigma_[i];
+    std::uint64_t bits = 0;
+    for (Index n = b; n < e; ++n) {
+      if ((n - b) % 64 == 0) bits = splitmix64(rng);
+      noise_torque_[static_cast<size_t>(n)] = (bits & 1u) ? sd : -sd;
+      bits >>= 1;
+    }
   }
 
   // Torque-meter noise (output_error.hpp): each segment's estimated level, and the covariance
@@ -1240,20 +1346,171 @@ class Refinement {
     noise_view_.torque = noise_torque_.data();
     noise_fm_ = std::make_unique<ForwardModel>(noise_view_, fm_.gear(), o_.formulation, ranges_);
     noise_sim_ = std::make_unique<SegmentSimulator>(
-        *noise_fm_, true, shape_ ? &o_.stiffness_shape : nullptr, nullptr);
+        *noise_fm_, !reference_, shape_ ? &o_.stiffness_shape : nullptr, nullptr);
     draw_normals_.assign(nseg_, Normal{});
-    for (const auto& set : problems_) torqueNoiseOf(set);
+    for (const auto& set : problems_) {
+      bool noisy = false;
+      for (size_t i : set) noisy = noisy || torque_sigma_[i] > 0.0;
+      if (!noisy) continue;
+      // The residual change -G w of a torque noise w moves the unknowns by the solve map of the
+      // converged problem applied to Jw^T W G w (Jw the prewhitened sensitivities).
+      std::vector<Eigen::MatrixXd> Jw(set.size());
+      for (size_t q = 0; q < set.size(); ++q)
+        if (torque_sigma_[set[q]] > 0.0) Jw[q] = whitenedSensitivities(set[q]);
+      if (reference_)
+        torqueNoiseImpulses(set, Jw);
+      else if (noise_sim_->tableApplies(substeps_))
+        torqueNoiseExact(set, Jw);
+      else
+        torqueNoiseDraws(set, Jw);
+    }
   }
 
-  // The Monte Carlo of torqueNoise on one problem: each draw's residual change -G w through
-  // the solve map of the converged problem (solveStep with the converged normal matrices).
-  void torqueNoiseOf(const Set& set) {
+  // Exact: the right-hand sides rhs_i = Jw_i^T W G_i w_i of the segments are independent with
+  // covariance Q_i = sigma_i^2 M_i M_i^T, M_i = Jw_i^T W G_i (torqueResponseGram: one backward
+  // pass through the converged model's step maps); the solve map is linear, so
+  //   dg = A^-1 sum_i P_i rhs_i,  P_i = [-N_sl,i N_ll,i^-1, I],
+  //   dl_i = N_ll,i^-1 (D_i rhs_i - N_ls,i A^-1 sum_{j != i} P_j rhs_j),  D_i = [I, 0] - N_ls,i
+  //   A^-1 P_i,
+  // and their covariances follow in closed form (what the draws estimate).
+  void torqueNoiseExact(const Set& set, const std::vector<Eigen::MatrixXd>& Jw) {
+    const int nl = nl_, ns = ns_;
+    std::vector<Eigen::MatrixXd> Q(set.size()), P(set.size());
+    Eigen::MatrixXd T = Eigen::MatrixXd::Zero(ns, ns);
+    const Eigen::MatrixXd& Ainv = Ainv_of_[set[0]];
+    for (size_t q = 0; q < set.size(); ++q) {
+      const size_t i = set[q];
+      const double sd = torque_sigma_[i];
+      Q[q] = sd > 0.0 ? Eigen::MatrixXd(sd * sd * torqueResponseGram(i, Jw[q]))
+                      : Eigen::MatrixXd::Zero(m_, m_);
+      P[q] = Eigen::MatrixXd::Zero(ns, m_);
+      P[q].leftCols(nl) = -normals_[i].N.block(nl, 0, ns, nl) * Nll_inv_[i];
+      P[q].rightCols(ns).setIdentity();
+      T += P[q] * Q[q] * P[q].transpose();
+    }
+    const Eigen::MatrixXd Cg = Ainv * T * Ainv;
+    for (size_t q = 0; q < set.size(); ++q) {
+      const size_t i = set[q];
+      const Eigen::MatrixXd Nls = normals_[i].N.block(0, nl, nl, ns);
+      Eigen::MatrixXd D = -Nls * Ainv * P[q];
+      D.leftCols(nl) += Eigen::MatrixXd::Identity(nl, nl);
+      const Eigen::MatrixXd others = T - P[q] * Q[q] * P[q].transpose();
+      const Eigen::MatrixXd inner =
+          D * Q[q] * D.transpose() + Nls * Ainv * others * Ainv * Nls.transpose();
+      tcov_ll_[i] = Nll_inv_[i] * inner * Nll_inv_[i];
+      tcov_ss_[i] = Cg;
+    }
+  }
+
+  // M^T M for segment i, M = Jw^T W G (m x samples): the prewhitening's transpose W^T applied
+  // to the sensitivities gives the weight of each response sample, and the adjoint (backward)
+  // recursion of the state steps x_{j+1} = A_j x_j + (the torque samples' terms) carries the
+  // weights to the torque samples. Split intervals' maps by unit inputs through the generic RK4.
+  Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
+    const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
+    const NoiseModel& nm = noise_of_[i];
+    // Scratch reused over the segments (first touch of fresh pages is slow here).
+    Eigen::MatrixXd& U = adj_U_;  // W^T Jw
+    U.setZero(n, m_);
+    for (Index r = 0; r < Jw.rows(); ++r) {
+      U.row(r + nm.p) += Jw.row(r);
+      for (int k = 0; k < nm.p; ++k) U.row(r + nm.p - k - 1) += nm.a[k] * Jw.row(r);
+    }
+    const Params p = noiseParams(i);
+    SegmentTable& tab = adj_tab_;
+    noise_sim_->buildTable(b, e, &tab);
+    std::vector<SegmentSimulator::StateMap>& maps = adj_maps_;
+    noise_sim_->stateMaps(tab, p, &maps);
+    Eigen::MatrixXd& M = adj_M_;  // its transpose
+    M.setZero(n, m_);
+    using Row = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxParams>;
+    using Pair = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxParams>;
+    Pair lam = Pair::Zero(2, m_), next(2, m_);
+    // The torque samples that can reach interval j: the cubic stencils lie within j-2..j+3.
+    auto window = [&](Index j, Index* lo, Index* hi) {
+      *lo = std::max<Index>(b, j - 3), *hi = std::min<Index>(e, j + 5);
+    };
+    for (Index idx = n - 1; idx >= 1; --idx) {
+      lam.row(0) += U.row(idx);  // the response sample idx = the state's first component
+      const Index j = b + idx - 1;
+      Index lo, hi;
+      window(j, &lo, &hi);
+      if (tab.key[static_cast<size_t>(idx - 1)] != SegmentTable::kSplit) {
+        const SegmentSimulator::StateMap& sm = maps[static_cast<size_t>(idx - 1)];
+        for (int q = 0; q < 3; ++q) {
+          const Row g = sm.c[0][q] * lam.row(0) + sm.c[1][q] * lam.row(1);
+          if (q == 0) M.row(j - b) += g;
+          if (q == 2) M.row(j + 1 - b) += g;
+          if (q != 1) continue;
+          for (Index s = lo; s < hi; ++s) {  // the midpoint torque's stencil weights
+            noise_torque_[static_cast<size_t>(s)] = 1.0;
+            const double w = noise_fm_->torque(j, 0.5, b, e);
+            noise_torque_[static_cast<size_t>(s)] = 0.0;
+            if (w != 0.0) M.row(s - b) += w * g;
+          }
+        }
+        next.row(0) = sm.A[0][0] * lam.row(0) + sm.A[1][0] * lam.row(1);
+        next.row(1) = sm.A[0][1] * lam.row(0) + sm.A[1][1] * lam.row(1);
+      } else {
+        for (Index s = lo; s < hi; ++s) {  // unit torque samples, zero state
+          double z[2] = {0.0, 0.0};
+          noise_torque_[static_cast<size_t>(s)] = 1.0;
+          noise_sim_->stepGeneric(j, b, e, p, z);
+          noise_torque_[static_cast<size_t>(s)] = 0.0;
+          M.row(s - b) += z[0] * lam.row(0) + z[1] * lam.row(1);
+        }
+        double A[2][2];
+        for (int c = 0; c < 2; ++c) {  // unit states, zero torque
+          double z[2] = {c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0};
+          noise_sim_->stepGeneric(j, b, e, p, z);
+          A[0][c] = z[0], A[1][c] = z[1];
+        }
+        next.row(0) = A[0][0] * lam.row(0) + A[1][0] * lam.row(1);
+        next.row(1) = A[0][1] * lam.row(0) + A[1][1] * lam.row(1);
+      }
+      lam = next;
+    }
+    return M.transpose() * M;
+  }
+
+  // The reference (tests): exact by brute force, one unit impulse sigma e_s of the torque per
+  // sample s of each noisy segment in turn (the others' right-hand sides zero), each response
+  // by the forward model and each through the solve map: sum of dl dl^T and dg dg^T.
+  void torqueNoiseImpulses(const Set& set, const std::vector<Eigen::MatrixXd>& Jw) {
+    std::vector<Eigen::MatrixXd> Sll(set.size(), Eigen::MatrixXd::Zero(nl_, nl_));
+    Eigen::MatrixXd Sss = Eigen::MatrixXd::Zero(ns_, ns_);
+    for (size_t i : set) draw_normals_[i] = normals_[i];
+    Locals& dl = dl_scratch_;
+    Eigen::VectorXd dg;
+    SegmentTable tab;
+    for (size_t q = 0; q < set.size(); ++q) {
+      const size_t i = set[q];
+      if (!(torque_sigma_[i] > 0.0)) continue;
+      for (Index s = ranges_[i].first; s < ranges_[i].second; ++s) {
+        for (size_t r : set) draw_normals_[r].rhs.setZero(m_);
+        noise_torque_[static_cast<size_t>(s)] = torque_sigma_[i];
+        draw_normals_[i].rhs = Jw[q].transpose() * responseToTorque(i, &tab);
+        noise_torque_[static_cast<size_t>(s)] = 0.0;
+        solveStep(set, draw_normals_, &dl, &dg, nullptr, nullptr);
+        for (size_t r = 0; r < set.size(); ++r) Sll[r] += dl[set[r]] * dl[set[r]].transpose();
+        if (ns_ > 0) Sss += dg * dg.transpose();
+      }
+    }
+    for (size_t q = 0; q < set.size(); ++q) {
+      tcov_ll_[set[q]] = Sll[q];
+      tcov_ss_[set[q]] = Sss;
+      draw_normals_[set[q]] = Normal{};
+    }
+  }
+
+  // Monte Carlo where the step maps are not tabled (a greybox stiffness shape, several RK4 steps
+  // per sample): draws of w through the solve map (solveStep with the converged normal
+  // matrices), seeded by the segment's first sample (the same draws on every path), in batches
+  // of 16 until the Monte Carlo standard error of the added variance is below 10 % of C's total
+  // variance, at most 64 draws.
+  void torqueNoiseDraws(const Set& set, const std::vector<Eigen::MatrixXd>& Jw) {
     constexpr int kBatch = 16, kMaxDraws = 64;
     constexpr double kMonteCarloTol = 0.1;  // of C's total variance
-    bool noisy = false;
-    for (size_t i : set) noisy = noisy || torque_sigma_[i] > 0.0;
-    if (!noisy) return;
-    std::vector<Eigen::MatrixXd> Jw(set.size());
     std::vector<SegmentTable> tab(set.size());
     std::vector<std::uint64_t> rng(set.size());
     std::vector<Eigen::MatrixXd> Sll(set.size(), Eigen::MatrixXd::Zero(nl_, nl_));
@@ -1264,10 +1521,8 @@ class Refinement {
       draw_normals_[i] = normals_[i];
       base[q] = cVariance(localCovariance(i), sigma2_pooled_ * Ainv_of_[i]);
       if (!(torque_sigma_[i] > 0.0)) continue;
-      Jw[q] = whitenedSensitivities(i);
       if (noise_sim_->tableApplies(substeps_))
         noise_sim_->buildTable(ranges_[i].first, ranges_[i].second, &tab[q]);
-      // Seeded by the segment's first sample: the same draws whatever path refines it.
       const double first = s_.time(ranges_[i].first) / s_.dt;
       rng[q] = 0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(std::llround(first));
     }
@@ -1279,8 +1534,9 @@ class Refinement {
         for (size_t q = 0; q < set.size(); ++q) {
           Normal& nm = draw_normals_[set[q]];
           nm.rhs.setZero(m_);
-          if (Jw[q].size() > 0)
-            nm.rhs = Jw[q].transpose() * responseToNoise(set[q], &rng[q], &tab[q]);
+          if (Jw[q].size() == 0) continue;
+          drawTorqueNoise(set[q], &rng[q]);
+          nm.rhs = Jw[q].transpose() * responseToTorque(set[q], &tab[q]);
         }
         solveStep(set, draw_normals_, &dl, &dg, nullptr, nullptr);
         for (size_t q = 0; q < set.size(); ++q) Sll[q] += dl[set[q]] * dl[set[q]].transpose();
@@ -1299,6 +1555,7 @@ class Refinement {
       tcov_ss_[set[q]] = Sss / draws;
       draw_normals_[set[q]] = Normal{};
     }
+    std::fill(noise_torque_.begin(), noise_torque_.end(), 0.0);
   }
 
   // Within-segment variation of the damping with the load (piecewise model): the converged
@@ -1498,6 +1755,8 @@ class Refinement {
   const ForwardModel fm_;
   const SegmentSimulator sim_;
   const int substeps_;
+  // The reference path (tests): generic RK4, torque noise by impulses.
+  const bool reference_;
   std::vector<Role> local_roles_, shared_roles_;
   int basis_first_ = 0, ste_shared_ = 0, nste_ = 0, nl_ = 0, ns_ = 0, m_ = 0;
   std::vector<char> active_, converged_;
@@ -1526,6 +1785,10 @@ class Refinement {
   std::unique_ptr<ForwardModel> noise_fm_;
   std::unique_ptr<SegmentSimulator> noise_sim_;
   std::vector<Normal> draw_normals_;
+  // torqueResponseGram's scratch.
+  Eigen::MatrixXd adj_U_, adj_M_;
+  SegmentTable adj_tab_;
+  std::vector<SegmentSimulator::StateMap> adj_maps_;
 };
 
 }  // namespace
