@@ -14,6 +14,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -227,7 +228,8 @@ class MemorySource : public RecordSource {
 // data and connection records only. Returns the offsets (from the chunk's start) of the
 // message-data records, ascending. `base` is the file offset of the chunk's data (for messages).
 std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t begin,
-                                             std::uint64_t size, std::uint64_t base, bool in_file) {
+                                             std::uint64_t size, std::uint64_t base, bool in_file,
+                                             std::set<std::uint32_t>* conns) {
   std::vector<std::uint32_t> messages;
   const std::uint64_t end = begin + size;
   for (std::uint64_t pos = begin; pos < end;) {
@@ -241,7 +243,7 @@ std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t be
     }
     const std::uint64_t at = in_file ? r.start : base;
     if (r.op == kMessageData) {
-      field<std::uint32_t>(r.fields, "conn", at, "message data record");
+      conns->insert(field<std::uint32_t>(r.fields, "conn", at, "message data record"));
       field<std::uint64_t>(r.fields, "time", at, "message data record");
       messages.push_back(static_cast<std::uint32_t>(r.start - begin));
     } else if (r.op == kConnection) {
@@ -289,6 +291,22 @@ class BagWalker {
  public:
   BagWalker(int fd, std::uint64_t file_size) : src_(fd), file_size_(file_size) {}
 
+  // Whether every message data record names a connection of the index (checkBagStructure).
+  bool messagesIndexed() const {
+    // rosbag reads conn_count connection records from index_pos on (refusing other records);
+    // deserialising a message whose record names another connection throws.
+    const auto first = std::lower_bound(starts_.begin(), starts_.end(), index_pos_);
+    std::set<std::uint32_t> known;
+    for (std::uint64_t c = 0; c < conn_count_; ++c) {
+      const auto at = first + static_cast<std::ptrdiff_t>(c);
+      if (at >= starts_.end()) return false;
+      const auto conn = top_connections_.find(*at);
+      if (conn == top_connections_.end()) return false;
+      known.insert(conn->second);
+    }
+    return std::includes(known.begin(), known.end(), message_conns_.begin(), message_conns_.end());
+  }
+
   void walk() {
     checkVersion();
     for (std::uint64_t pos = kVersionLength; pos < file_size_;) {
@@ -324,7 +342,7 @@ class BagWalker {
       case kBagHeader:
         if (starts_.size() != 1) throw Corrupt{"a second bag header record", r.start};
         index_pos_ = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
-        field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
+        conn_count_ = field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
         field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
         break;
       case kChunk:
@@ -338,9 +356,12 @@ class BagWalker {
         break;
       case kConnection:
         src_.checkConnection(r);
+        top_connections_[r.start] =
+            field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
         break;
       case kMessageData:
-        field<std::uint32_t>(r.fields, "conn", r.start, "message data record");
+        message_conns_.insert(
+            field<std::uint32_t>(r.fields, "conn", r.start, "message data record"));
         field<std::uint64_t>(r.fields, "time", r.start, "message data record");
         break;
       default:
@@ -359,7 +380,8 @@ class BagWalker {
         throw Corrupt{"an uncompressed chunk of " + std::to_string(r.data_len) +
                           " bytes whose header says " + std::to_string(size),
                       r.start};
-      chunk_messages_[r.start] = checkChunkRecords(&src_, r.data_pos, r.data_len, r.data_pos, true);
+      chunk_messages_[r.start] =
+          checkChunkRecords(&src_, r.data_pos, r.data_len, r.data_pos, true, &message_conns_);
     } else if (c->second == "bz2" || c->second == "lz4") {
       if (size > kMaxBagChunkBytes || r.data_len > kMaxBagChunkBytes)
         throw Corrupt{"a compressed chunk of " + std::to_string(size) + " bytes", r.start};
@@ -368,7 +390,7 @@ class BagWalker {
         throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
       const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
       MemorySource mem(bytes.get(), size);
-      chunk_messages_[r.start] = checkChunkRecords(&mem, 0, size, r.start, false);
+      chunk_messages_[r.start] = checkChunkRecords(&mem, 0, size, r.start, false, &message_conns_);
     } else {
       throw Corrupt{
           "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
@@ -443,9 +465,17 @@ class BagWalker {
   std::map<std::uint64_t, std::vector<std::uint32_t>> chunk_messages_;  // chunk start -> offsets
   std::vector<std::pair<std::uint64_t, std::uint64_t>> chunk_refs_;     // chunk info: (at, pos)
   std::optional<std::uint64_t> last_chunk_;
+  std::uint32_t conn_count_ = 0;
+  std::map<std::uint64_t, std::uint32_t> top_connections_;  // top-level connection: start -> conn
+  std::set<std::uint32_t> message_conns_;                   // conn of every message data record
 };
 
-void walk(int fd, std::uint64_t file_size) { BagWalker(fd, file_size).walk(); }
+// Walks the file; returns BagWalker::messagesIndexed.
+bool walk(int fd, std::uint64_t file_size) {
+  BagWalker walker(fd, file_size);
+  walker.walk();
+  return walker.messagesIndexed();
+}
 
 }  // namespace
 
@@ -461,6 +491,7 @@ struct CheckedFile {
   off_t size = 0;
   timespec mtime{};
   gear_sim::Status status;
+  BagStructure structure;
 };
 
 bool sameFile(const CheckedFile& c, const std::string& path, const struct stat& st) {
@@ -468,12 +499,12 @@ bool sameFile(const CheckedFile& c, const std::string& path, const struct stat& 
          c.mtime.tv_sec == st.st_mtim.tv_sec && c.mtime.tv_nsec == st.st_mtim.tv_nsec;
 }
 
-gear_sim::Status walkFile(int fd, const std::string& path) {
+gear_sim::Status walkFile(int fd, const std::string& path, BagStructure* structure) {
   using gear_sim::Status;
   const off_t end = ::lseek(fd, 0, SEEK_END);
   if (end < 0) return Status::ioError(path + ": cannot read as a bag (cannot determine its size)");
   try {
-    walk(fd, static_cast<std::uint64_t>(end));
+    structure->messages_indexed = walk(fd, static_cast<std::uint64_t>(end));
   } catch (const Corrupt& c) {
     return Status::invalidInput(
         path + ": cannot read as a bag (" + c.what + " at byte " + std::to_string(c.at) + ")" +
@@ -484,8 +515,11 @@ gear_sim::Status walkFile(int fd, const std::string& path) {
 
 }  // namespace
 
-gear_sim::Status checkBagStructure(const std::string& path) {
+gear_sim::Status checkBagStructure(const std::string& path, BagStructure* structure) {
   using gear_sim::Status;
+  BagStructure ignored;
+  if (structure == nullptr) structure = &ignored;
+  *structure = BagStructure{};
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return Status::ioError(path + ": cannot read as a bag (cannot open the file)");
   struct stat st {};
@@ -496,14 +530,15 @@ gear_sim::Status checkBagStructure(const std::string& path) {
     std::lock_guard<std::mutex> lock(mutex);
     if (sameFile(last, path, st)) {
       ::close(fd);
+      *structure = last.structure;
       return last.status;
     }
   }
-  Status status = walkFile(fd, path);
+  Status status = walkFile(fd, path, structure);
   ::close(fd);
   if (known) {
     std::lock_guard<std::mutex> lock(mutex);
-    last = {path, st.st_dev, st.st_ino, st.st_size, st.st_mtim, status};
+    last = {path, st.st_dev, st.st_ino, st.st_size, st.st_mtim, status, *structure};
   }
   return status;
 }

@@ -16,6 +16,7 @@
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <tuple>
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -36,15 +37,40 @@ std::string openError(const std::string& path, const std::exception& e) {
          "); if it is truncated, `rosbag reindex` may recover it";
 }
 
+// A SignalChunk read in place from its serialized bytes (laid out by chunkLayout): the scan
+// needs its values once, not a deserialised copy.
+struct RawArray {
+  const std::uint8_t* p = nullptr;
+  size_t n = 0;
+  size_t size() const { return n; }
+  bool empty() const { return n == 0; }
+  double operator[](size_t i) const {  // a float64 element (little-endian, as the host)
+    double v;
+    std::memcpy(&v, p + 8 * i, 8);
+    return v;
+  }
+};
+struct RawChunk {
+  double sample_rate = 0.0;
+  std::uint64_t first_index = 0;
+  RawArray dte, dte_velocity, stiffness, torque, mesh_state, mesh_phase, damping;
+};
+
+// Where the fields of a SignalChunk's `n` serialized bytes lie, into *c; the layout problem
+// (checkMessageLayout's), empty when every length fits.
+std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c);
+// The serialized bytes of `m` into *buf (grown as needed, never shrunk); returns their count.
+std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uint8_t>* buf);
+
 // The channels a chunk carries, as a bit set (dte_velocity, stiffness, torque, mesh_state,
 // mesh_phase, damping).
-unsigned channelSet(const gear_damping::SignalChunk& c) {
+unsigned channelSet(const RawChunk& c) {
   return (!c.dte_velocity.empty() ? 1u : 0u) | (!c.stiffness.empty() ? 2u : 0u) |
          (!c.torque.empty() ? 4u : 0u) | (!c.mesh_state.empty() ? 8u : 0u) |
          (!c.mesh_phase.empty() ? 16u : 0u) | (!c.damping.empty() ? 32u : 0u);
 }
 
-std::string channelLengthError(const gear_damping::SignalChunk& c) {
+std::string channelLengthError(const RawChunk& c) {
   const size_t m = c.dte.size();
   auto bad = [m](size_t s) { return s != 0 && s != m; };
   if (bad(c.dte_velocity.size())) return "dte_velocity";
@@ -82,7 +108,7 @@ void addPlausibilityWarnings(std::vector<double> chunk_max, BagSignalInfo* info)
 }
 
 // The channels of a chunk that plausibility is checked on, in kPlausibleRanges' order.
-std::array<const std::vector<double>*, 6> rangedChannels(const gear_damping::SignalChunk& c) {
+std::array<const RawArray*, 6> rangedChannels(const RawChunk& c) {
   return {&c.dte, &c.dte_velocity, &c.stiffness, &c.torque, &c.mesh_phase, &c.damping};
 }
 
@@ -92,24 +118,30 @@ bool plausibleMeshState(double x) { return x == 0.0 || x == 1.0; }
 
 // Counts the implausible values of a chunk into `info`; returns the chunk's max |dte|
 // (finite values only, 0 when none).
-double countImplausible(const gear_damping::SignalChunk& c, BagSignalInfo* info) {
+double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   const auto channels = rangedChannels(c);
-  for (size_t k = 0; k < channels.size(); ++k)
-    for (double x : *channels[k]) {
+  for (size_t k = 0; k < channels.size(); ++k) {
+    const RawArray& a = *channels[k];
+    for (size_t i = 0; i < a.size(); ++i) {
+      const double x = a[i];
       if (!std::isfinite(x))
         ++info->non_finite_values;
       else if (!inRange(kPlausibleRanges[k], x))
         ++info->out_of_range_values;
     }
-  for (double x : c.mesh_state) {
+  }
+  for (size_t i = 0; i < c.mesh_state.size(); ++i) {
+    const double x = c.mesh_state.p[i];
     if (!std::isfinite(x))
       ++info->non_finite_values;
     else if (!plausibleMeshState(x))
       ++info->bad_mesh_states;
   }
   double m = 0.0;
-  for (double x : c.dte)
+  for (size_t i = 0; i < c.dte.size(); ++i) {
+    const double x = c.dte[i];
     if (std::isfinite(x)) m = std::max(m, std::abs(x));
+  }
   return m;
 }
 
@@ -250,36 +282,54 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
 // plausibility warnings and channel flags are filled in at the end.
 class ChunkScan {
  public:
-  ChunkScan(const std::string& path, BagSignalInfo* out) : path_(path), out_(*out) {}
+  // `raw`: the bag's messages all name indexed connections (BagStructure::messages_indexed),
+  // so a SignalChunk whose layout fits is read in place, as deserialising it would read it.
+  ChunkScan(const std::string& path, BagSignalInfo* out, bool raw)
+      : path_(path), out_(*out), raw_(raw) {}
 
   Status add(const rosbag::MessageInstance& m) {
+    RawChunk c;
+    bool in_place = false;
     if (m.getDataType() == kChunkType) {
-      if (const Status bad = checkMessageLayout(m); !bad.ok()) {
+      const std::uint32_t n = copyMessage(m, &buffer_);
+      if (const std::string bad = chunkLayout(buffer_.data(), n, &c); !bad.empty()) {
         return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
                                     " message " + std::to_string(out_.chunks + 1) + ": corrupt " +
-                                    kChunkType + " (" + bad.message() + ")");
+                                    kChunkType + " (" + bad + ")");
       }
+      in_place = raw_ && m.isType<gear_damping::SignalChunk>();
     }
-    const auto c = m.instantiate<gear_damping::SignalChunk>();
+    if (!in_place) {  // rosbag's deserialisation, with its checks and exceptions
+      const auto p = m.instantiate<gear_damping::SignalChunk>();
+      if (!p) {
+        return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
+                                    " message " + std::to_string(out_.chunks + 1) +
+                                    " (first_index ?): not a " + std::string(kChunkType));
+      }
+      const std::uint32_t n = ros::serialization::serializationLength(*p);
+      if (buffer_.size() < n) buffer_.resize(n);
+      ros::serialization::OStream out(buffer_.data(), n);
+      ros::serialization::serialize(out, *p);
+      chunkLayout(buffer_.data(), n, &c);  // fits: serialised by ROS
+    }
     const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
                               std::to_string(out_.chunks + 1) + " (first_index " +
-                              (c ? std::to_string(c->first_index) : std::string("?")) + ")";
-    if (!c) {
-      return Status::invalidInput(where + ": not a " + std::string(kChunkType));
-    }
-    if (Status st = checkChunk(*c, where); !st.ok()) return st;
+                              std::to_string(c.first_index) + ")";
+    if (Status st = checkChunk(c, where); !st.ok()) return st;
     if (out_.chunks == 0) {
-      out_.sample_rate = c->sample_rate;
-      out_.first_index = c->first_index;
-      channels_ = channelSet(*c);
-    } else if (Status st = checkSequence(*c, where); !st.ok()) {
+      out_.sample_rate = c.sample_rate;
+      out_.first_index = c.first_index;
+      channels_ = channelSet(c);
+    } else if (Status st = checkSequence(c, where); !st.ok()) {
       return st;
     }
-    next_ = c->first_index + c->dte.size();
-    out_.real_samples += static_cast<std::int64_t>(c->dte.size());
-    chunk_max_.push_back(countImplausible(*c, &out_));
-    for (double k : c->stiffness)
+    next_ = c.first_index + c.dte.size();
+    out_.real_samples += static_cast<std::int64_t>(c.dte.size());
+    chunk_max_.push_back(countImplausible(c, &out_));
+    for (size_t i = 0; i < c.stiffness.size(); ++i) {
+      const double k = c.stiffness[i];
       if (std::isfinite(k)) k_sum_ += k, ++k_count_;
+    }
     ++out_.chunks;
     return {};
   }
@@ -315,7 +365,7 @@ class ChunkScan {
 
  private:
   // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
-  static Status checkChunk(const gear_damping::SignalChunk& c, const std::string& where) {
+  static Status checkChunk(const RawChunk& c, const std::string& where) {
     if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
       return Status::invalidInput(where + ": sample_rate " + formatNumber(c.sample_rate) +
                                   " is not a positive number");
@@ -338,7 +388,7 @@ class ChunkScan {
 
   // A later chunk against the first ones: same rate and channels, indices increasing; a gap
   // is counted and (the first kMaxGapWarnings) warned about.
-  Status checkSequence(const gear_damping::SignalChunk& c, const std::string& where) {
+  Status checkSequence(const RawChunk& c, const std::string& where) {
     if (c.sample_rate != out_.sample_rate) {
       return Status::invalidInput(where + ": sample_rate changed from " +
                                   formatNumber(out_.sample_rate) + " to " +
@@ -373,7 +423,9 @@ class ChunkScan {
 
   const std::string& path_;
   BagSignalInfo& out_;
-  std::uint64_t next_ = 0;  // global index after the previous chunk
+  const bool raw_;
+  std::vector<std::uint8_t> buffer_;  // the current message's serialized bytes
+  std::uint64_t next_ = 0;            // global index after the previous chunk
   unsigned channels_ = 0;
   double k_sum_ = 0.0;
   long long k_count_ = 0;
@@ -392,19 +444,18 @@ namespace {
 
 class LayoutWalk {
  public:
-  explicit LayoutWalk(const rosbag::MessageInstance& m) : n_(m.size()), buf_(n_) {
-    ros::serialization::OStream out(buf_.data(), n_);
-    m.write(out);
-  }
+  LayoutWalk(const std::uint8_t* bytes, std::uint32_t n) : n_(n), buf_(bytes) {}
   bool skip(std::uint64_t bytes) {
     if (bytes > n_ - k_) return false;
     k_ += bytes;
     return true;
   }
-  // An array of `len` elements of `element` bytes (a string: element 1).
-  std::string array(std::uint64_t element, const char* name) {
+  // An array of `len` elements of `element` bytes (a string: element 1); where it lies into
+  // *out when given.
+  std::string array(std::uint64_t element, const char* name, RawArray* out = nullptr) {
     std::uint32_t len = 0;
     if (std::string e = length(name, &len); !e.empty()) return e;
+    if (out != nullptr) *out = {buf_ + k_, len};
     return skip(element * len) ? std::string() : claims(name, len);
   }
   // string[]: a count, then each string's length and bytes.
@@ -418,11 +469,12 @@ class LayoutWalk {
   }
   // std_msgs/Header: seq, stamp, frame_id.
   std::string header() { return skip(12) ? array(1, "header.frame_id") : "cut in its header"; }
+  std::uint64_t position() const { return k_; }
 
  private:
   std::string length(const char* name, std::uint32_t* len) {
     if (n_ - k_ < 4) return std::string("cut before the length of ") + name;
-    std::memcpy(len, buf_.data() + k_, 4);
+    std::memcpy(len, buf_ + k_, 4);
     k_ += 4;
     return {};
   }
@@ -431,23 +483,49 @@ class LayoutWalk {
            std::to_string(n_) + " bytes";
   }
   std::uint32_t n_;
-  std::vector<std::uint8_t> buf_;
+  const std::uint8_t* buf_;
   std::uint64_t k_ = 0;
 };
+
+std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uint8_t>* buf) {
+  const std::uint32_t n = m.size();
+  if (buf->size() < n) buf->resize(n);
+  ros::serialization::OStream out(buf->data(), n);
+  m.write(out);
+  return n;
+}
+
+std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
+  LayoutWalk w(bytes, n);
+  if (std::string e = w.header(); !e.empty()) return e;
+  const std::uint64_t at = w.position();
+  if (!w.skip(16)) return "cut before sample_rate and first_index";
+  std::memcpy(&c->sample_rate, bytes + at, 8);
+  std::memcpy(&c->first_index, bytes + at + 8, 8);
+  const std::tuple<std::uint64_t, const char*, RawArray*> arrays[] = {
+      {8, "dte", &c->dte},
+      {8, "dte_velocity", &c->dte_velocity},
+      {8, "stiffness", &c->stiffness},
+      {8, "torque", &c->torque},
+      {1, "mesh_state", &c->mesh_state},
+      {8, "mesh_phase", &c->mesh_phase},
+      {8, "damping", &c->damping}};
+  for (const auto& [size, name, out] : arrays)
+    if (std::string e = w.array(size, name, out); !e.empty()) return e;
+  return {};
+}
 
 // The problem of checkMessageLayout, empty when the layout fits (LayoutWalk's convention).
 std::string layoutProblem(const rosbag::MessageInstance& m) {
   const std::string& type = m.getDataType();
-  LayoutWalk w(m);
+  std::vector<std::uint8_t> buf;
+  const std::uint32_t n = copyMessage(m, &buf);
   if (type == kChunkType) {
-    if (std::string e = w.header(); !e.empty()) return e;
-    if (!w.skip(16)) return "cut before sample_rate and first_index";
-    const std::pair<std::uint64_t, const char*> arrays[] = {
-        {8, "dte"},        {8, "dte_velocity"}, {8, "stiffness"}, {8, "torque"},
-        {1, "mesh_state"}, {8, "mesh_phase"},   {8, "damping"}};
-    for (const auto& [size, name] : arrays)
-      if (std::string e = w.array(size, name); !e.empty()) return e;
-  } else if (type == "sensor_msgs/JointState") {
+    RawChunk c;
+    return chunkLayout(buf.data(), n, &c);
+  }
+  LayoutWalk w(buf.data(), n);
+  if (type == "sensor_msgs/JointState") {
     if (std::string e = w.header(); !e.empty()) return e;
     if (std::string e = w.strings("name"); !e.empty()) return e;
     for (const char* name : {"position", "velocity", "effort"})
@@ -469,13 +547,14 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   out.path = path;
   // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
   // length): every record is checked first.
-  if (Status s = checkBagStructure(path); !s.ok()) return s;
+  BagStructure structure;
+  if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
     if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
-    ChunkScan scan(path, &out);
+    ChunkScan scan(path, &out, structure.messages_indexed);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     for (const rosbag::MessageInstance& m : view)
       if (Status s = scan.add(m); !s.ok()) return s;
