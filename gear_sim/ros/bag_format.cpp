@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
+#include <ctime>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -481,22 +482,32 @@ bool walk(int fd, std::uint64_t file_size) {
 
 namespace {
 
-// The walk's result for one file, keyed by its identity and modification time: `analyze` checks
+// The walk's result for one file, keyed by its identity and status-change time: `analyze` checks
 // a bag before it tells a rig bag from a signal bag and again before it scans the signal bag
-// (each walk reads every record header of the file).
+// (each walk reads every record header of the file). Only a file last changed well before its
+// walk started is remembered: a file rewritten since (even within the file system's timestamp
+// granularity, as a fuzzer rewrites its input) then shows a later change time.
 struct CheckedFile {
   std::string path;
   dev_t dev = 0;
   ino_t ino = 0;
   off_t size = 0;
-  timespec mtime{};
+  timespec mtime{}, ctime{};
   gear_sim::Status status;
   BagStructure structure;
 };
 
 bool sameFile(const CheckedFile& c, const std::string& path, const struct stat& st) {
   return c.path == path && c.dev == st.st_dev && c.ino == st.st_ino && c.size == st.st_size &&
-         c.mtime.tv_sec == st.st_mtim.tv_sec && c.mtime.tv_nsec == st.st_mtim.tv_nsec;
+         c.mtime.tv_sec == st.st_mtim.tv_sec && c.mtime.tv_nsec == st.st_mtim.tv_nsec &&
+         c.ctime.tv_sec == st.st_ctim.tv_sec && c.ctime.tv_nsec == st.st_ctim.tv_nsec;
+}
+
+// Whether a file of status `st`, walked from `start` (CLOCK_REALTIME, the file times' clock) on,
+// may be remembered: changed at least 2 s before.
+bool settled(const struct stat& st, const timespec& start) {
+  const auto before = [&](const timespec& t) { return t.tv_sec + 2 < start.tv_sec; };
+  return before(st.st_mtim) && before(st.st_ctim);
 }
 
 gear_sim::Status walkFile(int fd, const std::string& path, BagStructure* structure) {
@@ -522,6 +533,8 @@ gear_sim::Status checkBagStructure(const std::string& path, BagStructure* struct
   *structure = BagStructure{};
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return Status::ioError(path + ": cannot read as a bag (cannot open the file)");
+  timespec start{};
+  ::clock_gettime(CLOCK_REALTIME, &start);
   struct stat st {};
   const bool known = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
   static std::mutex mutex;
@@ -536,9 +549,9 @@ gear_sim::Status checkBagStructure(const std::string& path, BagStructure* struct
   }
   Status status = walkFile(fd, path, structure);
   ::close(fd);
-  if (known) {
+  if (known && settled(st, start)) {
     std::lock_guard<std::mutex> lock(mutex);
-    last = {path, st.st_dev, st.st_ino, st.st_size, st.st_mtim, status, *structure};
+    last = {path, st.st_dev, st.st_ino, st.st_size, st.st_mtim, st.st_ctim, status, *structure};
   }
   return status;
 }

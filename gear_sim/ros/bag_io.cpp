@@ -145,19 +145,29 @@ double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   return m;
 }
 
-// Reads and deserialises the messages of a SignalChunk topic on a thread of its own, so that
-// what the caller does with one chunk overlaps the read of the next (issue 18: `analyze` reads
-// and computes at the same time). The queue between them is bounded by samples, so memory stays
-// at about kQueueSamples samples (or one chunk when chunks are larger). A message that does not
-// instantiate as a SignalChunk arrives as nullptr; an exception of the read ends the stream and
-// is reported by error().
+// Reads the messages of a SignalChunk topic on a thread of its own, so that what the caller does
+// with one chunk overlaps the read of the next (issue 18: `analyze` reads and computes at the
+// same time). The queue between them is bounded by samples, so memory stays at about
+// kQueueSamples samples (or one chunk when chunks are larger); the byte buffers are recycled.
+// With `in_place` (BagSignalInfo::messages_indexed) a SignalChunk is passed on as its serialized
+// bytes, its fields read in place (chunkLayout), not deserialised; any other message goes
+// through rosbag's deserialisation as before. A message that does not instantiate as a
+// SignalChunk arrives with valid == false; an exception of the read ends the stream and is
+// reported by error().
 class ChunkReader {
  public:
-  using Chunk = gear_damping::SignalChunk::ConstPtr;
+  struct Chunk {
+    std::vector<std::uint8_t> bytes;  // the serialized message
+    RawChunk c;                       // its fields, in `bytes`
+    bool valid = false;
+  };
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
-  ChunkReader(std::string path, std::string topic)
-      : path_(std::move(path)), topic_(std::move(topic)), thread_([this] { run(); }) {}
+  ChunkReader(std::string path, std::string topic, bool in_place)
+      : path_(std::move(path)),
+        topic_(std::move(topic)),
+        in_place_(in_place),
+        thread_([this] { run(); }) {}
   ~ChunkReader() {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -169,14 +179,16 @@ class ChunkReader {
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
 
-  /// The next message into *c; false at the end of the topic or after a read error.
+  /// The next message into *c (whose previous bytes are recycled); false at the end of the
+  /// topic or after a read error.
   bool next(Chunk* c) {
     std::unique_lock<std::mutex> lock(mutex_);
+    if (c->bytes.capacity() > 0) spare_.push_back(std::move(c->bytes));
     cv_.wait(lock, [this] { return !queue_.empty() || done_; });
     if (queue_.empty()) return false;
     *c = std::move(queue_.front());
     queue_.pop_front();
-    queued_ -= *c ? (*c)->dte.size() : 0;
+    queued_ -= c->valid ? c->c.dte.size() : 0;
     cv_.notify_all();
     return true;
   }
@@ -184,6 +196,22 @@ class ChunkReader {
   const std::string& error() const { return error_; }
 
  private:
+  void read(const rosbag::MessageInstance& m, Chunk* item) const {
+    if (in_place_ && m.getDataType() == kChunkType && m.isType<gear_damping::SignalChunk>()) {
+      const std::uint32_t n = copyMessage(m, &item->bytes);
+      item->valid = chunkLayout(item->bytes.data(), n, &item->c).empty();
+      if (item->valid) return;
+    }
+    const auto p = m.instantiate<gear_damping::SignalChunk>();
+    item->valid = p != nullptr;
+    if (!p) return;
+    const std::uint32_t n = ros::serialization::serializationLength(*p);
+    if (item->bytes.size() < n) item->bytes.resize(n);
+    ros::serialization::OStream out(item->bytes.data(), n);
+    ros::serialization::serialize(out, *p);
+    chunkLayout(item->bytes.data(), n, &item->c);  // fits: serialised by ROS
+  }
+
   void run() {
     std::string error;
     try {
@@ -191,12 +219,20 @@ class ChunkReader {
       bag.open(path_, rosbag::bagmode::Read);
       rosbag::View view(bag, rosbag::TopicQuery(topic_));
       for (const rosbag::MessageInstance& m : view) {
-        Chunk c = m.instantiate<gear_damping::SignalChunk>();
-        const size_t n = c ? c->dte.size() : 0;
+        Chunk item;
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          if (!spare_.empty()) {
+            item.bytes = std::move(spare_.back());
+            spare_.pop_back();
+          }
+        }
+        read(m, &item);
+        const size_t n = item.valid ? item.c.dte.size() : 0;
         std::unique_lock<std::mutex> lock(mutex_);
         cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
         if (stop_) break;
-        queue_.push_back(std::move(c));
+        queue_.push_back(std::move(item));
         queued_ += n;
         cv_.notify_all();
       }
@@ -210,10 +246,12 @@ class ChunkReader {
   }
 
   const std::string path_, topic_;
+  const bool in_place_;
   std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Chunk> queue_;
-  size_t queued_ = 0;  // samples in queue_
+  std::vector<std::vector<std::uint8_t>> spare_;  // buffers the caller is done with
+  size_t queued_ = 0;                             // samples in queue_
   bool stop_ = false, done_ = false;
   std::string error_;
   std::thread thread_;  // last: started once the members above exist
@@ -554,6 +592,7 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
     bag.open(path, rosbag::bagmode::Read);
     if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
+    out.messages_indexed = structure.messages_indexed;
     ChunkScan scan(path, &out, structure.messages_indexed);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     for (const rosbag::MessageInstance& m : view)
@@ -585,14 +624,12 @@ Status streamSignalBag(const BagSignalInfo& info,
   auto plausible = [nan](size_t k, double x) {
     return std::isfinite(x) && !inRange(kPlausibleRanges[k], x) ? nan : x;
   };
+  // The range's channels are written where chunks cover them; the samples up to `filled` are
+  // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
+  Eigen::Index filled = 0;
   auto startRange = [&]() {
     const Eigen::Index n = ranges[r].second - ranges[r].first;
-    auto make = [&](bool present, Eigen::VectorXd& v) {
-      if (present)
-        v.setConstant(n, nan);
-      else
-        v.resize(0);
-    };
+    auto make = [&](bool present, Eigen::VectorXd& v) { v.resize(present ? n : 0); };
     block.time.resize(n);
     for (Eigen::Index i = 0; i < n; ++i)
       block.time[i] =
@@ -605,44 +642,69 @@ Status streamSignalBag(const BagSignalInfo& info,
     make(info.mesh_state, block.mesh_state);
     make(info.mesh_phase, block.mesh_phase);
     make(info.damping, block.damping);
+    filled = 0;
   };
-  // Emits every range that ends at or before sample `upto` (gap samples stay NaN).
+  auto gapUpTo = [&](Eigen::Index to) {  // NaN over [filled, to) of every channel present
+    if (to <= filled) return;
+    for (Eigen::VectorXd* v : {&block.dte, &block.dte_velocity, &block.stiffness, &block.torque,
+                               &block.mesh_state, &block.mesh_phase, &block.damping})
+      if (v->size() > 0) v->segment(filled, to - filled).setConstant(nan);
+    filled = to;
+  };
+  auto emit = [&]() {  // the current range to the sink, the next one started
+    gapUpTo(ranges[r].second - ranges[r].first);
+    if (Status s = sink(block, r); !s.ok()) return s;
+    if (++r < ranges.size()) startRange();
+    return Status();
+  };
+  // Samples [lo, hi) (global, from chunk sample b) of chunk c into the current range.
+  auto copy = [&](const RawChunk& c, Eigen::Index b, Eigen::Index lo, Eigen::Index hi) {
+    const Eigen::Index i0 = lo - ranges[r].first, n = hi - lo;
+    const size_t j0 = static_cast<size_t>(lo - b);
+    gapUpTo(i0);
+    auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
+      if (to.size() == 0) return;
+      for (Eigen::Index q = 0; q < n; ++q)
+        to[i0 + q] = plausible(k, from[j0 + static_cast<size_t>(q)]);
+    };
+    channel(c.dte, 0, block.dte);
+    channel(c.dte_velocity, 1, block.dte_velocity);
+    channel(c.stiffness, 2, block.stiffness);
+    channel(c.torque, 3, block.torque);
+    if (block.mesh_state.size() > 0)
+      for (Eigen::Index q = 0; q < n; ++q) {
+        const double x = c.mesh_state.p[j0 + static_cast<size_t>(q)];
+        block.mesh_state[i0 + q] = plausibleMeshState(x) ? x : nan;
+      }
+    channel(c.mesh_phase, 4, block.mesh_phase);
+    channel(c.damping, 5, block.damping);
+    filled = std::max(filled, i0 + n);
+  };
+  // Emits every range that ends at or before sample `upto` (gap samples NaN).
   auto flushUpTo = [&](Eigen::Index upto) {
-    while (r < ranges.size() && ranges[r].second <= upto) {
-      if (Status s = sink(block, r); !s.ok()) return s;
-      if (++r < ranges.size()) startRange();
-    }
+    while (r < ranges.size() && ranges[r].second <= upto)
+      if (Status s = emit(); !s.ok()) return s;
     return Status();
   };
   startRange();
   try {
-    ChunkReader reader(info.path, info.topic);  // reads ahead on its own thread
-    ChunkReader::Chunk c;
-    while (reader.next(&c)) {
+    // Reads ahead on its own thread.
+    ChunkReader reader(info.path, info.topic, info.messages_indexed);
+    ChunkReader::Chunk item;
+    while (reader.next(&item)) {
+      const RawChunk& c = item.c;
       // Validated by scanSignalBag; a bag changed since is not read out of bounds.
-      if (!c || c->first_index < info.first_index ||
-          c->first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
+      if (!item.valid || c.first_index < info.first_index ||
+          c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
         continue;
-      const Eigen::Index b = static_cast<Eigen::Index>(c->first_index - info.first_index);
-      const Eigen::Index e = b + static_cast<Eigen::Index>(c->dte.size());
+      const Eigen::Index b = static_cast<Eigen::Index>(c.first_index - info.first_index);
+      const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());
       if (Status s = flushUpTo(b); !s.ok()) return s;
       while (r < ranges.size() && ranges[r].first < e) {
         const Eigen::Index lo = std::max(b, ranges[r].first), hi = std::min(e, ranges[r].second);
-        for (Eigen::Index g = lo; g < hi; ++g) {
-          const size_t j = static_cast<size_t>(g - b);
-          const Eigen::Index i = g - ranges[r].first;
-          block.dte[i] = plausible(0, c->dte[j]);
-          if (info.dte_velocity) block.dte_velocity[i] = plausible(1, c->dte_velocity[j]);
-          if (info.stiffness) block.stiffness[i] = plausible(2, c->stiffness[j]);
-          if (info.torque) block.torque[i] = plausible(3, c->torque[j]);
-          if (info.mesh_state)
-            block.mesh_state[i] = plausibleMeshState(c->mesh_state[j]) ? c->mesh_state[j] : nan;
-          if (info.mesh_phase) block.mesh_phase[i] = plausible(4, c->mesh_phase[j]);
-          if (info.damping) block.damping[i] = plausible(5, c->damping[j]);
-        }
+        copy(c, b, lo, hi);
         if (hi < ranges[r].second) break;  // the range continues in the next chunk
-        if (Status s = sink(block, r); !s.ok()) return s;
-        if (++r < ranges.size()) startRange();
+        if (Status s = emit(); !s.ok()) return s;
       }
     }
     if (!reader.error().empty()) return Status::invalidInput(reader.error());

@@ -212,13 +212,14 @@ Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
   const auto bp_end = breakpoints.cend();
   auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
   auto scan = breakpoints.cbegin();  // first breakpoint > the interval's start
-  constexpr Eigen::Index kBlock = 1024;
-  constexpr size_t kB = static_cast<size_t>(kBlock);
+  // Blocks of 1024 intervals (fewer for a short record: the arrays are allocated per call).
+  const Eigen::Index n_block = std::clamp<Eigen::Index>(n_samples - 1, 1, 1024);
+  const size_t nb = static_cast<size_t>(n_block);
   const double h = dt / substeps, inv_h = 1.0 / h;
-  std::vector<AffineStep> maps(kB);
-  std::vector<char> split(kB);
+  std::vector<AffineStep> maps(nb);
+  std::vector<char> split(nb);
   const size_t n_stages = static_cast<size_t>(2 * substeps + 1);
-  std::vector<double> sc(n_stages * kB), sk(n_stages * kB), sf(n_stages * kB);
+  std::vector<double> sc(n_stages * nb), sk(n_stages * nb), sf(n_stages * nb);
   // The previous RK4 step's scaled damping and stiffness stages (a, b, c, k0, km, k1) and its
   // homogeneous part, per substep.
   std::vector<std::array<double, 6>> key(static_cast<size_t>(substeps));
@@ -227,19 +228,19 @@ Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
   SdofState s = initial;
   y_out[0] = s.y;
   if (v_out) v_out[0] = s.v;
-  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += kBlock) {
-    const Eigen::Index n1 = std::min(n_samples - 1, n0 + kBlock);
+  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += n_block) {
+    const Eigen::Index n1 = std::min(n_samples - 1, n0 + n_block);
     const size_t count = static_cast<size_t>(n1 - n0);
     for (Eigen::Index n = n0; n < n1; ++n) {
       const double ta = t0 + n * dt, tb = t0 + (n + 1) * dt;
       while (scan != bp_end && *scan <= ta) ++scan;
       split[static_cast<size_t>(n - n0)] = scan != bp_end && *scan < tb;
     }
-    stages(n0, n1, split.data(), sc.data(), sk.data(), sf.data(), kB);
+    stages(n0, n1, split.data(), sc.data(), sk.data(), sf.data(), nb);
     // forEachStep's substeps of each [t_n, t_n+1], of the nominal length h (forEachStep's differ
     // from it by rounding); a split interval's map is unused.
     for (int m = 0; m < substeps; ++m) {
-      const size_t k0 = static_cast<size_t>(2 * m) * kB, km = k0 + kB, k1 = km + kB;
+      const size_t k0 = static_cast<size_t>(2 * m) * nb, km = k0 + nb, k1 = km + nb;
       const double *c = sc.data(), *k = sk.data(), *f = sf.data();
       const size_t ms = static_cast<size_t>(m);
       for (size_t i = 0; i < count; ++i) {

@@ -38,8 +38,9 @@ struct BagStructure {
 
 /// Ok when `path` is a structurally sound bag of format 2.0; else InvalidInput (IoError when it
 /// cannot be opened) with a one-line message ("<path>: cannot read as a bag (<reason> at byte N)").
-/// The last file's result is remembered (by device, inode, size and modification time): a bag
-/// checked twice in a row is walked once. `structure` (optional) receives what the walk learnt.
+/// The last file's result is remembered (by device, inode, size, modification and status-change
+/// times) when the file was last changed more than 2 s before its walk: a bag checked twice in a
+/// row is then walked once. `structure` (optional) receives what the walk learnt.
 gear_sim::Status checkBagStructure(const std::string& path, BagStructure* structure = nullptr);
 
 }  // namespace gear_sim_ros
