@@ -16,6 +16,7 @@
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <tuple>
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -36,15 +37,40 @@ std::string openError(const std::string& path, const std::exception& e) {
          "); if it is truncated, `rosbag reindex` may recover it";
 }
 
+// A SignalChunk read in place from its serialized bytes (laid out by chunkLayout): the scan
+// needs its values once, not a deserialised copy.
+struct RawArray {
+  const std::uint8_t* p = nullptr;
+  size_t n = 0;
+  size_t size() const { return n; }
+  bool empty() const { return n == 0; }
+  double operator[](size_t i) const {  // a float64 element (little-endian, as the host)
+    double v;
+    std::memcpy(&v, p + 8 * i, 8);
+    return v;
+  }
+};
+struct RawChunk {
+  double sample_rate = 0.0;
+  std::uint64_t first_index = 0;
+  RawArray dte, dte_velocity, stiffness, torque, mesh_state, mesh_phase, damping;
+};
+
+// Where the fields of a SignalChunk's `n` serialized bytes lie, into *c; the layout problem
+// (checkMessageLayout's), empty when every length fits.
+std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c);
+// The serialized bytes of `m` into *buf (grown as needed, never shrunk); returns their count.
+std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uint8_t>* buf);
+
 // The channels a chunk carries, as a bit set (dte_velocity, stiffness, torque, mesh_state,
 // mesh_phase, damping).
-unsigned channelSet(const gear_damping::SignalChunk& c) {
+unsigned channelSet(const RawChunk& c) {
   return (!c.dte_velocity.empty() ? 1u : 0u) | (!c.stiffness.empty() ? 2u : 0u) |
          (!c.torque.empty() ? 4u : 0u) | (!c.mesh_state.empty() ? 8u : 0u) |
          (!c.mesh_phase.empty() ? 16u : 0u) | (!c.damping.empty() ? 32u : 0u);
 }
 
-std::string channelLengthError(const gear_damping::SignalChunk& c) {
+std::string channelLengthError(const RawChunk& c) {
   const size_t m = c.dte.size();
   auto bad = [m](size_t s) { return s != 0 && s != m; };
   if (bad(c.dte_velocity.size())) return "dte_velocity";
@@ -82,7 +108,7 @@ void addPlausibilityWarnings(std::vector<double> chunk_max, BagSignalInfo* info)
 }
 
 // The channels of a chunk that plausibility is checked on, in kPlausibleRanges' order.
-std::array<const std::vector<double>*, 6> rangedChannels(const gear_damping::SignalChunk& c) {
+std::array<const RawArray*, 6> rangedChannels(const RawChunk& c) {
   return {&c.dte, &c.dte_velocity, &c.stiffness, &c.torque, &c.mesh_phase, &c.damping};
 }
 
@@ -92,40 +118,56 @@ bool plausibleMeshState(double x) { return x == 0.0 || x == 1.0; }
 
 // Counts the implausible values of a chunk into `info`; returns the chunk's max |dte|
 // (finite values only, 0 when none).
-double countImplausible(const gear_damping::SignalChunk& c, BagSignalInfo* info) {
+double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   const auto channels = rangedChannels(c);
-  for (size_t k = 0; k < channels.size(); ++k)
-    for (double x : *channels[k]) {
+  for (size_t k = 0; k < channels.size(); ++k) {
+    const RawArray& a = *channels[k];
+    for (size_t i = 0; i < a.size(); ++i) {
+      const double x = a[i];
       if (!std::isfinite(x))
         ++info->non_finite_values;
       else if (!inRange(kPlausibleRanges[k], x))
         ++info->out_of_range_values;
     }
-  for (double x : c.mesh_state) {
+  }
+  for (size_t i = 0; i < c.mesh_state.size(); ++i) {
+    const double x = c.mesh_state.p[i];
     if (!std::isfinite(x))
       ++info->non_finite_values;
     else if (!plausibleMeshState(x))
       ++info->bad_mesh_states;
   }
   double m = 0.0;
-  for (double x : c.dte)
+  for (size_t i = 0; i < c.dte.size(); ++i) {
+    const double x = c.dte[i];
     if (std::isfinite(x)) m = std::max(m, std::abs(x));
+  }
   return m;
 }
 
-// Reads and deserialises the messages of a SignalChunk topic on a thread of its own, so that
-// what the caller does with one chunk overlaps the read of the next (issue 18: `analyze` reads
-// and computes at the same time). The queue between them is bounded by samples, so memory stays
-// at about kQueueSamples samples (or one chunk when chunks are larger). A message that does not
-// instantiate as a SignalChunk arrives as nullptr; an exception of the read ends the stream and
-// is reported by error().
+// Reads the messages of a SignalChunk topic on a thread of its own, so that what the caller does
+// with one chunk overlaps the read of the next (issue 18: `analyze` reads and computes at the
+// same time). The queue between them is bounded by samples, so memory stays at about
+// kQueueSamples samples (or one chunk when chunks are larger); the byte buffers are recycled.
+// With `in_place` (BagSignalInfo::messages_indexed) a SignalChunk is passed on as its serialized
+// bytes, its fields read in place (chunkLayout), not deserialised; any other message goes
+// through rosbag's deserialisation as before. A message that does not instantiate as a
+// SignalChunk arrives with valid == false; an exception of the read ends the stream and is
+// reported by error().
 class ChunkReader {
  public:
-  using Chunk = gear_damping::SignalChunk::ConstPtr;
+  struct Chunk {
+    std::vector<std::uint8_t> bytes;  // the serialized message
+    RawChunk c;                       // its fields, in `bytes`
+    bool valid = false;
+  };
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
-  ChunkReader(std::string path, std::string topic)
-      : path_(std::move(path)), topic_(std::move(topic)), thread_([this] { run(); }) {}
+  ChunkReader(std::string path, std::string topic, bool in_place)
+      : path_(std::move(path)),
+        topic_(std::move(topic)),
+        in_place_(in_place),
+        thread_([this] { run(); }) {}
   ~ChunkReader() {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -137,14 +179,16 @@ class ChunkReader {
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
 
-  /// The next message into *c; false at the end of the topic or after a read error.
+  /// The next message into *c (whose previous bytes are recycled); false at the end of the
+  /// topic or after a read error.
   bool next(Chunk* c) {
     std::unique_lock<std::mutex> lock(mutex_);
+    if (c->bytes.capacity() > 0) spare_.push_back(std::move(c->bytes));
     cv_.wait(lock, [this] { return !queue_.empty() || done_; });
     if (queue_.empty()) return false;
     *c = std::move(queue_.front());
     queue_.pop_front();
-    queued_ -= *c ? (*c)->dte.size() : 0;
+    queued_ -= c->valid ? c->c.dte.size() : 0;
     cv_.notify_all();
     return true;
   }
@@ -152,6 +196,22 @@ class ChunkReader {
   const std::string& error() const { return error_; }
 
  private:
+  void read(const rosbag::MessageInstance& m, Chunk* item) const {
+    if (in_place_ && m.getDataType() == kChunkType && m.isType<gear_damping::SignalChunk>()) {
+      const std::uint32_t n = copyMessage(m, &item->bytes);
+      item->valid = chunkLayout(item->bytes.data(), n, &item->c).empty();
+      if (item->valid) return;
+    }
+    const auto p = m.instantiate<gear_damping::SignalChunk>();
+    item->valid = p != nullptr;
+    if (!p) return;
+    const std::uint32_t n = ros::serialization::serializationLength(*p);
+    if (item->bytes.size() < n) item->bytes.resize(n);
+    ros::serialization::OStream out(item->bytes.data(), n);
+    ros::serialization::serialize(out, *p);
+    chunkLayout(item->bytes.data(), n, &item->c);  // fits: serialised by ROS
+  }
+
   void run() {
     std::string error;
     try {
@@ -159,12 +219,20 @@ class ChunkReader {
       bag.open(path_, rosbag::bagmode::Read);
       rosbag::View view(bag, rosbag::TopicQuery(topic_));
       for (const rosbag::MessageInstance& m : view) {
-        Chunk c = m.instantiate<gear_damping::SignalChunk>();
-        const size_t n = c ? c->dte.size() : 0;
+        Chunk item;
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          if (!spare_.empty()) {
+            item.bytes = std::move(spare_.back());
+            spare_.pop_back();
+          }
+        }
+        read(m, &item);
+        const size_t n = item.valid ? item.c.dte.size() : 0;
         std::unique_lock<std::mutex> lock(mutex_);
         cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
         if (stop_) break;
-        queue_.push_back(std::move(c));
+        queue_.push_back(std::move(item));
         queued_ += n;
         cv_.notify_all();
       }
@@ -178,10 +246,12 @@ class ChunkReader {
   }
 
   const std::string path_, topic_;
+  const bool in_place_;
   std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Chunk> queue_;
-  size_t queued_ = 0;  // samples in queue_
+  std::vector<std::vector<std::uint8_t>> spare_;  // buffers the caller is done with
+  size_t queued_ = 0;                             // samples in queue_
   bool stop_ = false, done_ = false;
   std::string error_;
   std::thread thread_;  // last: started once the members above exist
@@ -250,36 +320,54 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
 // plausibility warnings and channel flags are filled in at the end.
 class ChunkScan {
  public:
-  ChunkScan(const std::string& path, BagSignalInfo* out) : path_(path), out_(*out) {}
+  // `raw`: the bag's messages all name indexed connections (BagStructure::messages_indexed),
+  // so a SignalChunk whose layout fits is read in place, as deserialising it would read it.
+  ChunkScan(const std::string& path, BagSignalInfo* out, bool raw)
+      : path_(path), out_(*out), raw_(raw) {}
 
   Status add(const rosbag::MessageInstance& m) {
+    RawChunk c;
+    bool in_place = false;
     if (m.getDataType() == kChunkType) {
-      if (const Status bad = checkMessageLayout(m); !bad.ok()) {
+      const std::uint32_t n = copyMessage(m, &buffer_);
+      if (const std::string bad = chunkLayout(buffer_.data(), n, &c); !bad.empty()) {
         return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
                                     " message " + std::to_string(out_.chunks + 1) + ": corrupt " +
-                                    kChunkType + " (" + bad.message() + ")");
+                                    kChunkType + " (" + bad + ")");
       }
+      in_place = raw_ && m.isType<gear_damping::SignalChunk>();
     }
-    const auto c = m.instantiate<gear_damping::SignalChunk>();
+    if (!in_place) {  // rosbag's deserialisation, with its checks and exceptions
+      const auto p = m.instantiate<gear_damping::SignalChunk>();
+      if (!p) {
+        return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
+                                    " message " + std::to_string(out_.chunks + 1) +
+                                    " (first_index ?): not a " + std::string(kChunkType));
+      }
+      const std::uint32_t n = ros::serialization::serializationLength(*p);
+      if (buffer_.size() < n) buffer_.resize(n);
+      ros::serialization::OStream out(buffer_.data(), n);
+      ros::serialization::serialize(out, *p);
+      chunkLayout(buffer_.data(), n, &c);  // fits: serialised by ROS
+    }
     const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
                               std::to_string(out_.chunks + 1) + " (first_index " +
-                              (c ? std::to_string(c->first_index) : std::string("?")) + ")";
-    if (!c) {
-      return Status::invalidInput(where + ": not a " + std::string(kChunkType));
-    }
-    if (Status st = checkChunk(*c, where); !st.ok()) return st;
+                              std::to_string(c.first_index) + ")";
+    if (Status st = checkChunk(c, where); !st.ok()) return st;
     if (out_.chunks == 0) {
-      out_.sample_rate = c->sample_rate;
-      out_.first_index = c->first_index;
-      channels_ = channelSet(*c);
-    } else if (Status st = checkSequence(*c, where); !st.ok()) {
+      out_.sample_rate = c.sample_rate;
+      out_.first_index = c.first_index;
+      channels_ = channelSet(c);
+    } else if (Status st = checkSequence(c, where); !st.ok()) {
       return st;
     }
-    next_ = c->first_index + c->dte.size();
-    out_.real_samples += static_cast<std::int64_t>(c->dte.size());
-    chunk_max_.push_back(countImplausible(*c, &out_));
-    for (double k : c->stiffness)
+    next_ = c.first_index + c.dte.size();
+    out_.real_samples += static_cast<std::int64_t>(c.dte.size());
+    chunk_max_.push_back(countImplausible(c, &out_));
+    for (size_t i = 0; i < c.stiffness.size(); ++i) {
+      const double k = c.stiffness[i];
       if (std::isfinite(k)) k_sum_ += k, ++k_count_;
+    }
     ++out_.chunks;
     return {};
   }
@@ -315,7 +403,7 @@ class ChunkScan {
 
  private:
   // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
-  static Status checkChunk(const gear_damping::SignalChunk& c, const std::string& where) {
+  static Status checkChunk(const RawChunk& c, const std::string& where) {
     if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
       return Status::invalidInput(where + ": sample_rate " + formatNumber(c.sample_rate) +
                                   " is not a positive number");
@@ -338,7 +426,7 @@ class ChunkScan {
 
   // A later chunk against the first ones: same rate and channels, indices increasing; a gap
   // is counted and (the first kMaxGapWarnings) warned about.
-  Status checkSequence(const gear_damping::SignalChunk& c, const std::string& where) {
+  Status checkSequence(const RawChunk& c, const std::string& where) {
     if (c.sample_rate != out_.sample_rate) {
       return Status::invalidInput(where + ": sample_rate changed from " +
                                   formatNumber(out_.sample_rate) + " to " +
@@ -373,7 +461,9 @@ class ChunkScan {
 
   const std::string& path_;
   BagSignalInfo& out_;
-  std::uint64_t next_ = 0;  // global index after the previous chunk
+  const bool raw_;
+  std::vector<std::uint8_t> buffer_;  // the current message's serialized bytes
+  std::uint64_t next_ = 0;            // global index after the previous chunk
   unsigned channels_ = 0;
   double k_sum_ = 0.0;
   long long k_count_ = 0;
@@ -392,19 +482,18 @@ namespace {
 
 class LayoutWalk {
  public:
-  explicit LayoutWalk(const rosbag::MessageInstance& m) : n_(m.size()), buf_(n_) {
-    ros::serialization::OStream out(buf_.data(), n_);
-    m.write(out);
-  }
+  LayoutWalk(const std::uint8_t* bytes, std::uint32_t n) : n_(n), buf_(bytes) {}
   bool skip(std::uint64_t bytes) {
     if (bytes > n_ - k_) return false;
     k_ += bytes;
     return true;
   }
-  // An array of `len` elements of `element` bytes (a string: element 1).
-  std::string array(std::uint64_t element, const char* name) {
+  // An array of `len` elements of `element` bytes (a string: element 1); where it lies into
+  // *out when given.
+  std::string array(std::uint64_t element, const char* name, RawArray* out = nullptr) {
     std::uint32_t len = 0;
     if (std::string e = length(name, &len); !e.empty()) return e;
+    if (out != nullptr) *out = {buf_ + k_, len};
     return skip(element * len) ? std::string() : claims(name, len);
   }
   // string[]: a count, then each string's length and bytes.
@@ -418,11 +507,12 @@ class LayoutWalk {
   }
   // std_msgs/Header: seq, stamp, frame_id.
   std::string header() { return skip(12) ? array(1, "header.frame_id") : "cut in its header"; }
+  std::uint64_t position() const { return k_; }
 
  private:
   std::string length(const char* name, std::uint32_t* len) {
     if (n_ - k_ < 4) return std::string("cut before the length of ") + name;
-    std::memcpy(len, buf_.data() + k_, 4);
+    std::memcpy(len, buf_ + k_, 4);
     k_ += 4;
     return {};
   }
@@ -431,23 +521,49 @@ class LayoutWalk {
            std::to_string(n_) + " bytes";
   }
   std::uint32_t n_;
-  std::vector<std::uint8_t> buf_;
+  const std::uint8_t* buf_;
   std::uint64_t k_ = 0;
 };
+
+std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uint8_t>* buf) {
+  const std::uint32_t n = m.size();
+  if (buf->size() < n) buf->resize(n);
+  ros::serialization::OStream out(buf->data(), n);
+  m.write(out);
+  return n;
+}
+
+std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
+  LayoutWalk w(bytes, n);
+  if (std::string e = w.header(); !e.empty()) return e;
+  const std::uint64_t at = w.position();
+  if (!w.skip(16)) return "cut before sample_rate and first_index";
+  std::memcpy(&c->sample_rate, bytes + at, 8);
+  std::memcpy(&c->first_index, bytes + at + 8, 8);
+  const std::tuple<std::uint64_t, const char*, RawArray*> arrays[] = {
+      {8, "dte", &c->dte},
+      {8, "dte_velocity", &c->dte_velocity},
+      {8, "stiffness", &c->stiffness},
+      {8, "torque", &c->torque},
+      {1, "mesh_state", &c->mesh_state},
+      {8, "mesh_phase", &c->mesh_phase},
+      {8, "damping", &c->damping}};
+  for (const auto& [size, name, out] : arrays)
+    if (std::string e = w.array(size, name, out); !e.empty()) return e;
+  return {};
+}
 
 // The problem of checkMessageLayout, empty when the layout fits (LayoutWalk's convention).
 std::string layoutProblem(const rosbag::MessageInstance& m) {
   const std::string& type = m.getDataType();
-  LayoutWalk w(m);
+  std::vector<std::uint8_t> buf;
+  const std::uint32_t n = copyMessage(m, &buf);
   if (type == kChunkType) {
-    if (std::string e = w.header(); !e.empty()) return e;
-    if (!w.skip(16)) return "cut before sample_rate and first_index";
-    const std::pair<std::uint64_t, const char*> arrays[] = {
-        {8, "dte"},        {8, "dte_velocity"}, {8, "stiffness"}, {8, "torque"},
-        {1, "mesh_state"}, {8, "mesh_phase"},   {8, "damping"}};
-    for (const auto& [size, name] : arrays)
-      if (std::string e = w.array(size, name); !e.empty()) return e;
-  } else if (type == "sensor_msgs/JointState") {
+    RawChunk c;
+    return chunkLayout(buf.data(), n, &c);
+  }
+  LayoutWalk w(buf.data(), n);
+  if (type == "sensor_msgs/JointState") {
     if (std::string e = w.header(); !e.empty()) return e;
     if (std::string e = w.strings("name"); !e.empty()) return e;
     for (const char* name : {"position", "velocity", "effort"})
@@ -469,13 +585,15 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   out.path = path;
   // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
   // length): every record is checked first.
-  if (Status s = checkBagStructure(path); !s.ok()) return s;
+  BagStructure structure;
+  if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
     if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
-    ChunkScan scan(path, &out);
+    out.messages_indexed = structure.messages_indexed;
+    ChunkScan scan(path, &out, structure.messages_indexed);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     for (const rosbag::MessageInstance& m : view)
       if (Status s = scan.add(m); !s.ok()) return s;
@@ -506,14 +624,12 @@ Status streamSignalBag(const BagSignalInfo& info,
   auto plausible = [nan](size_t k, double x) {
     return std::isfinite(x) && !inRange(kPlausibleRanges[k], x) ? nan : x;
   };
+  // The range's channels are written where chunks cover them; the samples up to `filled` are
+  // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
+  Eigen::Index filled = 0;
   auto startRange = [&]() {
     const Eigen::Index n = ranges[r].second - ranges[r].first;
-    auto make = [&](bool present, Eigen::VectorXd& v) {
-      if (present)
-        v.setConstant(n, nan);
-      else
-        v.resize(0);
-    };
+    auto make = [&](bool present, Eigen::VectorXd& v) { v.resize(present ? n : 0); };
     block.time.resize(n);
     for (Eigen::Index i = 0; i < n; ++i)
       block.time[i] =
@@ -526,44 +642,69 @@ Status streamSignalBag(const BagSignalInfo& info,
     make(info.mesh_state, block.mesh_state);
     make(info.mesh_phase, block.mesh_phase);
     make(info.damping, block.damping);
+    filled = 0;
   };
-  // Emits every range that ends at or before sample `upto` (gap samples stay NaN).
+  auto gapUpTo = [&](Eigen::Index to) {  // NaN over [filled, to) of every channel present
+    if (to <= filled) return;
+    for (Eigen::VectorXd* v : {&block.dte, &block.dte_velocity, &block.stiffness, &block.torque,
+                               &block.mesh_state, &block.mesh_phase, &block.damping})
+      if (v->size() > 0) v->segment(filled, to - filled).setConstant(nan);
+    filled = to;
+  };
+  auto emit = [&]() {  // the current range to the sink, the next one started
+    gapUpTo(ranges[r].second - ranges[r].first);
+    if (Status s = sink(block, r); !s.ok()) return s;
+    if (++r < ranges.size()) startRange();
+    return Status();
+  };
+  // Samples [lo, hi) (global, from chunk sample b) of chunk c into the current range.
+  auto copy = [&](const RawChunk& c, Eigen::Index b, Eigen::Index lo, Eigen::Index hi) {
+    const Eigen::Index i0 = lo - ranges[r].first, n = hi - lo;
+    const size_t j0 = static_cast<size_t>(lo - b);
+    gapUpTo(i0);
+    auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
+      if (to.size() == 0) return;
+      for (Eigen::Index q = 0; q < n; ++q)
+        to[i0 + q] = plausible(k, from[j0 + static_cast<size_t>(q)]);
+    };
+    channel(c.dte, 0, block.dte);
+    channel(c.dte_velocity, 1, block.dte_velocity);
+    channel(c.stiffness, 2, block.stiffness);
+    channel(c.torque, 3, block.torque);
+    if (block.mesh_state.size() > 0)
+      for (Eigen::Index q = 0; q < n; ++q) {
+        const double x = c.mesh_state.p[j0 + static_cast<size_t>(q)];
+        block.mesh_state[i0 + q] = plausibleMeshState(x) ? x : nan;
+      }
+    channel(c.mesh_phase, 4, block.mesh_phase);
+    channel(c.damping, 5, block.damping);
+    filled = std::max(filled, i0 + n);
+  };
+  // Emits every range that ends at or before sample `upto` (gap samples NaN).
   auto flushUpTo = [&](Eigen::Index upto) {
-    while (r < ranges.size() && ranges[r].second <= upto) {
-      if (Status s = sink(block, r); !s.ok()) return s;
-      if (++r < ranges.size()) startRange();
-    }
+    while (r < ranges.size() && ranges[r].second <= upto)
+      if (Status s = emit(); !s.ok()) return s;
     return Status();
   };
   startRange();
   try {
-    ChunkReader reader(info.path, info.topic);  // reads ahead on its own thread
-    ChunkReader::Chunk c;
-    while (reader.next(&c)) {
+    // Reads ahead on its own thread.
+    ChunkReader reader(info.path, info.topic, info.messages_indexed);
+    ChunkReader::Chunk item;
+    while (reader.next(&item)) {
+      const RawChunk& c = item.c;
       // Validated by scanSignalBag; a bag changed since is not read out of bounds.
-      if (!c || c->first_index < info.first_index ||
-          c->first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
+      if (!item.valid || c.first_index < info.first_index ||
+          c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
         continue;
-      const Eigen::Index b = static_cast<Eigen::Index>(c->first_index - info.first_index);
-      const Eigen::Index e = b + static_cast<Eigen::Index>(c->dte.size());
+      const Eigen::Index b = static_cast<Eigen::Index>(c.first_index - info.first_index);
+      const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());
       if (Status s = flushUpTo(b); !s.ok()) return s;
       while (r < ranges.size() && ranges[r].first < e) {
         const Eigen::Index lo = std::max(b, ranges[r].first), hi = std::min(e, ranges[r].second);
-        for (Eigen::Index g = lo; g < hi; ++g) {
-          const size_t j = static_cast<size_t>(g - b);
-          const Eigen::Index i = g - ranges[r].first;
-          block.dte[i] = plausible(0, c->dte[j]);
-          if (info.dte_velocity) block.dte_velocity[i] = plausible(1, c->dte_velocity[j]);
-          if (info.stiffness) block.stiffness[i] = plausible(2, c->stiffness[j]);
-          if (info.torque) block.torque[i] = plausible(3, c->torque[j]);
-          if (info.mesh_state)
-            block.mesh_state[i] = plausibleMeshState(c->mesh_state[j]) ? c->mesh_state[j] : nan;
-          if (info.mesh_phase) block.mesh_phase[i] = plausible(4, c->mesh_phase[j]);
-          if (info.damping) block.damping[i] = plausible(5, c->damping[j]);
-        }
+        copy(c, b, lo, hi);
         if (hi < ranges[r].second) break;  // the range continues in the next chunk
-        if (Status s = sink(block, r); !s.ok()) return s;
-        if (++r < ranges.size()) startRange();
+        if (Status s = emit(); !s.ok()) return s;
       }
     }
     if (!reader.error().empty()) return Status::invalidInput(reader.error());

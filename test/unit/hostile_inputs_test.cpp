@@ -204,6 +204,28 @@ TEST_F(Hostile, IntactBagsPassTheStructureCheckCompressedOrNot) {
   }
 }
 
+// The scan reads SignalChunks in place from their bytes only when every message record names a
+// connection of the bag's index; one that names another is refused as rosbag's deserialisation
+// refuses it (the scan then goes through rosbag), not read.
+TEST_F(Hostile, MessageOfAnUnindexedConnectionIsRefusedAsRosbagRefusesIt) {
+  const std::string intact = writeBag("indexed.bag", [](size_t k) { return 500 * k; });
+  gear_sim_ros::BagStructure structure;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::checkBagStructure(intact, &structure), &e)) << e;
+  EXPECT_TRUE(structure.messages_indexed);
+  std::string b = readBytes(intact);
+  // The first message record's header: conn (4 bytes), then the op field's length and op=2.
+  putLe32(&b, find(b, std::string("op=\x02", 4)) - 8, 77);
+  const std::string bag = path("unindexed.bag");
+  writeBytes(bag, b);
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::checkBagStructure(bag, &structure), &e)) << e;
+  EXPECT_FALSE(structure.messages_indexed);
+  gear_sim_ros::BagSignalInfo info;
+  const gear_sim::Status s = gear_sim_ros::scanSignalBag(bag, "", &info);
+  EXPECT_EQ(s.code(), gear_sim::StatusCode::InvalidInput);
+  EXPECT_NE(s.message().find("Unknown connection ID: 77"), std::string::npos) << s.message();
+}
+
 // Each corruption is refused by the structure check, naming it, before rosbag reads the file:
 // without the check, the first one is a heap read out of bounds in ros::Header::parse (found
 // by fuzz_bag under AddressSanitizer; the sanitizer stage runs this test), the others send

@@ -2020,6 +2020,68 @@ class ResponseCoefficients {
   size_t si_ = 0, bi_ = 0;  // stage()'s cursors
 };
 
+// The modeled response's stage look-ups in the common case, without ResponseCoefficients'
+// generality: the known formulation with the stiffness held in the segment, one RK4 step per
+// sample, no load law. It computes what ResponseCoefficients::stage computes there, with the same
+// operations (so the same values): C = the segment's C, K = the held sample (that of j+1 when
+// the interval's break lies at or before its midpoint), F = force_factor T1 with T1 the sample
+// values at the ends and the forward model's cubic at the midpoint.
+class HeldKnownStages {
+ public:
+  HeldKnownStages(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
+                  const std::vector<SegmentEstimate>& seg, const ForwardModel::Ranges& ranges,
+                  const ForwardModel& fm, int substeps, Index begin)
+      : s_(s),
+        seg_(seg),
+        ranges_(ranges),
+        fm_(fm),
+        force_factor_(gear.force_factor),
+        inv_me_(1.0 / gear.equivalent_mass),
+        begin_(begin),
+        on_(substeps == 1 && r.formulation == Formulation::Known && s.stiffness != nullptr &&
+            !(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable)) {
+    held_.resize(seg.size());
+    for (size_t i = 0; i < seg.size(); ++i) held_[i] = !fm.smoothStiffness(ranges[i].first);
+  }
+
+  // Stages 0, 1, 2 of interval i into c/k/f[0], [stride], [2 stride]; false (nothing written)
+  // outside the common case.
+  bool fill(Index i, double* c, double* k, double* f, size_t stride) {
+    if (!on_) return false;
+    const Index j = begin_ + i;
+    const std::vector<QuadratureBreak>& brk = fm_.breaks();
+    while (si_ + 1 < seg_.size() && ranges_[si_ + 1].first <= j) ++si_;
+    while (bi_ < brk.size() && brk[bi_].j < j) ++bi_;
+    if (!held_[si_]) return false;
+    const double split = bi_ < brk.size() && brk[bi_].j == j ? brk[bi_].th : 1.0;
+    const bool right = 0.5 >= split;
+    const Index lo = ranges_[si_].first, hi = ranges_[si_].second;
+    const double K = (right && j + 1 < s_.n ? s_.stiffness[j + 1] : s_.stiffness[j]) * inv_me_;
+    const double* T = s_.torque;
+    const double t0 = T == nullptr ? 0.0 : T[j];
+    const double tm = fm_.torque(j, 0.5, lo, hi);
+    const double t1 = T == nullptr ? 0.0 : (j + 1 < s_.n ? T[j + 1] : fm_.torque(j, 1.0, lo, hi));
+    const double C = seg_[si_].C;
+    c[0] = c[stride] = c[2 * stride] = C;
+    k[0] = k[stride] = k[2 * stride] = K;
+    f[0] = force_factor_ * t0;
+    f[stride] = force_factor_ * tm;
+    f[2 * stride] = force_factor_ * t1;
+    return true;
+  }
+
+ private:
+  const SignalView& s_;
+  const std::vector<SegmentEstimate>& seg_;
+  const ForwardModel::Ranges& ranges_;
+  const ForwardModel& fm_;
+  const double force_factor_, inv_me_;
+  const Index begin_;
+  const bool on_;
+  std::vector<char> held_;
+  size_t si_ = 0, bi_ = 0;
+};
+
 }  // namespace
 
 gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
@@ -2060,13 +2122,27 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
   ResponseCoefficients rc(s, gear, r, seg, ranges, fm, substeps, begin);
   const std::vector<double> bps = responseBreakpoints(s, fm, rc.shape(), r, seg, begin, end);
   auto coeffs = [&rc](double t, double t_ref) { return rc.generic(t, t_ref); };
-  auto stage = [&rc](Index i, int k) { return rc.stage(i, k); };
+  HeldKnownStages held(s, gear, r, seg, ranges, fm, substeps, begin);
+  auto stages = [&](Index n0, Index n1, const char* split, double* c, double* k, double* f,
+                    size_t stride) {
+    for (Index i = n0; i < n1; ++i) {
+      const size_t q = static_cast<size_t>(i - n0);
+      if (split[q] || held.fill(i, c + q, k + q, f + q, stride)) continue;
+      for (int u = 0; u <= 2 * substeps; ++u) {
+        const gear_sim::SdofCoefficients v = rc.stage(i, u);
+        const size_t at = static_cast<size_t>(u) * stride + q;
+        c[at] = v.C;
+        k[at] = v.K;
+        f[at] = v.F;
+      }
+    }
+  };
   const Index n = end - begin;
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
-  if (const gear_sim::Status e = gear_sim::integrateSdofAffine(
-          coeffs, stage, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4, substeps,
+  if (const gear_sim::Status e = gear_sim::integrateSdofAffineBlocks(
+          coeffs, stages, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4, substeps,
           out->modeled.data(), nullptr);
       !e.ok())
     return e.withContext("modeled response");

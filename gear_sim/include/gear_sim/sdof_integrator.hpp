@@ -11,7 +11,9 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -119,30 +121,44 @@ struct AffineStep {
   double m11 = 1, m12 = 0, m21 = 0, m22 = 1, g1 = 0, g2 = 0;
 };
 
+/// The homogeneous part (m11, m12, m21, m22) of rk4AffineScaled into *s: it depends on the
+/// damping and stiffness stages only (held over many steps between stiffness switches).
+inline void rk4AffineHomogeneous(double h, double inv_h, double a, double b, double c, double k0,
+                                 double km, double k1, AffineStep* s) {
+  constexpr double k3 = 1.0 / 3.0, k6 = 1.0 / 6.0, k12 = 1.0 / 12.0, k24 = 1.0 / 24.0;
+  s->m11 = 1.0 - km * k3 + k0 * (km * k24 - k6) + b * (k0 * k12 + km * k12 - b * k0 * k24);
+  s->m12 = h * (1.0 - km * k6 + b * (b * k12 + km * k24 - k3) +
+                a * (b * (k12 - b * k24) + km * k24 - k6));
+  s->m21 =
+      inv_h *
+      (b * (b * (c * k0 * k24 - k0 * k12) - c * km * k12 + k0 * (k6 - k1 * k24) + km * k6) +
+       c * (km * k6 - k0 * km * k24) + k0 * (km * k12 - k6) + k1 * (km * k12 - k6) - 2.0 * km * k3);
+  s->m22 = 1.0 - km * k3 +
+           a * (b * (b * (c * k24 - k12) - k1 * k24 + k6) - c * km * k24 + km * k12 - k6) +
+           b * (b * (k6 - c * k12) + c * (k6 - km * k24) + k1 * k12 + km * k12 - 2.0 * k3) +
+           c * (km * k12 - k6) + k1 * (km * k24 - k6);
+}
+
+/// The forcing part (g1, g2) of rk4AffineScaled into *s.
+inline void rk4AffineForcing(double inv_h, double b, double c, double k1, double km, double f0,
+                             double fm, double f1, AffineStep* s) {
+  constexpr double k3 = 1.0 / 3.0, k6 = 1.0 / 6.0, k12 = 1.0 / 12.0, k24 = 1.0 / 24.0;
+  s->g1 = fm * k3 + f0 * (k6 - km * k24) + b * (b * f0 * k24 - f0 * k12 - fm * k12);
+  s->g2 =
+      inv_h * (b * (b * (f0 * k12 - c * f0 * k24) + c * fm * k12 + f0 * (k1 * k24 - k6) - fm * k6) +
+               c * (f0 * km * k24 - fm * k6) + f0 * (k6 - km * k12) + f1 * k6 - fm * k1 * k12 +
+               2.0 * fm * k3);
+}
+
 /// Closed form of rk4Step as an affine map (derived symbolically from rk4Step in the scaled
 /// variables V = h v, a = h C, k = h^2 K, f = h^2 F; Horner form), from the scaled stage values
 /// at the step's start (a, k0, f0), midpoint (b, km, fm) and end (c, k1, f1). Straight-line code:
 /// called in a loop over arrays it pipelines and vectorises.
 inline AffineStep rk4AffineScaled(double h, double inv_h, double a, double b, double c, double k0,
                                   double km, double k1, double f0, double fm, double f1) {
-  constexpr double k3 = 1.0 / 3.0, k6 = 1.0 / 6.0, k12 = 1.0 / 12.0, k24 = 1.0 / 24.0;
   AffineStep s;
-  s.m11 = 1.0 - km * k3 + k0 * (km * k24 - k6) + b * (k0 * k12 + km * k12 - b * k0 * k24);
-  s.m12 = h * (1.0 - km * k6 + b * (b * k12 + km * k24 - k3) +
-               a * (b * (k12 - b * k24) + km * k24 - k6));
-  s.g1 = fm * k3 + f0 * (k6 - km * k24) + b * (b * f0 * k24 - f0 * k12 - fm * k12);
-  s.m21 =
-      inv_h *
-      (b * (b * (c * k0 * k24 - k0 * k12) - c * km * k12 + k0 * (k6 - k1 * k24) + km * k6) +
-       c * (km * k6 - k0 * km * k24) + k0 * (km * k12 - k6) + k1 * (km * k12 - k6) - 2.0 * km * k3);
-  s.m22 = 1.0 - km * k3 +
-          a * (b * (b * (c * k24 - k12) - k1 * k24 + k6) - c * km * k24 + km * k12 - k6) +
-          b * (b * (k6 - c * k12) + c * (k6 - km * k24) + k1 * k12 + km * k12 - 2.0 * k3) +
-          c * (km * k12 - k6) + k1 * (km * k24 - k6);
-  s.g2 =
-      inv_h * (b * (b * (f0 * k12 - c * f0 * k24) + c * fm * k12 + f0 * (k1 * k24 - k6) - fm * k6) +
-               c * (f0 * km * k24 - fm * k6) + f0 * (k6 - km * k12) + f1 * k6 - fm * k1 * k12 +
-               2.0 * fm * k3);
+  rk4AffineHomogeneous(h, inv_h, a, b, c, k0, km, k1, &s);
+  rk4AffineForcing(inv_h, b, c, k1, km, f0, fm, f1, &s);
   return s;
 }
 
@@ -176,49 +192,79 @@ inline AffineStep affineOfStep(Integrator method, double h, double inv_h,
 }
 
 /// integrateSdof computed in blocks, with the same steps and stages: a first pass takes the
-/// coefficients of every output interval without a breakpoint inside from
-/// `stage(n, k)` (the coefficients at t_n + k dt / (2 substeps), k = 0..2 substeps, called for
-/// ascending n: 2 substeps + 1 look-ups instead of 3 per substep) and turns its steps into one
-/// affine map (independent iterations the CPU pipelines); a second applies the maps (a 2x2
-/// multiply-add per sample). Intervals with a breakpoint inside take advanceSdof with
-/// `coeffs`. With `stage` equal to `coeffs` at those instants, the results equal
+/// coefficients of every output interval without a breakpoint inside, for blocks of intervals
+/// [n0, n1) in ascending order, from `stages(n0, n1, split, c, k, f, stride)`, which fills, for
+/// every n with split[n - n0] == 0, the coefficients at t_n + q dt / (2 substeps),
+/// q = 0..2 substeps, into c[q * stride + n - n0] (C), k[...] (K) and f[...] (F); a second turns
+/// each interval's steps into one affine map (independent iterations without look-ups; the
+/// homogeneous part of an RK4 step is reused while its damping and stiffness stages are the same,
+/// bit for bit, as the previous interval's: between stiffness switches), a third applies the maps
+/// (a 2x2 multiply-add per sample). Intervals with a breakpoint inside take advanceSdof with
+/// `coeffs`. With the stages equal to `coeffs` at those instants, the results equal
 /// integrateSdof's to rounding. Same arguments, outputs and errors otherwise.
-template <class CoeffFn, class StageFn>
-Status integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
-                           std::vector<double> breakpoints, double t0, double dt,
-                           Eigen::Index n_samples, SdofState initial, Integrator method,
-                           int substeps, double* y_out, double* v_out) {
+template <class CoeffFn, class StagesFn>
+Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
+                                 std::vector<double> breakpoints, double t0, double dt,
+                                 Eigen::Index n_samples, SdofState initial, Integrator method,
+                                 int substeps, double* y_out, double* v_out) {
   if (Status e = checkSdofArguments(dt, n_samples, initial, substeps); !e.ok()) return e;
   std::sort(breakpoints.begin(), breakpoints.end());
   const auto bp_end = breakpoints.cend();
   auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
   auto scan = breakpoints.cbegin();  // first breakpoint > the interval's start
-  constexpr Eigen::Index kBlock = 1024;
+  // Blocks of 1024 intervals (fewer for a short record: the arrays are allocated per call).
+  const Eigen::Index n_block = std::clamp<Eigen::Index>(n_samples - 1, 1, 1024);
+  const size_t nb = static_cast<size_t>(n_block);
   const double h = dt / substeps, inv_h = 1.0 / h;
-  std::vector<AffineStep> maps(static_cast<size_t>(kBlock));
-  std::vector<char> split(static_cast<size_t>(kBlock));
-  std::vector<SdofCoefficients> c(static_cast<size_t>(2 * substeps + 1));
+  std::vector<AffineStep> maps(nb);
+  std::vector<char> split(nb);
+  const size_t n_stages = static_cast<size_t>(2 * substeps + 1);
+  std::vector<double> sc(n_stages * nb), sk(n_stages * nb), sf(n_stages * nb);
+  // The previous RK4 step's scaled damping and stiffness stages (a, b, c, k0, km, k1) and its
+  // homogeneous part, per substep.
+  std::vector<std::array<double, 6>> key(static_cast<size_t>(substeps));
+  std::vector<AffineStep> hom(static_cast<size_t>(substeps));
+  std::vector<char> have(static_cast<size_t>(substeps), 0);
   SdofState s = initial;
   y_out[0] = s.y;
   if (v_out) v_out[0] = s.v;
-  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += kBlock) {
-    const Eigen::Index n1 = std::min(n_samples - 1, n0 + kBlock);
+  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += n_block) {
+    const Eigen::Index n1 = std::min(n_samples - 1, n0 + n_block);
+    const size_t count = static_cast<size_t>(n1 - n0);
     for (Eigen::Index n = n0; n < n1; ++n) {
       const double ta = t0 + n * dt, tb = t0 + (n + 1) * dt;
       while (scan != bp_end && *scan <= ta) ++scan;
-      const size_t i = static_cast<size_t>(n - n0);
-      split[i] = scan != bp_end && *scan < tb;
-      if (split[i]) continue;
-      for (int k = 0; k <= 2 * substeps; ++k) c[static_cast<size_t>(k)] = stage(n, k);
-      // forEachStep's substeps of [ta, tb], of the nominal length h (forEachStep's differ from
-      // it by rounding).
-      AffineStep map;
-      for (int m = 0; m < substeps; ++m) {
-        const size_t k = static_cast<size_t>(2 * m);
-        const AffineStep one = affineOfStep(method, h, inv_h, c[k], c[k + 1], c[k + 2]);
-        map = m == 0 ? one : composeAffine(one, map);
+      split[static_cast<size_t>(n - n0)] = scan != bp_end && *scan < tb;
+    }
+    stages(n0, n1, split.data(), sc.data(), sk.data(), sf.data(), nb);
+    // forEachStep's substeps of each [t_n, t_n+1], of the nominal length h (forEachStep's differ
+    // from it by rounding); a split interval's map is unused.
+    for (int m = 0; m < substeps; ++m) {
+      const size_t k0 = static_cast<size_t>(2 * m) * nb, km = k0 + nb, k1 = km + nb;
+      const double *c = sc.data(), *k = sk.data(), *f = sf.data();
+      const size_t ms = static_cast<size_t>(m);
+      for (size_t i = 0; i < count; ++i) {
+        if (split[i]) continue;
+        AffineStep one;
+        if (method == Integrator::Rk4) {  // affineOfStep's RK4 case
+          const double h2 = h * h;
+          const std::array<double, 6> now{h * c[k0 + i],  h * c[km + i],  h * c[k1 + i],
+                                          h2 * k[k0 + i], h2 * k[km + i], h2 * k[k1 + i]};
+          if (!have[ms] || std::memcmp(now.data(), key[ms].data(), sizeof(now)) != 0) {
+            rk4AffineHomogeneous(h, inv_h, now[0], now[1], now[2], now[3], now[4], now[5],
+                                 &hom[ms]);
+            key[ms] = now;
+            have[ms] = 1;
+          }
+          one = hom[ms];
+          rk4AffineForcing(inv_h, now[1], now[2], now[5], now[4], h2 * f[k0 + i], h2 * f[km + i],
+                           h2 * f[k1 + i], &one);
+        } else {
+          one = affineOfStep(method, h, inv_h, {c[k0 + i], k[k0 + i], f[k0 + i]},
+                             {c[km + i], k[km + i], f[km + i]}, {c[k1 + i], k[k1 + i], f[k1 + i]});
+        }
+        maps[i] = m == 0 ? one : composeAffine(one, maps[i]);
       }
-      maps[i] = map;
     }
     for (Eigen::Index n = n0; n < n1; ++n) {
       const size_t i = static_cast<size_t>(n - n0);
@@ -233,6 +279,32 @@ Status integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
     }
   }
   return {};
+}
+
+/// integrateSdofAffineBlocks with one look-up per stage: `stage(n, q)` returns the coefficients
+/// at t_n + q dt / (2 substeps), q = 0..2 substeps (called for ascending n: 2 substeps + 1
+/// look-ups instead of 3 per substep).
+template <class CoeffFn, class StageFn>
+Status integrateSdofAffine(const CoeffFn& coeffs, const StageFn& stage,
+                           std::vector<double> breakpoints, double t0, double dt,
+                           Eigen::Index n_samples, SdofState initial, Integrator method,
+                           int substeps, double* y_out, double* v_out) {
+  const size_t n_stages = static_cast<size_t>(2 * substeps + 1);
+  auto stages = [&](Eigen::Index n0, Eigen::Index n1, const char* split, double* c, double* k,
+                    double* f, size_t stride) {
+    for (Eigen::Index n = n0; n < n1; ++n) {
+      const size_t i = static_cast<size_t>(n - n0);
+      if (split[i]) continue;
+      for (size_t q = 0; q < n_stages; ++q) {
+        const SdofCoefficients v = stage(n, static_cast<int>(q));
+        c[q * stride + i] = v.C;
+        k[q * stride + i] = v.K;
+        f[q * stride + i] = v.F;
+      }
+    }
+  };
+  return integrateSdofAffineBlocks(coeffs, stages, std::move(breakpoints), t0, dt, n_samples,
+                                   initial, method, substeps, y_out, v_out);
 }
 
 /// Integrates eq. (4) on the uniform output grid t_n = t0 + n*dt, n = 0..n_samples-1, from

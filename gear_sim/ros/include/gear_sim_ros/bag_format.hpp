@@ -29,8 +29,18 @@ constexpr unsigned kMaxBagHeaderBytes = 16u << 20;
 /// Largest uncompressed chunk accepted [bytes] (rosbag allocates it; its default is 768 KiB).
 constexpr unsigned kMaxBagChunkBytes = 1u << 30;
 
+/// What the walk learnt besides soundness.
+struct BagStructure {
+  /// Every message data record names a connection of the bag's index (rosbag's deserialisation
+  /// throws "Unknown connection ID" for the others; the raw readers of bag_io need it).
+  bool messages_indexed = false;
+};
+
 /// Ok when `path` is a structurally sound bag of format 2.0; else InvalidInput (IoError when it
 /// cannot be opened) with a one-line message ("<path>: cannot read as a bag (<reason> at byte N)").
-gear_sim::Status checkBagStructure(const std::string& path);
+/// The last file's result is remembered (by device, inode, size, modification and status-change
+/// times) when the file was last changed more than 2 s before its walk: a bag checked twice in a
+/// row is then walked once. `structure` (optional) receives what the walk learnt.
+gear_sim::Status checkBagStructure(const std::string& path, BagStructure* structure = nullptr);
 
 }  // namespace gear_sim_ros

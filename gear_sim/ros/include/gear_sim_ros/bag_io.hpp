@@ -80,6 +80,9 @@ struct BagSignalInfo {
   /// Optional channels present (every chunk must carry the same set).
   bool dte_velocity = false, stiffness = false, torque = false, mesh_state = false,
        mesh_phase = false, damping = false;
+  /// Every message record names a connection of the bag's index (BagStructure): the chunks are
+  /// read in place from their bytes instead of through rosbag's deserialisation.
+  bool messages_indexed = false;
 };
 
 /// Opens `path` and validates its signal record in one pass: the topic is `topic` or, when
