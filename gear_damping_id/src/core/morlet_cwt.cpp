@@ -34,6 +34,11 @@ constexpr double kPadScales = 8.0;
 // The Gaussian multiplier is advanced by a two-multiplication recurrence and recomputed with
 // exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
 constexpr long kRecurrenceBlock = 64;
+// The pruned rows' twiddle phasors are advanced by one complex multiplication per batch and
+// re-seeded with sin/cos every kTwiddleSeedBlock batches (drift < 256 * 4 eps = 2.3e-13 of the
+// row's peak, inside PrunedComplexRowsEqualTheFullInverseFft's 1e-12; the seeds were 5 % of
+// a scalogram's instructions at 64).
+constexpr long kTwiddleSeedBlock = 256;
 constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
 // The pruned |W| of a row (MorletCwt::prunedRow) is used when its band fits in M <= N/16
 // bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
@@ -74,9 +79,9 @@ struct FftwApi<double> {
   }
   // howmany transforms of size m, out of place: input i at in[i*m..], output i strided at
   // out[i], out[howmany + i], ... (transposed: element q of every transform contiguous).
-  static Plan many(int m, int howmany, Complex* in, Complex* out) {
+  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
     return fftw_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
-                            FFTW_BACKWARD, FFTW_ESTIMATE);
+                            FFTW_BACKWARD, flags);
   }
 };
 template <>
@@ -91,9 +96,9 @@ struct FftwApi<float> {
   static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
     return fftwf_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
   }
-  static Plan many(int m, int howmany, Complex* in, Complex* out) {
+  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
     return fftwf_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
-                               FFTW_BACKWARD, FFTW_ESTIMATE);
+                               FFTW_BACKWARD, flags);
   }
 };
 
@@ -575,10 +580,12 @@ bool MorletCwt::prunedRow(T* out) {
     auto& plans = f.template batchPlansOf<R>();
     auto found = plans.find(M);
     if (found == plans.end()) {
-      // FFTW_ESTIMATE always: up to one plan per row size, each planned in ~1 ms.
-      Api::timeLimit(FFTW_NO_TIMELIMIT);
+      // The object's planning: FFTW_MEASURE times the batch's algorithms (up to one plan per row
+      // size, a few ms each: the sizes are small), FFTW_ESTIMATE plans in ~1 ms.
+      Api::timeLimit(planning_ == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
       const typename Api::Plan pl =
-          Api::many(static_cast<int>(M), static_cast<int>(C), batch, batch + chunk_capacity);
+          Api::many(static_cast<int>(M), static_cast<int>(C), batch, batch + chunk_capacity,
+                    planning_ == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE);
       if (!pl) return false;
       found = plans.emplace(M, pl).first;
     }
@@ -586,7 +593,7 @@ bool MorletCwt::prunedRow(T* out) {
   }
   // Twiddles e^{2 pi i (lo+k) p/N} for k < B, kept per k (structure of arrays: tr, ti) and
   // advanced along p by the per-k step e^{2 pi i (lo+k)/N} (sr, si): independent per k, so the
-  // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kRecurrenceBlock
+  // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kTwiddleSeedBlock
   // batches. The modulus does not depend on the common phase e^{2 pi i lo j/N}, but keeping it
   // costs nothing and makes the complex row exact.
   double* tr = f.tw.data();
@@ -619,7 +626,7 @@ bool MorletCwt::prunedRow(T* out) {
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
-      if (p % kRecurrenceBlock == 0) {
+      if (p % kTwiddleSeedBlock == 0) {
         for (long k = 0; k < B; ++k) {
           const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
