@@ -141,7 +141,8 @@ class MorletCwt {
   /// Rows whose band of nonzero bins fits in M <= N/16 bins (M a divisor of N) skip the full
   /// inverse FFT: with j = q*(N/M) + p, W_j is the value of N/M inverse FFTs of size M of
   /// twiddled copies of the band (exact up to rounding, ~1e-14 relative to the row's peak;
-  /// N log M work instead of N log N, in cache; FFTW_ESTIMATE plans, one per size M). With
+  /// N log M work instead of N log N, in cache; one batch plan per size M, with the object's
+  /// planning, transforms out of place into a transposed chunk buffer). With
   /// the default log grid (10 cycles per record to 0.4 fs, omega0 = 6) 2/3 to 3/4 of the rows
   /// take this path; row() and rowAt() use it too (complex W). setPrunedModulus(false) always
   /// uses the full inverse FFT. The pruned |W| leaves row()'s buffer untouched.
@@ -249,8 +250,8 @@ class MorletScalogram {
 
   long n_ = 0;
   std::vector<double> frequencies_;
-  std::vector<std::vector<int>> group_rows_;     ///< rows (indices into frequencies_) per group
-  std::vector<std::vector<MorletCwt>> workers_;  ///< [thread][group]
+  std::vector<std::vector<int>> group_rows_;      ///< rows (indices into frequencies_) per group
+  std::vector<std::vector<MorletCwt>> workers_;   ///< [thread][group]
   std::vector<std::vector<double>> row_buffers_;  ///< forEachRow's |W| row per thread
 };
 

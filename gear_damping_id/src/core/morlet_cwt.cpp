@@ -81,7 +81,7 @@ struct FftwApi<double> {
   // out[i], out[howmany + i], ... (transposed: element q of every transform contiguous).
   static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
     return fftw_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
-                            FFTW_BACKWARD, flags);
+                              FFTW_BACKWARD, flags);
   }
 };
 template <>
@@ -485,8 +485,8 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   bandOf(a, omega0, n_fft_, &lo, &hi);
   // The double inverse FFT is planned on the first row that needs it (a full-length double row:
   // not prunable, or pruning off), so a group of pruned rows never plans it nor touches `in`.
-  const bool pruned_only = pruned_ && (lo > hi || prunedBatchLength(f.divisors, n_fft_,
-                                                                    hi - lo + 1) > 0);
+  const bool pruned_only =
+      pruned_ && (lo > hi || prunedBatchLength(f.divisors, n_fft_, hi - lo + 1) > 0);
   const bool full_double = !pruned_only && precision_ == Precision::Double;
   if (!f.c2c && full_double) {
     std::lock_guard<std::mutex> lock(plannerMutex());
@@ -611,7 +611,7 @@ bool MorletCwt::prunedRow(T* out) {
   const double* x = reinterpret_cast<const double*>(f.in + lo);
   R* b = reinterpret_cast<R*>(batch);
   const R* o = reinterpret_cast<const R*>(batch + chunk_capacity);  // o[q*C + c]: W_{q*P+p0+c}
-  const long q_end = (n_ + P - 1) / P;  // q with some q*P + p < n
+  const long q_end = (n_ + P - 1) / P;                              // q with some q*P + p < n
   // Outside the band's slots every batch is zero: cleared once per row (the out-of-place
   // transforms leave their input as it is).
   for (long c = 0; c < C; ++c) {
