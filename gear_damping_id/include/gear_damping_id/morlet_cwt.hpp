@@ -141,7 +141,8 @@ class MorletCwt {
   /// Rows whose band of nonzero bins fits in M <= N/16 bins (M a divisor of N) skip the full
   /// inverse FFT: with j = q*(N/M) + p, W_j is the value of N/M inverse FFTs of size M of
   /// twiddled copies of the band (exact up to rounding, ~1e-14 relative to the row's peak;
-  /// N log M work instead of N log N, in cache; FFTW_ESTIMATE plans, one per size M). With
+  /// N log M work instead of N log N, in cache; one batch plan per size M, with the object's
+  /// planning, transforms out of place into a transposed chunk buffer). With
   /// the default log grid (10 cycles per record to 0.4 fs, omega0 = 6) 2/3 to 3/4 of the rows
   /// take this path; row() and rowAt() use it too (complex W). setPrunedModulus(false) always
   /// uses the full inverse FFT. The pruned |W| leaves row()'s buffer untouched.
@@ -196,7 +197,7 @@ class MorletCwt {
   template <typename R, typename T>
   bool prunedRow(T* out);
   bool fullRowSingle();
-  void fullInverse();
+  bool fullInverse();
   template <typename T>
   bool rowModulusImpl(int i, T* out);
   void release();
@@ -214,7 +215,7 @@ class MorletCwt {
 /// Full scalogram |W| of signals of a fixed length, faster than one MorletCwt over all rows:
 /// - Padding per group of rows: the rows are grouped so that each group's FFT length is the
 ///   fast length >= n + 8 s_max fs of the group's own lowest row, within a factor
-///   kGroupLengthRatio (1.25) of each member's own need. Each row keeps its 8-scale padding
+///   kGroupLengthRatio (1.05) of each member's own need. Each row keeps its 8-scale padding
 ///   (wrap-around e^-32: the same edge accuracy as MorletCwt); high rows no longer pay the
 ///   0.76 n padding of the lowest row. Rows whose band reaches the Nyquist frequency (a
 ///   band-limited wavelet, whose cut rings beyond 8 scales) keep the lowest row's padding.
@@ -224,7 +225,7 @@ class MorletCwt {
 ///   length whatever the thread count, so results are bit-identical to one thread.
 class MorletScalogram {
  public:
-  static constexpr double kGroupLengthRatio = 1.25;
+  static constexpr double kGroupLengthRatio = 1.05;
 
   /// Same preconditions as MorletCwt::configure (one omega0 for all rows), plus threads >= 1.
   /// precision: of the rows' inverse FFTs (see Precision). A failed Status as MorletCwt's
@@ -255,8 +256,9 @@ class MorletScalogram {
 
   long n_ = 0;
   std::vector<double> frequencies_;
-  std::vector<std::vector<int>> group_rows_;     ///< rows (indices into frequencies_) per group
-  std::vector<std::vector<MorletCwt>> workers_;  ///< [thread][group]
+  std::vector<std::vector<int>> group_rows_;      ///< rows (indices into frequencies_) per group
+  std::vector<std::vector<MorletCwt>> workers_;   ///< [thread][group]
+  std::vector<std::vector<double>> row_buffers_;  ///< forEachRow's |W| row per thread
 };
 
 }  // namespace gear_damping_id

@@ -38,6 +38,11 @@ constexpr double kPadScales = 8.0;
 // The Gaussian multiplier is advanced by a two-multiplication recurrence and recomputed with
 // exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
 constexpr long kRecurrenceBlock = 64;
+// The pruned rows' twiddle phasors are advanced by one complex multiplication per batch and
+// re-seeded with sin/cos every kTwiddleSeedBlock batches (drift < 256 * 4 eps = 2.3e-13 of the
+// row's peak, inside PrunedComplexRowsEqualTheFullInverseFft's 1e-12; the seeds were 5 % of
+// a scalogram's instructions at 64).
+constexpr long kTwiddleSeedBlock = 256;
 constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
 // The pruned |W| of a row (MorletCwt::prunedRow) is used when its band fits in M <= N/16
 // bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
@@ -94,9 +99,11 @@ struct FftwApi<double> {
   static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
     return fftw_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
   }
-  static Plan many(int m, int howmany, Complex* b) {
-    return fftw_plan_many_dft(1, &m, howmany, b, nullptr, 1, m, b, nullptr, 1, m, FFTW_BACKWARD,
-                              FFTW_ESTIMATE);
+  // howmany transforms of size m, out of place: input i at in[i*m..], output i strided at
+  // out[i], out[howmany + i], ... (transposed: element q of every transform contiguous).
+  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
+    return fftw_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
+                              FFTW_BACKWARD, flags);
   }
 };
 template <>
@@ -111,9 +118,9 @@ struct FftwApi<float> {
   static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
     return fftwf_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
   }
-  static Plan many(int m, int howmany, Complex* b) {
-    return fftwf_plan_many_dft(1, &m, howmany, b, nullptr, 1, m, b, nullptr, 1, m, FFTW_BACKWARD,
-                               FFTW_ESTIMATE);
+  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
+    return fftwf_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
+                               FFTW_BACKWARD, flags);
   }
 };
 
@@ -194,6 +201,14 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
     tr[k] = ar * sr[k] - ai * si[k];
     ti[k] = ar * si[k] + ai * sr[k];
   }
+}
+
+// Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
+// smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
+// kMinPrunedBatches batches (the full inverse FFT is then as fast).
+long prunedBatchLength(const std::vector<long>& divisors, long n_fft, long band) {
+  const auto it = std::lower_bound(divisors.begin(), divisors.end(), band);
+  return it == divisors.end() || *it * kMinPrunedBatches > n_fft ? -1 : *it;
 }
 
 }  // namespace
@@ -281,7 +296,7 @@ struct MorletCwt::Fftw {
   // Pruned |W| of narrow-band rows (see prunedRow): divisors of N (ascending), the batch
   // buffer of N values (allocated on first use) and one batched size-M plan per M used.
   std::vector<long> divisors;
-  fftw_complex* batch = nullptr;  // one chunk of batches
+  fftw_complex* batch = nullptr;  // one chunk of batches, then its transforms (transposed)
   std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
   std::map<long, fftw_plan> batch_plans;
   // Precision::Single: the band rounded to float (in_f, zero outside the band), the float
@@ -454,14 +469,23 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
   // The r2c input in `out` is no longer needed once the spectrum is computed.
   auto* w = reinterpret_cast<std::complex<double>*>(fftw_->out);
   if (pruned_ && prunedRow<double>(w)) return w;
-  fullInverse();
+  if (!fullInverse()) return nullptr;
   return w;
 }
 
 // The full inverse FFT of the band fillRow left in `in` (into `out`); zeroes `in` outside the
-// band first if it has not been yet (the buffer is not touched until a row needs it).
-void MorletCwt::fullInverse() {
+// band first if it has not been yet (the buffer is not touched until a row needs it). fillRow
+// plans the inverse FFT for rows that need it; a row that was to take the pruned path but could
+// not (no memory for its batches) is planned here with FFTW_ESTIMATE, which leaves the band in
+// `in` intact. False if FFTW cannot plan.
+bool MorletCwt::fullInverse() {
   Fftw& f = *fftw_;
+  if (!f.c2c) {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD,
+                             fftwFlags(FftPlanning::Estimate));
+    if (!f.c2c) return false;
+  }
   if (!f.in_clean) {
     double* p = reinterpret_cast<double*>(f.in);
     if (f.band_lo <= f.band_hi) {
@@ -473,11 +497,20 @@ void MorletCwt::fullInverse() {
     f.in_clean = true;
   }
   fftw_execute(f.c2c);
+  return true;
 }
 
 bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   Fftw& f = *fftw_;
-  if (!f.c2c) {
+  const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));  // s*w_k = a*k
+  long lo = 0, hi = 0;
+  bandOf(a, omega0, n_fft_, &lo, &hi);
+  // The double inverse FFT is planned on the first row that needs it (a full-length double row:
+  // not prunable, or pruning off), so a group of pruned rows never plans it nor touches `in`.
+  const bool pruned_only =
+      pruned_ && (lo > hi || prunedBatchLength(f.divisors, n_fft_, hi - lo + 1) > 0);
+  const bool full_double = !pruned_only && precision_ == Precision::Double;
+  if (!f.c2c && full_double) {
     std::lock_guard<std::mutex> lock(plannerMutex());
     const unsigned flags = fftwFlags(planning_);
     // Out-of-place, input preserved (FFTW's default for c2c): only the band changes per row.
@@ -490,9 +523,6 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
     f.band_lo = 1;
     f.band_hi = 0;
   }
-  const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));  // s*w_k = a*k
-  long lo = 0, hi = 0;
-  bandOf(a, omega0, n_fft_, &lo, &hi);
   // Zero what the previous row left outside the new band.
   if (f.band_lo <= f.band_hi) {
     if (lo > hi) {
@@ -550,18 +580,20 @@ bool MorletCwt::prunedRow(T* out) {
     return true;
   }
   const long B = hi - lo + 1;
-  const auto it = std::lower_bound(f.divisors.begin(), f.divisors.end(), B);
-  if (it == f.divisors.end() || *it * kMinPrunedBatches > n_fft_) return false;
-  const long M = *it, P = n_fft_ / M;
+  const long M = prunedBatchLength(f.divisors, n_fft_, B);
+  if (M < 0) return false;
+  const long P = n_fft_ / M;
   long C = std::max(1L, std::min(P, kPrunedChunk / M));
   while (P % C != 0) --C;  // chunks of equal size: one plan
   typename Api::Plan plan = nullptr;
   typename Api::Complex*& batch = f.template batchOf<R>();
+  // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches; the
+  // chunk's transforms go to the second half.
+  const long chunk_capacity = std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches);
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (!batch) {
-      // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches.
-      batch = Api::alloc(static_cast<size_t>(std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches)));
+      batch = Api::alloc(static_cast<size_t>(2 * chunk_capacity));
       if (!batch) return false;
     }
     if (f.tw.empty()) {
@@ -570,9 +602,12 @@ bool MorletCwt::prunedRow(T* out) {
     auto& plans = f.template batchPlansOf<R>();
     auto found = plans.find(M);
     if (found == plans.end()) {
-      // FFTW_ESTIMATE always: up to one plan per row size, each planned in ~1 ms.
-      Api::timeLimit(FFTW_NO_TIMELIMIT);
-      const typename Api::Plan pl = Api::many(static_cast<int>(M), static_cast<int>(C), batch);
+      // The object's planning: FFTW_MEASURE times the batch's algorithms (up to one plan per row
+      // size, a few ms each: the sizes are small), FFTW_ESTIMATE plans in ~1 ms.
+      Api::timeLimit(planning_ == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
+      const typename Api::Plan pl =
+          Api::many(static_cast<int>(M), static_cast<int>(C), batch, batch + chunk_capacity,
+                    planning_ == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE);
       if (!pl) return false;
       found = plans.emplace(M, pl).first;
     }
@@ -580,7 +615,7 @@ bool MorletCwt::prunedRow(T* out) {
   }
   // Twiddles e^{2 pi i (lo+k) p/N} for k < B, kept per k (structure of arrays: tr, ti) and
   // advanced along p by the per-k step e^{2 pi i (lo+k)/N} (sr, si): independent per k, so the
-  // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kRecurrenceBlock
+  // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kTwiddleSeedBlock
   // batches. The modulus does not depend on the common phase e^{2 pi i lo j/N}, but keeping it
   // costs nothing and makes the complex row exact.
   double* tr = f.tw.data();
@@ -597,11 +632,23 @@ bool MorletCwt::prunedRow(T* out) {
   const long r0 = lo % M, B1 = std::min(B, M - r0);
   const double* x = reinterpret_cast<const double*>(f.in + lo);
   R* b = reinterpret_cast<R*>(batch);
-  const long q_end = (n_ + P - 1) / P;  // q with some q*P + p < n
+  const R* o = reinterpret_cast<const R*>(batch + chunk_capacity);  // o[q*C + c]: W_{q*P+p0+c}
+  const long q_end = (n_ + P - 1) / P;                              // q with some q*P + p < n
+  // Outside the band's slots every batch is zero: cleared once per row (the out-of-place
+  // transforms leave their input as it is).
+  for (long c = 0; c < C; ++c) {
+    R* bc = b + 2 * c * M;
+    if (B1 == B) {
+      std::fill(bc, bc + 2 * r0, R(0));
+      std::fill(bc + 2 * (r0 + B), bc + 2 * M, R(0));
+    } else {
+      std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
+    }
+  }
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
-      if (p % kRecurrenceBlock == 0) {
+      if (p % kTwiddleSeedBlock == 0) {
         for (long k = 0; k < B; ++k) {
           const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
@@ -609,28 +656,26 @@ bool MorletCwt::prunedRow(T* out) {
         }
       }
       R* bc = b + 2 * c * M;
-      if (B1 == B) {
-        std::fill(bc, bc + 2 * r0, R(0));
-        std::fill(bc + 2 * (r0 + B), bc + 2 * M, R(0));
-      } else {
-        std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
-      }
       twiddleBand(x, tr, ti, sr, si, bc + 2 * r0, B1);
       twiddleBand(x + 2 * B1, tr + B1, ti + B1, sr + B1, si + B1, bc, B - B1);
     }
     Api::execute(plan);
-    // out[q*P + p] = chunk[(p - p0)*M + q] (moduli: squares gathered, then vector roots).
+    // out[q*P + p0 + c] = o[q*C + c]: C contiguous values per q.
     for (long q = 0; q < q_end; ++q) {
       const long j0 = q * P + p0;
       const long ce = std::min(C, n_ - j0);
+      if (ce <= 0) break;
+      const R* oq = o + 2 * q * C;
       if constexpr (std::is_same<T, std::complex<double>>::value) {
-        for (long c = 0; c < ce; ++c) out[j0 + c] = {b[2 * (c * M + q)], b[2 * (c * M + q) + 1]};
+        for (long c = 0; c < ce; ++c) out[j0 + c] = {oq[2 * c], oq[2 * c + 1]};
+      } else if constexpr (std::is_same<R, double>::value) {
+        modulusOf(oq, ce, out + j0);
       } else {
         for (long c = 0; c < ce; ++c) {
-          const double re = b[2 * (c * M + q)], im = b[2 * (c * M + q) + 1];  // R -> double
+          const double re = oq[2 * c], im = oq[2 * c + 1];  // float -> double
           sq[c] = re * re + im * im;
         }
-        if (ce > 0) sqrtOf(sq, ce, out + j0);
+        sqrtOf(sq, ce, out + j0);
       }
     }
   }
@@ -664,7 +709,7 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
     return true;
   }
   if (pruned_ && prunedRow<double>(out)) return true;
-  fullInverse();
+  if (!fullInverse()) return false;
   modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
   return true;
 }
@@ -907,10 +952,11 @@ Status MorletScalogram::modulusImpl(const double* y, T* out) {
 
 Status MorletScalogram::forEachRow(const double* y,
                                    const std::function<void(int, const double*)>& sink) {
-  std::vector<std::vector<double>> buffers(static_cast<size_t>(std::max(1, threads())),
-                                           std::vector<double>(static_cast<size_t>(n_)));
+  // One row buffer per thread, kept between calls (fresh pages cost the kernel's zeroing).
+  row_buffers_.resize(static_cast<size_t>(std::max(1, threads())));
+  for (auto& b : row_buffers_) b.resize(static_cast<size_t>(n_));
   return runRows<double>(
-      y, [&](int t, int) { return buffers[size_t(t)].data(); },
+      y, [&](int t, int) { return row_buffers_[size_t(t)].data(); },
       [&](int, int row, const double* d) { sink(row, d); });
 }
 
