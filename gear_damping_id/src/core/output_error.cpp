@@ -1906,18 +1906,42 @@ std::vector<double> responseBreakpoints(const SignalView& s, const ForwardModel&
 // C(t), K(t), F(t) of the modeled response from the identified segments and the forward model:
 // the generic driver's look-up by time (generic) and the affine fast path's by interval and
 // stage (stage, intervals in ascending order).
+// What both stage providers of the modeled response read: the record, the segments, their
+// sample ranges, the forward model and which segments hold their stiffness, with cursors over
+// the segments and the breaks for intervals visited in ascending order.
+struct StageCursor {
+  StageCursor(const SignalView& sig, const std::vector<SegmentEstimate>& segs,
+              const ForwardModel::Ranges& rng, const ForwardModel& model)
+      : s(sig), seg(segs), ranges(rng), fm(model) {
+    held.resize(seg.size());
+    for (size_t i = 0; i < seg.size(); ++i) held[i] = !fm.smoothStiffness(ranges[i].first);
+  }
+
+  // Moves the cursors to interval j; returns the local coordinate of j's break (1: none).
+  double advance(Index j) {
+    const std::vector<QuadratureBreak>& brk = fm.breaks();
+    while (si + 1 < seg.size() && ranges[si + 1].first <= j) ++si;
+    while (bi < brk.size() && brk[bi].j < j) ++bi;
+    return bi < brk.size() && brk[bi].j == j ? brk[bi].th : 1.0;
+  }
+
+  const SignalView& s;
+  const std::vector<SegmentEstimate>& seg;
+  const ForwardModel::Ranges& ranges;
+  const ForwardModel& fm;
+  std::vector<char> held;
+  size_t si = 0, bi = 0;
+};
+
 class ResponseCoefficients {
  public:
   ResponseCoefficients(const SignalView& s, const GearConstants& gear,
                        const IdentificationResult& r, const std::vector<SegmentEstimate>& seg,
                        const ForwardModel::Ranges& ranges, const ForwardModel& fm, int substeps,
                        Index begin)
-      : s_(s),
+      : cur_(s, seg, ranges, fm),
         gear_(gear),
         r_(r),
-        seg_(seg),
-        ranges_(ranges),
-        fm_(fm),
         me_(gear.equivalent_mass),
         inv_me_(1.0 / me_),
         load_(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable),
@@ -1927,8 +1951,6 @@ class ResponseCoefficients {
                r.stiffness_shape.kind != StiffnessShape::Kind::Square && s.mesh_phase != nullptr),
         begin_(begin),
         u_first_mid_(0.5 / substeps) {
-    held_.resize(seg.size());
-    for (size_t i = 0; i < seg.size(); ++i) held_[i] = !fm.smoothStiffness(ranges[i].first);
     u_stage_.resize(static_cast<size_t>(2 * substeps + 1));
     for (int k = 0; k < 2 * substeps; ++k) u_stage_[static_cast<size_t>(k)] = k * (0.5 / substeps);
     u_stage_.back() = 1.0;
@@ -1938,10 +1960,10 @@ class ResponseCoefficients {
 
   // The generic driver's look-up: K(t), F(t) of the piece holding t_ref.
   gear_sim::SdofCoefficients generic(double t, double t_ref) const {
-    const double uref = (t_ref - s_.t0) / s_.dt;
-    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, s_.n - 2);
-    const double u = std::clamp((t - s_.t0) / s_.dt - static_cast<double>(j), 0.0, 1.0);
-    const bool right = uref - static_cast<double>(j) >= fm_.heldSplit(j);
+    const double uref = (t_ref - cur_.s.t0) / cur_.s.dt;
+    const Index j = std::clamp<Index>(static_cast<Index>(std::floor(uref)), 0, cur_.s.n - 2);
+    const double u = std::clamp((t - cur_.s.t0) / cur_.s.dt - static_cast<double>(j), 0.0, 1.0);
+    const bool right = uref - static_cast<double>(j) >= cur_.fm.heldSplit(j);
     return at(j, u, right, segmentAt(t_ref));
   }
 
@@ -1950,19 +1972,16 @@ class ResponseCoefficients {
   // cursors over the segments and the breaks instead of a search per look-up.
   gear_sim::SdofCoefficients stage(Index i, int k) {
     const Index j = begin_ + i;
-    const std::vector<QuadratureBreak>& brk = fm_.breaks();
-    while (si_ + 1 < seg_.size() && ranges_[si_ + 1].first <= j) ++si_;
-    while (bi_ < brk.size() && brk[bi_].j < j) ++bi_;
-    const double split = bi_ < brk.size() && brk[bi_].j == j ? brk[bi_].th : 1.0;
-    return at(j, u_stage_[static_cast<size_t>(k)], u_first_mid_ >= split, si_);
+    const double split = cur_.advance(j);
+    return at(j, u_stage_[static_cast<size_t>(k)], u_first_mid_ >= split, cur_.si);
   }
 
  private:
   size_t segmentAt(double t) const {
-    size_t lo = 0, hi = seg_.size();
+    size_t lo = 0, hi = cur_.seg.size();
     while (hi - lo > 1) {
       const size_t mid = (lo + hi) / 2;
-      if (seg_[mid].t_start <= t)
+      if (cur_.seg[mid].t_start <= t)
         lo = mid;
       else
         hi = mid;
@@ -1973,9 +1992,9 @@ class ResponseCoefficients {
   // Coefficients at local coordinate u of interval j, segment `si`, before (right = false) or
   // after the interval's break.
   gear_sim::SdofCoefficients at(Index j, double u, bool right, size_t si) const {
-    const SegmentEstimate& e = seg_[si];
-    const Index lo = ranges_[si].first, hi = ranges_[si].second;
-    const double T1 = fm_.torque(j, u, lo, hi);
+    const SegmentEstimate& e = cur_.seg[si];
+    const Index lo = cur_.ranges[si].first, hi = cur_.ranges[si].second;
+    const double T1 = cur_.fm.torque(j, u, lo, hi);
     gear_sim::SdofCoefficients c;
     c.C = load_ ? th0_ + th1_ * T1 : e.C;
     c.F = gear_.force_factor * T1;
@@ -1983,15 +2002,17 @@ class ResponseCoefficients {
       case Formulation::Known:
         // A held channel's value directly (knownStiffness's first case, without its search of
         // the segment's smoothness per look-up).
-        c.K = held_[si] ? (right && j + 1 < s_.n ? s_.stiffness[j + 1] : s_.stiffness[j]) * inv_me_
-                        : fm_.knownStiffness(j, u, right, lo, hi);
+        c.K = cur_.held[si]
+                  ? (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) *
+                        inv_me_
+                  : cur_.fm.knownStiffness(j, u, right, lo, hi);
         break;
       case Formulation::Greybox:
         if (shape_ && !e.stiffness_curve.empty()) {
-          const double phase = fm_.cubic(s_.mesh_phase, j, u, lo, hi);
+          const double phase = cur_.fm.cubic(cur_.s.mesh_phase, j, u, lo, hi);
           c.K = shapeStiffness(r_.stiffness_shape, e.stiffness_curve, phase) / me_;
         } else {
-          c.K = (e.k_min + (e.k_max - e.k_min) * fm_.meshState(j, right)) / me_;
+          c.K = (e.k_min + (e.k_max - e.k_min) * cur_.fm.meshState(j, right)) / me_;
         }
         break;
       case Formulation::Paper:
@@ -2003,21 +2024,16 @@ class ResponseCoefficients {
     return c;
   }
 
-  const SignalView& s_;
+  StageCursor cur_;
   const GearConstants& gear_;
   const IdentificationResult& r_;
-  const std::vector<SegmentEstimate>& seg_;
-  const ForwardModel::Ranges& ranges_;
-  const ForwardModel& fm_;
   const double me_, inv_me_;
   const bool load_;
   const double th0_, th1_;
   const bool shape_;
   const Index begin_;
   const double u_first_mid_;
-  std::vector<char> held_;
   std::vector<double> u_stage_;
-  size_t si_ = 0, bi_ = 0;  // stage()'s cursors
 };
 
 // The modeled response's stage look-ups in the common case, without ResponseCoefficients'
@@ -2031,37 +2047,30 @@ class HeldKnownStages {
   HeldKnownStages(const SignalView& s, const GearConstants& gear, const IdentificationResult& r,
                   const std::vector<SegmentEstimate>& seg, const ForwardModel::Ranges& ranges,
                   const ForwardModel& fm, int substeps, Index begin)
-      : s_(s),
-        seg_(seg),
-        ranges_(ranges),
-        fm_(fm),
+      : cur_(s, seg, ranges, fm),
         force_factor_(gear.force_factor),
         inv_me_(1.0 / gear.equivalent_mass),
         begin_(begin),
         on_(substeps == 1 && r.formulation == Formulation::Known && s.stiffness != nullptr &&
-            !(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable)) {
-    held_.resize(seg.size());
-    for (size_t i = 0; i < seg.size(); ++i) held_[i] = !fm.smoothStiffness(ranges[i].first);
-  }
+            !(r.model == DampingModel::LoadLaw && r.load_law && r.load_law->identifiable)) {}
 
   // Stages 0, 1, 2 of interval i into c/k/f[0], [stride], [2 stride]; false (nothing written)
   // outside the common case.
   bool fill(Index i, double* c, double* k, double* f, size_t stride) {
     if (!on_) return false;
     const Index j = begin_ + i;
-    const std::vector<QuadratureBreak>& brk = fm_.breaks();
-    while (si_ + 1 < seg_.size() && ranges_[si_ + 1].first <= j) ++si_;
-    while (bi_ < brk.size() && brk[bi_].j < j) ++bi_;
-    if (!held_[si_]) return false;
-    const double split = bi_ < brk.size() && brk[bi_].j == j ? brk[bi_].th : 1.0;
+    const double split = cur_.advance(j);
+    if (!cur_.held[cur_.si]) return false;
     const bool right = 0.5 >= split;
-    const Index lo = ranges_[si_].first, hi = ranges_[si_].second;
-    const double K = (right && j + 1 < s_.n ? s_.stiffness[j + 1] : s_.stiffness[j]) * inv_me_;
-    const double* T = s_.torque;
+    const Index lo = cur_.ranges[cur_.si].first, hi = cur_.ranges[cur_.si].second;
+    const double K =
+        (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) * inv_me_;
+    const double* T = cur_.s.torque;
     const double t0 = T == nullptr ? 0.0 : T[j];
-    const double tm = fm_.torque(j, 0.5, lo, hi);
-    const double t1 = T == nullptr ? 0.0 : (j + 1 < s_.n ? T[j + 1] : fm_.torque(j, 1.0, lo, hi));
-    const double C = seg_[si_].C;
+    const double tm = cur_.fm.torque(j, 0.5, lo, hi);
+    const double t1 =
+        T == nullptr ? 0.0 : (j + 1 < cur_.s.n ? T[j + 1] : cur_.fm.torque(j, 1.0, lo, hi));
+    const double C = cur_.seg[cur_.si].C;
     c[0] = c[stride] = c[2 * stride] = C;
     k[0] = k[stride] = k[2 * stride] = K;
     f[0] = force_factor_ * t0;
@@ -2071,15 +2080,10 @@ class HeldKnownStages {
   }
 
  private:
-  const SignalView& s_;
-  const std::vector<SegmentEstimate>& seg_;
-  const ForwardModel::Ranges& ranges_;
-  const ForwardModel& fm_;
+  StageCursor cur_;
   const double force_factor_, inv_me_;
   const Index begin_;
   const bool on_;
-  std::vector<char> held_;
-  size_t si_ = 0, bi_ = 0;
 };
 
 }  // namespace
