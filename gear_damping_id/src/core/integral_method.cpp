@@ -826,7 +826,9 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
   // a = 2k + 1, b = 2l + 1) and z_k * swap(z_l) (halves swapped: a = 2k, b = 2l + 1 and
   // a = 2k + 1, b = 2l). Combined (even + odd) at the end.
   typedef double V4 __attribute__((vector_size(32)));
+#if !defined(__clang__)
   typedef long I4 __attribute__((vector_size(32)));
+#endif
   constexpr int KC = (CAP + 1) / 2;
   const int nk = (n + 1) / 2;  // column pairs (an odd count pads with a zero column)
   V4 S4[KC], SP4[KC], Md[KC][KC], Ms[KC][KC];
@@ -835,7 +837,9 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
     for (int l = 0; l < nk; ++l) Md[k][l] = Ms[k][l] = V4{0, 0, 0, 0};
   }
   V4 raw4 = {0, 0, 0, 0};  // lanes 0, 1: the raw damping column's even and odd rows
+#if !defined(__clang__)
   const I4 swap = {2, 3, 0, 1};
+#endif
   auto accumulate = [&](const V4* z, const V4& p, const V4& rc) {
     for (int k = 0; k < nk; ++k) {
       S4[k] += z[k];
@@ -844,7 +848,11 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
     for (int k = 0; k < nk; ++k) {
       for (int l = k; l < nk; ++l) {
         Md[k][l] += z[k] * z[l];
+#if defined(__clang__)  // the same lane permutation in clang's spelling
+        Ms[k][l] += z[k] * __builtin_shufflevector(z[l], z[l], 2, 3, 0, 1);
+#else
         Ms[k][l] += z[k] * __builtin_shuffle(z[l], swap);
+#endif
       }
     }
     raw4 += rc * rc;
