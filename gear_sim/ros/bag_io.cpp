@@ -61,6 +61,10 @@ struct RawChunk {
 std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c);
 // The serialized bytes of `m` into *buf (grown as needed, never shrunk); returns their count.
 std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uint8_t>* buf);
+// A deserialised chunk serialized again into *buf (grown as needed) and laid out into *c: the
+// fallback of the in-place reading, so both paths hand on the same RawChunk.
+void layoutDeserialised(const gear_damping::SignalChunk& p, std::vector<std::uint8_t>* buf,
+                        RawChunk* c);
 
 // The channels a chunk carries, as a bit set (dte_velocity, stiffness, torque, mesh_state,
 // mesh_phase, damping).
@@ -205,11 +209,7 @@ class ChunkReader {
     const auto p = m.instantiate<gear_damping::SignalChunk>();
     item->valid = p != nullptr;
     if (!p) return;
-    const std::uint32_t n = ros::serialization::serializationLength(*p);
-    if (item->bytes.size() < n) item->bytes.resize(n);
-    ros::serialization::OStream out(item->bytes.data(), n);
-    ros::serialization::serialize(out, *p);
-    chunkLayout(item->bytes.data(), n, &item->c);  // fits: serialised by ROS
+    layoutDeserialised(*p, &item->bytes, &item->c);
   }
 
   void run() {
@@ -344,11 +344,7 @@ class ChunkScan {
                                     " message " + std::to_string(out_.chunks + 1) +
                                     " (first_index ?): not a " + std::string(kChunkType));
       }
-      const std::uint32_t n = ros::serialization::serializationLength(*p);
-      if (buffer_.size() < n) buffer_.resize(n);
-      ros::serialization::OStream out(buffer_.data(), n);
-      ros::serialization::serialize(out, *p);
-      chunkLayout(buffer_.data(), n, &c);  // fits: serialised by ROS
+      layoutDeserialised(*p, &buffer_, &c);
     }
     const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
                               std::to_string(out_.chunks + 1) + " (first_index " +
@@ -531,6 +527,15 @@ std::uint32_t copyMessage(const rosbag::MessageInstance& m, std::vector<std::uin
   ros::serialization::OStream out(buf->data(), n);
   m.write(out);
   return n;
+}
+
+void layoutDeserialised(const gear_damping::SignalChunk& p, std::vector<std::uint8_t>* buf,
+                        RawChunk* c) {
+  const std::uint32_t n = ros::serialization::serializationLength(p);
+  if (buf->size() < n) buf->resize(n);
+  ros::serialization::OStream out(buf->data(), n);
+  ros::serialization::serialize(out, p);
+  chunkLayout(buf->data(), n, c);  // fits: serialised by ROS
 }
 
 std::string chunkLayout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
