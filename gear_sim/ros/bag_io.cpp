@@ -68,10 +68,18 @@ void layoutDeserialised(const gear_damping::SignalChunk& p, std::vector<std::uin
 
 // The channels a chunk carries, as a bit set (dte_velocity, stiffness, torque, mesh_state,
 // mesh_phase, damping).
+unsigned channelSet(bool velocity, bool stiffness, bool torque, bool mesh_state, bool mesh_phase,
+                    bool damping) {
+  return (velocity ? 1u : 0u) | (stiffness ? 2u : 0u) | (torque ? 4u : 0u) |
+         (mesh_state ? 8u : 0u) | (mesh_phase ? 16u : 0u) | (damping ? 32u : 0u);
+}
 unsigned channelSet(const RawChunk& c) {
-  return (!c.dte_velocity.empty() ? 1u : 0u) | (!c.stiffness.empty() ? 2u : 0u) |
-         (!c.torque.empty() ? 4u : 0u) | (!c.mesh_state.empty() ? 8u : 0u) |
-         (!c.mesh_phase.empty() ? 16u : 0u) | (!c.damping.empty() ? 32u : 0u);
+  return channelSet(!c.dte_velocity.empty(), !c.stiffness.empty(), !c.torque.empty(),
+                    !c.mesh_state.empty(), !c.mesh_phase.empty(), !c.damping.empty());
+}
+unsigned channelSet(const BagSignalInfo& info) {
+  return channelSet(info.dte_velocity, info.stiffness, info.torque, info.mesh_state,
+                    info.mesh_phase, info.damping);
 }
 
 std::string channelLengthError(const RawChunk& c) {
@@ -695,12 +703,16 @@ Status streamSignalBag(const BagSignalInfo& info,
   try {
     // Reads ahead on its own thread.
     ChunkReader reader(info.path, info.topic, info.messages_indexed);
+    const unsigned channels = channelSet(info);
     ChunkReader::Chunk item;
     while (reader.next(&item)) {
       const RawChunk& c = item.c;
-      // Validated by scanSignalBag; a bag changed since is not read out of bounds.
+      // Validated by scanSignalBag; a chunk of a bag changed since is not read out of bounds
+      // (outside the scanned indices, other channels or channels of other lengths: its samples
+      // stay a gap).
       if (!item.valid || c.first_index < info.first_index ||
-          c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples))
+          c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples) ||
+          channelSet(c) != channels || !channelLengthError(c).empty())
         continue;
       const Eigen::Index b = static_cast<Eigen::Index>(c.first_index - info.first_index);
       const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());

@@ -131,6 +131,32 @@ TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
   EXPECT_TRUE(fs::is_regular_file(out));
 }
 
+// A bag changed between its scan and its read (here: another file with the stiffness channel
+// dropped from every chunk, read with the first bag's scan) is not read out of bounds: the
+// chunks whose channels differ from the scan's are skipped, their samples a gap (NaN).
+TEST_F(AnalyzeBag, ABagChangedSinceItsScanIsNotReadOutOfBounds) {
+  const fs::path bag = intactBag();
+  const fs::path changed = writeBag("changed.bag", [](size_t, gear_damping::SignalChunk* c) {
+    c->stiffness.clear();
+    return true;
+  });
+  gear_sim_ros::BagSignalInfo info;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &info), &e)) << e;
+  ASSERT_TRUE(info.stiffness);
+  gear_sim::SignalTable whole;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &whole), &e)) << e;
+  EXPECT_TRUE(std::isfinite(whole.dte[0]));  // the scanned bag itself reads
+  info.path = changed.string();
+  gear_sim::SignalTable t;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &t), &e)) << e;
+  ASSERT_EQ(t.size(), table_.size());
+  for (Eigen::Index i = 0; i < t.size(); ++i) {
+    ASSERT_TRUE(std::isnan(t.dte[i])) << i;
+    ASSERT_TRUE(std::isnan(t.stiffness[i])) << i;
+  }
+}
+
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,
 // for the record read whole and streamed, for segment-local and shared unknowns.
 TEST_F(AnalyzeBag, ThreadsGiveTheSameResultsAsOneThreadWholeAndStreamed) {
