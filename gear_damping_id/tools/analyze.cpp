@@ -288,6 +288,7 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
   const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
+  gd::ModeledResponse resp;
   const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
     if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
       for (const auto& r : segs) {  // the analysed samples, in order
@@ -300,15 +301,16 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
       const auto outs = drivers[k].addAll(view, segs);
       if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
       for (size_t j = 0; j < outs.size(); ++j) {
-        gd::ModeledResponse resp;
+        // `resp` is reused: its vectors keep their storage from segment to segment.
         if (!outs[j].estimate.identifiable ||
             !gd::modeledResponse(view, gear, outs[j].result, &resp).ok())
           continue;
         fits[k].add(resp);
-        bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
-                   gear_damping_ros::toMsg(
-                       resp, info.sample_rate,
-                       info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
+        if (bag->active())  // the message only when a bag is written
+          bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
+                     gear_damping_ros::toMsg(
+                         resp, info.sample_rate,
+                         info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
       }
     }
     progress->set(

@@ -128,31 +128,35 @@ bool inRange(const PlausibleRange& r, double x) { return x >= r.low && x <= r.hi
 
 bool plausibleMeshState(double x) { return x == 0.0 || x == 1.0; }
 
+// Whether x is finite, written so that loops over arrays vectorise: x - x is 0 for finite x and
+// NaN for NaN and +-Inf.
+inline bool finite(double x) { return x - x == 0.0; }
+
 // Counts the implausible values of a chunk into `info`; returns the chunk's max |dte|
-// (finite values only, 0 when none).
+// (finite values only, 0 when none). Branch-free counts (an out-of-range count includes the
+// non-finite values, which fail every range check, and is corrected by their count), so the
+// loops over the channels vectorise.
 double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   const auto channels = rangedChannels(c);
   for (size_t k = 0; k < channels.size(); ++k) {
     const RawArray& a = *channels[k];
+    const double low = kPlausibleRanges[k].low, high = kPlausibleRanges[k].high;
+    std::int64_t non_finite = 0, outside = 0;
     for (size_t i = 0; i < a.size(); ++i) {
       const double x = a[i];
-      if (!std::isfinite(x))
-        ++info->non_finite_values;
-      else if (!inRange(kPlausibleRanges[k], x))
-        ++info->out_of_range_values;
+      non_finite += finite(x) ? 0 : 1;
+      outside += x >= low && x <= high ? 0 : 1;
     }
+    info->non_finite_values += non_finite;
+    info->out_of_range_values += outside - non_finite;
   }
-  for (size_t i = 0; i < c.mesh_state.size(); ++i) {
-    const double x = c.mesh_state.p[i];
-    if (!std::isfinite(x))
-      ++info->non_finite_values;
-    else if (!plausibleMeshState(x))
-      ++info->bad_mesh_states;
-  }
+  std::int64_t bad_states = 0;  // a byte: finite, plausible when 0 or 1
+  for (size_t i = 0; i < c.mesh_state.size(); ++i) bad_states += c.mesh_state.p[i] > 1 ? 1 : 0;
+  info->bad_mesh_states += bad_states;
   double m = 0.0;
   for (size_t i = 0; i < c.dte.size(); ++i) {
-    const double x = c.dte[i];
-    if (std::isfinite(x)) m = std::max(m, std::abs(x));
+    const double a = std::abs(c.dte[i]);
+    m = finite(a) && a > m ? a : m;
   }
   return m;
 }
@@ -368,10 +372,16 @@ class ChunkScan {
     next_ = c.first_index + c.dte.size();
     out_.real_samples += static_cast<std::int64_t>(c.dte.size());
     chunk_max_.push_back(countImplausible(c, &out_));
+    // In order (the sum's bits fix the default window); k_sum_ is never -0, so adding +0 for a
+    // non-finite value leaves it as it is.
+    long long count = 0;
     for (size_t i = 0; i < c.stiffness.size(); ++i) {
       const double k = c.stiffness[i];
-      if (std::isfinite(k)) k_sum_ += k, ++k_count_;
+      const bool fin = finite(k);
+      k_sum_ += fin ? k : 0.0;
+      count += fin ? 1 : 0;
     }
+    k_count_ += count;
     ++out_.chunks;
     return {};
   }
@@ -634,8 +644,8 @@ Status streamSignalBag(const BagSignalInfo& info,
   gear_sim::SignalTable block;
   size_t r = 0;  // current range
   // A value outside channel k's plausible range reads as NaN (counted by scanSignalBag).
-  auto plausible = [nan](size_t k, double x) {
-    return std::isfinite(x) && !inRange(kPlausibleRanges[k], x) ? nan : x;
+  auto plausible = [nan](size_t k, double x) {  // branch-free: the copy loops vectorise
+    return inRange(kPlausibleRanges[k], x) || !finite(x) ? x : nan;
   };
   // The range's channels are written where chunks cover them; the samples up to `filled` are
   // written, those of a gap are set to NaN when the next chunk or the range's end shows it.

@@ -2,8 +2,10 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
@@ -2057,34 +2059,183 @@ class HeldKnownStages {
   // Stages 0, 1, 2 of interval i into c/k/f[0], [stride], [2 stride]; false (nothing written)
   // outside the common case.
   bool fill(Index i, double* c, double* k, double* f, size_t stride) {
+    double C, K;
+    if (!held(i, &C, &K, f, f + stride, f + 2 * stride)) return false;
+    c[0] = c[stride] = c[2 * stride] = C;
+    k[0] = k[stride] = k[2 * stride] = K;
+    return true;
+  }
+
+  // The same for one interval as scalars: its damping C and stiffness K (the same at the three
+  // stages) and the forcing at the start, midpoint and end; false outside the common case.
+  bool held(Index i, double* C, double* K, double* f0, double* fm, double* f1) {
     if (!on_) return false;
     const Index j = begin_ + i;
     const double split = cur_.advance(j);
     if (!cur_.held[cur_.si]) return false;
     const bool right = 0.5 >= split;
     const Index lo = cur_.ranges[cur_.si].first, hi = cur_.ranges[cur_.si].second;
-    const double K =
-        (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) * inv_me_;
+    *K = (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) * inv_me_;
     const double* T = cur_.s.torque;
     const double t0 = T == nullptr ? 0.0 : T[j];
-    const double tm = cur_.fm.torque(j, 0.5, lo, hi);
+    const double tm = T == nullptr ? 0.0 : hi - lo < 4 ? cur_.fm.torque(j, 0.5, lo, hi)
+                                                     : midpoint(T, j, lo, hi);
     const double t1 =
         T == nullptr ? 0.0 : (j + 1 < cur_.s.n ? T[j + 1] : cur_.fm.torque(j, 1.0, lo, hi));
-    const double C = cur_.seg[cur_.si].C;
-    c[0] = c[stride] = c[2 * stride] = C;
-    k[0] = k[stride] = k[2 * stride] = K;
-    f[0] = force_factor_ * t0;
-    f[stride] = force_factor_ * tm;
-    f[2 * stride] = force_factor_ * t1;
+    *C = cur_.seg[cur_.si].C;
+    *f0 = force_factor_ * t0;
+    *fm = force_factor_ * tm;
+    *f1 = force_factor_ * t1;
     return true;
   }
 
+  // Whether the common case applies to the record (a segment may still not hold its stiffness).
+  bool on() const { return on_; }
+
+  // After held(i) returned true: the end E of the intervals i' in (i, E) that held() would treat
+  // plainly (the same segment, no break, the interior midpoint rule, samples j' - 1 .. j' + 2 in
+  // the segment and the record, a torque channel), for which Plain below gives what held() gives.
+  Index plainEnd(Index i) const {
+    const Index j = begin_ + i;
+    const std::vector<QuadratureBreak>& brk = cur_.fm.breaks();
+    const Index lo = cur_.ranges[cur_.si].first, hi = cur_.ranges[cur_.si].second;
+    if (cur_.s.torque == nullptr || j < lo) return i + 1;
+    Index end = std::min(hi - 2, cur_.s.n - 1);  // j' + 2 < hi, j' + 1 < n
+    if (cur_.si + 1 < cur_.seg.size()) end = std::min(end, cur_.ranges[cur_.si + 1].first);
+    size_t b = cur_.bi;
+    while (b < brk.size() && brk[b].j <= j) ++b;
+    if (b < brk.size()) end = std::min(end, static_cast<Index>(brk[b].j));
+    return std::max(i + 1, end - begin_);
+  }
+
+  // What held() computes for a plain interval, from the arrays directly.
+  struct Plain {
+    const double *k, *T;
+    double inv_me, force_factor;
+    Index begin;
+    CubicIntervalRule::Weights w;  // the interior rule's midpoint weights (offset -1)
+  };
+  Plain plain() const {
+    return {cur_.s.stiffness, cur_.s.torque, inv_me_, force_factor_, begin_, mid().interior};
+  }
+
  private:
+  struct Mid {
+    CubicRules rules;
+    CubicIntervalRule::Weights first = rules.first.value(0.5), interior = rules.interior.value(0.5),
+                               last = rules.last.value(0.5);
+  };
+  static const Mid& mid() {
+    static const Mid m;
+    return m;
+  }
+
+  // ForwardModel::cubic at u = 0.5 for hi - lo >= 4, inline: the same rule, weights (the same
+  // rules evaluated at 0.5 by the same code) and sum.
+  static double midpoint(const double* ch, Index j, Index lo, Index hi) {
+    const Mid& m = mid();
+    const CubicIntervalRule& r = m.rules.forInterval(j, lo, hi);
+    const CubicIntervalRule::Weights& w = &r == &m.rules.interior ? m.interior
+                                          : &r == &m.rules.first  ? m.first
+                                                                  : m.last;
+    const Index b = j + r.offset();
+    return w[0] * ch[b] + w[1] * ch[b + 1] + w[2] * ch[b + 2] + w[3] * ch[b + 3];
+  }
+
   StageCursor cur_;
   const double force_factor_, inv_me_;
   const Index begin_;
   const bool on_;
 };
+
+// Whether two doubles are the same bits (the affine map's cache key compares bits, as memcmp).
+inline bool sameBits(double a, double b) {
+  std::uint64_t x, y;
+  std::memcpy(&x, &a, 8);
+  std::memcpy(&y, &b, 8);
+  return x == y;
+}
+
+// gear_sim::integrateSdofAffineBlocks for one RK4 step per sample (substeps 1) with the
+// common case's stages taken per interval as scalars (HeldKnownStages::held; the other
+// intervals from `stages`, split ones by advanceSdof with `coeffs`): the same steps, stages and
+// operations in the same order, so the same values, in one loop without stage arrays. The
+// homogeneous part of the step's map is recomputed only when its scaled damping or stiffness
+// stages change (bit for bit), i.e. at stiffness switches and segment boundaries.
+template <class CoeffFn, class StagesFn>
+gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, const StagesFn& stages,
+                              std::vector<double> breakpoints, double t0, double dt,
+                              Index n_samples, gear_sim::SdofState initial, double* y_out) {
+  if (gear_sim::Status e = gear_sim::checkSdofArguments(dt, n_samples, initial, 1); !e.ok())
+    return e;
+  std::sort(breakpoints.begin(), breakpoints.end());
+  const auto bp_end = breakpoints.cend();
+  auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
+  auto scan = breakpoints.cbegin();  // first breakpoint > the interval's start
+  const double h = dt / 1, inv_h = 1.0 / h, h2 = h * h;
+  std::array<double, 6> key{};  // the scaled stages (a, b, c, k0, km, k1) of `hom`
+  gear_sim::AffineStep hom;
+  bool have = false;
+  const char no_split = 0;
+  gear_sim::SdofState s = initial;
+  y_out[0] = s.y;
+  // Whether interval n has a breakpoint strictly inside (the scan cursor moved to it).
+  auto split = [&](Index n) {
+    const double ta = t0 + n * dt, tb = t0 + (n + 1) * dt;
+    while (scan != bp_end && *scan <= ta) ++scan;
+    return scan != bp_end && *scan < tb;
+  };
+  for (Index n = 0; n + 1 < n_samples;) {
+    if (split(n)) {
+      s = gear_sim::advanceSdof(coeffs, s, t0 + n * dt, t0 + (n + 1) * dt, 1, bp, bp_end,
+                                gear_sim::Integrator::Rk4);
+      y_out[++n] = s.y;
+      continue;
+    }
+    double c[3], k[3], f[3];
+    const bool fast = held.held(n, &c[0], &k[0], &f[0], &f[1], &f[2]);
+    if (fast) {
+      c[1] = c[2] = c[0];
+      k[1] = k[2] = k[0];
+    } else {
+      stages(n, n + 1, &no_split, c, k, f, size_t{1});
+    }
+    const std::array<double, 6> now{h * c[0], h * c[1], h * c[2], h2 * k[0], h2 * k[1], h2 * k[2]};
+    if (!have || std::memcmp(now.data(), key.data(), sizeof(now)) != 0) {
+      gear_sim::rk4AffineHomogeneous(h, inv_h, now[0], now[1], now[2], now[3], now[4], now[5],
+                                     &hom);
+      key = now;
+      have = true;
+    }
+    gear_sim::AffineStep a = hom;
+    gear_sim::rk4AffineForcing(inv_h, now[1], now[2], now[5], now[4], h2 * f[0], h2 * f[1],
+                               h2 * f[2], &a);
+    s = {a.m11 * s.y + a.m12 * s.v + a.g1, a.m21 * s.y + a.m22 * s.v + a.g2};
+    y_out[++n] = s.y;
+    if (!fast) continue;
+    // The plain intervals that follow (HeldKnownStages::plainEnd) with the same stiffness, bit
+    // for bit (so the same damping, stiffness and homogeneous part): held()'s values read from
+    // the arrays, the stages' scaled damping and stiffness loop constants, and so are the
+    // forcing part's terms made of them alone (hoisted by the compiler: the same operations, the
+    // same values).
+    const Index end = std::min(n_samples - 1, held.plainEnd(n - 1));
+    const HeldKnownStages::Plain p = held.plain();
+    const double b = now[1], cc = now[2], k1 = now[5], km = now[4], K = k[0];
+    const gear_sim::AffineStep m = hom;
+    while (n < end && !split(n)) {
+      const Index j = p.begin + n;
+      if (!sameBits(p.k[j] * p.inv_me, K)) break;
+      const double* T = p.T;
+      const double tm = p.w[0] * T[j - 1] + p.w[1] * T[j] + p.w[2] * T[j + 1] + p.w[3] * T[j + 2];
+      a = m;
+      gear_sim::rk4AffineForcing(inv_h, b, cc, k1, km, h2 * (p.force_factor * T[j]),
+                                 h2 * (p.force_factor * tm), h2 * (p.force_factor * T[j + 1]), &a);
+      s = {a.m11 * s.y + a.m12 * s.v + a.g1, a.m21 * s.y + a.m22 * s.v + a.g2};
+      y_out[++n] = s.y;
+    }
+  }
+  return {};
+}
 
 }  // namespace
 
@@ -2145,9 +2296,12 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
-  if (const gear_sim::Status e = gear_sim::integrateSdofAffineBlocks(
-          coeffs, stages, bps, s.time(begin), s.dt, n, init, gear_sim::Integrator::Rk4, substeps,
-          out->modeled.data(), nullptr);
+  if (const gear_sim::Status e =
+          held.on() ? heldResponse(coeffs, held, stages, bps, s.time(begin), s.dt, n, init,
+                                   out->modeled.data())
+                    : gear_sim::integrateSdofAffineBlocks(coeffs, stages, bps, s.time(begin), s.dt,
+                                                          n, init, gear_sim::Integrator::Rk4,
+                                                          substeps, out->modeled.data(), nullptr);
       !e.ok())
     return e.withContext("modeled response");
   if (!out->modeled.allFinite()) {

@@ -191,17 +191,17 @@ inline AffineStep affineOfStep(Integrator method, double h, double inv_h,
   return {e1.y, e2.y, e1.v, e2.v, g.y, g.v};
 }
 
-/// integrateSdof computed in blocks, with the same steps and stages: a first pass takes the
-/// coefficients of every output interval without a breakpoint inside, for blocks of intervals
-/// [n0, n1) in ascending order, from `stages(n0, n1, split, c, k, f, stride)`, which fills, for
-/// every n with split[n - n0] == 0, the coefficients at t_n + q dt / (2 substeps),
-/// q = 0..2 substeps, into c[q * stride + n - n0] (C), k[...] (K) and f[...] (F); a second turns
-/// each interval's steps into one affine map (independent iterations without look-ups; the
-/// homogeneous part of an RK4 step is reused while its damping and stiffness stages are the same,
-/// bit for bit, as the previous interval's: between stiffness switches), a third applies the maps
-/// (a 2x2 multiply-add per sample). Intervals with a breakpoint inside take advanceSdof with
-/// `coeffs`. With the stages equal to `coeffs` at those instants, the results equal
-/// integrateSdof's to rounding. Same arguments, outputs and errors otherwise.
+/// integrateSdof computed with per-interval affine maps, with the same steps and stages: for
+/// every output interval [t_n, t_n+1] without a breakpoint inside, `stages(n, n + 1, split, c, k,
+/// f, 1)` (split[0] == 0) fills the coefficients at t_n + q dt / (2 substeps), q = 0..2 substeps,
+/// into c[q] (C), k[q] (K) and f[q] (F); the interval's steps become one affine map, applied at
+/// once (a 2x2 multiply-add). The homogeneous part of an RK4 step is reused while its damping and
+/// stiffness stages are the same, bit for bit, as the previous interval's (between stiffness
+/// switches), so a held stretch costs the forcing part and the multiply-add per sample. Intervals
+/// with a breakpoint inside take advanceSdof with `coeffs`. With the stages equal to `coeffs` at
+/// those instants, the results equal integrateSdof's to rounding. Same arguments, outputs and
+/// errors otherwise. (The stages callback takes a range [n0, n1) and a split mask so a caller may
+/// serve blocks; this driver asks for one interval at a time, so nothing is buffered.)
 template <class CoeffFn, class StagesFn>
 Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
                                  std::vector<double> breakpoints, double t0, double dt,
@@ -212,71 +212,65 @@ Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
   const auto bp_end = breakpoints.cend();
   auto bp = breakpoints.cbegin();    // the stepping cursor (advanceSdof's)
   auto scan = breakpoints.cbegin();  // first breakpoint > the interval's start
-  // Blocks of 1024 intervals (fewer for a short record: the arrays are allocated per call).
-  const Eigen::Index n_block = std::clamp<Eigen::Index>(n_samples - 1, 1, 1024);
-  const size_t nb = static_cast<size_t>(n_block);
-  const double h = dt / substeps, inv_h = 1.0 / h;
-  std::vector<AffineStep> maps(nb);
-  std::vector<char> split(nb);
+  const double h = dt / substeps, inv_h = 1.0 / h, h2 = h * h;
+  constexpr int kInline = 4;  // stages held on the stack up to 4 substeps (9 stages)
   const size_t n_stages = static_cast<size_t>(2 * substeps + 1);
-  std::vector<double> sc(n_stages * nb), sk(n_stages * nb), sf(n_stages * nb);
+  std::array<double, 3 * (2 * kInline + 1)> local{};
+  std::vector<double> heap(substeps > kInline ? 3 * n_stages : 0);
+  double* sc = substeps > kInline ? heap.data() : local.data();
+  double *sk = sc + n_stages, *sf = sk + n_stages;
   // The previous RK4 step's scaled damping and stiffness stages (a, b, c, k0, km, k1) and its
-  // homogeneous part, per substep.
-  std::vector<std::array<double, 6>> key(static_cast<size_t>(substeps));
-  std::vector<AffineStep> hom(static_cast<size_t>(substeps));
-  std::vector<char> have(static_cast<size_t>(substeps), 0);
+  // homogeneous part, per substep (on the stack for one substep, the common case).
+  std::array<double, 6> key1{};
+  AffineStep hom1;
+  std::vector<std::array<double, 6>> keys(static_cast<size_t>(substeps > 1 ? substeps : 0));
+  std::vector<AffineStep> homs(keys.size());
+  std::vector<char> haves(keys.size(), 0);
+  bool have1 = false;
+  const char no_split = 0;
   SdofState s = initial;
   y_out[0] = s.y;
   if (v_out) v_out[0] = s.v;
-  for (Eigen::Index n0 = 0; n0 + 1 < n_samples; n0 += n_block) {
-    const Eigen::Index n1 = std::min(n_samples - 1, n0 + n_block);
-    const size_t count = static_cast<size_t>(n1 - n0);
-    for (Eigen::Index n = n0; n < n1; ++n) {
-      const double ta = t0 + n * dt, tb = t0 + (n + 1) * dt;
-      while (scan != bp_end && *scan <= ta) ++scan;
-      split[static_cast<size_t>(n - n0)] = scan != bp_end && *scan < tb;
-    }
-    stages(n0, n1, split.data(), sc.data(), sk.data(), sf.data(), nb);
-    // forEachStep's substeps of each [t_n, t_n+1], of the nominal length h (forEachStep's differ
-    // from it by rounding); a split interval's map is unused.
-    for (int m = 0; m < substeps; ++m) {
-      const size_t k0 = static_cast<size_t>(2 * m) * nb, km = k0 + nb, k1 = km + nb;
-      const double *c = sc.data(), *k = sk.data(), *f = sf.data();
-      const size_t ms = static_cast<size_t>(m);
-      for (size_t i = 0; i < count; ++i) {
-        if (split[i]) continue;
+  for (Eigen::Index n = 0; n + 1 < n_samples; ++n) {
+    const double ta = t0 + n * dt, tb = t0 + (n + 1) * dt;
+    while (scan != bp_end && *scan <= ta) ++scan;
+    if (scan != bp_end && *scan < tb) {
+      s = advanceSdof(coeffs, s, ta, tb, substeps, bp, bp_end, method);
+    } else {
+      stages(n, n + 1, &no_split, sc, sk, sf, size_t{1});
+      AffineStep map;
+      // forEachStep's substeps of [t_n, t_n+1], of the nominal length h (forEachStep's differ
+      // from it by rounding).
+      for (int m = 0; m < substeps; ++m) {
+        const size_t k0 = static_cast<size_t>(2 * m), km = k0 + 1, k1 = km + 1;
         AffineStep one;
         if (method == Integrator::Rk4) {  // affineOfStep's RK4 case
-          const double h2 = h * h;
-          const std::array<double, 6> now{h * c[k0 + i],  h * c[km + i],  h * c[k1 + i],
-                                          h2 * k[k0 + i], h2 * k[km + i], h2 * k[k1 + i]};
-          if (!have[ms] || std::memcmp(now.data(), key[ms].data(), sizeof(now)) != 0) {
-            rk4AffineHomogeneous(h, inv_h, now[0], now[1], now[2], now[3], now[4], now[5],
-                                 &hom[ms]);
-            key[ms] = now;
-            have[ms] = 1;
+          const std::array<double, 6> now{h * sc[k0],  h * sc[km],  h * sc[k1],
+                                          h2 * sk[k0], h2 * sk[km], h2 * sk[k1]};
+          std::array<double, 6>& key = substeps == 1 ? key1 : keys[static_cast<size_t>(m)];
+          AffineStep& hom = substeps == 1 ? hom1 : homs[static_cast<size_t>(m)];
+          char have = substeps == 1 ? have1 : haves[static_cast<size_t>(m)];
+          if (!have || std::memcmp(now.data(), key.data(), sizeof(now)) != 0) {
+            rk4AffineHomogeneous(h, inv_h, now[0], now[1], now[2], now[3], now[4], now[5], &hom);
+            key = now;
+            if (substeps == 1)
+              have1 = true;
+            else
+              haves[static_cast<size_t>(m)] = 1;
           }
-          one = hom[ms];
-          rk4AffineForcing(inv_h, now[1], now[2], now[5], now[4], h2 * f[k0 + i], h2 * f[km + i],
-                           h2 * f[k1 + i], &one);
+          one = hom;
+          rk4AffineForcing(inv_h, now[1], now[2], now[5], now[4], h2 * sf[k0], h2 * sf[km],
+                           h2 * sf[k1], &one);
         } else {
-          one = affineOfStep(method, h, inv_h, {c[k0 + i], k[k0 + i], f[k0 + i]},
-                             {c[km + i], k[km + i], f[km + i]}, {c[k1 + i], k[k1 + i], f[k1 + i]});
+          one = affineOfStep(method, h, inv_h, {sc[k0], sk[k0], sf[k0]},
+                             {sc[km], sk[km], sf[km]}, {sc[k1], sk[k1], sf[k1]});
         }
-        maps[i] = m == 0 ? one : composeAffine(one, maps[i]);
+        map = m == 0 ? one : composeAffine(one, map);
       }
+      s = {map.m11 * s.y + map.m12 * s.v + map.g1, map.m21 * s.y + map.m22 * s.v + map.g2};
     }
-    for (Eigen::Index n = n0; n < n1; ++n) {
-      const size_t i = static_cast<size_t>(n - n0);
-      if (split[i]) {
-        s = advanceSdof(coeffs, s, t0 + n * dt, t0 + (n + 1) * dt, substeps, bp, bp_end, method);
-      } else {
-        const AffineStep& a = maps[i];
-        s = {a.m11 * s.y + a.m12 * s.v + a.g1, a.m21 * s.y + a.m22 * s.v + a.g2};
-      }
-      y_out[n + 1] = s.y;
-      if (v_out) v_out[n + 1] = s.v;
-    }
+    y_out[n + 1] = s.y;
+    if (v_out) v_out[n + 1] = s.v;
   }
   return {};
 }
