@@ -140,15 +140,15 @@ double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   const auto channels = rangedChannels(c);
   for (size_t k = 0; k < channels.size(); ++k) {
     const RawArray& a = *channels[k];
-    const double low = kPlausibleRanges[k].low, high = kPlausibleRanges[k].high;
-    std::int64_t non_finite = 0, outside = 0;
+    const PlausibleRange range = kPlausibleRanges[k];
+    double non_finite = 0.0, outside = 0.0;  // counts (exact in a double), summed in lanes
     for (size_t i = 0; i < a.size(); ++i) {
       const double x = a[i];
-      non_finite += finite(x) ? 0 : 1;
-      outside += x >= low && x <= high ? 0 : 1;
+      non_finite += finite(x) ? 0.0 : 1.0;
+      outside += inRange(range, x) ? 0.0 : 1.0;
     }
-    info->non_finite_values += non_finite;
-    info->out_of_range_values += outside - non_finite;
+    info->non_finite_values += static_cast<std::int64_t>(non_finite);
+    info->out_of_range_values += static_cast<std::int64_t>(outside - non_finite);
   }
   std::int64_t bad_states = 0;  // a byte: finite, plausible when 0 or 1
   for (size_t i = 0; i < c.mesh_state.size(); ++i) bad_states += c.mesh_state.p[i] > 1 ? 1 : 0;
@@ -200,12 +200,14 @@ class ChunkReader {
   bool next(Chunk* c) {
     std::unique_lock<std::mutex> lock(mutex_);
     if (c->bytes.capacity() > 0) spare_.push_back(std::move(c->bytes));
+    consumer_waiting_ = true;
     cv_.wait(lock, [this] { return !queue_.empty() || done_; });
+    consumer_waiting_ = false;
     if (queue_.empty()) return false;
     *c = std::move(queue_.front());
     queue_.pop_front();
     queued_ -= c->valid ? c->c.dte.size() : 0;
-    cv_.notify_all();
+    if (producer_waiting_) cv_.notify_all();  // (a wake-up per chunk costs two system calls)
     return true;
   }
   /// The read error (empty when none); valid once next() returned false.
@@ -242,11 +244,13 @@ class ChunkReader {
         read(m, &item);
         const size_t n = item.valid ? item.c.dte.size() : 0;
         std::unique_lock<std::mutex> lock(mutex_);
+        producer_waiting_ = true;
         cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
+        producer_waiting_ = false;
         if (stop_) break;
         queue_.push_back(std::move(item));
         queued_ += n;
-        cv_.notify_all();
+        if (consumer_waiting_) cv_.notify_all();
       }
     } catch (const std::exception& e) {
       error = openError(path_, e);
@@ -265,6 +269,7 @@ class ChunkReader {
   std::vector<std::vector<std::uint8_t>> spare_;  // buffers the caller is done with
   size_t queued_ = 0;                             // samples in queue_
   bool stop_ = false, done_ = false;
+  bool consumer_waiting_ = false, producer_waiting_ = false;  // in cv_.wait (notify only then)
   std::string error_;
   std::thread thread_;  // last: started once the members above exist
 };
@@ -643,10 +648,6 @@ Status streamSignalBag(const BagSignalInfo& info,
   const double nan = std::numeric_limits<double>::quiet_NaN();
   gear_sim::SignalTable block;
   size_t r = 0;  // current range
-  // A value outside channel k's plausible range reads as NaN (counted by scanSignalBag).
-  auto plausible = [nan](size_t k, double x) {  // branch-free: the copy loops vectorise
-    return inRange(kPlausibleRanges[k], x) || !finite(x) ? x : nan;
-  };
   // The range's channels are written where chunks cover them; the samples up to `filled` are
   // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
   Eigen::Index filled = 0;
@@ -687,8 +688,14 @@ Status streamSignalBag(const BagSignalInfo& info,
     gapUpTo(i0);
     auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
       if (to.size() == 0) return;
-      for (Eigen::Index q = 0; q < n; ++q)
-        to[i0 + q] = plausible(k, from[j0 + static_cast<size_t>(q)]);
+      const PlausibleRange range = kPlausibleRanges[k];
+      double* out = to.data() + i0;
+      // A finite value outside channel k's plausible range reads as NaN (counted by
+      // scanSignalBag); branch-free, so the loop vectorises.
+      for (Eigen::Index q = 0; q < n; ++q) {
+        const double x = from[j0 + static_cast<size_t>(q)];
+        out[q] = inRange(range, x) || !finite(x) ? x : nan;
+      }
     };
     channel(c.dte, 0, block.dte);
     channel(c.dte_velocity, 1, block.dte_velocity);

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iomanip>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "gear_damping_id/quality_flags.hpp"
@@ -379,11 +380,47 @@ gear_sim::Status writeFileAtomically(const std::string& path, const std::string&
                              [&](std::ostream& f) { return static_cast<bool>(f << text); });
 }
 
+namespace {
+
+// nlohmann's serializer writing into a 1 MiB buffer passed on to the stream when full: the
+// stream adapter of `f << doc` makes an ostream call per token (a sentry each), most of the
+// time of writing a long record's document.
+class BufferedJsonOutput : public nlohmann::detail::output_adapter_protocol<char> {
+ public:
+  explicit BufferedJsonOutput(std::ostream& f) : f_(f) { buffer_.reserve(kSize); }
+  void write_character(char c) override {
+    buffer_.push_back(c);
+    if (buffer_.size() >= kSize) flush();
+  }
+  void write_characters(const char* s, std::size_t n) override {
+    buffer_.append(s, n);
+    if (buffer_.size() >= kSize) flush();
+  }
+  void flush() {
+    f_.write(buffer_.data(), static_cast<std::streamsize>(buffer_.size()));
+    buffer_.clear();
+  }
+
+ private:
+  static constexpr std::size_t kSize = std::size_t{1} << 20;
+  std::ostream& f_;
+  std::string buffer_;
+};
+
+}  // namespace
+
 gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, OutputStage* stage) {
-  // Serialised straight into the file: the text of a long record's document (tens of MB) is
-  // never held in memory. `<< std::setw(2)` is dump(2).
+  // Serialised into the file through a 1 MiB buffer: the text of a long record's document (tens
+  // of MB) is never held in memory whole. The same serializer and settings as
+  // `f << std::setw(2) << doc` (dump(2): pretty, indent 2 with ' ', UTF-8 as is), so the same
+  // bytes.
   return writeThroughPartial(path, stage, "path", [&](std::ostream& f) {
-    return static_cast<bool>(f << std::setw(2) << doc << '\n');
+    const auto out = std::make_shared<BufferedJsonOutput>(f);
+    nlohmann::detail::serializer<json> s(out, ' ');
+    s.dump(doc, true, false, 2);
+    out->write_character('\n');
+    out->flush();
+    return static_cast<bool>(f);
   });
 }
 
