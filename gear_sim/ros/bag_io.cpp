@@ -694,7 +694,8 @@ Status streamSignalBag(const BagSignalInfo& info,
       // scanSignalBag); branch-free, so the loop vectorises.
       for (Eigen::Index q = 0; q < n; ++q) {
         const double x = from[j0 + static_cast<size_t>(q)];
-        out[q] = inRange(range, x) || !finite(x) ? x : nan;
+        const bool keep = ((x >= range.low) & (x <= range.high)) | !finite(x);  // no branches
+        out[q] = keep ? x : nan;
       }
     };
     channel(c.dte, 0, block.dte);
