@@ -2078,8 +2078,9 @@ class HeldKnownStages {
     *K = (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) * inv_me_;
     const double* T = cur_.s.torque;
     const double t0 = T == nullptr ? 0.0 : T[j];
-    const double tm = T == nullptr ? 0.0 : hi - lo < 4 ? cur_.fm.torque(j, 0.5, lo, hi)
-                                                     : midpoint(T, j, lo, hi);
+    const double tm = T == nullptr  ? 0.0
+                      : hi - lo < 4 ? cur_.fm.torque(j, 0.5, lo, hi)
+                                    : midpoint(T, j, lo, hi);
     const double t1 =
         T == nullptr ? 0.0 : (j + 1 < cur_.s.n ? T[j + 1] : cur_.fm.torque(j, 1.0, lo, hi));
     *C = cur_.seg[cur_.si].C;

@@ -262,8 +262,8 @@ Status integrateSdofAffineBlocks(const CoeffFn& coeffs, const StagesFn& stages,
           rk4AffineForcing(inv_h, now[1], now[2], now[5], now[4], h2 * sf[k0], h2 * sf[km],
                            h2 * sf[k1], &one);
         } else {
-          one = affineOfStep(method, h, inv_h, {sc[k0], sk[k0], sf[k0]},
-                             {sc[km], sk[km], sf[km]}, {sc[k1], sk[k1], sf[k1]});
+          one = affineOfStep(method, h, inv_h, {sc[k0], sk[k0], sf[k0]}, {sc[km], sk[km], sf[km]},
+                             {sc[k1], sk[k1], sf[k1]});
         }
         map = m == 0 ? one : composeAffine(one, map);
       }
