@@ -458,21 +458,21 @@ struct Taps4 {
 };
 
 // Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
-// area/moment increments of y (ay, my) and of K y - F (ag, mg), with yb, Tb pointing one
-// sample before the interval's left end and kb at it. Compiled for AVX2 as well as the baseline
-// (chosen at load time): without FMA contraction or reassociation both give the same bits.
+// area increments of y (ay) and the area/moment increments of K y - F (ag, mg), with yb, Tb
+// pointing one sample before the interval's left end and kb at it (the moment of y alone is not
+// needed by the known rows). Compiled for AVX2 as well as the baseline (chosen at load time):
+// without FMA contraction or reassociation both give the same bits.
 GD_AVX2_CLONES
 void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
                              const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
                              const double* wa, const double* wm, double inv_me, double ff,
-                             double* __restrict__ ay, double* __restrict__ my,
-                             double* __restrict__ ag, double* __restrict__ mg) {
+                             double* __restrict__ ay, double* __restrict__ ag,
+                             double* __restrict__ mg) {
   const Taps4 a(wa), m(wm);
   for (Eigen::Index i = lo; i < hi; ++i) {
     const double A = a(yb + i), Mo = m(yb + i);
     const double K = kb[i] * inv_me;
     ay[i] = A;
-    my[i] = Mo;
     ag[i] = K * A - ff * a(Tb + i);
     mg[i] = K * Mo - ff * m(Tb + i);
   }
@@ -577,8 +577,8 @@ void interiorIncrements(const WindowPass& p) {
   if (p.split_k) {
     // K held on the interval (a switch inside is fixed up by breakIncrements): the hot path.
     const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
-    heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
-                            ag, mg);
+    heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, ag,
+                            mg);
   } else if (p.grey) {
     const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
     greyIncrements(yb, p.T + w0 - 1, p.st + w0, i_lo, i_hi, wa4, wm4, ff, ay, my, ag, mg, p.as,
