@@ -169,7 +169,8 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
   auto run = [&](Eigen::Index b0, Eigen::Index b1) {
     for (Eigen::Index b = b0; b < b1; ++b) {
       const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
-      const Eigen::Index i = firstBadStep(t.time.data(), std::max<Eigen::Index>(lo, 1), hi, ref, tol);
+      const Eigen::Index i =
+          firstBadStep(t.time.data(), std::max<Eigen::Index>(lo, 1), hi, ref, tol);
       if (i < hi) {
         bad[static_cast<size_t>(b)] = i;
         return;
@@ -194,9 +195,8 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
     double total = 0.0;
     for (const double v : sums) total += v;
     // (recordSum's order, so this equals defaultWindowLength, which handles non-finite samples)
-    *window_length = std::isfinite(total)
-                         ? windowFromStiffness(total, static_cast<double>(n), gear)
-                         : defaultWindowLength(view, gear);
+    *window_length = std::isfinite(total) ? windowFromStiffness(total, static_cast<double>(n), gear)
+                                          : defaultWindowLength(view, gear);
   }
   return {};
 }
@@ -1206,9 +1206,9 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
   const int rc = std::max(columnIndex(Column::DampC), 0);
   const double* ahead[5];
   int n_ahead = 0;
-  for (const double* c : {s.dte, s.stiffness, use_torque ? s.torque : nullptr,
-                          needsMeshState(f) ? s.mesh_state : nullptr,
-                          shape_ ? s.mesh_phase : nullptr}) {
+  for (const double* c :
+       {s.dte, s.stiffness, use_torque ? s.torque : nullptr,
+        needsMeshState(f) ? s.mesh_state : nullptr, shape_ ? s.mesh_phase : nullptr}) {
     if (c != nullptr) ahead[n_ahead++] = c;
   }
   const Eigen::Index next_lo = begin + rows, next_hi = std::min<Eigen::Index>(s.n, next_lo + rows);
@@ -1245,9 +1245,9 @@ gear_sim::Status IntegralMethod::solveLocals(SegmentRecord* rec) const {
   const int q = static_cast<int>(columns_.size());
   Eigen::VectorXd x;
   double cond = 0.0;
-  const bool ok =
-      solveEquilibrated(rec->gram.topLeftCorner(n_local_, n_local_),
-                        rec->gram.block(0, q, n_local_, 1), options_.max_condition, &x, nullptr, &cond);
+  const bool ok = solveEquilibrated(rec->gram.topLeftCorner(n_local_, n_local_),
+                                    rec->gram.block(0, q, n_local_, 1), options_.max_condition, &x,
+                                    nullptr, &cond);
   rec->estimate.condition = cond;
   if (ok) return {};
   std::ostringstream m;
