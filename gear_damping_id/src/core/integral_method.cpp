@@ -726,36 +726,51 @@ void basisIncrements(const WindowPass& p, const Eigen::MatrixXd& basis, int nb,
 }
 
 // Pass 2 of the hot path (known, piecewise/constant: one column): prefix sums -> rows
-// [-P, y + IIKy - IIF] in colC, colb.
-void knownRows(const WindowPass& p, double* colC, double* colb) {
-  const double h = p.h, *y = p.y;
-  const double *ay = p.ay, *ag = p.ag, *mg = p.mg;
-  const Eigen::Index w0 = p.w0, L = p.L;
-  double P = 0.0, G = 0.0, Q = 0.0;
+// [-P, y + IIKy - IIF] in colC, colb, from the increments ay, ag, mg and y (all from row 0 of the
+// window; the increments of row r's interval at r - 1). Two rows per step: each running sum
+// advances by the pair's total, so its add chain is half as long, and the odd row is formed off
+// the chain. P and G run in the two lanes of one vector V2 = [P, G] (each lane the same scalar
+// operations in the same order, so the same bits as two scalar sums); the pair's two rows are
+// stored as one vector per column. AVX2 clone (three-operand encodings), no FMA.
+GD_AVX2_CLONES
+void knownRowPairs(double h, const double* __restrict__ y, const double* __restrict__ ay,
+                   const double* __restrict__ ag, const double* __restrict__ mg, Eigen::Index L,
+                   double* __restrict__ colC, double* __restrict__ colb) {
+  typedef double V2 __attribute__((vector_size(16)));
+  V2 PG = {0.0, 0.0};
+  double Q = 0.0;
   colC[0] = 0.0;
-  colb[0] = y[w0];
-  // Two rows per step: each running sum advances by the pair's total, so its add chain is
-  // half as long (the sums are latency-bound); the odd row is formed off the chain.
+  colb[0] = y[0];
   Eigen::Index r = 1;
   for (; r + 1 < L; r += 2) {
-    const double i1 = h * G + mg[r - 1];
-    const double G1 = G + ag[r - 1];
-    const double i2 = h * G1 + mg[r];
-    colC[r] = -(P + ay[r - 1]);
-    colb[r] = y[w0 + r] + (Q + i1);
-    Q += i1 + i2;
-    G += ag[r - 1] + ag[r];
-    P += ay[r - 1] + ay[r];
-    colC[r + 1] = -P;
-    colb[r + 1] = y[w0 + r + 1] + Q;
+    const V2 v1 = {ay[r - 1], ag[r - 1]}, v2 = {ay[r], ag[r]};
+    const V2 u = PG + v1;         // [P + ay, G1 = G + ag]
+    const V2 GG = {PG[1], u[1]};  // [G, G1]
+    V2 m;
+    std::memcpy(&m, mg + r - 1, sizeof(V2));
+    const V2 ii = h * GG + m;  // [i1, i2] = h G + mg
+    PG = PG + (v1 + v2);       // P += ay + ay, G += ag + ag
+    const double Q1 = Q + ii[0];
+    Q = Q + (ii[0] + ii[1]);
+    V2 yy;
+    std::memcpy(&yy, y + r, sizeof(V2));
+    const V2 b = yy + V2{Q1, Q};
+    const V2 c = -V2{u[0], PG[0]};
+    std::memcpy(colb + r, &b, sizeof(V2));
+    std::memcpy(colC + r, &c, sizeof(V2));
   }
+  double P = PG[0], G = PG[1];
   for (; r < L; ++r) {
     Q += h * G + mg[r - 1];
     G += ag[r - 1];
     P += ay[r - 1];
     colC[r] = -P;
-    colb[r] = y[w0 + r] + Q;
+    colb[r] = y[r] + Q;
   }
+}
+
+void knownRows(const WindowPass& p, double* colC, double* colb) {
+  knownRowPairs(p.h, p.y + p.w0, p.ay, p.ag, p.mg, p.L, colC, colb);
 }
 
 // Where each kind of column stands in the rows (-1: not a column of this problem).
