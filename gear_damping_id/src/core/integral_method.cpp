@@ -960,17 +960,25 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
   };
   Eigen::Index r = 0;
   V4 rl = {0.0, 1.0, 0.0, 1.0};
+  // The raw column's lanes 0, 1 are those of the first pair's x when it is column 0 (only lanes
+  // 0, 1 of raw4 are summed).
+  const bool raw_first = raw_col == 0;
+  typedef double V2 __attribute__((vector_size(16)));
   for (; r + 2 <= L; r += 2, rl += 2.0) {
-    V4 z[KC];
+    V4 z[KC], x0 = {0, 0, 0, 0};
     for (int k = 0; k < nk; ++k) {
       const int a = 2 * k, b = 2 * k + 1;
       const double* cb = b < n ? col[b] + r : col[a] + r;  // (padding: multiplied by 0)
       const double bmask = b < n ? 1.0 : 0.0;
-      const V4 x = {col[a][r], col[a][r + 1], cb[0] * bmask, cb[1] * bmask};
+      V2 xa, xb;  // rows r, r + 1 of columns a and b, one load each
+      std::memcpy(&xa, col[a] + r, sizeof(V2));
+      std::memcpy(&xb, cb, sizeof(V2));
+      const V4 x = {xa[0], xa[1], xb[0] * bmask, xb[1] * bmask};
+      if (k == 0) x0 = x;
       const V4 o = {d0[a], d0[a], d0[b], d0[b]}, s = {d1[a], d1[a], d1[b], d1[b]};
       z[k] = x - o - s * rl;
     }
-    const V4 rc = {col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
+    const V4 rc = raw_first ? x0 : V4{col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
     accumulate(z, rl - half, rc);
   }
   if (r < L) {  // odd L: the last row in the even lanes, the odd lanes zero (add nothing)
