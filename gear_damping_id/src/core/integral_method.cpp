@@ -1211,7 +1211,15 @@ namespace {
 // on it.
 void prefetchSamples(const double* const* channels, int nch, Eigen::Index lo, Eigen::Index hi) {
   for (int c = 0; c < nch; ++c) {
-    for (Eigen::Index i = lo; i < hi; i += 8) __builtin_prefetch(channels[c] + i, 0, 3);
+    const char* p = reinterpret_cast<const char*>(channels[c] + lo);
+    const char* const e = reinterpret_cast<const char*>(channels[c] + hi);
+    for (; p + 192 < e; p += 256) {  // four lines per step
+      __builtin_prefetch(p, 0, 3);
+      __builtin_prefetch(p + 64, 0, 3);
+      __builtin_prefetch(p + 128, 0, 3);
+      __builtin_prefetch(p + 192, 0, 3);
+    }
+    for (; p < e; p += 64) __builtin_prefetch(p, 0, 3);
   }
 }
 
