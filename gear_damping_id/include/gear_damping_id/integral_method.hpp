@@ -176,6 +176,10 @@ class IntegralMethod {
     double duration = 0.0;           // [s]
     std::vector<double> basis_mean;  // time-means of the shape's basis functions (greybox)
     std::vector<WindowRecord> window_records;
+    // The local block's solve from addSegment's identifiability check, reused by finish()
+    // (empty without local unknowns): its inverse and the locals without shared unknowns.
+    Eigen::MatrixXd local_inverse;
+    Eigen::VectorXd local_solution;
   };
 
   void buildColumns();

@@ -1274,13 +1274,14 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
 gear_sim::Status IntegralMethod::solveLocals(SegmentRecord* rec) const {
   if (n_local_ == 0) return {};
   const int q = static_cast<int>(columns_.size());
-  Eigen::VectorXd x;
   double cond = 0.0;
   const bool ok = solveEquilibrated(rec->gram.topLeftCorner(n_local_, n_local_),
-                                    rec->gram.block(0, q, n_local_, 1), options_.max_condition, &x,
-                                    nullptr, &cond);
+                                    rec->gram.block(0, q, n_local_, 1), options_.max_condition,
+                                    &rec->local_solution, &rec->local_inverse, &cond);
   rec->estimate.condition = cond;
   if (ok) return {};
+  rec->local_inverse.resize(0, 0);
+  rec->local_solution.resize(0);
   std::ostringstream m;
   m << "rank deficient or ill-conditioned (condition " << cond << " > " << options_.max_condition
     << ")";
@@ -1328,8 +1329,12 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
     SharedSolution::Local& L = sh.locals[i - s_begin];
     Eigen::VectorXd xl;
     double cond = 0.0;
-    if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl, &L.Gll_inv,
-                           &cond)) {
+    if (nl > 0 && rec.local_inverse.rows() == nl) {
+      // addSegment's solve (the same call, which passed the stricter max_condition).
+      L.Gll_inv = rec.local_inverse;
+      xl = rec.local_solution;
+    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl,
+                                  &L.Gll_inv, &cond)) {
       continue;
     }
     L.ok = true;
