@@ -347,15 +347,20 @@ bool solveEquilibrated(const Eigen::Ref<const Eigen::MatrixXd>& G,
     if (inverse) inverse->setConstant(1, 1, (d[0] * sinv) * d[0]);
     return true;
   }
-  const Eigen::MatrixXd S = d.asDiagonal() * G * d.asDiagonal();
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+  // Run-time sizes with compile-time bounds: the dynamic-size algorithms, without heap
+  // allocations.
+  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, IntegralMethod::kMaxColumns,
+                        IntegralMethod::kMaxColumns>
+      Small;
+  const Small S = d.asDiagonal() * G * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Small> es(S);
   if (es.info() != Eigen::Success) return false;
-  const Eigen::VectorXd& lam = es.eigenvalues();
+  const auto& lam = es.eigenvalues();
   const double lmax = lam[q - 1], lmin = lam[0];
   *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
   if (!(*condition <= max_condition)) return false;
-  const Eigen::MatrixXd& V = es.eigenvectors();
-  const Eigen::MatrixXd Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
+  const Small& V = es.eigenvectors();
+  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
   *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
   if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
   return true;
