@@ -225,6 +225,46 @@ TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
       "");
 }
 
+// identify()'s one pass over time and stiffness (checkRecord: blocks of 8192 samples shared by the
+// threads) reports the same first bad step as checkSignalTable and the same window as
+// defaultWindowLength, for any thread count: a bad step in the second block only, bad steps in
+// both blocks (the first is named), and a NaN stiffness sample (the finite samples' mean).
+TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksForAnyThreadCount) {
+  const double dt = 1e-6;
+  ASSERT_GT(clean_->size(), 8192 + 100);
+  for (const int bad_case : {0, 1, 2, 3}) {
+    SignalTable t = *clean_;
+    if (bad_case >= 1) t.time[9000] += 0.01 * dt;  // second block
+    if (bad_case == 2) t.time[77] -= 0.02 * dt;    // first block too: named first
+    if (bad_case == 3) t.stiffness[100] = kNaN;    // window from the finite samples
+    if (bad_case == 3) t.time[9000] = clean_->time[9000];
+    const gear_sim::Status sep =
+        gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+    const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
+    for (const int threads : {1, 2, 3, 4}) {
+      double w = kNaN;
+      const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), threads, &w);
+      EXPECT_EQ(s.ok(), sep.ok()) << bad_case << " " << threads;
+      EXPECT_EQ(s.message(), sep.message()) << bad_case << " " << threads;
+      if (sep.ok()) {
+        EXPECT_EQ(w, w_sep) << bad_case << " " << threads;  // bit-identical
+      }
+    }
+    if (bad_case == 1) {
+      EXPECT_NE(sep.message().find("sample 9000"), std::string::npos) << sep.message();
+    }
+    if (bad_case == 2) {
+      EXPECT_NE(sep.message().find("sample 77"), std::string::npos) << sep.message();
+    }
+  }
+  // A set window is passed through.
+  IdentificationOptions o = opts();
+  o.window_length = 3e-4;
+  double w = 0.0;
+  ASSERT_TRUE(gear_damping_id::checkRecord(*clean_, gear(), o, 2, &w).ok());
+  EXPECT_EQ(w, 3e-4);
+}
+
 TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
   struct Case {
     const char* field;

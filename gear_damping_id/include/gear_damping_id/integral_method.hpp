@@ -92,6 +92,14 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& table, Formulatio
                                   DampingModel model, double rel_tolerance = 1e-6,
                                   Eigen::Index first_line = -1);
 
+/// checkSignalTable (without file lines) and, when options.window_length is 0, the default window
+/// of defaultWindowLength in one pass over the time and stiffness columns, in blocks shared by
+/// up to `threads` threads (the same results for any count). *window_length receives the window
+/// (options.window_length when set) when the check passes.
+gear_sim::Status checkRecord(const gear_sim::SignalTable& table, const GearConstants& gear,
+                             const IdentificationOptions& options, int threads,
+                             double* window_length);
+
 /// The sample ranges of the damping segments of [t_start, t_end] within a record: segment i starts
 /// at the first sample at or after t_start + i*dT. A final partial segment shorter than half dT
 /// is merged into the previous one. Returns pairs [begin, end) of sample indices.
@@ -168,6 +176,10 @@ class IntegralMethod {
     double duration = 0.0;           // [s]
     std::vector<double> basis_mean;  // time-means of the shape's basis functions (greybox)
     std::vector<WindowRecord> window_records;
+    // The local block's solve from addSegment's identifiability check, reused by finish()
+    // (empty without local unknowns): its inverse and the locals without shared unknowns.
+    Eigen::MatrixXd local_inverse;
+    Eigen::VectorXd local_solution;
   };
 
   void buildColumns();

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <thread>
 
 #include "gear_damping_id/damping_units.hpp"
 #include "gear_damping_id/forward_model.hpp"
@@ -32,13 +33,14 @@ namespace gear_damping_id {
 
 namespace {
 
-// The first step i in [1, n) from which the steps of tt may not all be within tol of ref:
-// blocks of 64 steps are checked branch-free (vectorised); the caller searches on from the
-// returned index for the first bad step (n when every block passed).
+// The first step i in [lo, hi) (lo >= 1) from which the steps of tt may not all be within tol of
+// ref: blocks of 64 steps are checked branch-free (vectorised); the caller searches on from the
+// returned index for the first bad step (hi when every block passed).
 GD_AVX2_CLONES
-Eigen::Index uniformStepsUpTo(const double* tt, Eigen::Index n, double ref, double tol) {
-  Eigen::Index i0 = 1;
-  for (; i0 + 64 <= n; i0 += 64) {
+Eigen::Index uniformStepsUpTo(const double* tt, Eigen::Index lo, Eigen::Index hi, double ref,
+                              double tol) {
+  Eigen::Index i0 = lo;
+  for (; i0 + 64 <= hi; i0 += 64) {
     long good = 0;  // an integer count vectorises (a bool reduction does not)
     for (int k = 0; k < 64; ++k) good += std::abs(tt[i0 + k] - tt[i0 + k - 1] - ref) <= tol;
     if (good != 64) break;
@@ -46,10 +48,44 @@ Eigen::Index uniformStepsUpTo(const double* tt, Eigen::Index n, double ref, doub
   return i0;
 }
 
-}  // namespace
+// The first step i in [lo, hi) (lo >= 1) not within tol of ref, hi when there is none.
+Eigen::Index firstBadStep(const double* tt, Eigen::Index lo, Eigen::Index hi, double ref,
+                          double tol) {
+  for (Eigen::Index i = uniformStepsUpTo(tt, lo, hi, ref, tol); i < hi; ++i) {
+    if (!(std::abs(tt[i] - tt[i - 1] - ref) <= tol)) return i;
+  }
+  return hi;
+}
 
-gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
-                                  double rel_tolerance, Eigen::Index first_line) {
+// Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
+// full; a non-finite term makes the sum non-finite).
+GD_AVX2_CLONES
+double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
+  double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  Eigen::Index i = lo;
+  for (; i + 8 <= hi; i += 8) {
+    for (int k = 0; k < 8; ++k) a[k] += x[i + k];
+  }
+  for (; i < hi; ++i) a[0] += x[i];
+  return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+// Whole-record passes go in blocks of this many samples; a whole-record sum is the sum of the
+// block sums in block order, whatever the number of threads.
+constexpr Eigen::Index kRecordBlock = 8192;
+
+// The sum of x[0, n) in that order.
+double recordSum(const double* x, Eigen::Index n) {
+  double total = 0.0;
+  for (Eigen::Index lo = 0; lo < n; lo += kRecordBlock)
+    total += blockSum(x, lo, std::min(n, lo + kRecordBlock));
+  return total;
+}
+
+// checkSignalTable's checks of everything but the individual time steps; *ref receives the
+// reference step.
+gear_sim::Status checkColumns(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
+                              double* ref) {
   std::ostringstream e;
   const Eigen::Index n = t.size();
   if (n < 2)
@@ -75,28 +111,92 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f,
     return gear_sim::Status::invalidInput("time is not increasing", "time");
   // Reference step: the median of the first three steps (a record whose very first step is the
   // odd one is then reported there, not at every later step).
-  double ref = t.time[1] - t.time[0];
+  *ref = t.time[1] - t.time[0];
   if (n >= 4) {
     double d[3] = {t.time[1] - t.time[0], t.time[2] - t.time[1], t.time[3] - t.time[2]};
     std::sort(d, d + 3);
-    ref = d[1];
+    *ref = d[1];
   }
-  // Blocks of 64 steps are checked branch-free (vectorisable); a failing block is searched
-  // for its first bad step.
-  const double tol = rel_tolerance * ref;
-  for (Eigen::Index i = uniformStepsUpTo(t.time.data(), n, ref, tol); i < n; ++i) {
-    const double d = t.time[i] - t.time[i - 1];
-    if (!(std::abs(d - ref) <= tol)) {
-      e << "time is not uniformly sampled at ";
-      if (first_line >= 0)
-        e << "line " << first_line + i << " (sample " << i << ", ";
-      else
-        e << "sample " << i << " (";
-      e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step " << ref
-        << " s by more than the tolerance " << rel_tolerance << " (relative)"
-        << (d > ref ? ": a gap or a dropped sample" : "");
-      return gear_sim::Status::invalidInput(e.str(), "time");
+  return {};
+}
+
+// The error for the non-uniform step i.
+gear_sim::Status badStep(const gear_sim::SignalTable& t, Eigen::Index i, double ref,
+                         double rel_tolerance, Eigen::Index first_line) {
+  std::ostringstream e;
+  const double d = t.time[i] - t.time[i - 1];
+  e << "time is not uniformly sampled at ";
+  if (first_line >= 0)
+    e << "line " << first_line + i << " (sample " << i << ", ";
+  else
+    e << "sample " << i << " (";
+  e << "t = " << t.time[i] << " s): step " << d << " s differs from the sampling step " << ref
+    << " s by more than the tolerance " << rel_tolerance << " (relative)"
+    << (d > ref ? ": a gap or a dropped sample" : "");
+  return gear_sim::Status::invalidInput(e.str(), "time");
+}
+
+// Default window from the sum of the finite stiffness samples and their count.
+double windowFromStiffness(double total, double count, const GearConstants& gear) {
+  const double kbar = count > 0.0 && total > 0.0 ? total / count : gear.mean_stiffness;
+  const double omega0 = std::sqrt(kbar / gear.equivalent_mass);
+  return 2.0 * 2.0 * M_PI / omega0;
+}
+
+}  // namespace
+
+gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
+                                  double rel_tolerance, Eigen::Index first_line) {
+  double ref = 0.0;
+  if (gear_sim::Status s = checkColumns(t, f, m, &ref); !s.ok()) return s;
+  const Eigen::Index n = t.size();
+  const Eigen::Index i = firstBadStep(t.time.data(), 1, n, ref, rel_tolerance * ref);
+  return i < n ? badStep(t, i, ref, rel_tolerance, first_line) : gear_sim::Status();
+}
+
+gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants& gear,
+                             const IdentificationOptions& o, int threads, double* window_length) {
+  double ref = 0.0;
+  if (gear_sim::Status s = checkColumns(t, o.formulation, o.model, &ref); !s.ok()) return s;
+  const SignalView view = SignalView::of(t);
+  const Eigen::Index n = t.size();
+  const double* k = o.window_length > 0.0 ? nullptr : view.stiffness;
+  const Eigen::Index blocks = (n + kRecordBlock - 1) / kRecordBlock;
+  std::vector<double> sums(static_cast<size_t>(blocks), 0.0);
+  std::vector<Eigen::Index> bad(static_cast<size_t>(blocks), n);
+  const double tol = o.time_tolerance * ref;
+  // Contiguous runs of blocks per thread; each stops at its first bad step.
+  auto run = [&](Eigen::Index b0, Eigen::Index b1) {
+    for (Eigen::Index b = b0; b < b1; ++b) {
+      const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
+      const Eigen::Index i =
+          firstBadStep(t.time.data(), std::max<Eigen::Index>(lo, 1), hi, ref, tol);
+      if (i < hi) {
+        bad[static_cast<size_t>(b)] = i;
+        return;
+      }
+      if (k != nullptr) sums[static_cast<size_t>(b)] = blockSum(k, lo, hi);
     }
+  };
+  const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
+  std::vector<std::thread> pool;
+  for (Eigen::Index p = 1; p < parts; ++p)
+    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts);
+  run(0, blocks / parts);
+  for (auto& th : pool) th.join();
+  for (const Eigen::Index i : bad) {
+    if (i < n) return badStep(t, i, ref, o.time_tolerance, -1);
+  }
+  if (o.window_length > 0.0) {
+    *window_length = o.window_length;
+  } else if (k == nullptr) {
+    *window_length = defaultWindowLength(view, gear);
+  } else {
+    double total = 0.0;
+    for (const double v : sums) total += v;
+    // (recordSum's order, so this equals defaultWindowLength, which handles non-finite samples)
+    *window_length = std::isfinite(total) ? windowFromStiffness(total, static_cast<double>(n), gear)
+                                          : defaultWindowLength(view, gear);
   }
   return {};
 }
@@ -153,40 +253,23 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
 }
 
 double defaultWindowLength(const SignalView& s, const GearConstants& gear) {
-  double kbar = gear.mean_stiffness;
-  if (s.stiffness != nullptr && s.n > 0) {
-    // Mean over the finite samples: one vectorised sum when all are finite (the usual case),
-    // else an element-wise pass that skips the non-finite ones.
+  if (s.stiffness == nullptr || s.n <= 0) return windowFromStiffness(0.0, 0.0, gear);
+  // Mean over the finite samples: one vectorised sum when all are finite (the usual case; in
+  // checkRecord's block order), else an element-wise pass that skips the non-finite ones.
+  double total = recordSum(s.stiffness, s.n), count = static_cast<double>(s.n);
+  if (!std::isfinite(total)) {
     const Eigen::Map<const Eigen::ArrayXd> k(s.stiffness, s.n);
-    double total = k.sum(), count = static_cast<double>(s.n);
-    if (!std::isfinite(total)) {
-      const auto finite = k.abs() <= std::numeric_limits<double>::max();
-      total = finite.select(k, 0.0).sum();
-      count = static_cast<double>(finite.count());
-    }
-    if (count > 0.0 && total > 0.0) kbar = total / count;
+    const auto finite = k.abs() <= std::numeric_limits<double>::max();
+    total = finite.select(k, 0.0).sum();
+    count = static_cast<double>(finite.count());
   }
-  const double omega0 = std::sqrt(kbar / gear.equivalent_mass);
-  return 2.0 * 2.0 * M_PI / omega0;
+  return windowFromStiffness(total, count, gear);
 }
 
 // ----------------------------------------------------------------------------------------------
 // Small dense solves
 
 namespace {
-
-// Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
-// full; a non-finite term makes the sum non-finite).
-GD_AVX2_CLONES
-double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
-  double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-  Eigen::Index i = lo;
-  for (; i + 8 <= hi; i += 8) {
-    for (int k = 0; k < 8; ++k) a[k] += x[i + k];
-  }
-  for (; i < hi; ++i) a[0] += x[i];
-  return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-}
 
 // Noise and signal levels of a segment's DTE y[0, n) (sum: its sum): the noise standard
 // deviation from the RMS of the third differences (for white noise their variance is 20 sigma^2;
@@ -232,7 +315,9 @@ constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
 // (D G D, D = diag(G)^-1/2) by a symmetric eigendecomposition. Returns false when G is not
 // positive definite or its equilibrated 2-norm condition number (of the underlying design matrix,
 // i.e. sqrt of the Gram's) exceeds max_condition. `inverse` (may be null) receives G^-1.
-bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, double max_condition,
+// G and r are referenced in place (blocks of a segment's Gram matrix, not copies).
+bool solveEquilibrated(const Eigen::Ref<const Eigen::MatrixXd>& G,
+                       const Eigen::Ref<const Eigen::VectorXd>& r, double max_condition,
                        Eigen::VectorXd* x, Eigen::MatrixXd* inverse, double* condition) {
   const Eigen::Index q = G.rows();
   if (q == 0) {
@@ -241,7 +326,8 @@ bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, doubl
     *condition = 1.0;
     return true;
   }
-  Eigen::VectorXd d(q);
+  // (at most kMaxColumns + 1 entries: no heap allocation)
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, IntegralMethod::kMaxColumns + 1, 1> d(q);
   for (Eigen::Index i = 0; i < q; ++i) {
     if (!(G(i, i) > 0.0) || !std::isfinite(G(i, i))) {
       *condition = std::numeric_limits<double>::infinity();
@@ -261,15 +347,20 @@ bool solveEquilibrated(const Eigen::MatrixXd& G, const Eigen::VectorXd& r, doubl
     if (inverse) inverse->setConstant(1, 1, (d[0] * sinv) * d[0]);
     return true;
   }
-  const Eigen::MatrixXd S = d.asDiagonal() * G * d.asDiagonal();
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+  // Run-time sizes with compile-time bounds: the dynamic-size algorithms, without heap
+  // allocations.
+  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, IntegralMethod::kMaxColumns,
+                        IntegralMethod::kMaxColumns>
+      Small;
+  const Small S = d.asDiagonal() * G * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Small> es(S);
   if (es.info() != Eigen::Success) return false;
-  const Eigen::VectorXd& lam = es.eigenvalues();
+  const auto& lam = es.eigenvalues();
   const double lmax = lam[q - 1], lmin = lam[0];
   *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
   if (!(*condition <= max_condition)) return false;
-  const Eigen::MatrixXd& V = es.eigenvectors();
-  const Eigen::MatrixXd Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
+  const Small& V = es.eigenvectors();
+  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
   *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
   if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
   return true;
@@ -372,21 +463,21 @@ struct Taps4 {
 };
 
 // Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
-// area/moment increments of y (ay, my) and of K y - F (ag, mg), with yb, Tb pointing one
-// sample before the interval's left end and kb at it. Compiled for AVX2 as well as the baseline
-// (chosen at load time): without FMA contraction or reassociation both give the same bits.
+// area increments of y (ay) and the area/moment increments of K y - F (ag, mg), with yb, Tb
+// pointing one sample before the interval's left end and kb at it (the moment of y alone is not
+// needed by the known rows). Compiled for AVX2 as well as the baseline (chosen at load time):
+// without FMA contraction or reassociation both give the same bits.
 GD_AVX2_CLONES
 void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
                              const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
                              const double* wa, const double* wm, double inv_me, double ff,
-                             double* __restrict__ ay, double* __restrict__ my,
-                             double* __restrict__ ag, double* __restrict__ mg) {
+                             double* __restrict__ ay, double* __restrict__ ag,
+                             double* __restrict__ mg) {
   const Taps4 a(wa), m(wm);
   for (Eigen::Index i = lo; i < hi; ++i) {
     const double A = a(yb + i), Mo = m(yb + i);
     const double K = kb[i] * inv_me;
     ay[i] = A;
-    my[i] = Mo;
     ag[i] = K * A - ff * a(Tb + i);
     mg[i] = K * Mo - ff * m(Tb + i);
   }
@@ -491,8 +582,8 @@ void interiorIncrements(const WindowPass& p) {
   if (p.split_k) {
     // K held on the interval (a switch inside is fixed up by breakIncrements): the hot path.
     const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
-    heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, my,
-                            ag, mg);
+    heldStiffnessIncrements(yb, p.k + w0, p.T + w0 - 1, i_lo, i_hi, wa4, wm4, inv_me, ff, ay, ag,
+                            mg);
   } else if (p.grey) {
     const double wa4[4] = {a0, a1, a2, a3}, wm4[4] = {m0, m1, m2, m3};
     greyIncrements(yb, p.T + w0 - 1, p.st + w0, i_lo, i_hi, wa4, wm4, ff, ay, my, ag, mg, p.as,
@@ -640,36 +731,51 @@ void basisIncrements(const WindowPass& p, const Eigen::MatrixXd& basis, int nb,
 }
 
 // Pass 2 of the hot path (known, piecewise/constant: one column): prefix sums -> rows
-// [-P, y + IIKy - IIF] in colC, colb.
-void knownRows(const WindowPass& p, double* colC, double* colb) {
-  const double h = p.h, *y = p.y;
-  const double *ay = p.ay, *ag = p.ag, *mg = p.mg;
-  const Eigen::Index w0 = p.w0, L = p.L;
-  double P = 0.0, G = 0.0, Q = 0.0;
+// [-P, y + IIKy - IIF] in colC, colb, from the increments ay, ag, mg and y (all from row 0 of the
+// window; the increments of row r's interval at r - 1). Two rows per step: each running sum
+// advances by the pair's total, so its add chain is half as long, and the odd row is formed off
+// the chain. P and G run in the two lanes of one vector V2 = [P, G] (each lane the same scalar
+// operations in the same order, so the same bits as two scalar sums); the pair's two rows are
+// stored as one vector per column. AVX2 clone (three-operand encodings), no FMA.
+GD_AVX2_CLONES
+void knownRowPairs(double h, const double* __restrict__ y, const double* __restrict__ ay,
+                   const double* __restrict__ ag, const double* __restrict__ mg, Eigen::Index L,
+                   double* __restrict__ colC, double* __restrict__ colb) {
+  typedef double V2 __attribute__((vector_size(16)));
+  V2 PG = {0.0, 0.0};
+  double Q = 0.0;
   colC[0] = 0.0;
-  colb[0] = y[w0];
-  // Two rows per step: each running sum advances by the pair's total, so its add chain is
-  // half as long (the sums are latency-bound); the odd row is formed off the chain.
+  colb[0] = y[0];
   Eigen::Index r = 1;
   for (; r + 1 < L; r += 2) {
-    const double i1 = h * G + mg[r - 1];
-    const double G1 = G + ag[r - 1];
-    const double i2 = h * G1 + mg[r];
-    colC[r] = -(P + ay[r - 1]);
-    colb[r] = y[w0 + r] + (Q + i1);
-    Q += i1 + i2;
-    G += ag[r - 1] + ag[r];
-    P += ay[r - 1] + ay[r];
-    colC[r + 1] = -P;
-    colb[r + 1] = y[w0 + r + 1] + Q;
+    const V2 v1 = {ay[r - 1], ag[r - 1]}, v2 = {ay[r], ag[r]};
+    const V2 u = PG + v1;         // [P + ay, G1 = G + ag]
+    const V2 GG = {PG[1], u[1]};  // [G, G1]
+    V2 m;
+    std::memcpy(&m, mg + r - 1, sizeof(V2));
+    const V2 ii = h * GG + m;  // [i1, i2] = h G + mg
+    PG = PG + (v1 + v2);       // P += ay + ay, G += ag + ag
+    const double Q1 = Q + ii[0];
+    Q = Q + (ii[0] + ii[1]);
+    V2 yy;
+    std::memcpy(&yy, y + r, sizeof(V2));
+    const V2 b = yy + V2{Q1, Q};
+    const V2 c = -V2{u[0], PG[0]};
+    std::memcpy(colb + r, &b, sizeof(V2));
+    std::memcpy(colC + r, &c, sizeof(V2));
   }
+  double P = PG[0], G = PG[1];
   for (; r < L; ++r) {
     Q += h * G + mg[r - 1];
     G += ag[r - 1];
     P += ay[r - 1];
     colC[r] = -P;
-    colb[r] = y[w0 + r] + Q;
+    colb[r] = y[r] + Q;
   }
+}
+
+void knownRows(const WindowPass& p, double* colC, double* colb) {
+  knownRowPairs(p.h, p.y + p.w0, p.ay, p.ag, p.mg, p.L, colC, colb);
 }
 
 // Where each kind of column stands in the rows (-1: not a column of this problem).
@@ -859,17 +965,25 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
   };
   Eigen::Index r = 0;
   V4 rl = {0.0, 1.0, 0.0, 1.0};
+  // The raw column's lanes 0, 1 are those of the first pair's x when it is column 0 (only lanes
+  // 0, 1 of raw4 are summed).
+  const bool raw_first = raw_col == 0;
+  typedef double V2 __attribute__((vector_size(16)));
   for (; r + 2 <= L; r += 2, rl += 2.0) {
-    V4 z[KC];
+    V4 z[KC], x0 = {0, 0, 0, 0};
     for (int k = 0; k < nk; ++k) {
       const int a = 2 * k, b = 2 * k + 1;
       const double* cb = b < n ? col[b] + r : col[a] + r;  // (padding: multiplied by 0)
       const double bmask = b < n ? 1.0 : 0.0;
-      const V4 x = {col[a][r], col[a][r + 1], cb[0] * bmask, cb[1] * bmask};
+      V2 xa, xb;  // rows r, r + 1 of columns a and b, one load each
+      std::memcpy(&xa, col[a] + r, sizeof(V2));
+      std::memcpy(&xb, cb, sizeof(V2));
+      const V4 x = {xa[0], xa[1], xb[0] * bmask, xb[1] * bmask};
+      if (k == 0) x0 = x;
       const V4 o = {d0[a], d0[a], d0[b], d0[b]}, s = {d1[a], d1[a], d1[b], d1[b]};
       z[k] = x - o - s * rl;
     }
-    const V4 rc = {col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
+    const V4 rc = raw_first ? x0 : V4{col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
     accumulate(z, rl - half, rc);
   }
   if (r < L) {  // odd L: the last row in the even lanes, the odd lanes zero (add nothing)
@@ -1094,18 +1208,55 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   return {};
 }
 
+namespace {
+
+// Asks the memory system for samples [lo, hi) of every channel the segment pass reads (one
+// prefetch per 64-byte line): issued for the next segment while this one computes, so its first
+// pass finds the samples in cache instead of waiting for memory. Only a hint: no result depends
+// on it.
+void prefetchSamples(const double* const* channels, int nch, Eigen::Index lo, Eigen::Index hi) {
+  for (int c = 0; c < nch; ++c) {
+    const char* p = reinterpret_cast<const char*>(channels[c] + lo);
+    const char* const e = reinterpret_cast<const char*>(channels[c] + hi);
+    for (; p + 192 < e; p += 256) {  // four lines per step
+      __builtin_prefetch(p, 0, 3);
+      __builtin_prefetch(p + 64, 0, 3);
+      __builtin_prefetch(p + 128, 0, 3);
+      __builtin_prefetch(p + 192, 0, 3);
+    }
+    for (; p < e; p += 64) __builtin_prefetch(p, 0, 3);
+  }
+}
+
+}  // namespace
+
 // The rows of each of the W windows, projected and added to the segment's Gram matrix; the
 // window records for the modeled response. Returns the damping column's raw squared norm.
+// While window w computes, the samples of the record's next segment-length span (the next
+// segment, in a batch or a node's time order) are prefetched, a W-th of them per window.
 double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int W,
                                          SegmentRecord* rec) {
-  const bool use_torque = needsTorque(options_.formulation, options_.model);
+  const Formulation f = options_.formulation;
+  const bool use_torque = needsTorque(f, options_.model);
   const int nc = static_cast<int>(columns_.size()) + 1;
   const int rc = std::max(columnIndex(Column::DampC), 0);
+  const double* ahead[5];
+  int n_ahead = 0;
+  for (const double* c :
+       {s.dte, s.stiffness, use_torque ? s.torque : nullptr,
+        needsMeshState(f) ? s.mesh_state : nullptr, shape_ ? s.mesh_phase : nullptr}) {
+    if (c != nullptr) ahead[n_ahead++] = c;
+  }
+  const Eigen::Index next_lo = begin + rows, next_hi = std::min<Eigen::Index>(s.n, next_lo + rows);
   double raw_c = 0.0;
   rec->window_records.reserve(W);
   for (int w = 0; w < W; ++w) {
     const Eigen::Index w0 = begin + (rows * w) / W, w1 = begin + (rows * (w + 1)) / W;
     const Eigen::Index L = w1 - w0;
+    if (next_hi > next_lo) {
+      const Eigen::Index span = next_hi - next_lo;
+      prefetchSamples(ahead, n_ahead, next_lo + (span * w) / W, next_lo + (span * (w + 1)) / W);
+    }
     windowRows(s, w0, w1, legacy_fbar_);
     WindowRecord wr;
     wr.t_start = s.time(w0);
@@ -1128,13 +1279,14 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
 gear_sim::Status IntegralMethod::solveLocals(SegmentRecord* rec) const {
   if (n_local_ == 0) return {};
   const int q = static_cast<int>(columns_.size());
-  Eigen::VectorXd x;
   double cond = 0.0;
-  const Eigen::MatrixXd Gll = rec->gram.topLeftCorner(n_local_, n_local_);
-  const bool ok = solveEquilibrated(Gll, rec->gram.block(0, q, n_local_, 1), options_.max_condition,
-                                    &x, nullptr, &cond);
+  const bool ok = solveEquilibrated(rec->gram.topLeftCorner(n_local_, n_local_),
+                                    rec->gram.block(0, q, n_local_, 1), options_.max_condition,
+                                    &rec->local_solution, &rec->local_inverse, &cond);
   rec->estimate.condition = cond;
   if (ok) return {};
+  rec->local_inverse.resize(0, 0);
+  rec->local_solution.resize(0);
   std::ostringstream m;
   m << "rank deficient or ill-conditioned (condition " << cond << " > " << options_.max_condition
     << ")";
@@ -1182,11 +1334,16 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
     SharedSolution::Local& L = sh.locals[i - s_begin];
     Eigen::VectorXd xl;
     double cond = 0.0;
-    if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl, &L.Gll_inv,
-                           &cond)) {
+    if (nl > 0 && rec.local_inverse.rows() == nl) {
+      // addSegment's solve (the same call, which passed the stricter max_condition).
+      L.Gll_inv = rec.local_inverse;
+      xl = rec.local_solution;
+    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl,
+                                  &L.Gll_inv, &cond)) {
       continue;
     }
     L.ok = true;
+    if (ns == 0) continue;  // (the shared problem's sums below are of zero size)
     const Eigen::MatrixXd Gsl = G.block(nl, 0, ns, nl);
     A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv * Gsl.transpose();
     rhs += G.block(nl, q, ns, 1) - Gsl * xl;
@@ -1230,23 +1387,27 @@ std::vector<IntegralMethod::SegmentParams> IntegralMethod::segmentParams(size_t 
     const Eigen::MatrixXd& G = rec.gram;
     SegmentParams& p = params[i - s_begin];
     p.theta.resize(q);
-    p.cov = Eigen::MatrixXd::Zero(q, q);
-    const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
-    const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * sh.g);
-    p.theta.head(nl) = xl;
-    p.theta.tail(ns) = sh.g;
-    double sigma2 = sh.sigma2;
     if (ns == 0) {
+      // Local unknowns only: the general expressions below with their zero-size terms dropped
+      // (the same values, without the temporaries).
+      p.theta.noalias() = L.Gll_inv * G.block(0, q, nl, 1);
       // The residual sum from the Gram matrix cancels to rounding when the fit is near exact:
       // floor it at the rounding level instead of reporting a zero standard error.
-      const double rss = std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
-      sigma2 = rss / static_cast<double>(rec.rows - 2L * rec.windows - nl);
+      const double rss = std::max(G(q, q) - G.row(q).head(nl).dot(p.theta), kRssFloor * G(q, q));
+      p.cov = (rss / static_cast<double>(rec.rows - 2L * rec.windows - nl)) * L.Gll_inv;
+    } else {
+      const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
+      const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * sh.g);
+      p.theta.head(nl) = xl;
+      p.theta.tail(ns) = sh.g;
+      const double sigma2 = sh.sigma2;
+      const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
+      p.cov = Eigen::MatrixXd::Zero(q, q);
+      p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * sh.Ainv * B.transpose());
+      p.cov.block(0, nl, nl, ns) = -sigma2 * B * sh.Ainv;
+      p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
+      p.cov.bottomRightCorner(ns, ns) = sigma2 * sh.Ainv;
     }
-    const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
-    p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * sh.Ainv * B.transpose());
-    p.cov.block(0, nl, nl, ns) = -sigma2 * B * sh.Ainv;
-    p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
-    p.cov.bottomRightCorner(ns, ns) = sigma2 * sh.Ainv;
     // Mean normalised stiffness over the segment.
     double kmean = kNaN;
     const int cK0 = columnIndex(Column::StiffK0), cDK = columnIndex(Column::StiffDK);

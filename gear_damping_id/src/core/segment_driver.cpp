@@ -350,14 +350,19 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   for (int w = 0; w < limits_.threads; ++w) workers.push_back(newMethod());
   outs.resize(ranges.size());
   std::vector<long> unlocated(ranges.size(), 0);
-  parallelFor(ranges.size(), limits_.threads, [&](size_t i, int w) {
-    const auto& r = ranges[i];
-    if (r.second - r.first < 1) {
-      outs[i] = unusableSegment(v, r.first, r.second);
-      return;
+  // Runs of kChunk consecutive segments per claim: a worker's next segment is then mostly its
+  // own, so the samples the integral method prefetches for it are used by the same core.
+  constexpr size_t kChunk = 8;
+  parallelFor((ranges.size() + kChunk - 1) / kChunk, limits_.threads, [&](size_t chunk, int w) {
+    for (size_t i = chunk * kChunk; i < std::min(ranges.size(), (chunk + 1) * kChunk); ++i) {
+      const auto& r = ranges[i];
+      if (r.second - r.first < 1) {
+        outs[i] = unusableSegment(v, r.first, r.second);
+        continue;
+      }
+      outs[i] = piecewiseSegment(&workers[static_cast<size_t>(w)], v, r.first, r.second, true);
+      unlocated[i] = workers[static_cast<size_t>(w)].unlocatedSwitches();
     }
-    outs[i] = piecewiseSegment(&workers[static_cast<size_t>(w)], v, r.first, r.second, true);
-    unlocated[i] = workers[static_cast<size_t>(w)].unlocatedSwitches();
   });
   for (size_t i = 0; i < ranges.size(); ++i) {
     if (ranges[i].second - ranges[i].first < 1)
@@ -425,13 +430,10 @@ gear_sim::Status identify(const gear_sim::SignalTable& table, const GearConstant
                           int threads) {
   if (gear_sim::Status s = options.check(); !s.ok()) return s;
   if (gear_sim::Status s = gear.check(); !s.ok()) return s;
-  if (gear_sim::Status s =
-          checkSignalTable(table, options.formulation, options.model, options.time_tolerance);
-      !s.ok())
+  IdentificationOptions o = options;
+  if (gear_sim::Status s = checkRecord(table, gear, options, threads, &o.window_length); !s.ok())
     return s;
   const SignalView view = SignalView::of(table);
-  IdentificationOptions o = options;
-  if (o.window_length <= 0.0) o.window_length = defaultWindowLength(view, gear);
   const SampleRanges ranges = segmentRanges(view, o);
   if (ranges.empty())
     return gear_sim::Status::notIdentifiable("no samples in the analysed time range [" +
