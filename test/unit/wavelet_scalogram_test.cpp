@@ -168,6 +168,41 @@ TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
   EXPECT_LE(worst, kPrunedVsFullTol * peak);
 }
 
+// The pruned |W| (rowModulus, the scalogram's rows) advances each batch's band from the previous
+// batch's (one complex multiplication per bin, re-seeded exactly every 256 batches): equal to
+// the full inverse FFT's |W| up to that drift (< 256 x 4 eps of the row's peak) and rounding.
+// n = 60000 gives the lowest rows ~2500 batches, so the re-seeding is exercised.
+TEST(MorletCwt, PrunedModulusRowsEqualTheFullInverseFft) {
+  const long n = 60000;
+  const std::vector<double> y = testSignal(n, 13);
+  const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 40);
+  std::string e;
+  MorletCwt pruned, full;
+  ASSERT_TRUE(gear_test::ok(pruned.configure(n, 1.0, f, 6.0, FftPlanning::Estimate), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(full.configure(n, 1.0, f, 6.0, FftPlanning::Estimate), &e)) << e;
+  full.setPrunedModulus(false);
+  ASSERT_TRUE(gear_test::ok(pruned.setSignal(y.data()), &e) &&
+              gear_test::ok(full.setSignal(y.data()), &e))
+      << e;
+  std::vector<double> a(static_cast<size_t>(n)), b(a.size());
+  std::vector<float> af(a.size());
+  int differing = 0;
+  for (int i = 0; i < pruned.rows(); ++i) {
+    ASSERT_TRUE(pruned.rowModulus(i, a.data()) && full.rowModulus(i, b.data()));
+    ASSERT_TRUE(pruned.rowModulus(i, af.data()));
+    double peak = 0.0, worst = 0.0, worst_f = 0.0;
+    for (size_t j = 0; j < a.size(); ++j) {
+      peak = std::max(peak, b[j]);
+      worst = std::max(worst, std::abs(a[j] - b[j]));
+      worst_f = std::max(worst_f, std::abs(static_cast<double>(af[j]) - a[j]));
+    }
+    EXPECT_LE(worst, kPrunedVsFullTol * peak) << "row " << i << " f = " << f[size_t(i)];
+    EXPECT_LE(worst_f, 1e-7 * peak) << "row " << i;  // the same row rounded to float
+    differing += worst > 0.0;
+  }
+  EXPECT_GT(differing, 0);  // some rows did take the pruned path
+}
+
 TEST(MorletScalogram, RefusesBadThreadCountsAndNonFiniteSamples) {
   MorletScalogram s;
   std::string e;

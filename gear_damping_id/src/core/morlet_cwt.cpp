@@ -206,6 +206,32 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
   }
 }
 
+// bc[k] = u[k] * (sr[k] + i si[k]) for k < count (interleaved complex u, bc; distinct arrays),
+// and the same in place (u[k] *= ...): the pruned |W|'s band of batch p from batch p-1's.
+// AVX2 clones as twiddleBand's (no FMA: the results do not depend on the clone).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void advanceBand(const double* __restrict u, const double* __restrict sr,
+                 const double* __restrict si, double* __restrict bc, long count) {
+  for (long k = 0; k < count; ++k) {
+    const double ur = u[2 * k], ui = u[2 * k + 1];
+    bc[2 * k] = ur * sr[k] - ui * si[k];
+    bc[2 * k + 1] = ur * si[k] + ui * sr[k];
+  }
+}
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void advanceBand(double* __restrict u, const double* __restrict sr, const double* __restrict si,
+                 long count) {
+  for (long k = 0; k < count; ++k) {
+    const double ur = u[2 * k], ui = u[2 * k + 1];
+    u[2 * k] = ur * sr[k] - ui * si[k];
+    u[2 * k + 1] = ur * si[k] + ui * sr[k];
+  }
+}
+
 // out[i] = |w_i| = sqrt(re^2 + im^2) for n complex doubles w (interleaved), bit-identical to
 // modulusOf (no FMA; IEEE square root): four per instruction with AVX2 where the CPU has it
 // (runtime check), else modulusOf's SSE2.
@@ -254,7 +280,11 @@ void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out
     }
     for (long q = 0; q < q_hi; ++q) {
       const long j0 = q * P + p0, ce = std::min(C, n - j0);
-      for (long c = 0; c < ce; ++c) out[j0 + c] = static_cast<T>(mod[q * C + c]);
+      if constexpr (std::is_same<T, double>::value) {
+        std::memcpy(out + j0, mod + q * C, sizeof(double) * static_cast<size_t>(ce));
+      } else {
+        for (long c = 0; c < ce; ++c) out[j0 + c] = static_cast<T>(mod[q * C + c]);
+      }
     }
   } else {
     for (long q = 0; q < q_hi; ++q) {
@@ -758,17 +788,31 @@ bool MorletCwt::prunedRow(T* out) {
       std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
     }
   }
+  // |W| in double: between seeds, batch p's band is batch p-1's times the step (one complex
+  // multiplication per bin instead of two; the same drift bound). W (the fits' complex rows)
+  // and float batches: the band times the twiddles.
+  constexpr bool kChained = std::is_same<R, double>::value && std::is_arithmetic<T>::value;
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
+      R* bc = b + 2 * c * M;
       if (p % kTwiddleSeedBlock == 0) {
         for (long k = 0; k < B; ++k) {
           const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
           ti[k] = std::sin(ph);
         }
+      } else if constexpr (kChained) {
+        if (C == 1) {
+          advanceBand(bc + 2 * r0, sr, si, B1);
+          advanceBand(bc, sr + B1, si + B1, B - B1);
+        } else {
+          const R* u = b + 2 * ((c + C - 1) % C) * M;  // batch p-1 (the previous chunk's last)
+          advanceBand(u + 2 * r0, sr, si, bc + 2 * r0, B1);
+          advanceBand(u, sr + B1, si + B1, bc, B - B1);
+        }
+        continue;
       }
-      R* bc = b + 2 * c * M;
       twiddleBand(x, tr, ti, sr, si, bc + 2 * r0, B1);
       twiddleBand(x + 2 * B1, tr + B1, ti + B1, sr + B1, si + B1, bc, B - B1);
     }
@@ -806,7 +850,11 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
   }
   if (pruned_ && prunedRow<double>(out)) return true;
   if (!fullInverse()) return false;
-  modulusOf(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
+  if constexpr (std::is_same<T, double>::value) {
+    modulusRun(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
+  } else {
+    modulusOf(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
+  }
   return true;
 }
 
