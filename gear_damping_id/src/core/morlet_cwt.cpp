@@ -299,6 +299,47 @@ void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out
   }
 }
 
+// e^{2 pi i m/N} for integers m in [0, N) from two tables of correctly rounded phasors,
+// m = 512 h + l: hi[h] * lo[l] (within ~2 eps of the correctly rounded value). The pruned |W|'s
+// twiddle steps and seeds without a sin/cos per bin (they were ~2 % of a scalogram).
+class Phasors {
+ public:
+  // re[k] + i im[k] = e^{2 pi i ((m0 + k*dm) mod N)/N} for k < count.
+  void fill(long n_fft, long m0, long dm, long count, double* re, double* im) {
+    if (n_ != n_fft) build(n_fft);
+    long m = m0 % n_;
+    dm %= n_;
+    for (long k = 0; k < count; ++k) {
+      const double* a = &hi_[2 * static_cast<size_t>(m >> kBits)];
+      const double* b = &lo_[2 * static_cast<size_t>(m & kMask)];
+      re[k] = a[0] * b[0] - a[1] * b[1];
+      im[k] = a[0] * b[1] + a[1] * b[0];
+      m += dm;
+      if (m >= n_) m -= n_;
+    }
+  }
+
+ private:
+  static constexpr long kBits = 9, kMask = (1L << kBits) - 1;
+  void build(long n_fft) {
+    n_ = n_fft;
+    const double w = 2.0 * kPi / static_cast<double>(n_fft);
+    lo_.resize(2 * static_cast<size_t>(kMask + 1));
+    hi_.resize(2 * static_cast<size_t>((n_fft >> kBits) + 1));
+    for (size_t l = 0; l < lo_.size() / 2; ++l) {
+      lo_[2 * l] = std::cos(w * static_cast<double>(l));
+      lo_[2 * l + 1] = std::sin(w * static_cast<double>(l));
+    }
+    for (size_t h = 0; h < hi_.size() / 2; ++h) {
+      const double ph = w * static_cast<double>(static_cast<long>(h) << kBits);
+      hi_[2 * h] = std::cos(ph);
+      hi_[2 * h + 1] = std::sin(ph);
+    }
+  }
+  long n_ = 0;
+  std::vector<double> lo_, hi_;
+};
+
 // Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
 // smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
 // kMinPrunedBatches batches (the full inverse FFT is then as fast).
@@ -441,6 +482,7 @@ struct MorletCwt::Fftw {
   // Precision::Single: the float inverse FFT (in_f into out_f) and the float batch plans.
   fftwf_plan c2c_f = nullptr;
   std::map<long, fftwf_plan> batch_plans_f;
+  Phasors phasors;  // the pruned |W|'s twiddles
   // The batch plans of real type R (double or float).
   template <typename R>
   std::map<long, typename FftwApi<R>::Plan>& batchPlansOf();
@@ -767,10 +809,16 @@ bool MorletCwt::prunedRow(T* out) {
   double* sr = ti + B;
   double* si = sr + B;
   double* sq = si + B;  // the chunk's moduli (C * M values at most)
+  // |W| in double (kChained): the phasors from tables; W and float batches: sin/cos per bin.
+  constexpr bool kChained = std::is_same<R, double>::value && std::is_arithmetic<T>::value;
   const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
-  for (long k = 0; k < B; ++k) {
-    sr[k] = std::cos(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
-    si[k] = std::sin(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+  if constexpr (kChained) {
+    f.phasors.fill(n_fft_, lo, 1, B, sr, si);
+  } else {
+    for (long k = 0; k < B; ++k) {
+      sr[k] = std::cos(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+      si[k] = std::sin(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+    }
   }
   // Bin k of the band goes to index (r0 + k) mod M of each batch: [r0, r0 + B1) then [0, B - B1).
   const long r0 = lo % M, B1 = std::min(B, M - r0);
@@ -791,12 +839,13 @@ bool MorletCwt::prunedRow(T* out) {
   // |W| in double: between seeds, batch p's band is batch p-1's times the step (one complex
   // multiplication per bin instead of two; the same drift bound). W (the fits' complex rows)
   // and float batches: the band times the twiddles.
-  constexpr bool kChained = std::is_same<R, double>::value && std::is_arithmetic<T>::value;
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
       R* bc = b + 2 * c * M;
-      if (p % kTwiddleSeedBlock == 0) {
+      if (p % kTwiddleSeedBlock == 0 && kChained) {
+        f.phasors.fill(n_fft_, (lo % n_fft_) * p, p, B, tr, ti);
+      } else if (p % kTwiddleSeedBlock == 0) {
         for (long k = 0; k < B; ++k) {
           const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
