@@ -201,6 +201,10 @@ class MorletCwt {
   gear_sim::Status configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
                                const std::vector<double>& frequencies_hz,
                                const std::vector<double>& omega0s, FftPlanning planning);
+  /// setSignal's check of n samples (all finite; InvalidInput naming the first that is not)
+  /// and their mean; then its transform of samples already checked, whose mean is `mean`.
+  static gear_sim::Status checkedMean(const double* y, long n, double* mean);
+  void loadChecked(const double* y, double mean);
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
   bool rowAtAllowed(double frequency_hz, double omega0) const;
   bool fillRow(double frequency_hz, double omega0);

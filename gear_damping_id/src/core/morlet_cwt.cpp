@@ -623,22 +623,33 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
 Status MorletCwt::setSignal(const double* y) {
   has_signal_ = false;
   if (!configured()) return Status::internal("MorletCwt: not configured");
+  double mean = 0.0;
+  if (Status st = checkedMean(y, n_, &mean); !st.ok()) return st;
+  loadChecked(y, mean);
+  return {};
+}
+
+Status MorletCwt::checkedMean(const double* y, long n, double* mean) {
   if (!y) return Status::internal("MorletCwt: null signal");
   double sum = 0.0;
-  for (long j = 0; j < n_; ++j) {
+  for (long j = 0; j < n; ++j) {
     if (!std::isfinite(y[j])) {
       return Status::invalidInput("MorletCwt: sample " + std::to_string(j) + " is not finite (" +
                                   num(y[j]) + ")");
     }
     sum += y[j];
   }
-  mean_ = sum / static_cast<double>(n_);
+  *mean = sum / static_cast<double>(n);
+  return {};
+}
+
+void MorletCwt::loadChecked(const double* y, double mean) {
+  mean_ = mean;
   double* r = reinterpret_cast<double*>(fftw_->buf->out);
   for (long j = 0; j < n_; ++j) r[j] = y[j] - mean_;
   std::memset(r + n_, 0, sizeof(double) * static_cast<size_t>(n_fft_ - n_));
   fftw_execute(fftw_->r2c);
   has_signal_ = true;
-  return {};
 }
 
 bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
@@ -1105,6 +1116,10 @@ Status MorletScalogram::runRows(const double* y, Dest dest, Done done) {
       items.push_back({g, k});
     }
   }
+  // The samples are checked and their mean computed once (as MorletCwt::setSignal does), not
+  // once per group and thread.
+  double mean = 0.0;
+  if (Status st = MorletCwt::checkedMean(y, n_, &mean); !st.ok()) return st;
   const int nt = threads();
   std::vector<Status> errors(static_cast<size_t>(nt));
   auto work = [&](int t) {
@@ -1115,8 +1130,7 @@ Status MorletScalogram::runRows(const double* y, Dest dest, Done done) {
     for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
       const int g = items[it].first, k = items[it].second;
       if (g != loaded) {
-        errors[size_t(t)] = cwts[size_t(g)].setSignal(y);
-        if (!errors[size_t(t)].ok()) return;
+        cwts[size_t(g)].loadChecked(y, mean);
         loaded = g;
       }
       const int row = group_rows_[size_t(g)][size_t(k)];
