@@ -21,12 +21,16 @@
 // FFTW_MEASURE (both the CWT and the bound). FFTW_MEASURE planning is capped at 5 s per plan
 // (as in MorletCwt) and happens outside the timed region; the bound and the CWT of one size
 // share FFTW's wisdom within the process, so whichever runs second reuses the first's plan
-// search.
+// search. --wisdom FILE imports FFTW's wisdom from FILE when it exists and exports it there at
+// the end, so repeated runs (bench/compare_peers' rounds) plan once: a first FFTW_MEASURE run of
+// a scalogram plans ~130 batch sizes and the groups' lengths, up to minutes at 1e6 samples.
 #include <benchmark/benchmark.h>
 #include <fftw3.h>
+#include <sys/resource.h>
 
 #include <cmath>
 #include <complex>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <string>
@@ -44,6 +48,14 @@ constexpr int kScales = 200;
 constexpr double kOmega0 = 6.0;
 constexpr double kSampleRate = 1.0;  // frequencies are relative to fs; throughput does not care
 FftPlanning g_planning = FftPlanning::Measure;
+
+// User + system CPU time of the whole process (all threads) [s].
+double processCpuSeconds() {
+  rusage r{};
+  getrusage(RUSAGE_SELF, &r);
+  return static_cast<double>(r.ru_utime.tv_sec + r.ru_stime.tv_sec) +
+         1e-6 * static_cast<double>(r.ru_utime.tv_usec + r.ru_stime.tv_usec);
+}
 
 std::vector<double> gridFor(long n) {
   return gear_damping_id::logSpacedFrequencies(10.0 * kSampleRate / static_cast<double>(n),
@@ -154,10 +166,15 @@ void scalogram(benchmark::State& state, gear_damping_id::Precision precision) {
     state.SkipWithError(error.c_str());
     return;
   }
+  const double cpu0 = processCpuSeconds();
   for (auto _ : state) {
     once();
     benchmark::ClobberMemory();
   }
+  // CPU time of every thread of the process per transform (Google Benchmark's cpu_time counts
+  // the main thread only): the measure on a shared machine.
+  state.counters["process_cpu_ms"] =
+      1e3 * (processCpuSeconds() - cpu0) / static_cast<double>(state.iterations());
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n) * kScales);
   state.counters["groups"] = scal.groups();
   state.counters["threads"] = threads;
@@ -238,17 +255,32 @@ BENCHMARK(BM_FftBound)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)
 
 int main(int argc, char** argv) {
   std::vector<char*> args;
+  std::string wisdom;
   for (int i = 0; i < argc; ++i) {
-    if (std::string(argv[i]) == "--estimate") {
+    const std::string a = argv[i];
+    if (a == "--estimate") {
       g_planning = FftPlanning::Estimate;
+    } else if (a.rfind("--wisdom=", 0) == 0) {
+      wisdom = a.substr(9);
     } else {
       args.push_back(argv[i]);
     }
+  }
+  // Double-precision wisdom in FILE, single-precision (BM_ScalogramSingle) in FILE.f; absent
+  // files: plan anew.
+  const std::string wisdom_f = wisdom + ".f";
+  if (!wisdom.empty()) {
+    fftw_import_wisdom_from_filename(wisdom.c_str());
+    fftwf_import_wisdom_from_filename(wisdom_f.c_str());
   }
   int n = static_cast<int>(args.size());
   benchmark::Initialize(&n, args.data());
   if (benchmark::ReportUnrecognizedArguments(n, args.data())) return 1;
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
+  if (!wisdom.empty() && (!fftw_export_wisdom_to_filename(wisdom.c_str()) ||
+                          !fftwf_export_wisdom_to_filename(wisdom_f.c_str()))) {
+    std::fprintf(stderr, "bench_wavelet: cannot write wisdom to %s\n", wisdom.c_str());
+  }
   return 0;
 }

@@ -133,18 +133,31 @@ TEST(MorletScalogram, SinglePrecisionAgreesWithDoubleWithinOnePpmOfThePeak) {
 // narrow; they equal the full inverse FFT up to rounding (relative to the row's peak).
 constexpr double kPrunedVsFullTol = 1e-12;
 
+// Two transforms of testSignal(n, seed) on 40 rows up to 0.45 fs: `pruned` with the pruned rows
+// (the default), `full` with the full inverse FFT for every row.
+struct PrunedAndFull {
+  std::vector<double> y, f;
+  MorletCwt pruned, full;
+};
+void loadPrunedAndFull(long n, unsigned seed, PrunedAndFull* t) {
+  t->y = testSignal(n, seed);
+  t->f = logSpacedFrequencies(10.0 / n, 0.45, 40);
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(t->pruned.configure(n, 1.0, t->f, 6.0, FftPlanning::Estimate), &e))
+      << e;
+  ASSERT_TRUE(gear_test::ok(t->full.configure(n, 1.0, t->f, 6.0, FftPlanning::Estimate), &e)) << e;
+  t->full.setPrunedModulus(false);
+  ASSERT_TRUE(gear_test::ok(t->pruned.setSignal(t->y.data()), &e) &&
+              gear_test::ok(t->full.setSignal(t->y.data()), &e))
+      << e;
+}
+
 TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
   const long n = 6000;
-  const std::vector<double> y = testSignal(n, 11);
-  const std::vector<double> f = logSpacedFrequencies(10.0 / n, 0.45, 40);
-  std::string e;
-  MorletCwt pruned, full;
-  ASSERT_TRUE(gear_test::ok(pruned.configure(n, 1.0, f, 6.0, FftPlanning::Estimate), &e)) << e;
-  ASSERT_TRUE(gear_test::ok(full.configure(n, 1.0, f, 6.0, FftPlanning::Estimate), &e)) << e;
-  full.setPrunedModulus(false);
-  ASSERT_TRUE(gear_test::ok(pruned.setSignal(y.data()), &e) &&
-              gear_test::ok(full.setSignal(y.data()), &e))
-      << e;
+  PrunedAndFull t;
+  ASSERT_NO_FATAL_FAILURE(loadPrunedAndFull(n, 11, &t));
+  MorletCwt &pruned = t.pruned, &full = t.full;
+  const std::vector<double>& f = t.f;
   for (int i = 0; i < pruned.rows(); ++i) {
     const std::vector<std::complex<double>> a(pruned.row(i), pruned.row(i) + n);
     const std::complex<double>* b = full.row(i);
@@ -166,6 +179,33 @@ TEST(MorletCwt, PrunedComplexRowsEqualTheFullInverseFft) {
     worst = std::max(worst, std::abs(a[size_t(j)] - b[j]));
   }
   EXPECT_LE(worst, kPrunedVsFullTol * peak);
+}
+
+// The pruned |W| (rowModulus, the scalogram's rows) advances each batch's band from the previous
+// batch's (one complex multiplication per bin, re-seeded exactly every 256 batches): equal to
+// the full inverse FFT's |W| up to that drift (< 256 x 4 eps of the row's peak) and rounding.
+// n = 60000 gives the lowest rows ~2500 batches, so the re-seeding is exercised.
+TEST(MorletCwt, PrunedModulusRowsEqualTheFullInverseFft) {
+  const long n = 60000;
+  PrunedAndFull t;
+  ASSERT_NO_FATAL_FAILURE(loadPrunedAndFull(n, 13, &t));
+  std::vector<double> a(static_cast<size_t>(n)), b(a.size());
+  std::vector<float> af(a.size());
+  int differing = 0;
+  for (int i = 0; i < t.pruned.rows(); ++i) {
+    ASSERT_TRUE(t.pruned.rowModulus(i, a.data()) && t.full.rowModulus(i, b.data()));
+    ASSERT_TRUE(t.pruned.rowModulus(i, af.data()));
+    double peak = 0.0, worst = 0.0, worst_f = 0.0;
+    for (size_t j = 0; j < a.size(); ++j) {
+      peak = std::max(peak, b[j]);
+      worst = std::max(worst, std::abs(a[j] - b[j]));
+      worst_f = std::max(worst_f, std::abs(static_cast<double>(af[j]) - a[j]));
+    }
+    EXPECT_LE(worst, kPrunedVsFullTol * peak) << "row " << i << " f = " << t.f[size_t(i)];
+    EXPECT_LE(worst_f, 1e-7 * peak) << "row " << i;  // the same row rounded to float
+    differing += worst > 0.0;
+  }
+  EXPECT_GT(differing, 0);  // some rows did take the pruned path
 }
 
 TEST(MorletScalogram, RefusesBadThreadCountsAndNonFiniteSamples) {

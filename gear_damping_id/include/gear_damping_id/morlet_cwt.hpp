@@ -190,7 +190,21 @@ class MorletCwt {
   const std::vector<double>& omega0s() const { return omega0s_; }          ///< per row
 
  private:
+  friend class MorletScalogram;
+  struct Buffers;
   struct Fftw;
+  static std::shared_ptr<Buffers> makeBuffers(long capacity);
+  /// configure() on the buffers *shared when they hold the padded length (MorletScalogram's
+  /// groups, used in turn by one thread; each use must start with setSignal, since another
+  /// object's setSignal overwrites the spectrum); otherwise on new buffers, stored in *shared
+  /// when shared is not null.
+  gear_sim::Status configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
+                               const std::vector<double>& frequencies_hz,
+                               const std::vector<double>& omega0s, FftPlanning planning);
+  /// setSignal's check of n samples (all finite; InvalidInput naming the first that is not)
+  /// and their mean; then its transform of samples already checked, whose mean is `mean`.
+  static gear_sim::Status checkedMean(const double* y, long n, double* mean);
+  void loadChecked(const double* y, double mean);
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
   bool rowAtAllowed(double frequency_hz, double omega0) const;
   bool fillRow(double frequency_hz, double omega0);
@@ -223,6 +237,8 @@ class MorletCwt {
 /// - Rows in parallel on `threads` threads (std::thread, each with its own MorletCwt per
 ///   group; rows dealt round-robin). Every row is computed by the same code on the same FFT
 ///   length whatever the thread count, so results are bit-identical to one thread.
+/// - Memory: one set of FFT buffers per thread, sized for the longest group and shared by the
+///   thread's groups (its plans per group point into it), not one set per group.
 class MorletScalogram {
  public:
   static constexpr double kGroupLengthRatio = 1.05;

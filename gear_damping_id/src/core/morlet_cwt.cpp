@@ -2,6 +2,9 @@
 #include "gear_damping_id/morlet_cwt.hpp"
 
 #include <fftw3.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 #if defined(__linux__)
 #include <sys/mman.h>
 #endif
@@ -203,6 +206,140 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
   }
 }
 
+// bc[k] = u[k] * (sr[k] + i si[k]) for k < count (interleaved complex u, bc; distinct arrays),
+// and the same in place (u[k] *= ...): the pruned |W|'s band of batch p from batch p-1's.
+// AVX2 clones as twiddleBand's (no FMA: the results do not depend on the clone).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void advanceBand(const double* __restrict u, const double* __restrict sr,
+                 const double* __restrict si, double* __restrict bc, long count) {
+  for (long k = 0; k < count; ++k) {
+    const double ur = u[2 * k], ui = u[2 * k + 1];
+    bc[2 * k] = ur * sr[k] - ui * si[k];
+    bc[2 * k + 1] = ur * si[k] + ui * sr[k];
+  }
+}
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void advanceBand(double* __restrict u, const double* __restrict sr, const double* __restrict si,
+                 long count) {
+  for (long k = 0; k < count; ++k) {
+    const double ur = u[2 * k], ui = u[2 * k + 1];
+    u[2 * k] = ur * sr[k] - ui * si[k];
+    u[2 * k + 1] = ur * si[k] + ui * sr[k];
+  }
+}
+
+// out[i] = |w_i| = sqrt(re^2 + im^2) for n complex doubles w (interleaved), bit-identical to
+// modulusOf (no FMA; IEEE square root): four per instruction with AVX2 where the CPU has it
+// (runtime check), else modulusOf's SSE2.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2"))) void modulusAvx2(const double* w, long n, double* out) {
+  long i = 0;
+  for (; i + 3 < n; i += 4) {
+    const __m256d a = _mm256_loadu_pd(w + 2 * i), b = _mm256_loadu_pd(w + 2 * i + 4);
+    // (|w0|^2, |w2|^2, |w1|^2, |w3|^2), each re^2 + im^2, then in order.
+    const __m256d h = _mm256_hadd_pd(_mm256_mul_pd(a, a), _mm256_mul_pd(b, b));
+    _mm256_storeu_pd(out + i, _mm256_sqrt_pd(_mm256_permute4x64_pd(h, 0xD8)));
+  }
+  modulusOf(w + 2 * i, n - i, out + i);
+}
+void modulusRun(const double* w, long n, double* out) {
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) {
+    modulusAvx2(w, n, out);
+  } else {
+    modulusOf(w, n, out);
+  }
+}
+#else
+void modulusRun(const double* w, long n, double* out) { modulusOf(w, n, out); }
+#endif
+
+// Output of one chunk of a pruned row (MorletCwt::prunedRow): the transforms of batches
+// p0..p0+C-1 are o[q*C + c] = W_{q*P + p0 + c}, so each q gives C contiguous samples of the row
+// out (n samples; complex W, or |W| as double or float). mod: scratch for C * M moduli.
+template <typename R, typename T>
+void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out) {
+  if (p0 >= n) return;
+  const long q_hi = (n - p0 + P - 1) / P;  // q with q*P + p0 < n
+  if constexpr (std::is_same<T, std::complex<double>>::value) {
+    for (long q = 0; q < q_hi; ++q) {
+      const long j0 = q * P + p0, ce = std::min(C, n - j0);
+      for (long c = 0; c < ce; ++c) out[j0 + c] = {o[2 * (q * C + c)], o[2 * (q * C + c) + 1]};
+    }
+  } else if constexpr (std::is_same<R, double>::value) {
+    // The moduli of the whole chunk in one vectorised pass, then runs of C values to their
+    // places (single values P apart when C = 1).
+    modulusRun(o, q_hi * C, mod);
+    if (C == 1) {
+      for (long q = 0; q < q_hi; ++q) out[q * P + p0] = static_cast<T>(mod[q]);
+      return;
+    }
+    for (long q = 0; q < q_hi; ++q) {
+      const long j0 = q * P + p0, ce = std::min(C, n - j0);
+      if constexpr (std::is_same<T, double>::value) {
+        std::memcpy(out + j0, mod + q * C, sizeof(double) * static_cast<size_t>(ce));
+      } else {
+        for (long c = 0; c < ce; ++c) out[j0 + c] = static_cast<T>(mod[q * C + c]);
+      }
+    }
+  } else {
+    for (long q = 0; q < q_hi; ++q) {
+      const long j0 = q * P + p0, ce = std::min(C, n - j0);
+      const R* oq = o + 2 * q * C;
+      for (long c = 0; c < ce; ++c) {
+        const double re = oq[2 * c], im = oq[2 * c + 1];  // float -> double
+        mod[c] = re * re + im * im;
+      }
+      sqrtOf(mod, ce, out + j0);
+    }
+  }
+}
+
+// e^{2 pi i m/N} for integers m in [0, N) from two tables of correctly rounded phasors,
+// m = 512 h + l: hi[h] * lo[l] (within ~2 eps of the correctly rounded value). The pruned |W|'s
+// twiddle steps and seeds without a sin/cos per bin (they were ~2 % of a scalogram).
+class Phasors {
+ public:
+  // re[k] + i im[k] = e^{2 pi i ((m0 + k*dm) mod N)/N} for k < count.
+  void fill(long n_fft, long m0, long dm, long count, double* re, double* im) {
+    if (n_ != n_fft) build(n_fft);
+    long m = m0 % n_;
+    dm %= n_;
+    for (long k = 0; k < count; ++k) {
+      const double* a = &hi_[2 * static_cast<size_t>(m >> kBits)];
+      const double* b = &lo_[2 * static_cast<size_t>(m & kMask)];
+      re[k] = a[0] * b[0] - a[1] * b[1];
+      im[k] = a[0] * b[1] + a[1] * b[0];
+      m += dm;
+      if (m >= n_) m -= n_;
+    }
+  }
+
+ private:
+  static constexpr long kBits = 9, kMask = (1L << kBits) - 1;
+  void build(long n_fft) {
+    n_ = n_fft;
+    const double w = 2.0 * kPi / static_cast<double>(n_fft);
+    lo_.resize(2 * static_cast<size_t>(kMask + 1));
+    hi_.resize(2 * static_cast<size_t>((n_fft >> kBits) + 1));
+    for (size_t l = 0; l < lo_.size() / 2; ++l) {
+      lo_[2 * l] = std::cos(w * static_cast<double>(l));
+      lo_[2 * l + 1] = std::sin(w * static_cast<double>(l));
+    }
+    for (size_t h = 0; h < hi_.size() / 2; ++h) {
+      const double ph = w * static_cast<double>(static_cast<long>(h) << kBits);
+      hi_[2 * h] = std::cos(ph);
+      hi_[2 * h + 1] = std::sin(ph);
+    }
+  }
+  long n_ = 0;
+  std::vector<double> lo_, hi_;
+};
+
 // Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
 // smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
 // kMinPrunedBatches batches (the full inverse FFT is then as fast).
@@ -283,42 +420,37 @@ double ridgeFrequency(const double* frequencies_hz, const double* values, int co
 // ------------------------------------------------------------------------------------------
 // MorletCwt
 
-struct MorletCwt::Fftw {
-  // spec: r2c output, N/2+1 bins, kept for all rows. in: the band-limited product (zero outside
-  // [band_lo, band_hi]). out: c2c output; its first N doubles also hold the r2c input.
+// The FFT buffers of a MorletCwt, sized for `capacity` complex values (at least its padded
+// length N), and the state of what they hold. A MorletCwt allocates its own; the row groups of
+// a MorletScalogram share one set per thread (sized for the largest group), used in turn, so
+// memory does not grow with the number of groups. Indices into `in` are bins (the same for any
+// N), so the band bookkeeping carries over from one object to the next.
+struct MorletCwt::Buffers {
+  long capacity = 0;
+  // spec: r2c output, capacity/2+1 bins. in: the band-limited product (zero outside
+  // [band_lo, band_hi] once in_clean). out: c2c output; its first N doubles also hold the r2c
+  // input.
   fftw_complex* spec = nullptr;
   fftw_complex* in = nullptr;
   fftw_complex* out = nullptr;
-  fftw_plan r2c = nullptr;
-  fftw_plan c2c = nullptr;
   long band_lo = 1, band_hi = 0;
-  bool in_clean = false;  // `in` is zero outside [band_lo, band_hi]
-  // Pruned |W| of narrow-band rows (see prunedRow): divisors of N (ascending), the batch
-  // buffer of N values (allocated on first use) and one batched size-M plan per M used.
-  std::vector<long> divisors;
-  fftw_complex* batch = nullptr;  // one chunk of batches, then its transforms (transposed)
-  std::vector<double> tw;         // twiddle phasors and steps (4 * max band), C squares
-  std::map<long, fftw_plan> batch_plans;
-  // Precision::Single: the band rounded to float (in_f, zero outside the band), the float
-  // inverse FFT (c2c_f into out_f) and the float batches of the pruned path.
+  bool in_clean = false;  // `in` is zero outside [band_lo, band_hi] (over the whole capacity)
+  // Pruned |W| (see prunedRow): one chunk of batches, then its transforms (transposed),
+  // allocated on first use for 2 * batchCapacity() values; twiddle phasors and steps (4 * max
+  // band), C squares.
+  fftw_complex* batch = nullptr;
+  std::vector<double> tw;
+  // Precision::Single: the band rounded to float (in_f, zero outside [band_lo_f, band_hi_f]),
+  // the float inverse FFT's output (out_f) and the float batches of the pruned path.
   fftwf_complex* in_f = nullptr;
   fftwf_complex* out_f = nullptr;
-  fftwf_plan c2c_f = nullptr;
   long band_lo_f = 1, band_hi_f = 0;
   fftwf_complex* batch_f = nullptr;
-  std::map<long, fftwf_plan> batch_plans_f;
-  // The batch buffer and plans of real type R (double or float).
+  // The batch buffer of real type R (double or float).
   template <typename R>
   typename FftwApi<R>::Complex*& batchOf();
-  template <typename R>
-  std::map<long, typename FftwApi<R>::Plan>& batchPlansOf();
-  ~Fftw() {
-    std::lock_guard<std::mutex> lock(plannerMutex());
-    if (r2c) fftw_destroy_plan(r2c);
-    if (c2c) fftw_destroy_plan(c2c);
-    for (auto& p : batch_plans) fftw_destroy_plan(p.second);
-    if (c2c_f) fftwf_destroy_plan(c2c_f);
-    for (auto& p : batch_plans_f) fftwf_destroy_plan(p.second);
+  long batchCapacity() const { return std::max(kPrunedChunk, capacity / kMinPrunedBatches); }
+  ~Buffers() {
     fftw_free(spec);
     fftw_free(in);
     fftw_free(out);
@@ -330,13 +462,40 @@ struct MorletCwt::Fftw {
 };
 
 template <>
-fftw_complex*& MorletCwt::Fftw::batchOf<double>() {
+fftw_complex*& MorletCwt::Buffers::batchOf<double>() {
   return batch;
 }
 template <>
-fftwf_complex*& MorletCwt::Fftw::batchOf<float>() {
+fftwf_complex*& MorletCwt::Buffers::batchOf<float>() {
   return batch_f;
 }
+
+// The plans of a MorletCwt (made for its own padded length N on its Buffers).
+struct MorletCwt::Fftw {
+  std::shared_ptr<Buffers> buf;
+  fftw_plan r2c = nullptr;
+  fftw_plan c2c = nullptr;
+  // Pruned |W| of narrow-band rows (see prunedRow): divisors of N (ascending) and one batched
+  // size-M plan per M used.
+  std::vector<long> divisors;
+  std::map<long, fftw_plan> batch_plans;
+  // Precision::Single: the float inverse FFT (in_f into out_f) and the float batch plans.
+  fftwf_plan c2c_f = nullptr;
+  std::map<long, fftwf_plan> batch_plans_f;
+  Phasors phasors;  // the pruned |W|'s twiddles
+  // The batch plans of real type R (double or float).
+  template <typename R>
+  std::map<long, typename FftwApi<R>::Plan>& batchPlansOf();
+  ~Fftw() {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    if (r2c) fftw_destroy_plan(r2c);
+    if (c2c) fftw_destroy_plan(c2c);
+    for (auto& p : batch_plans) fftw_destroy_plan(p.second);
+    if (c2c_f) fftwf_destroy_plan(c2c_f);
+    for (auto& p : batch_plans_f) fftwf_destroy_plan(p.second);
+  }
+};
+
 template <>
 std::map<long, fftw_plan>& MorletCwt::Fftw::batchPlansOf<double>() {
   return batch_plans;
@@ -344,6 +503,20 @@ std::map<long, fftw_plan>& MorletCwt::Fftw::batchPlansOf<double>() {
 template <>
 std::map<long, fftwf_plan>& MorletCwt::Fftw::batchPlansOf<float>() {
   return batch_plans_f;
+}
+
+// Buffers for `capacity` complex values: spec, in and out allocated (not touched: fresh pages
+// cost the kernel's zeroing, and a spectrum-only or pruned-rows use never faults most of them
+// in), the rest on first use. Null when out of memory.
+std::shared_ptr<MorletCwt::Buffers> MorletCwt::makeBuffers(long capacity) {
+  auto b = std::make_shared<Buffers>();
+  const size_t nc = static_cast<size_t>(capacity);
+  b->capacity = capacity;
+  b->spec = hugePages(fftw_alloc_complex(nc / 2 + 1), sizeof(fftw_complex) * (nc / 2 + 1));
+  b->in = hugePages(fftw_alloc_complex(nc), sizeof(fftw_complex) * nc);
+  b->out = hugePages(fftw_alloc_complex(nc), sizeof(fftw_complex) * nc);
+  if (!b->spec || !b->in || !b->out) return nullptr;
+  return b;
 }
 
 MorletCwt::MorletCwt() = default;
@@ -362,6 +535,12 @@ void MorletCwt::release() {
 
 Status MorletCwt::configure(long n, double sample_rate, const std::vector<double>& frequencies_hz,
                             const std::vector<double>& omega0s, FftPlanning planning) {
+  return configureOn(nullptr, n, sample_rate, frequencies_hz, omega0s, planning);
+}
+
+Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
+                              const std::vector<double>& frequencies_hz,
+                              const std::vector<double>& omega0s, FftPlanning planning) {
   release();
   if (n < 2)
     return Status::invalidArgument("MorletCwt: n = " + std::to_string(n) + " must be >= 2", "n");
@@ -402,18 +581,21 @@ Status MorletCwt::configure(long n, double sample_rate, const std::vector<double
                                  " and the lowest frequency is too large");
   }
   auto f = std::make_unique<Fftw>();
-  const size_t nc = static_cast<size_t>(n_fft);
-  f->spec = hugePages(fftw_alloc_complex(nc / 2 + 1), sizeof(fftw_complex) * (nc / 2 + 1));
-  f->in = hugePages(fftw_alloc_complex(nc), sizeof(fftw_complex) * nc);
-  f->out = hugePages(fftw_alloc_complex(nc), sizeof(fftw_complex) * nc);
-  if (!f->spec || !f->in || !f->out) {
-    return Status::resourceLimit("MorletCwt: out of memory for N = " + std::to_string(n_fft));
+  // Shared buffers large enough, or new ones (then shared from here on).
+  if (shared && *shared && (*shared)->capacity >= n_fft) {
+    f->buf = *shared;
+  } else {
+    f->buf = makeBuffers(n_fft);
+    if (!f->buf) {
+      return Status::resourceLimit("MorletCwt: out of memory for N = " + std::to_string(n_fft));
+    }
+    if (shared) *shared = f->buf;
   }
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
     const unsigned flags = fftwFlags(planning);
-    f->r2c = fftw_plan_dft_r2c_1d(static_cast<int>(n_fft), reinterpret_cast<double*>(f->out),
-                                  f->spec, flags);
+    f->r2c = fftw_plan_dft_r2c_1d(static_cast<int>(n_fft), reinterpret_cast<double*>(f->buf->out),
+                                  f->buf->spec, flags);
   }
   if (!f->r2c) return Status::internal("MorletCwt: FFTW could not plan the forward FFT");
   // No buffer is touched here: setSignal writes `out`'s first N doubles and `spec`; `in` is
@@ -441,22 +623,33 @@ Status MorletCwt::configure(long n, double sample_rate, const std::vector<double
 Status MorletCwt::setSignal(const double* y) {
   has_signal_ = false;
   if (!configured()) return Status::internal("MorletCwt: not configured");
+  double mean = 0.0;
+  if (Status st = checkedMean(y, n_, &mean); !st.ok()) return st;
+  loadChecked(y, mean);
+  return {};
+}
+
+Status MorletCwt::checkedMean(const double* y, long n, double* mean) {
   if (!y) return Status::internal("MorletCwt: null signal");
   double sum = 0.0;
-  for (long j = 0; j < n_; ++j) {
+  for (long j = 0; j < n; ++j) {
     if (!std::isfinite(y[j])) {
       return Status::invalidInput("MorletCwt: sample " + std::to_string(j) + " is not finite (" +
                                   num(y[j]) + ")");
     }
     sum += y[j];
   }
-  mean_ = sum / static_cast<double>(n_);
-  double* r = reinterpret_cast<double*>(fftw_->out);
+  *mean = sum / static_cast<double>(n);
+  return {};
+}
+
+void MorletCwt::loadChecked(const double* y, double mean) {
+  mean_ = mean;
+  double* r = reinterpret_cast<double*>(fftw_->buf->out);
   for (long j = 0; j < n_; ++j) r[j] = y[j] - mean_;
   std::memset(r + n_, 0, sizeof(double) * static_cast<size_t>(n_fft_ - n_));
   fftw_execute(fftw_->r2c);
   has_signal_ = true;
-  return {};
 }
 
 bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
@@ -467,7 +660,7 @@ bool MorletCwt::fitsPadding(double frequency_hz, double omega0) const {
 const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double omega0) {
   if (!fillRow(frequency_hz, omega0)) return nullptr;
   // The r2c input in `out` is no longer needed once the spectrum is computed.
-  auto* w = reinterpret_cast<std::complex<double>*>(fftw_->out);
+  auto* w = reinterpret_cast<std::complex<double>*>(fftw_->buf->out);
   if (pruned_ && prunedRow<double>(w)) return w;
   if (!fullInverse()) return nullptr;
   return w;
@@ -480,21 +673,22 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
 // `in` intact. False if FFTW cannot plan.
 bool MorletCwt::fullInverse() {
   Fftw& f = *fftw_;
+  Buffers& b = *f.buf;
   if (!f.c2c) {
     std::lock_guard<std::mutex> lock(plannerMutex());
-    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD,
+    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), b.in, b.out, FFTW_BACKWARD,
                              fftwFlags(FftPlanning::Estimate));
     if (!f.c2c) return false;
   }
-  if (!f.in_clean) {
-    double* p = reinterpret_cast<double*>(f.in);
-    if (f.band_lo <= f.band_hi) {
-      std::fill(p, p + 2 * f.band_lo, 0.0);
-      std::fill(p + 2 * (f.band_hi + 1), p + 2 * n_fft_, 0.0);
+  if (!b.in_clean) {
+    double* p = reinterpret_cast<double*>(b.in);
+    if (b.band_lo <= b.band_hi) {
+      std::fill(p, p + 2 * b.band_lo, 0.0);
+      std::fill(p + 2 * (b.band_hi + 1), p + 2 * b.capacity, 0.0);
     } else {
-      std::fill(p, p + 2 * n_fft_, 0.0);
+      std::fill(p, p + 2 * b.capacity, 0.0);
     }
-    f.in_clean = true;
+    b.in_clean = true;
   }
   fftw_execute(f.c2c);
   return true;
@@ -502,6 +696,7 @@ bool MorletCwt::fullInverse() {
 
 bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   Fftw& f = *fftw_;
+  Buffers& b = *f.buf;
   const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));  // s*w_k = a*k
   long lo = 0, hi = 0;
   bandOf(a, omega0, n_fft_, &lo, &hi);
@@ -517,34 +712,34 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
     // FFTW_MEASURE overwrites both arrays while planning: `in` is zeroed again before the
     // first full inverse FFT (in_clean); `out` (which holds the r2c input) is not needed once
     // the spectrum is computed.
-    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), f.in, f.out, FFTW_BACKWARD, flags);
+    f.c2c = fftw_plan_dft_1d(static_cast<int>(n_fft_), b.in, b.out, FFTW_BACKWARD, flags);
     if (!f.c2c) return false;
-    f.in_clean = false;
-    f.band_lo = 1;
-    f.band_hi = 0;
+    b.in_clean = false;
+    b.band_lo = 1;
+    b.band_hi = 0;
   }
   // Zero what the previous row left outside the new band.
-  if (f.band_lo <= f.band_hi) {
+  if (b.band_lo <= b.band_hi) {
     if (lo > hi) {
-      std::memset(f.in + f.band_lo, 0, sizeof(fftw_complex) * size_t(f.band_hi - f.band_lo + 1));
+      std::memset(b.in + b.band_lo, 0, sizeof(fftw_complex) * size_t(b.band_hi - b.band_lo + 1));
     } else {
-      if (f.band_lo < lo) {
-        const long e = std::min(f.band_hi, lo - 1);
-        std::memset(f.in + f.band_lo, 0, sizeof(fftw_complex) * size_t(e - f.band_lo + 1));
+      if (b.band_lo < lo) {
+        const long e = std::min(b.band_hi, lo - 1);
+        std::memset(b.in + b.band_lo, 0, sizeof(fftw_complex) * size_t(e - b.band_lo + 1));
       }
-      if (f.band_hi > hi) {
-        const long b = std::max(f.band_lo, hi + 1);
-        std::memset(f.in + b, 0, sizeof(fftw_complex) * size_t(f.band_hi - b + 1));
+      if (b.band_hi > hi) {
+        const long k0 = std::max(b.band_lo, hi + 1);
+        std::memset(b.in + k0, 0, sizeof(fftw_complex) * size_t(b.band_hi - k0 + 1));
       }
     }
   }
-  f.band_lo = lo;
-  f.band_hi = hi;
+  b.band_lo = lo;
+  b.band_hi = hi;
   // in_k = Y_k * Psi(a*k) / N (the 1/N normalises FFTW's unnormalised backward transform).
   const double scale = 2.0 / static_cast<double>(n_fft_);
   const double q = std::exp(-a * a);
-  const double* y = reinterpret_cast<const double*>(f.spec);
-  double* p = reinterpret_cast<double*>(f.in);
+  const double* y = reinterpret_cast<const double*>(b.spec);
+  double* p = reinterpret_cast<double*>(b.in);
   for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
     const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
     const double x = a * static_cast<double>(k0) - omega0;
@@ -574,7 +769,8 @@ template <typename R, typename T>
 bool MorletCwt::prunedRow(T* out) {
   using Api = FftwApi<R>;
   Fftw& f = *fftw_;
-  const long lo = f.band_lo, hi = f.band_hi;
+  Buffers& buf = *f.buf;
+  const long lo = buf.band_lo, hi = buf.band_hi;
   if (lo > hi) {
     std::fill(out, out + n_, T(0));
     return true;
@@ -586,18 +782,19 @@ bool MorletCwt::prunedRow(T* out) {
   long C = std::max(1L, std::min(P, kPrunedChunk / M));
   while (P % C != 0) --C;  // chunks of equal size: one plan
   typename Api::Plan plan = nullptr;
-  typename Api::Complex*& batch = f.template batchOf<R>();
+  typename Api::Complex*& batch = buf.template batchOf<R>();
   // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches; the
-  // chunk's transforms go to the second half.
+  // chunk's transforms go after chunk_capacity values (this object's own, so the plans' arrays
+  // keep their alignment whatever the shared buffers' capacity).
   const long chunk_capacity = std::max(kPrunedChunk, n_fft_ / kMinPrunedBatches);
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (!batch) {
-      batch = Api::alloc(static_cast<size_t>(2 * chunk_capacity));
+      batch = Api::alloc(static_cast<size_t>(2 * buf.batchCapacity()));
       if (!batch) return false;
     }
-    if (f.tw.empty()) {
-      f.tw.resize(static_cast<size_t>(4 * (n_fft_ / kMinPrunedBatches + 1) + n_fft_));
+    if (buf.tw.empty()) {
+      buf.tw.resize(static_cast<size_t>(4 * (buf.capacity / kMinPrunedBatches + 1) + buf.capacity));
     }
     auto& plans = f.template batchPlansOf<R>();
     auto found = plans.find(M);
@@ -618,22 +815,27 @@ bool MorletCwt::prunedRow(T* out) {
   // loop vectorises; re-seeded exactly (integer phase (lo+k)*p mod N) every kTwiddleSeedBlock
   // batches. The modulus does not depend on the common phase e^{2 pi i lo j/N}, but keeping it
   // costs nothing and makes the complex row exact.
-  double* tr = f.tw.data();
+  double* tr = buf.tw.data();
   double* ti = tr + B;
   double* sr = ti + B;
   double* si = sr + B;
-  double* sq = si + B;  // C squared moduli
+  double* sq = si + B;  // the chunk's moduli (C * M values at most)
+  // |W| in double (kChained): the phasors from tables; W and float batches: sin/cos per bin.
+  constexpr bool kChained = std::is_same<R, double>::value && std::is_arithmetic<T>::value;
   const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
-  for (long k = 0; k < B; ++k) {
-    sr[k] = std::cos(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
-    si[k] = std::sin(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+  if constexpr (kChained) {
+    f.phasors.fill(n_fft_, lo, 1, B, sr, si);
+  } else {
+    for (long k = 0; k < B; ++k) {
+      sr[k] = std::cos(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+      si[k] = std::sin(two_pi_over_n * static_cast<double>((lo + k) % n_fft_));
+    }
   }
   // Bin k of the band goes to index (r0 + k) mod M of each batch: [r0, r0 + B1) then [0, B - B1).
   const long r0 = lo % M, B1 = std::min(B, M - r0);
-  const double* x = reinterpret_cast<const double*>(f.in + lo);
+  const double* x = reinterpret_cast<const double*>(buf.in + lo);
   R* b = reinterpret_cast<R*>(batch);
   const R* o = reinterpret_cast<const R*>(batch + chunk_capacity);  // o[q*C + c]: W_{q*P+p0+c}
-  const long q_end = (n_ + P - 1) / P;                              // q with some q*P + p < n
   // Outside the band's slots every batch is zero: cleared once per row (the out-of-place
   // transforms leave their input as it is).
   for (long c = 0; c < C; ++c) {
@@ -645,39 +847,37 @@ bool MorletCwt::prunedRow(T* out) {
       std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
     }
   }
+  // |W| in double: between seeds, batch p's band is batch p-1's times the step (one complex
+  // multiplication per bin instead of two; the same drift bound). W (the fits' complex rows)
+  // and float batches: the band times the twiddles.
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
-      if (p % kTwiddleSeedBlock == 0) {
+      R* bc = b + 2 * c * M;
+      if (p % kTwiddleSeedBlock == 0 && kChained) {
+        f.phasors.fill(n_fft_, (lo % n_fft_) * p, p, B, tr, ti);
+      } else if (p % kTwiddleSeedBlock == 0) {
         for (long k = 0; k < B; ++k) {
           const double ph = two_pi_over_n * static_cast<double>(((lo + k) * p) % n_fft_);
           tr[k] = std::cos(ph);
           ti[k] = std::sin(ph);
         }
+      } else if constexpr (kChained) {
+        if (C == 1) {
+          advanceBand(bc + 2 * r0, sr, si, B1);
+          advanceBand(bc, sr + B1, si + B1, B - B1);
+        } else {
+          const R* u = b + 2 * ((c + C - 1) % C) * M;  // batch p-1 (the previous chunk's last)
+          advanceBand(u + 2 * r0, sr, si, bc + 2 * r0, B1);
+          advanceBand(u, sr + B1, si + B1, bc, B - B1);
+        }
+        continue;
       }
-      R* bc = b + 2 * c * M;
       twiddleBand(x, tr, ti, sr, si, bc + 2 * r0, B1);
       twiddleBand(x + 2 * B1, tr + B1, ti + B1, sr + B1, si + B1, bc, B - B1);
     }
     Api::execute(plan);
-    // out[q*P + p0 + c] = o[q*C + c]: C contiguous values per q.
-    for (long q = 0; q < q_end; ++q) {
-      const long j0 = q * P + p0;
-      const long ce = std::min(C, n_ - j0);
-      if (ce <= 0) break;
-      const R* oq = o + 2 * q * C;
-      if constexpr (std::is_same<T, std::complex<double>>::value) {
-        for (long c = 0; c < ce; ++c) out[j0 + c] = {oq[2 * c], oq[2 * c + 1]};
-      } else if constexpr (std::is_same<R, double>::value) {
-        modulusOf(oq, ce, out + j0);
-      } else {
-        for (long c = 0; c < ce; ++c) {
-          const double re = oq[2 * c], im = oq[2 * c + 1];  // float -> double
-          sq[c] = re * re + im * im;
-        }
-        sqrtOf(sq, ce, out + j0);
-      }
-    }
+    writeChunk(o, C, P, p0, n_, sq, out);
   }
   return true;
 }
@@ -705,12 +905,16 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
   if (precision_ == Precision::Single) {
     if (pruned_ && prunedRow<float>(out)) return true;
     if (!fullRowSingle()) return false;
-    modulusOfFloats(reinterpret_cast<const float*>(fftw_->out_f), n_, out);
+    modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
     return true;
   }
   if (pruned_ && prunedRow<double>(out)) return true;
   if (!fullInverse()) return false;
-  modulusOf(reinterpret_cast<const double*>(fftw_->out), n_, out);
+  if constexpr (std::is_same<T, double>::value) {
+    modulusRun(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
+  } else {
+    modulusOf(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
+  }
   return true;
 }
 
@@ -718,7 +922,7 @@ bool MorletCwt::rowModulusSingleAt(double frequency_hz, double omega0, float* ou
   if (!out || !rowAtAllowed(frequency_hz, omega0) || !fillRow(frequency_hz, omega0)) return false;
   if (pruned_ && prunedRow<float>(out)) return true;
   if (!fullRowSingle()) return false;
-  modulusOfFloats(reinterpret_cast<const float*>(fftw_->out_f), n_, out);
+  modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
   return true;
 }
 
@@ -726,30 +930,32 @@ bool MorletCwt::rowModulusSingleAt(double frequency_hz, double omega0, float* ou
 // to float into in_f (zero elsewhere; only what the previous row set is cleared), then c2c_f.
 bool MorletCwt::fullRowSingle() {
   Fftw& f = *fftw_;
-  const size_t nc = static_cast<size_t>(n_fft_);
+  Buffers& b = *f.buf;
+  const size_t nc = static_cast<size_t>(b.capacity);
   if (!f.c2c_f) {
-    f.in_f = hugePages(fftwf_alloc_complex(nc), sizeof(fftwf_complex) * nc);
-    f.out_f = hugePages(fftwf_alloc_complex(nc), sizeof(fftwf_complex) * nc);
-    if (!f.in_f || !f.out_f) return false;
+    if (!b.in_f) b.in_f = hugePages(fftwf_alloc_complex(nc), sizeof(fftwf_complex) * nc);
+    if (!b.out_f) b.out_f = hugePages(fftwf_alloc_complex(nc), sizeof(fftwf_complex) * nc);
+    if (!b.in_f || !b.out_f) return false;
     {
       std::lock_guard<std::mutex> lock(plannerMutex());
       const unsigned flags = fftwFlags(planning_);
       fftwf_set_timelimit(planning_ == FftPlanning::Measure ? kMeasureTimeLimitS
                                                             : FFTW_NO_TIMELIMIT);
-      f.c2c_f = fftwf_plan_dft_1d(static_cast<int>(n_fft_), f.in_f, f.out_f, FFTW_BACKWARD, flags);
+      f.c2c_f = fftwf_plan_dft_1d(static_cast<int>(n_fft_), b.in_f, b.out_f, FFTW_BACKWARD, flags);
     }
     if (!f.c2c_f) return false;
-    std::memset(f.in_f, 0, sizeof(fftwf_complex) * nc);
-    std::memset(f.out_f, 0, sizeof(fftwf_complex) * nc);
-    f.band_lo_f = 1;
-    f.band_hi_f = 0;
+    // Planning may have written both arrays (FFTW_MEASURE), of this or another object.
+    std::memset(b.in_f, 0, sizeof(fftwf_complex) * nc);
+    std::memset(b.out_f, 0, sizeof(fftwf_complex) * nc);
+    b.band_lo_f = 1;
+    b.band_hi_f = 0;
   }
-  float* p = reinterpret_cast<float*>(f.in_f);
-  if (f.band_lo_f <= f.band_hi_f) std::fill(p + 2 * f.band_lo_f, p + 2 * (f.band_hi_f + 1), 0.0f);
-  const double* x = reinterpret_cast<const double*>(f.in);
-  for (long k = 2 * f.band_lo; k < 2 * (f.band_hi + 1); ++k) p[k] = static_cast<float>(x[k]);
-  f.band_lo_f = f.band_lo;
-  f.band_hi_f = f.band_hi;
+  float* p = reinterpret_cast<float*>(b.in_f);
+  if (b.band_lo_f <= b.band_hi_f) std::fill(p + 2 * b.band_lo_f, p + 2 * (b.band_hi_f + 1), 0.0f);
+  const double* x = reinterpret_cast<const double*>(b.in);
+  for (long k = 2 * b.band_lo; k < 2 * (b.band_hi + 1); ++k) p[k] = static_cast<float>(x[k]);
+  b.band_lo_f = b.band_lo;
+  b.band_hi_f = b.band_hi;
   fftwf_execute(f.c2c_f);
   return true;
 }
@@ -806,7 +1012,7 @@ double bandSumPsi2(double a, double omega0, long n_fft, Weight weight) {
 double MorletCwt::meanPowerAt(double frequency_hz, double omega0) const {
   if (!has_signal_ || !(frequency_hz > 0.0) || !(omega0 > 0.0)) return kNaN;
   const double a = omega0 * fs_ / (frequency_hz * static_cast<double>(n_fft_));
-  const double* y = reinterpret_cast<const double*>(fftw_->spec);
+  const double* y = reinterpret_cast<const double*>(fftw_->buf->spec);
   const double sum = bandSumPsi2(
       a, omega0, n_fft_, [y](long k) { return y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1]; });
   return sum / (static_cast<double>(n_) * static_cast<double>(n_fft_));
@@ -824,7 +1030,7 @@ double MorletCwt::noiseGainAt(double frequency_hz, double omega0) const {
 }
 
 const std::complex<double>* MorletCwt::spectrum() const {
-  return has_signal_ ? reinterpret_cast<const std::complex<double>*>(fftw_->spec) : nullptr;
+  return has_signal_ ? reinterpret_cast<const std::complex<double>*>(fftw_->buf->spec) : nullptr;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -870,13 +1076,17 @@ Status MorletScalogram::configure(long n, double sample_rate,
     }
     groups.back().push_back(i);
   }
+  // One buffer set per thread, shared by its groups (the first, longest group sizes it).
   std::vector<std::vector<MorletCwt>> workers(static_cast<size_t>(threads));
   for (auto& w : workers) {
+    std::shared_ptr<MorletCwt::Buffers> buffers;
     for (const auto& g : groups) {
       std::vector<double> f;
       for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
       MorletCwt cwt;
-      if (Status st = cwt.configure(n, sample_rate, f, omega0, planning); !st.ok()) return st;
+      if (Status st = cwt.configureOn(&buffers, n, sample_rate, f, {omega0}, planning); !st.ok()) {
+        return st;
+      }
       cwt.setPrecision(precision);
       w.push_back(std::move(cwt));
     }
@@ -906,17 +1116,22 @@ Status MorletScalogram::runRows(const double* y, Dest dest, Done done) {
       items.push_back({g, k});
     }
   }
+  // The samples are checked and their mean computed once (as MorletCwt::setSignal does), not
+  // once per group and thread.
+  double mean = 0.0;
+  if (Status st = MorletCwt::checkedMean(y, n_, &mean); !st.ok()) return st;
   const int nt = threads();
   std::vector<Status> errors(static_cast<size_t>(nt));
   auto work = [&](int t) {
     std::vector<MorletCwt>& cwts = workers_[size_t(t)];
-    std::vector<bool> loaded(cwts.size(), false);
+    // The thread's groups share one buffer set: the signal is loaded (its spectrum computed)
+    // whenever the group changes; items come in group order, so once per group.
+    int loaded = -1;
     for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
       const int g = items[it].first, k = items[it].second;
-      if (!loaded[size_t(g)]) {
-        errors[size_t(t)] = cwts[size_t(g)].setSignal(y);
-        if (!errors[size_t(t)].ok()) return;
-        loaded[size_t(g)] = true;
+      if (g != loaded) {
+        cwts[size_t(g)].loadChecked(y, mean);
+        loaded = g;
       }
       const int row = group_rows_[size_t(g)][size_t(k)];
       T* d = dest(t, row);
