@@ -83,6 +83,9 @@ class ForwardModel {
   /// Known stiffness K = k/Me [1/s^2] at u of interval j; `right` picks the part after the
   /// interval's break (the held value of sample j+1, or the cubic of the samples after it).
   double knownStiffness(Index j, double u, bool right, Index lo, Index hi) const;
+  /// knownStiffness of a segment whose stiffness is held (smoothStiffness false): the value of
+  /// sample j (right: of sample j + 1), without looking up the segment.
+  double heldStiffness(Index j, bool right) const;
   /// Greybox mesh state (0/1) of interval j before (right = false) or after the split.
   double meshState(Index j, bool right) const;
 

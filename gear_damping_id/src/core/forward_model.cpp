@@ -170,10 +170,7 @@ double ForwardModel::heldSplit(Index j) const {
 
 double ForwardModel::knownStiffness(Index j, double u, bool right, Index lo, Index hi) const {
   const double* k = signal_.stiffness;
-  if (!smoothStiffness(j)) {
-    const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
-    return v * inv_me_;
-  }
+  if (!smoothStiffness(j)) return heldStiffness(j, right);
   QuadratureBreak near[5];
   const int nn = nearBreaks(j, near);
   if (nn == 0 || hi - lo < 4) return cubic(k, j, u, lo, hi) * inv_me_;
@@ -184,6 +181,12 @@ double ForwardModel::knownStiffness(Index j, double u, bool right, Index lo, Ind
   const auto w = p.rule->value(u);
   const Index b = j + p.rule->offset();
   return (w[0] * k[b] + w[1] * k[b + 1] + w[2] * k[b + 2] + w[3] * k[b + 3]) * inv_me_;
+}
+
+double ForwardModel::heldStiffness(Index j, bool right) const {
+  const double* k = signal_.stiffness;
+  const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
+  return v * inv_me_;
 }
 
 double ForwardModel::meshState(Index j, bool right) const {

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
@@ -160,6 +161,59 @@ class SegmentSimulator {
     }
   }
 
+  struct AffineMap {
+    double K = 0, sv = 0;
+    double R[2][2], G[2][3];
+    double S[kMaxParams][2][2], H[kMaxParams][2][3];
+    bool coupled[kMaxParams];
+    // M: the number of unknowns when fixed at compile time (0: m).
+    template <int M>
+    void apply(double* z, int m_dyn, const double* T) const {
+      const int m = M > 0 ? M : m_dyn;
+      const double y = z[0], v = z[1];
+      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
+      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
+      for (int k = 0; k < m; ++k) {
+        double* w = z + 2 + 2 * k;
+        const double a = w[0], c = w[1];
+        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
+        if (coupled[k]) {
+          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
+                H[k][0][2] * T[2];
+          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
+                H[k][1][2] * T[2];
+        }
+        w[0] = n0, w[1] = n1;
+      }
+    }
+  };
+
+  // The affine maps of table t's held stiffness values at p (runTable's), into maps[0..n_keys):
+  // false where they do not apply (a smooth stiffness, a load-varying C).
+  bool heldMaps(const SegmentTable& t, const Params& p, AffineMap* maps) const {
+    if (t.smooth || !constantC(p)) return false;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    for (int k = 0; k < t.n_keys; ++k) {
+      const double K = grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k];
+      maps[k] = affineMap(2 + 2 * p.m, p, K, t.key_sv[k], fm_.signal().dt);
+    }
+    return true;
+  }
+
+  // Interval i (from the segment's start) of table t stepped in parts by the generic RK4 (runTable
+  // for a kSplit interval); z: the state and the p.m sensitivity pairs.
+  void splitInterval(const SegmentTable& t, Index i, const Params& p, double* z) const {
+    genericInterval(t.b + i, fm_.heldSplit(t.b + i), t.b, t.e, p, 1, t.smooth, z, 2 + 2 * p.m);
+  }
+
+  // Whether C is constant over the segment (no load-law unknown).
+  static bool constantC(const Params& p) {
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Theta1) return false;
+    }
+    return true;
+  }
+
   // Whether runTable applies: the fast path, one step per sample, no shape and no STE.
   bool tableApplies(int substeps) const {
     return fast_ && substeps == 1 && shape_ == nullptr && ste_ == nullptr;
@@ -191,7 +245,7 @@ class SegmentSimulator {
         continue;
       }
       const double sv = grey ? fm_.meshState(j, false) : 0.0;
-      const double K = grey ? 0.0 : fm_.knownStiffness(j, 0.0, false, b, e);
+      const double K = grey ? 0.0 : fm_.heldStiffness(j, false);
       int k = 0;
       while (k < t->n_keys && !(t->key_K[k] == K && t->key_sv[k] == sv)) ++k;
       if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
@@ -408,14 +462,6 @@ class SegmentSimulator {
     return D;
   }
 
-  // Whether C is constant over the segment (no load-law unknown).
-  static bool constantC(const Params& p) {
-    for (int k = 0; k < p.m; ++k) {
-      if (p.role[k] == Role::Theta1) return false;
-    }
-    return true;
-  }
-
   // Interval j by the generic RK4, in two parts at its split fraction th (1: one part), each by
   // `substeps` steps with the coefficients looked up at the stage times.
   void genericInterval(Index j, double th, Index b, Index e, const Params& p, int substeps,
@@ -432,7 +478,7 @@ class SegmentSimulator {
         sv = fm_.meshState(j, right);
         Kc = p.K0 + p.dK * sv;
       } else if (!smooth) {
-        Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+        Kc = fm_.heldStiffness(j, right);
       }
       const double du = (u1 - u0) / substeps;
       for (int q = 0; q < substeps; ++q) {
@@ -465,33 +511,6 @@ class SegmentSimulator {
       }
     }
   }
-
-  struct AffineMap {
-    double K = 0, sv = 0;
-    double R[2][2], G[2][3];
-    double S[kMaxParams][2][2], H[kMaxParams][2][3];
-    bool coupled[kMaxParams];
-    // M: the number of unknowns when fixed at compile time (0: m).
-    template <int M>
-    void apply(double* z, int m_dyn, const double* T) const {
-      const int m = M > 0 ? M : m_dyn;
-      const double y = z[0], v = z[1];
-      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
-      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
-      for (int k = 0; k < m; ++k) {
-        double* w = z + 2 + 2 * k;
-        const double a = w[0], c = w[1];
-        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
-        if (coupled[k]) {
-          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
-                H[k][0][2] * T[2];
-          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
-                H[k][1][2] * T[2];
-        }
-        w[0] = n0, w[1] = n1;
-      }
-    }
-  };
 
   // The affine map of one RK4 step of length h with K and the mesh state sv held.
   AffineMap affineMap(int D, const Params& p, double K, double sv, double h) const {
@@ -694,6 +713,223 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
   double d = x.p == y.p ? 0.0 : 1.0;
   for (int k = 0; k < kMaxArOrder; ++k) d = std::max(d, std::abs(x.a[k] - y.a[k]));
   return d;
+}
+
+// ----------------------------------------------------------------------------------------------
+// The fused pass (issue 18): one evaluation of a segment's prewhitened normal equations in a
+// single loop, the state in scalars and the sensitivity pairs as lanes of AVX2 vectors (on the
+// held-stiffness path they share the step matrix R): step, residual, AR prewhitening and the
+// Gram of the whitened row, without storing the rows; the residual's autocovariances after the
+// loop from the residuals kept in reverse order. The sums run in sample order as in
+// runTable + Accumulator; the affine step adds the torque terms last (off the state's latency
+// chain), so the numbers agree with that path to rounding. Intervals stepped in parts call
+// back into the generic RK4.
+
+// Hot loops compiled for AVX2 as well as the baseline, chosen at load time (integral_method.cpp).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#define GD_ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define GD_AVX2_CLONES
+#define GD_ALWAYS_INLINE
+#endif
+
+constexpr int kFusedLanes = 8;  // sensitivities of the fused pass (two vectors of four)
+typedef double V4d __attribute__((vector_size(32)));  // a GCC vector: one AVX or two SSE2 registers
+
+// One held value's affine step in lanes: x+ = R x + G T (the state), and for sensitivity k
+// z_k+ = R z_k + S_k x + H_k T (zero S, H for the initial-state unknowns).
+struct FusedMap {
+  double R[2][2], G[2][3];
+  V4d S[2][2][2];  // [row][y, v][lanes k / 4]
+  V4d H[2][3][2];  // [row][stage][lanes k / 4]
+};
+
+struct FusedPass {
+  // In: the maps and keys of the segment's intervals (SegmentTable::kSplit: split(i) steps it),
+  // the stage torques, the measured y of its n samples, the noise model and the initial state.
+  const FusedMap* maps = nullptr;
+  const unsigned char* key = nullptr;
+  const double *T = nullptr, *T_mid = nullptr, *y = nullptr;
+  Index n = 0;
+  NoiseModel nm;
+  double x[2] = {0, 0};
+  alignas(32) double s[2][kFusedLanes] = {{0}};  // sensitivity k: (s[0][k], s[1][k])
+  void (*split)(const void* ctx, Index i, double* x, double (*s)[kFusedLanes]) = nullptr;
+  const void* ctx = nullptr;
+  double* rrev = nullptr;  // scratch of n + 8: the residuals in reverse order, then zeros
+  // The RK4 step in lanes (fusedPassImpl<M, false>: a smooth stiffness or a load-varying C, as
+  // SegmentSimulator::stepLinear): K of the held keys (with the greybox mesh state) or three
+  // stage values per interval, C = theta0 + theta1 (T1 - t_ref), F = ff T1, and the weights of
+  // the sensitivities' forcing -((v0 + v1 (T1 - t_ref)) v + (y0 + y1 sv) y) in lanes.
+  const double* K3 = nullptr;
+  double key_K[kMaxMaps] = {0}, key_sv[kMaxMaps] = {0};
+  double theta0 = 0, theta1 = 0, t_ref = 0, ff = 0, h = 0;
+  V4d lv0[2] = {}, lv1[2] = {}, ly0[2] = {}, ly1[2] = {};
+  // Out: sums over the whitened rows (rhs_k = sum J_k e, N = sum J J^T) and the raw residual's.
+  alignas(32) double N[kFusedLanes][kFusedLanes], rhs[kFusedLanes];
+  double cost = 0, wlag = 0, acov[8] = {0};  // acov[0]: sum r^2
+  long rows = 0;
+};
+
+// SegmentSimulator::stepLinear of interval i in lanes: the state's RK4 (rk4Pair) keeping its
+// stage values, then every sensitivity pair's with the forcing of those stages.
+template <int V>
+GD_ALWAYS_INLINE inline void fusedLinearStep(const FusedPass* f, Index i, unsigned char key,
+                                             double* y, double* vel, V4d* a, V4d* c) {
+  double K[4], sv = 0.0;
+  if (f->K3 != nullptr) {
+    K[0] = f->K3[3 * i], K[1] = K[2] = f->K3[3 * i + 1], K[3] = f->K3[3 * i + 2];
+  } else {
+    K[0] = K[1] = K[2] = K[3] = f->key_K[key];
+    sv = f->key_sv[key];
+  }
+  const double T[4] = {f->T[i], f->T_mid[i], f->T_mid[i], f->T[i + 1]};
+  const double hs = f->h, h2 = 0.5 * hs, h6 = hs / 6.0;
+  double dT[4], C[4], ys[4], vs[4];
+  {
+    const double y0 = *y, v0 = *vel;
+    double ka[4], kb[4], ta = y0, tb = v0;
+    for (int q = 0; q < 4; ++q) {
+      dT[q] = T[q] - f->t_ref;
+      C[q] = f->theta0 + f->theta1 * dT[q];
+      ys[q] = ta, vs[q] = tb;
+      ka[q] = tb;
+      kb[q] = f->ff * T[q] - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = y0 + hq * ka[q], tb = v0 + hq * kb[q];
+    }
+    *y = y0 + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    *vel = v0 + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
+  }
+  for (int v = 0; v < V; ++v) {
+    const V4d cy = f->ly0[v] + f->ly1[v] * sv, a0 = a[v], b0 = c[v];
+    V4d ka[4], kb[4], ta = a0, tb = b0;
+    for (int q = 0; q < 4; ++q) {
+      const V4d fq = -((f->lv0[v] + f->lv1[v] * dT[q]) * vs[q] + cy * ys[q]);
+      ka[q] = tb;
+      kb[q] = fq - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = a0 + hq * ka[q], tb = b0 + hq * kb[q];
+    }
+    a[v] = a0 + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    c[v] = b0 + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
+  }
+}
+
+// The affine step of a held interval (FusedMap) with stage torques T0, T1 (midpoint), T2.
+template <int V>
+GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, double T1, double T2,
+                                             double* y, double* vel, V4d* a, V4d* c) {
+  const double y0 = *y, v0 = *vel;
+  for (int v = 0; v < V; ++v) {
+    const V4d t0 = mp.H[0][0][v] * T0 + mp.H[0][1][v] * T1 + mp.H[0][2][v] * T2;
+    const V4d t1 = mp.H[1][0][v] * T0 + mp.H[1][1][v] * T1 + mp.H[1][2][v] * T2;
+    const V4d f0 = mp.S[0][0][v] * y0 + mp.S[0][1][v] * v0 + t0;
+    const V4d f1 = mp.S[1][0][v] * y0 + mp.S[1][1][v] * v0 + t1;
+    const V4d na = mp.R[0][0] * a[v] + mp.R[0][1] * c[v] + f0;
+    c[v] = mp.R[1][0] * a[v] + mp.R[1][1] * c[v] + f1;
+    a[v] = na;
+  }
+  const double g0 = mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
+  const double g1 = mp.G[1][0] * T0 + mp.G[1][1] * T1 + mp.G[1][2] * T2;
+  *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + g0;
+  *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + g1;
+}
+
+template <int M, bool Affine>
+GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
+  constexpr int V = (M + 3) / 4;
+  const V4d zero = {0, 0, 0, 0};
+  V4d a[V], c[V], Nv[M][V], Rv[V], ring[8][V];
+  std::memcpy(a, f->s[0], sizeof(a));
+  std::memcpy(c, f->s[1], sizeof(c));
+  for (int v = 0; v < V; ++v) {
+    Rv[v] = zero;
+    for (int q = 0; q < M; ++q) Nv[q][v] = zero;
+  }
+  double y = f->x[0], vel = f->x[1], rr[8] = {0};
+  double cost = 0.0, wlag = 0.0, eprev = 0.0;
+  const Index n = f->n;
+  const int P = f->nm.p;
+  long rows = 0;
+  for (Index i = 0;; ++i) {
+    const double r = f->y[i] - y;
+    f->rrev[n - 1 - i] = r;
+    double er = r;
+    V4d ej[V];
+    for (int v = 0; v < V; ++v) ej[v] = a[v];
+    bool row = true;
+    if (P > 0) {  // the whitened row e = row_i + a_1 row_{i-1} + ... in this order
+      rr[i & 7] = r;
+      for (int v = 0; v < V; ++v) ring[i & 7][v] = a[v];
+      row = i >= P;
+      for (int k = 0; row && k < P; ++k) {
+        const double ak = f->nm.a[k];
+        er += ak * rr[(i - 1 - k) & 7];
+        for (int v = 0; v < V; ++v) ej[v] += ak * ring[(i - 1 - k) & 7][v];
+      }
+    }
+    if (row) {
+      cost += er * er;
+      if (rows > 0) wlag += er * eprev;
+      eprev = er;
+      ++rows;
+      for (int v = 0; v < V; ++v) Rv[v] += ej[v] * er;
+      for (int q = 0; q < M; ++q) {
+        const double jq = ej[q / 4][q % 4];
+        for (int v = 0; v < V; ++v) Nv[q][v] += ej[v] * jq;
+      }
+    }
+    if (i + 1 >= n) break;
+    const unsigned char key = f->key[i];
+    if (key == SegmentTable::kSplit) {
+      double x[2] = {y, vel};
+      std::memcpy(f->s[0], a, sizeof(a));
+      std::memcpy(f->s[1], c, sizeof(c));
+      f->split(f->ctx, i, x, f->s);
+      y = x[0], vel = x[1];
+      std::memcpy(a, f->s[0], sizeof(a));
+      std::memcpy(c, f->s[1], sizeof(c));
+    } else if constexpr (Affine) {
+      fusedAffineStep<V>(f->maps[key], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
+    } else {
+      fusedLinearStep<V>(f, i, key, &y, &vel, a, c);
+    }
+  }
+  // Autocovariances, lag k in lane k: r_i times (r_i, r_{i-1}, ...), in sample order.
+  V4d acc_lo = zero, acc_hi = zero;
+  for (Index i = 0; i < n; ++i) {
+    V4d lo, hi;
+    std::memcpy(&lo, f->rrev + (n - 1 - i), sizeof(V4d));
+    std::memcpy(&hi, f->rrev + (n + 3 - i), sizeof(V4d));
+    const double r = lo[0];
+    acc_lo += r * lo;
+    acc_hi += r * hi;
+  }
+  for (int q = 0; q < M; ++q) {
+    for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q][k / 4][k % 4];
+  }
+  for (int k = 0; k < M; ++k) f->rhs[k] = Rv[k / 4][k % 4];
+  for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
+  f->cost = cost, f->wlag = wlag, f->rows = rows;
+}
+
+// The passes by number of unknowns (3 to 6), affine maps or the RK4 step.
+GD_AVX2_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
+GD_AVX2_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
+GD_AVX2_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
+GD_AVX2_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
+GD_AVX2_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
+GD_AVX2_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
+GD_AVX2_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
+GD_AVX2_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
+
+void runFused(FusedPass* f, int m, bool affine) {
+  static void (*const kPass[2][4])(FusedPass*) = {
+      {fusedLinear3, fusedLinear4, fusedLinear5, fusedLinear6},
+      {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6}};
+  kPass[affine ? 1 : 0][m - 3](f);
 }
 
 }  // namespace
@@ -1015,13 +1251,102 @@ class Refinement {
 
   template <int MT>
   Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm) const {
+    const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    Normal fused;
+    if (t != nullptr && evaluateFused(*t, p, nm, &fused)) return fused;
     Accumulator<MT> acc(p.m, nm, s_.dte);
     auto visit = [&acc](Index n, const double* z) { acc.add(n, z); };
-    if (sim_.tableApplies(substeps_))
-      sim_.runTable<MT>(tableOf(i), p, visit);
-    else
+    if (t != nullptr) {
+      sim_.runTable<MT>(*t, p, visit);
+    } else {
       sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, visit);
+    }
     return acc.finish();
+  }
+
+  // The held value's affine map (SegmentSimulator::AffineMap) of m sensitivities in lanes.
+  static void toLanes(const SegmentSimulator::AffineMap& am, int m, FusedMap* out) {
+    *out = FusedMap{};
+    std::copy(&am.R[0][0], &am.R[0][0] + 4, &out->R[0][0]);
+    std::copy(&am.G[0][0], &am.G[0][0] + 6, &out->G[0][0]);
+    for (int k = 0; k < m; ++k) {
+      if (!am.coupled[k]) continue;
+      for (int row = 0; row < 2; ++row) {
+        for (int c = 0; c < 2; ++c) out->S[row][c][k / 4][k % 4] = am.S[k][row][c];
+        for (int q = 0; q < 3; ++q) out->H[row][q][k / 4][k % 4] = am.H[k][row][q];
+      }
+    }
+  }
+
+  // The RK4 step's coefficients of table t at p for the fused pass (stepLinear's: the tabled
+  // stiffness, C and F, the sensitivities' forcing weights).
+  void linearLanes(const SegmentTable& t, const Params& p, FusedPass* f) const {
+    const bool grey = o_.formulation == Formulation::Greybox;
+    if (t.smooth) f->K3 = t.K3.data();
+    for (int k = 0; k < t.n_keys; ++k) {
+      f->key_K[k] = grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k];
+      f->key_sv[k] = grey ? t.key_sv[k] : 0.0;
+    }
+    f->theta0 = p.theta0, f->theta1 = p.theta1, f->t_ref = p.t_ref;
+    f->ff = fm_.gear().force_factor, f->h = s_.dt;
+    for (int k = 0; k < p.m; ++k) {
+      f->lv0[k / 4][k % 4] = p.role[k] == Role::Theta0 ? 1.0 : 0.0;
+      f->lv1[k / 4][k % 4] = p.role[k] == Role::Theta1 ? 1.0 : 0.0;
+      f->ly0[k / 4][k % 4] = p.role[k] == Role::K0 ? 1.0 : 0.0;
+      f->ly1[k / 4][k % 4] = p.role[k] == Role::DK ? 1.0 : 0.0;
+    }
+  }
+
+  // Segment t's normal equations at p by the fused pass (3 to 6 unknowns): the numbers of
+  // runTable + Accumulator (affine maps where the stiffness is held and C constant).
+  bool evaluateFused(const SegmentTable& t, const Params& p, const NoiseModel& nm,
+                     Normal* out) const {
+    if (p.m < 3 || p.m > 6 || t.e - t.b < 2) return false;
+    SegmentSimulator::AffineMap am[kMaxMaps];
+    FusedMap maps[kMaxMaps];
+    FusedPass f;
+    const bool affine = sim_.heldMaps(t, p, am);
+    if (affine) {
+      for (int k = 0; k < t.n_keys; ++k) toLanes(am[k], p.m, &maps[k]);
+    } else {
+      linearLanes(t, p, &f);
+    }
+    f.maps = maps, f.key = t.key.data(), f.T = t.T.data(), f.T_mid = t.T_mid.data();
+    f.y = s_.dte + t.b, f.n = t.e - t.b, f.nm = nm;
+    f.x[0] = p.y0, f.x[1] = p.v0;
+    if (fused_rrev_.size() < static_cast<size_t>(f.n + 8)) fused_rrev_.resize(f.n + 8);
+    std::fill(fused_rrev_.begin() + f.n, fused_rrev_.begin() + f.n + 8, 0.0);
+    f.rrev = fused_rrev_.data();
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Y0) f.s[0][k] = 1.0;
+      if (p.role[k] == Role::V0) f.s[1][k] = 1.0;
+    }
+    struct Ctx {
+      const SegmentSimulator* sim;
+      const SegmentTable* t;
+      const Params* p;
+    } ctx{&sim_, &t, &p};
+    f.ctx = &ctx;
+    f.split = [](const void* c, Index i, double* x, double (*s)[kFusedLanes]) {
+      const Ctx& q = *static_cast<const Ctx*>(c);
+      double z[2 + 2 * kFusedLanes] = {x[0], x[1]};
+      for (int k = 0; k < q.p->m; ++k) z[2 + 2 * k] = s[0][k], z[3 + 2 * k] = s[1][k];
+      q.sim->splitInterval(*q.t, i, *q.p, z);
+      x[0] = z[0], x[1] = z[1];
+      for (int k = 0; k < q.p->m; ++k) s[0][k] = z[2 + 2 * k], s[1][k] = z[3 + 2 * k];
+    };
+    runFused(&f, p.m, affine);
+    const int m = p.m;
+    out->N.resize(m, m);
+    out->rhs.resize(m);
+    for (int a = 0; a < m; ++a) {
+      out->rhs[a] = f.rhs[a];
+      for (int b = 0; b <= a; ++b) out->N(a, b) = out->N(b, a) = f.N[a][b];
+    }
+    out->cost = f.cost, out->rows = f.rows, out->raw = f.acov[0], out->samples = f.n;
+    std::copy(f.acov, f.acov + kMaxArOrder + 1, out->acov);
+    out->wlag1 = f.wlag;
+    return true;
   }
 
   // Segment i's look-ups (SegmentSimulator::buildTable), cached while the cached intervals stay
@@ -1774,6 +2099,7 @@ class Refinement {
   Locals dl_scratch_, x1_scratch_;
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
+  mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
   mutable SegmentTable scratch_;
   mutable size_t cached_ = 0;
   // Torque noise (torqueNoise): per-segment level and added covariances, and the draws' model
