@@ -757,7 +757,8 @@ struct FusedPass {
   alignas(32) double s[2][kFusedLanes] = {{0}};  // sensitivity k: (s[0][k], s[1][k])
   void (*split)(const void* ctx, Index i, double* x, double (*s)[kFusedLanes]) = nullptr;
   const void* ctx = nullptr;
-  double* rrev = nullptr;  // scratch of n + 8: the residuals in reverse order, then zeros
+  double* rrev = nullptr;  // n + 8: the residuals in reverse order, then zeros
+  double* keep = nullptr;  // null or n x 4V (V = (m + 3) / 4): the raw sensitivities (lanes)
   // The RK4 step in lanes (fusedPassImpl<M, false>: a smooth stiffness or a load-varying C, as
   // SegmentSimulator::stepLinear): K of the held keys (with the greybox mesh state) or three
   // stage values per interval, C = theta0 + theta1 (T1 - t_ref), F = ff T1, and the weights of
@@ -837,50 +838,85 @@ GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, doub
   *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + g1;
 }
 
-template <int M, bool Affine>
-GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
-  constexpr int V = (M + 3) / 4;
-  const V4d zero = {0, 0, 0, 0};
-  V4d a[V], c[V], Nv[M][V], Rv[V], ring[8][V];
-  std::memcpy(a, f->s[0], sizeof(a));
-  std::memcpy(c, f->s[1], sizeof(c));
-  for (int v = 0; v < V; ++v) {
-    Rv[v] = zero;
-    for (int q = 0; q < M; ++q) Nv[q][v] = zero;
-  }
-  double y = f->x[0], vel = f->x[1], rr[8] = {0};
-  double cost = 0.0, wlag = 0.0, eprev = 0.0;
-  const Index n = f->n;
-  const int P = f->nm.p;
+// The whitened rows' sums of a pass (fusedPassImpl, fusedRowsImpl): add() takes the raw row
+// (r, J) of sample i in sample order.
+template <int M>
+struct FusedSums {
+  static constexpr int V = (M + 3) / 4;
+  V4d Nv[M][V], Rv[V], ring[8][V];
+  double rr[8] = {0}, cost = 0.0, wlag = 0.0, eprev = 0.0;
   long rows = 0;
-  for (Index i = 0;; ++i) {
-    const double r = f->y[i] - y;
-    f->rrev[n - 1 - i] = r;
+
+  GD_ALWAYS_INLINE inline FusedSums() {
+    const V4d zero = {0, 0, 0, 0};
+    for (int v = 0; v < V; ++v) {
+      Rv[v] = zero;
+      for (int q = 0; q < M; ++q) Nv[q][v] = zero;
+    }
+  }
+
+  GD_ALWAYS_INLINE inline void add(const NoiseModel& nm, Index i, double r, const V4d* a) {
     double er = r;
     V4d ej[V];
     for (int v = 0; v < V; ++v) ej[v] = a[v];
-    bool row = true;
+    const int P = nm.p;
     if (P > 0) {  // the whitened row e = row_i + a_1 row_{i-1} + ... in this order
       rr[i & 7] = r;
       for (int v = 0; v < V; ++v) ring[i & 7][v] = a[v];
-      row = i >= P;
-      for (int k = 0; row && k < P; ++k) {
-        const double ak = f->nm.a[k];
+      if (i < P) return;
+      for (int k = 0; k < P; ++k) {
+        const double ak = nm.a[k];
         er += ak * rr[(i - 1 - k) & 7];
         for (int v = 0; v < V; ++v) ej[v] += ak * ring[(i - 1 - k) & 7][v];
       }
     }
-    if (row) {
-      cost += er * er;
-      if (rows > 0) wlag += er * eprev;
-      eprev = er;
-      ++rows;
-      for (int v = 0; v < V; ++v) Rv[v] += ej[v] * er;
-      for (int q = 0; q < M; ++q) {
-        const double jq = ej[q / 4][q % 4];
-        for (int v = 0; v < V; ++v) Nv[q][v] += ej[v] * jq;
-      }
+    cost += er * er;
+    if (rows > 0) wlag += er * eprev;
+    eprev = er;
+    ++rows;
+    for (int v = 0; v < V; ++v) Rv[v] += ej[v] * er;
+    for (int q = 0; q < M; ++q) {
+      const double jq = ej[q / 4][q % 4];
+      for (int v = 0; v < V; ++v) Nv[q][v] += ej[v] * jq;
     }
+  }
+
+  // The sums into f, and the autocovariances (lag k in lane k: r_i times r_i, r_{i-1}, ... in
+  // sample order) from the residuals f->rrev.
+  GD_ALWAYS_INLINE inline void finish(FusedPass* f) const {
+    const Index n = f->n;
+    V4d acc_lo = {0, 0, 0, 0}, acc_hi = {0, 0, 0, 0};
+    for (Index i = 0; i < n; ++i) {
+      V4d lo, hi;
+      std::memcpy(&lo, f->rrev + (n - 1 - i), sizeof(V4d));
+      std::memcpy(&hi, f->rrev + (n + 3 - i), sizeof(V4d));
+      const double r = lo[0];
+      acc_lo += r * lo;
+      acc_hi += r * hi;
+    }
+    for (int q = 0; q < M; ++q) {
+      for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q][k / 4][k % 4];
+    }
+    for (int k = 0; k < M; ++k) f->rhs[k] = Rv[k / 4][k % 4];
+    for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
+    f->cost = cost, f->wlag = wlag, f->rows = rows;
+  }
+};
+
+template <int M, bool Affine>
+GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
+  constexpr int V = (M + 3) / 4;
+  V4d a[V], c[V];
+  std::memcpy(a, f->s[0], sizeof(a));
+  std::memcpy(c, f->s[1], sizeof(c));
+  FusedSums<M> sums;
+  double y = f->x[0], vel = f->x[1];
+  const Index n = f->n;
+  for (Index i = 0;; ++i) {
+    const double r = f->y[i] - y;
+    f->rrev[n - 1 - i] = r;
+    if (f->keep != nullptr) std::memcpy(f->keep + 4 * V * i, a, sizeof(a));
+    sums.add(f->nm, i, r, a);
     if (i + 1 >= n) break;
     const unsigned char key = f->key[i];
     if (key == SegmentTable::kSplit) {
@@ -897,22 +933,22 @@ GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
       fusedLinearStep<V>(f, i, key, &y, &vel, a, c);
     }
   }
-  // Autocovariances, lag k in lane k: r_i times (r_i, r_{i-1}, ...), in sample order.
-  V4d acc_lo = zero, acc_hi = zero;
+  sums.finish(f);
+}
+
+// The sums of the rows a pass kept (f->rrev, f->keep) under the noise model f->nm: the numbers
+// of a new pass at the same unknowns.
+template <int M>
+GD_ALWAYS_INLINE inline void fusedRowsImpl(FusedPass* f) {
+  constexpr int V = (M + 3) / 4;
+  FusedSums<M> sums;
+  const Index n = f->n;
   for (Index i = 0; i < n; ++i) {
-    V4d lo, hi;
-    std::memcpy(&lo, f->rrev + (n - 1 - i), sizeof(V4d));
-    std::memcpy(&hi, f->rrev + (n + 3 - i), sizeof(V4d));
-    const double r = lo[0];
-    acc_lo += r * lo;
-    acc_hi += r * hi;
+    V4d a[V];
+    std::memcpy(a, f->keep + 4 * V * i, sizeof(a));
+    sums.add(f->nm, i, f->rrev[n - 1 - i], a);
   }
-  for (int q = 0; q < M; ++q) {
-    for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q][k / 4][k % 4];
-  }
-  for (int k = 0; k < M; ++k) f->rhs[k] = Rv[k / 4][k % 4];
-  for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
-  f->cost = cost, f->wlag = wlag, f->rows = rows;
+  sums.finish(f);
 }
 
 // The passes by number of unknowns (3 to 6), affine maps or the RK4 step.
@@ -924,12 +960,18 @@ GD_AVX2_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
 GD_AVX2_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
 GD_AVX2_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
 GD_AVX2_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
+GD_AVX2_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
+GD_AVX2_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
+GD_AVX2_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
+GD_AVX2_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
 
-void runFused(FusedPass* f, int m, bool affine) {
-  static void (*const kPass[2][4])(FusedPass*) = {
+// kind 0: the RK4 step, 1: the affine maps, 2: the kept rows.
+void runFused(FusedPass* f, int m, int kind) {
+  static void (*const kPass[3][4])(FusedPass*) = {
       {fusedLinear3, fusedLinear4, fusedLinear5, fusedLinear6},
-      {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6}};
-  kPass[affine ? 1 : 0][m - 3](f);
+      {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6},
+      {fusedRows3, fusedRows4, fusedRows5, fusedRows6}};
+  kPass[kind][m - 3](f);
 }
 
 }  // namespace
@@ -1127,9 +1169,17 @@ class Refinement {
     return p;
   }
 
+  // The rows of a fused pass of one segment (FusedPass::rrev, keep), kept for the first
+  // evaluation of its next noise round at the same unknowns (rewhiten).
+  struct KeptRows {
+    size_t seg = static_cast<size_t>(-1);  // none
+    int m = 0;
+    std::vector<double> rrev, J;
+  };
+
   Normal evaluate(size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
-                  const NoiseModel& nm) const {
-    return evaluateAt(i, makeParams(x, g), nm);
+                  const NoiseModel& nm, KeptRows* keep = nullptr) const {
+    return evaluateAt(i, makeParams(x, g), nm, keep);
   }
 
   // Accumulates the normal equations (Normal) of the prewhitened residuals: add() stores each
@@ -1234,26 +1284,32 @@ class Refinement {
   };
 
   // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
-  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
+  // `keep` (may be null): receives the rows of a fused pass (seg = i), else seg = none.
+  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm,
+                    KeptRows* keep = nullptr) const {
     switch (p.m) {  // the common problem sizes unrolled
       case 3:
-        return evaluateWith<3>(i, p, nm);
+        return evaluateWith<3>(i, p, nm, keep);
       case 4:
-        return evaluateWith<4>(i, p, nm);
+        return evaluateWith<4>(i, p, nm, keep);
       case 5:
-        return evaluateWith<5>(i, p, nm);
+        return evaluateWith<5>(i, p, nm, keep);
       case 6:
-        return evaluateWith<6>(i, p, nm);
+        return evaluateWith<6>(i, p, nm, keep);
       default:
-        return evaluateWith<0>(i, p, nm);
+        return evaluateWith<0>(i, p, nm, keep);
     }
   }
 
   template <int MT>
-  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm) const {
+  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm, KeptRows* keep) const {
     const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
     Normal fused;
-    if (t != nullptr && evaluateFused(*t, p, nm, &fused)) return fused;
+    if (keep != nullptr) keep->seg = static_cast<size_t>(-1);
+    if (t != nullptr && evaluateFused(*t, p, nm, &fused, keep)) {
+      if (keep != nullptr) keep->seg = i, keep->m = p.m;
+      return fused;
+    }
     Accumulator<MT> acc(p.m, nm, s_.dte);
     auto visit = [&acc](Index n, const double* z) { acc.add(n, z); };
     if (t != nullptr) {
@@ -1299,8 +1355,8 @@ class Refinement {
 
   // Segment t's normal equations at p by the fused pass (3 to 6 unknowns): the numbers of
   // runTable + Accumulator (affine maps where the stiffness is held and C constant).
-  bool evaluateFused(const SegmentTable& t, const Params& p, const NoiseModel& nm,
-                     Normal* out) const {
+  bool evaluateFused(const SegmentTable& t, const Params& p, const NoiseModel& nm, Normal* out,
+                     KeptRows* keep) const {
     if (p.m < 3 || p.m > 6 || t.e - t.b < 2) return false;
     SegmentSimulator::AffineMap am[kMaxMaps];
     FusedMap maps[kMaxMaps];
@@ -1314,9 +1370,14 @@ class Refinement {
     f.maps = maps, f.key = t.key.data(), f.T = t.T.data(), f.T_mid = t.T_mid.data();
     f.y = s_.dte + t.b, f.n = t.e - t.b, f.nm = nm;
     f.x[0] = p.y0, f.x[1] = p.v0;
-    if (fused_rrev_.size() < static_cast<size_t>(f.n + 8)) fused_rrev_.resize(f.n + 8);
-    std::fill(fused_rrev_.begin() + f.n, fused_rrev_.begin() + f.n + 8, 0.0);
-    f.rrev = fused_rrev_.data();
+    std::vector<double>& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
+    if (rrev.size() < static_cast<size_t>(f.n + 8)) rrev.resize(f.n + 8);
+    std::fill(rrev.begin() + f.n, rrev.begin() + f.n + 8, 0.0);
+    f.rrev = rrev.data();
+    if (keep != nullptr) {
+      keep->J.resize(static_cast<size_t>(f.n * 4 * ((p.m + 3) / 4)));
+      f.keep = keep->J.data();
+    }
     for (int k = 0; k < p.m; ++k) {
       if (p.role[k] == Role::Y0) f.s[0][k] = 1.0;
       if (p.role[k] == Role::V0) f.s[1][k] = 1.0;
@@ -1335,17 +1396,37 @@ class Refinement {
       x[0] = z[0], x[1] = z[1];
       for (int k = 0; k < q.p->m; ++k) s[0][k] = z[2 + 2 * k], s[1][k] = z[3 + 2 * k];
     };
-    runFused(&f, p.m, affine);
-    const int m = p.m;
-    out->N.resize(m, m);
-    out->rhs.resize(m);
+    runFused(&f, p.m, affine ? 1 : 0);
+    *out = normalOf(f, p.m);
+    return true;
+  }
+
+  static Normal normalOf(const FusedPass& f, int m) {
+    Normal out;
+    out.N.resize(m, m);
+    out.rhs.resize(m);
     for (int a = 0; a < m; ++a) {
-      out->rhs[a] = f.rhs[a];
-      for (int b = 0; b <= a; ++b) out->N(a, b) = out->N(b, a) = f.N[a][b];
+      out.rhs[a] = f.rhs[a];
+      for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = f.N[a][b];
     }
-    out->cost = f.cost, out->rows = f.rows, out->raw = f.acov[0], out->samples = f.n;
-    std::copy(f.acov, f.acov + kMaxArOrder + 1, out->acov);
-    out->wlag1 = f.wlag;
+    out.cost = f.cost, out.rows = f.rows, out.raw = f.acov[0], out.samples = f.n;
+    std::copy(f.acov, f.acov + kMaxArOrder + 1, out.acov);
+    out.wlag1 = f.wlag;
+    return out;
+  }
+
+  // Segment i's normal equations under the noise model nm from the rows kept at its current
+  // unknowns (kept_[0]; the same numbers as a new pass there); false when none are kept.
+  bool rewhiten(size_t i, const NoiseModel& nm, Normal* out) const {
+    KeptRows& k = kept_[0];
+    if (k.seg != i || k.m != m_) return false;
+    FusedPass f;
+    f.n = ranges_[i].second - ranges_[i].first;
+    f.nm = nm;
+    f.rrev = k.rrev.data();
+    f.keep = k.J.data();
+    runFused(&f, m_, 2);
+    *out = normalOf(f, m_);
     return true;
   }
 
@@ -1426,8 +1507,14 @@ class Refinement {
   int gaussNewton(const Set& set, const NoiseModel& nm, bool* converged, bool* finite) {
     constexpr double kConvergenceTol = 1e-10;
     double cost = 0.0;
+    // One segment: its rows at the accepted unknowns are kept (kept_[0]; the trial's in
+    // kept_[1]), so a new noise round starts without a pass.
+    KeptRows* keep = set.size() == 1 ? &kept_[1] : nullptr;
     for (size_t i : set) {
-      normals_[i] = evaluate(i, loc_[i], sh_, nm);
+      if (keep == nullptr || !rewhiten(i, nm, &normals_[i])) {
+        normals_[i] = evaluate(i, loc_[i], sh_, nm, keep);
+        if (keep != nullptr) std::swap(kept_[0], kept_[1]);
+      }
       cost += normals_[i].cost;
     }
     *finite = std::isfinite(cost);
@@ -1452,7 +1539,7 @@ class Refinement {
         double c1 = 0.0;
         for (size_t i : set) {
           x1[i] = loc_[i] + step * dl[i];
-          n1[i] = evaluate(i, x1[i], g1, nm);
+          n1[i] = evaluate(i, x1[i], g1, nm, keep);
           c1 += n1[i].cost;
         }
         if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
@@ -1463,6 +1550,7 @@ class Refinement {
             loc_[i] = x1[i];
             normals_[i] = std::move(n1[i]);
           }
+          if (keep != nullptr) std::swap(kept_[0], kept_[1]);
           sh_ = g1;
           cost = c1;
         }
@@ -2100,6 +2188,7 @@ class Refinement {
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
   mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
+  mutable KeptRows kept_[2];                  // gaussNewton: accepted, trial
   mutable SegmentTable scratch_;
   mutable size_t cached_ = 0;
   // Torque noise (torqueNoise): per-segment level and added covariances, and the draws' model
