@@ -758,7 +758,7 @@ struct FusedPass {
   void (*split)(const void* ctx, Index i, double* x, double (*s)[kFusedLanes]) = nullptr;
   const void* ctx = nullptr;
   double* rrev = nullptr;  // n + 8: the residuals in reverse order, then zeros
-  double* keep = nullptr;  // null or n x 4V (V = (m + 3) / 4): the raw sensitivities (lanes)
+  double* keep = nullptr;  // null or n x 4 (m / 4 + 1): the raw rows (r, J) (fusedRow)
   // The RK4 step in lanes (fusedPassImpl<M, false>: a smooth stiffness or a load-varying C, as
   // SegmentSimulator::stepLinear): K of the held keys (with the greybox mesh state) or three
   // stage values per interval, C = theta0 + theta1 (T1 - t_ref), F = ff T1, and the weights of
@@ -838,46 +838,64 @@ GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, doub
   *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + g1;
 }
 
+// *out = {lo[3], hi[0], hi[1], hi[2]}.
+GD_ALWAYS_INLINE inline void shiftIn(const V4d& lo, const V4d& hi, V4d* out) {
+#if defined(__clang__)
+  *out = __builtin_shufflevector(lo, hi, 3, 4, 5, 6);
+#else
+  typedef long I4 __attribute__((vector_size(32)));
+  *out = __builtin_shuffle(lo, hi, I4{3, 4, 5, 6});
+#endif
+}
+
+// The raw row (r, J_1..J_M) of a sample in W = M / 4 + 1 vectors from the residual and the
+// sensitivities in lanes (a).
+template <int M>
+GD_ALWAYS_INLINE inline void fusedRow(double r, const V4d* a, V4d* w) {
+  constexpr int V = (M + 3) / 4, W = M / 4 + 1;
+  const V4d rb = {r, r, r, r}, zero = {0, 0, 0, 0};
+  shiftIn(rb, a[0], &w[0]);
+  for (int v = 1; v < W; ++v) shiftIn(a[v - 1], v < V ? a[v] : zero, &w[v]);
+}
+
 // The whitened rows' sums of a pass (fusedPassImpl, fusedRowsImpl): add() takes the raw row
-// (r, J) of sample i in sample order.
+// w = (r, J_1..J_M) of sample i in sample order; Nv[q] sums e e_q (e the whitened row): lane 0
+// of Nv[0] the cost, Nv[0] the right-hand side, Nv[1..M] the normal matrix.
 template <int M>
 struct FusedSums {
-  static constexpr int V = (M + 3) / 4;
-  V4d Nv[M][V], Rv[V], ring[8][V];
-  double rr[8] = {0}, cost = 0.0, wlag = 0.0, eprev = 0.0;
+  static constexpr int W = M / 4 + 1;
+  V4d Nv[M + 1][W];
+  double wlag = 0.0, eprev = 0.0;
   long rows = 0;
 
   GD_ALWAYS_INLINE inline FusedSums() {
     const V4d zero = {0, 0, 0, 0};
-    for (int v = 0; v < V; ++v) {
-      Rv[v] = zero;
-      for (int q = 0; q < M; ++q) Nv[q][v] = zero;
+    for (int v = 0; v < W; ++v) {
+      for (int q = 0; q <= M; ++q) Nv[q][v] = zero;
     }
   }
 
-  GD_ALWAYS_INLINE inline void add(const NoiseModel& nm, Index i, double r, const V4d* a) {
-    double er = r;
-    V4d ej[V];
-    for (int v = 0; v < V; ++v) ej[v] = a[v];
-    const int P = nm.p;
-    if (P > 0) {  // the whitened row e = row_i + a_1 row_{i-1} + ... in this order
-      rr[i & 7] = r;
-      for (int v = 0; v < V; ++v) ring[i & 7][v] = a[v];
-      if (i < P) return;
-      for (int k = 0; k < P; ++k) {
+  // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice.
+  GD_ALWAYS_INLINE inline void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
+    V4d e[W];
+    for (int v = 0; v < W; ++v) e[v] = w[v];
+    if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... in this order (zero a_k beyond the order)
+      V4d* slot = ring + (i & 7) * W;
+      for (int v = 0; v < W; ++v) slot[v] = slot[v + 8 * W] = w[v];
+      if (i < nm.p) return;
+      const V4d* prev = slot + 7 * W;
+      for (int k = 0; k < kMaxArOrder; ++k) {
         const double ak = nm.a[k];
-        er += ak * rr[(i - 1 - k) & 7];
-        for (int v = 0; v < V; ++v) ej[v] += ak * ring[(i - 1 - k) & 7][v];
+        for (int v = 0; v < W; ++v) e[v] += ak * prev[v - k * W];
       }
     }
-    cost += er * er;
-    if (rows > 0) wlag += er * eprev;
-    eprev = er;
+    const double e0 = e[0][0];
+    if (rows > 0) wlag += e0 * eprev;
+    eprev = e0;
     ++rows;
-    for (int v = 0; v < V; ++v) Rv[v] += ej[v] * er;
-    for (int q = 0; q < M; ++q) {
-      const double jq = ej[q / 4][q % 4];
-      for (int v = 0; v < V; ++v) Nv[q][v] += ej[v] * jq;
+    for (int q = 0; q <= M; ++q) {
+      const double eq = e[q / 4][q % 4];
+      for (int v = 0; v < W; ++v) Nv[q][v] += e[v] * eq;
     }
   }
 
@@ -895,11 +913,11 @@ struct FusedSums {
       acc_hi += r * hi;
     }
     for (int q = 0; q < M; ++q) {
-      for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q][k / 4][k % 4];
+      for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q + 1][(k + 1) / 4][(k + 1) % 4];
     }
-    for (int k = 0; k < M; ++k) f->rhs[k] = Rv[k / 4][k % 4];
+    for (int k = 0; k < M; ++k) f->rhs[k] = Nv[0][(k + 1) / 4][(k + 1) % 4];
     for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
-    f->cost = cost, f->wlag = wlag, f->rows = rows;
+    f->cost = Nv[0][0][0], f->wlag = wlag, f->rows = rows;
   }
 };
 
@@ -912,11 +930,15 @@ GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
   FusedSums<M> sums;
   double y = f->x[0], vel = f->x[1];
   const Index n = f->n;
+  constexpr int W = M / 4 + 1;
+  V4d ring[16 * W] = {};
   for (Index i = 0;; ++i) {
     const double r = f->y[i] - y;
     f->rrev[n - 1 - i] = r;
-    if (f->keep != nullptr) std::memcpy(f->keep + 4 * V * i, a, sizeof(a));
-    sums.add(f->nm, i, r, a);
+    V4d w[W];
+    fusedRow<M>(r, a, w);
+    if (f->keep != nullptr) std::memcpy(f->keep + 4 * W * i, w, sizeof(w));
+    sums.add(f->nm, i, w, ring);
     if (i + 1 >= n) break;
     const unsigned char key = f->key[i];
     if (key == SegmentTable::kSplit) {
@@ -940,13 +962,13 @@ GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
 // of a new pass at the same unknowns.
 template <int M>
 GD_ALWAYS_INLINE inline void fusedRowsImpl(FusedPass* f) {
-  constexpr int V = (M + 3) / 4;
+  constexpr int W = M / 4 + 1;
   FusedSums<M> sums;
-  const Index n = f->n;
-  for (Index i = 0; i < n; ++i) {
-    V4d a[V];
-    std::memcpy(a, f->keep + 4 * V * i, sizeof(a));
-    sums.add(f->nm, i, f->rrev[n - 1 - i], a);
+  V4d ring[16 * W] = {};
+  for (Index i = 0; i < f->n; ++i) {
+    V4d w[W];
+    std::memcpy(w, f->keep + 4 * W * i, sizeof(w));
+    sums.add(f->nm, i, w, ring);
   }
   sums.finish(f);
 }
@@ -1375,7 +1397,7 @@ class Refinement {
     std::fill(rrev.begin() + f.n, rrev.begin() + f.n + 8, 0.0);
     f.rrev = rrev.data();
     if (keep != nullptr) {
-      keep->J.resize(static_cast<size_t>(f.n * 4 * ((p.m + 3) / 4)));
+      keep->J.resize(static_cast<size_t>(f.n * 4 * (p.m / 4 + 1)));
       f.keep = keep->J.data();
     }
     for (int k = 0; k < p.m; ++k) {
