@@ -720,10 +720,10 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // single loop, the state in scalars and the sensitivity pairs as lanes of AVX2 vectors (on the
 // held-stiffness path they share the step matrix R): step, residual, AR prewhitening and the
 // Gram of the whitened row, without storing the rows; the residual's autocovariances after the
-// loop from the residuals kept in reverse order. The sums run in sample order as in
-// runTable + Accumulator; the affine step adds the torque terms last (off the state's latency
-// chain), so the numbers agree with that path to rounding. Intervals stepped in parts call
-// back into the generic RK4.
+// loop from the residuals kept in reverse order. Every element is computed with the operations
+// of runTable + Accumulator in their order (no FMA contraction, no reassociation), and the sums
+// run in sample order, so both paths give the same bits. Intervals stepped in parts call back
+// into the generic RK4.
 
 // Hot loops compiled for AVX2 as well as the baseline, chosen at load time (integral_method.cpp).
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
@@ -818,24 +818,23 @@ GD_ALWAYS_INLINE inline void fusedLinearStep(const FusedPass* f, Index i, unsign
   }
 }
 
-// The affine step of a held interval (FusedMap) with stage torques T0, T1 (midpoint), T2.
+// The affine step of a held interval (FusedMap) with stage torques T0, T1 (midpoint), T2, in
+// AffineMap::apply's order of operations (the same numbers).
 template <int V>
 GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, double T1, double T2,
                                              double* y, double* vel, V4d* a, V4d* c) {
   const double y0 = *y, v0 = *vel;
   for (int v = 0; v < V; ++v) {
-    const V4d t0 = mp.H[0][0][v] * T0 + mp.H[0][1][v] * T1 + mp.H[0][2][v] * T2;
-    const V4d t1 = mp.H[1][0][v] * T0 + mp.H[1][1][v] * T1 + mp.H[1][2][v] * T2;
-    const V4d f0 = mp.S[0][0][v] * y0 + mp.S[0][1][v] * v0 + t0;
-    const V4d f1 = mp.S[1][0][v] * y0 + mp.S[1][1][v] * v0 + t1;
+    const V4d f0 = mp.S[0][0][v] * y0 + mp.S[0][1][v] * v0 + mp.H[0][0][v] * T0 +
+                   mp.H[0][1][v] * T1 + mp.H[0][2][v] * T2;
+    const V4d f1 = mp.S[1][0][v] * y0 + mp.S[1][1][v] * v0 + mp.H[1][0][v] * T0 +
+                   mp.H[1][1][v] * T1 + mp.H[1][2][v] * T2;
     const V4d na = mp.R[0][0] * a[v] + mp.R[0][1] * c[v] + f0;
     c[v] = mp.R[1][0] * a[v] + mp.R[1][1] * c[v] + f1;
     a[v] = na;
   }
-  const double g0 = mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
-  const double g1 = mp.G[1][0] * T0 + mp.G[1][1] * T1 + mp.G[1][2] * T2;
-  *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + g0;
-  *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + g1;
+  *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
+  *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + mp.G[1][0] * T0 + mp.G[1][1] * T1 + mp.G[1][2] * T2;
 }
 
 // *out = {lo[3], hi[0], hi[1], hi[2]}.
