@@ -1409,7 +1409,7 @@ class Refinement {
       const Params* p;
     } ctx{&sim_, &t, &p};
     f.ctx = &ctx;
-    f.split = [](const void* c, Index i, double* x, double (*s)[kFusedLanes]) {
+    f.split = [](const void* c, Index i, double* x, double(*s)[kFusedLanes]) {
       const Ctx& q = *static_cast<const Ctx*>(c);
       double z[2 + 2 * kFusedLanes] = {x[0], x[1]};
       for (int k = 0; k < q.p->m; ++k) z[2 + 2 * k] = s[0][k], z[3 + 2 * k] = s[1][k];
