@@ -66,6 +66,10 @@ class ForwardModel {
   /// Value at local coordinate u in [0, 1] of interval j of the local cubic through the samples
   /// of `channel`, stencil within [lo, hi) (hi - lo >= 4; fewer: linear between the samples).
   double cubic(const double* channel, Index j, double u, Index lo, Index hi) const;
+  /// The weights of cubic(channel, j, u, lo, hi) on the samples: its value is the sum over
+  /// k < the returned count (at most 4) of w[k] * channel[*first + k], each w[k] the value
+  /// cubic() gives for a unit sample there and zeros elsewhere.
+  int cubicWeights(Index j, double u, Index lo, Index hi, Index* first, double* w) const;
   /// Torque T1 [N*m] at u of interval j (0 without a torque channel).
   double torque(Index j, double u, Index lo, Index hi) const {
     return signal_.torque == nullptr ? 0.0 : cubic(signal_.torque, j, u, lo, hi);

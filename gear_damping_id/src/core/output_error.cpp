@@ -1705,13 +1705,26 @@ class Refinement {
   }
 
   // Segment i's sensitivities at the solution, prewhitened (rows x m).
+  // Held stiffness and constant C: from the rows of a fused pass (the same numbers).
   Eigen::MatrixXd whitenedSensitivities(size_t i) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
     Eigen::MatrixXd J(e - b, m_);
     const int m = m_;
-    sim_.run(b, e, makeParams(loc_[i], sh_), substeps_, [&](Index n, const double* z) {
-      for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
-    });
+    const Params p = makeParams(loc_[i], sh_);
+    const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    KeptRows rows;
+    Normal unused;
+    if (t != nullptr && !t->smooth && SegmentSimulator::constantC(p) &&
+        evaluateFused(*t, p, NoiseModel{}, &unused, &rows)) {
+      const Index stride = 4 * (m / 4 + 1);  // the row (r, J_1..J_m) of each sample
+      for (Index n = 0; n < e - b; ++n) {
+        for (int a = 0; a < m; ++a) J(n, a) = rows.J[static_cast<size_t>(stride * n + a + 1)];
+      }
+    } else {
+      sim_.run(b, e, p, substeps_, [&](Index n, const double* z) {
+        for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
+      });
+    }
     return whiten(J, noise_of_[i]);
   }
 
@@ -1876,11 +1889,11 @@ class Refinement {
           if (q == 0) M.row(j - b) += g;
           if (q == 2) M.row(j + 1 - b) += g;
           if (q != 1) continue;
-          for (Index s = lo; s < hi; ++s) {  // the midpoint torque's stencil weights
-            noise_torque_[static_cast<size_t>(s)] = 1.0;
-            const double w = noise_fm_->torque(j, 0.5, b, e);
-            noise_torque_[static_cast<size_t>(s)] = 0.0;
-            if (w != 0.0) M.row(s - b) += w * g;
+          Index first;  // the midpoint torque's stencil weights
+          double w[4];
+          const int nw = noise_fm_->cubicWeights(j, 0.5, b, e, &first, w);
+          for (int k = 0; k < nw; ++k) {
+            if (w[k] != 0.0) M.row(first + k - b) += w[k] * g;
           }
         }
         next.row(0) = sm.A[0][0] * lam.row(0) + sm.A[1][0] * lam.row(1);
