@@ -1689,9 +1689,13 @@ class Refinement {
   static Eigen::MatrixXd whiten(const Eigen::MatrixXd& M, const NoiseModel& nm) {
     const Index rows = std::max<Index>(M.rows() - nm.p, 0);
     Eigen::MatrixXd out(rows, M.cols());
-    for (Index n = 0; n < rows; ++n) {
-      out.row(n) = M.row(n + nm.p);
-      for (int k = 0; k < nm.p; ++k) out.row(n) += nm.a[k] * M.row(n + nm.p - k - 1);
+    for (Index c = 0; c < M.cols(); ++c) {  // by columns: the same operations per element
+      const double* in = M.col(c).data();
+      double* o = out.col(c).data();
+      for (Index n = 0; n < rows; ++n) {
+        o[n] = in[n + nm.p];
+        for (int k = 0; k < nm.p; ++k) o[n] += nm.a[k] * in[n + nm.p - k - 1];
+      }
     }
     return out;
   }
@@ -1856,68 +1860,83 @@ class Refinement {
   Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
     const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
     const NoiseModel& nm = noise_of_[i];
-    // Scratch reused over the segments (first touch of fresh pages is slow here).
-    Eigen::MatrixXd& U = adj_U_;  // W^T Jw
-    U.setZero(n, m_);
+    const int m = m_;
+    // Row-major scratch reused over the segments (first touch of fresh pages is slow here).
+    std::vector<double>& U = adj_u_;  // W^T Jw, a row per sample
+    U.assign(static_cast<size_t>(n * m), 0.0);
     for (Index r = 0; r < Jw.rows(); ++r) {
-      U.row(r + nm.p) += Jw.row(r);
-      for (int k = 0; k < nm.p; ++k) U.row(r + nm.p - k - 1) += nm.a[k] * Jw.row(r);
+      double* u = &U[static_cast<size_t>((r + nm.p) * m)];
+      for (int a = 0; a < m; ++a) u[a] += Jw(r, a);
+      for (int k = 0; k < nm.p; ++k) {
+        double* uk = &U[static_cast<size_t>((r + nm.p - k - 1) * m)];
+        for (int a = 0; a < m; ++a) uk[a] += nm.a[k] * Jw(r, a);
+      }
     }
     const Params p = noiseParams(i);
     SegmentTable& tab = adj_tab_;
     noise_sim_->buildTable(b, e, &tab);
     std::vector<SegmentSimulator::StateMap>& maps = adj_maps_;
     noise_sim_->stateMaps(tab, p, &maps);
-    Eigen::MatrixXd& M = adj_M_;  // its transpose
-    M.setZero(n, m_);
-    using Row = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxParams>;
-    using Pair = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxParams>;
-    Pair lam = Pair::Zero(2, m_), next(2, m_);
-    // The torque samples that can reach interval j: the cubic stencils lie within j-2..j+3.
-    auto window = [&](Index j, Index* lo, Index* hi) {
-      *lo = std::max<Index>(b, j - 3), *hi = std::min<Index>(e, j + 5);
+    std::vector<double>& M = adj_m_;  // M^T, a row per torque sample
+    M.assign(static_cast<size_t>(n * m), 0.0);
+    auto addTo = [&](Index s, double w0, const double* x0, double w1, const double* x1) {
+      double* row = &M[static_cast<size_t>((s - b) * m)];
+      for (int a = 0; a < m; ++a) row[a] += w0 * x0[a] + w1 * x1[a];
     };
+    double lam0[kMaxParams] = {0}, lam1[kMaxParams] = {0}, g[kMaxParams], nx0[kMaxParams];
     for (Index idx = n - 1; idx >= 1; --idx) {
-      lam.row(0) += U.row(idx);  // the response sample idx = the state's first component
+      const double* u = &U[static_cast<size_t>(idx * m)];
+      for (int a = 0; a < m; ++a) lam0[a] += u[a];  // the response sample idx = the state's y
       const Index j = b + idx - 1;
-      Index lo, hi;
-      window(j, &lo, &hi);
+      double A[2][2];
       if (tab.key[static_cast<size_t>(idx - 1)] != SegmentTable::kSplit) {
         const SegmentSimulator::StateMap& sm = maps[static_cast<size_t>(idx - 1)];
         for (int q = 0; q < 3; ++q) {
-          const Row g = sm.c[0][q] * lam.row(0) + sm.c[1][q] * lam.row(1);
-          if (q == 0) M.row(j - b) += g;
-          if (q == 2) M.row(j + 1 - b) += g;
-          if (q != 1) continue;
+          for (int a = 0; a < m; ++a) g[a] = sm.c[0][q] * lam0[a] + sm.c[1][q] * lam1[a];
+          const Index at = q == 0 ? j : j + 1;
+          if (q != 1) {
+            double* row = &M[static_cast<size_t>((at - b) * m)];
+            for (int a = 0; a < m; ++a) row[a] += g[a];
+            continue;
+          }
           Index first;  // the midpoint torque's stencil weights
           double w[4];
           const int nw = noise_fm_->cubicWeights(j, 0.5, b, e, &first, w);
           for (int k = 0; k < nw; ++k) {
-            if (w[k] != 0.0) M.row(first + k - b) += w[k] * g;
+            if (w[k] == 0.0) continue;
+            double* row = &M[static_cast<size_t>((first + k - b) * m)];
+            for (int a = 0; a < m; ++a) row[a] += w[k] * g[a];
           }
         }
-        next.row(0) = sm.A[0][0] * lam.row(0) + sm.A[1][0] * lam.row(1);
-        next.row(1) = sm.A[0][1] * lam.row(0) + sm.A[1][1] * lam.row(1);
+        std::copy(&sm.A[0][0], &sm.A[0][0] + 4, &A[0][0]);
       } else {
-        for (Index s = lo; s < hi; ++s) {  // unit torque samples, zero state
+        // Unit torque samples (zero state) that can reach interval j: the cubic stencils lie
+        // within j-2..j+3; then unit states (zero torque).
+        for (Index s = std::max<Index>(b, j - 3); s < std::min<Index>(e, j + 5); ++s) {
           double z[2] = {0.0, 0.0};
           noise_torque_[static_cast<size_t>(s)] = 1.0;
           noise_sim_->stepGeneric(j, b, e, p, z);
           noise_torque_[static_cast<size_t>(s)] = 0.0;
-          M.row(s - b) += z[0] * lam.row(0) + z[1] * lam.row(1);
+          addTo(s, z[0], lam0, z[1], lam1);
         }
-        double A[2][2];
-        for (int c = 0; c < 2; ++c) {  // unit states, zero torque
+        for (int c = 0; c < 2; ++c) {
           double z[2] = {c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0};
           noise_sim_->stepGeneric(j, b, e, p, z);
           A[0][c] = z[0], A[1][c] = z[1];
         }
-        next.row(0) = A[0][0] * lam.row(0) + A[1][0] * lam.row(1);
-        next.row(1) = A[0][1] * lam.row(0) + A[1][1] * lam.row(1);
       }
-      lam = next;
+      for (int a = 0; a < m; ++a) {
+        nx0[a] = A[0][0] * lam0[a] + A[1][0] * lam1[a];
+        lam1[a] = A[0][1] * lam0[a] + A[1][1] * lam1[a];
+        lam0[a] = nx0[a];
+      }
     }
-    return M.transpose() * M;
+    Eigen::MatrixXd& Mc = adj_M_;  // column-major for the product, as before
+    Mc.resize(n, m);
+    for (Index s = 0; s < n; ++s) {
+      for (int a = 0; a < m; ++a) Mc(s, a) = M[static_cast<size_t>(s * m + a)];
+    }
+    return Mc.transpose() * Mc;
   }
 
   // The reference (tests): exact by brute force, one unit impulse sigma e_s of the torque per
@@ -2235,7 +2254,8 @@ class Refinement {
   std::unique_ptr<SegmentSimulator> noise_sim_;
   std::vector<Normal> draw_normals_;
   // torqueResponseGram's scratch.
-  Eigen::MatrixXd adj_U_, adj_M_;
+  std::vector<double> adj_u_, adj_m_;
+  Eigen::MatrixXd adj_M_;
   SegmentTable adj_tab_;
   std::vector<SegmentSimulator::StateMap> adj_maps_;
 };
