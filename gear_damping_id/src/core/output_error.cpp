@@ -725,14 +725,14 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // run in sample order, so both paths give the same bits. Intervals stepped in parts call back
 // into the generic RK4.
 
-// Hot loops compiled for AVX2 as well as the baseline, chosen at load time (integral_method.cpp).
+// The passes are compiled for AVX2 as well as the baseline, chosen at load time (GCC
+// target_clones; other compilers build the baseline), their helpers inlined into each clone.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#define GD_ALWAYS_INLINE __attribute__((always_inline))
+#define GD_FUSED_CLONES __attribute__((target_clones("avx2", "default")))
 #else
-#define GD_AVX2_CLONES
-#define GD_ALWAYS_INLINE
+#define GD_FUSED_CLONES
 #endif
+#define GD_FUSED_INLINE inline __attribute__((always_inline))
 
 constexpr int kFusedLanes = 8;  // sensitivities of the fused pass (two vectors of four)
 typedef double V4d __attribute__((vector_size(32)));  // a GCC vector: one AVX or two SSE2 registers
@@ -776,8 +776,8 @@ struct FusedPass {
 // SegmentSimulator::stepLinear of interval i in lanes: the state's RK4 (rk4Pair) keeping its
 // stage values, then every sensitivity pair's with the forcing of those stages.
 template <int V>
-GD_ALWAYS_INLINE inline void fusedLinearStep(const FusedPass* f, Index i, unsigned char key,
-                                             double* y, double* vel, V4d* a, V4d* c) {
+GD_FUSED_INLINE void fusedLinearStep(const FusedPass* f, Index i, unsigned char key, double* y,
+                                     double* vel, V4d* a, V4d* c) {
   double K[4], sv = 0.0;
   if (f->K3 != nullptr) {
     K[0] = f->K3[3 * i], K[1] = K[2] = f->K3[3 * i + 1], K[3] = f->K3[3 * i + 2];
@@ -821,8 +821,8 @@ GD_ALWAYS_INLINE inline void fusedLinearStep(const FusedPass* f, Index i, unsign
 // The affine step of a held interval (FusedMap) with stage torques T0, T1 (midpoint), T2, in
 // AffineMap::apply's order of operations (the same numbers).
 template <int V>
-GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, double T1, double T2,
-                                             double* y, double* vel, V4d* a, V4d* c) {
+GD_FUSED_INLINE void fusedAffineStep(const FusedMap& mp, double T0, double T1, double T2, double* y,
+                                     double* vel, V4d* a, V4d* c) {
   const double y0 = *y, v0 = *vel;
   for (int v = 0; v < V; ++v) {
     const V4d f0 = mp.S[0][0][v] * y0 + mp.S[0][1][v] * v0 + mp.H[0][0][v] * T0 +
@@ -838,7 +838,7 @@ GD_ALWAYS_INLINE inline void fusedAffineStep(const FusedMap& mp, double T0, doub
 }
 
 // *out = {lo[3], hi[0], hi[1], hi[2]}.
-GD_ALWAYS_INLINE inline void shiftIn(const V4d& lo, const V4d& hi, V4d* out) {
+GD_FUSED_INLINE void shiftIn(const V4d& lo, const V4d& hi, V4d* out) {
 #if defined(__clang__)
   *out = __builtin_shufflevector(lo, hi, 3, 4, 5, 6);
 #else
@@ -850,7 +850,7 @@ GD_ALWAYS_INLINE inline void shiftIn(const V4d& lo, const V4d& hi, V4d* out) {
 // The raw row (r, J_1..J_M) of a sample in W = M / 4 + 1 vectors from the residual and the
 // sensitivities in lanes (a).
 template <int M>
-GD_ALWAYS_INLINE inline void fusedRow(double r, const V4d* a, V4d* w) {
+GD_FUSED_INLINE void fusedRow(double r, const V4d* a, V4d* w) {
   constexpr int V = (M + 3) / 4, W = M / 4 + 1;
   const V4d rb = {r, r, r, r}, zero = {0, 0, 0, 0};
   shiftIn(rb, a[0], &w[0]);
@@ -867,7 +867,7 @@ struct FusedSums {
   double wlag = 0.0, eprev = 0.0;
   long rows = 0;
 
-  GD_ALWAYS_INLINE inline FusedSums() {
+  GD_FUSED_INLINE FusedSums() {
     const V4d zero = {0, 0, 0, 0};
     for (int v = 0; v < W; ++v) {
       for (int q = 0; q <= M; ++q) Nv[q][v] = zero;
@@ -875,7 +875,7 @@ struct FusedSums {
   }
 
   // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice.
-  GD_ALWAYS_INLINE inline void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
+  GD_FUSED_INLINE void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
     V4d e[W];
     for (int v = 0; v < W; ++v) e[v] = w[v];
     if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... in this order (zero a_k beyond the order)
@@ -900,7 +900,7 @@ struct FusedSums {
 
   // The sums into f, and the autocovariances (lag k in lane k: r_i times r_i, r_{i-1}, ... in
   // sample order) from the residuals f->rrev.
-  GD_ALWAYS_INLINE inline void finish(FusedPass* f) const {
+  GD_FUSED_INLINE void finish(FusedPass* f) const {
     const Index n = f->n;
     V4d acc_lo = {0, 0, 0, 0}, acc_hi = {0, 0, 0, 0};
     for (Index i = 0; i < n; ++i) {
@@ -921,7 +921,7 @@ struct FusedSums {
 };
 
 template <int M, bool Affine>
-GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
+GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
   constexpr int V = (M + 3) / 4;
   V4d a[V], c[V];
   std::memcpy(a, f->s[0], sizeof(a));
@@ -960,7 +960,7 @@ GD_ALWAYS_INLINE inline void fusedPassImpl(FusedPass* f) {
 // The sums of the rows a pass kept (f->rrev, f->keep) under the noise model f->nm: the numbers
 // of a new pass at the same unknowns.
 template <int M>
-GD_ALWAYS_INLINE inline void fusedRowsImpl(FusedPass* f) {
+GD_FUSED_INLINE void fusedRowsImpl(FusedPass* f) {
   constexpr int W = M / 4 + 1;
   FusedSums<M> sums;
   V4d ring[16 * W] = {};
@@ -973,18 +973,18 @@ GD_ALWAYS_INLINE inline void fusedRowsImpl(FusedPass* f) {
 }
 
 // The passes by number of unknowns (3 to 6), affine maps or the RK4 step.
-GD_AVX2_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
-GD_AVX2_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
-GD_AVX2_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
-GD_AVX2_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
-GD_AVX2_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
-GD_AVX2_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
-GD_AVX2_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
-GD_AVX2_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
-GD_AVX2_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
-GD_AVX2_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
-GD_AVX2_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
-GD_AVX2_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
+GD_FUSED_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
+GD_FUSED_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
+GD_FUSED_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
+GD_FUSED_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
+GD_FUSED_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
+GD_FUSED_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
+GD_FUSED_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
+GD_FUSED_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
+GD_FUSED_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
+GD_FUSED_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
+GD_FUSED_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
+GD_FUSED_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
 
 // kind 0: the RK4 step, 1: the affine maps, 2: the kept rows.
 void runFused(FusedPass* f, int m, int kind) {
