@@ -1858,9 +1858,23 @@ class Refinement {
   // recursion of the state steps x_{j+1} = A_j x_j + (the torque samples' terms) carries the
   // weights to the torque samples. Split intervals' maps by unit inputs through the generic RK4.
   Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
+    switch (m_) {  // the common problem sizes unrolled
+      case 3:
+        return torqueResponseGramOf<3>(i, Jw);
+      case 4:
+        return torqueResponseGramOf<4>(i, Jw);
+      case 5:
+        return torqueResponseGramOf<5>(i, Jw);
+      default:
+        return torqueResponseGramOf<0>(i, Jw);
+    }
+  }
+  // MT: the number of unknowns when fixed at compile time (0: m_).
+  template <int MT>
+  Eigen::MatrixXd torqueResponseGramOf(size_t i, const Eigen::MatrixXd& Jw) {
     const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
     const NoiseModel& nm = noise_of_[i];
-    const int m = m_;
+    const int m = MT > 0 ? MT : m_;
     // Row-major scratch reused over the segments (first touch of fresh pages is slow here).
     std::vector<double>& U = adj_u_;  // W^T Jw, a row per sample
     U.assign(static_cast<size_t>(n * m), 0.0);
