@@ -50,12 +50,16 @@ void refineBoth(const SignalTable& t, const gear_damping_id::GearConstants& gear
   ASSERT_EQ(fast->segments.size(), reference->segments.size());
 }
 
-void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
+// `rho` > 0: AR(1) measurement noise of that lag-1 correlation (the prewhitened problem).
+void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed, double rho = 0.0) {
   SimConfig c = table1Config();
   c.simulation.duration = 0.005;
   if (m == DampingModel::Piecewise) setPiecewiseTruth(&c, 1e-3);
   SignalTable t = simulateOrFail(c);
-  addWhiteNoise(&t.dte, snr_db, seed);
+  if (rho > 0.0)
+    addAr1Noise(&t.dte, snr_db, rho, seed);
+  else
+    addWhiteNoise(&t.dte, snr_db, seed);
   const auto gear = gear_damping_id::gearConstants(c.gearModel());
   const auto view = gear_damping_id::SignalView::of(t);
   IdentificationOptions o;
@@ -77,6 +81,16 @@ void compare(Formulation f, DampingModel m, double snr_db, unsigned long seed) {
     }
   }
   expectSame(fast.noise_std, reference.noise_std, label + " noise_std");
+  if (rho > 0.0) {
+    EXPECT_FALSE(reference.noise_ar.empty()) << label << ": no AR model fitted";
+  }
+  if (m == DampingModel::LoadLaw) {
+    ASSERT_TRUE(fast.load_law && reference.load_law) << label;
+    expectSame(fast.load_law->c0, reference.load_law->c0, label + " c0");
+    expectSame(fast.load_law->c1, reference.load_law->c1, label + " c1");
+    expectSame(fast.load_law->c0_std, reference.load_law->c0_std, label + " c0_std");
+    expectSame(fast.load_law->c1_std, reference.load_law->c1_std, label + " c1_std");
+  }
 }
 
 // The tabled look-ups (issue 18): every stiffness model, the variation test and the greybox
@@ -152,6 +166,15 @@ TEST(RefineFastPath, SameEstimatesAsTheGenericRk4) {
   compare(Formulation::Known, DampingModel::Piecewise, 20.0, 12);
   compare(Formulation::Greybox, DampingModel::Piecewise, 40.0, 13);
   compare(Formulation::Known, DampingModel::Constant, 40.0, 14);
+}
+
+// The fused pass (issue 18) with a fitted AR noise model (prewhitened rows) and with the load
+// law (C varying within each step: the RK4 step in lanes) against the generic RK4.
+TEST(RefineFastPath, SameWithColouredNoiseAndTheLoadLaw) {
+  compare(Formulation::Known, DampingModel::Piecewise, 40.0, 16, 0.8);
+  compare(Formulation::Greybox, DampingModel::Piecewise, 40.0, 17, 0.8);
+  compare(Formulation::Known, DampingModel::LoadLaw, 40.0, 18);
+  compare(Formulation::Known, DampingModel::LoadLaw, 40.0, 19, 0.8);
 }
 
 }  // namespace

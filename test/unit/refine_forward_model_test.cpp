@@ -13,6 +13,8 @@
 
 #include <cmath>
 #include <iostream>
+#include <utility>
+#include <vector>
 
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_sim/sdof_integrator.hpp"
@@ -304,6 +306,46 @@ TEST(RefineForwardModelBreaks, HeldOrSmoothAndRigTableBreaksFromTheData) {
       EXPECT_LT(best, 1e-6) << "break at interval " << b.j << " phase " << f;
     }
   }
+}
+
+// cubicWeights (the torque noise's adjoint pass): its weights on the samples give cubic()'s value
+// exactly, at the stages of whole intervals and elsewhere, interior and at both ends of a range,
+// and on a range too short for the cubic (linear between the samples).
+TEST(RefineForwardModelWeights, CubicWeightsReproduceTheCubic) {
+  namespace gd = gear_damping_id;
+  SimConfig c = table1Config();
+  c.simulation.duration = 2e-5;  // about 20 samples
+  const SignalTable t = simulateOrFail(c);
+  const auto view = gd::SignalView::of(t);
+  const auto gear = gd::gearConstants(c.gearModel());
+  const gd::ForwardModel fm(view, gear, Formulation::Known);
+  std::vector<double> ch(static_cast<size_t>(t.size()));
+  for (size_t k = 0; k < ch.size(); ++k) ch[k] = std::sin(0.7 * static_cast<double>(k)) + 0.1 * k;
+  const std::pair<Eigen::Index, Eigen::Index> ranges[] = {{0, t.size()}, {3, 6}, {5, 16}};
+  int checked = 0;
+  for (const auto& [lo, hi] : ranges) {
+    for (Eigen::Index j = lo; j + 1 < hi; ++j) {
+      for (double u : {0.0, 0.5, 1.0, 0.3, 0.85}) {
+        Eigen::Index first = -1;
+        double w[4];
+        const int nw = fm.cubicWeights(j, u, lo, hi, &first, w);
+        ASSERT_GE(nw, 1);
+        ASSERT_LE(nw, 4);
+        ASSERT_GE(first, lo);
+        ASSERT_LE(first + nw, hi);
+        double sum = 0.0;  // against unit samples, as the adjoint pass uses the weights
+        for (int k = 0; k < nw; ++k) {
+          std::vector<double> unit(ch.size(), 0.0);
+          unit[static_cast<size_t>(first + k)] = 1.0;
+          EXPECT_EQ(w[k], fm.cubic(unit.data(), j, u, lo, hi)) << j << " " << u << " " << k;
+          sum += w[k] * ch[static_cast<size_t>(first + k)];
+        }
+        EXPECT_NEAR(sum, fm.cubic(ch.data(), j, u, lo, hi), 1e-12 * (1.0 + std::abs(sum)));
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 100);
 }
 
 }  // namespace

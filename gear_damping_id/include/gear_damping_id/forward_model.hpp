@@ -66,6 +66,10 @@ class ForwardModel {
   /// Value at local coordinate u in [0, 1] of interval j of the local cubic through the samples
   /// of `channel`, stencil within [lo, hi) (hi - lo >= 4; fewer: linear between the samples).
   double cubic(const double* channel, Index j, double u, Index lo, Index hi) const;
+  /// The weights of cubic(channel, j, u, lo, hi) on the samples: its value is the sum over
+  /// k < the returned count (at most 4) of w[k] * channel[*first + k], each w[k] the value
+  /// cubic() gives for a unit sample there and zeros elsewhere.
+  int cubicWeights(Index j, double u, Index lo, Index hi, Index* first, double* w) const;
   /// Torque T1 [N*m] at u of interval j (0 without a torque channel).
   double torque(Index j, double u, Index lo, Index hi) const {
     return signal_.torque == nullptr ? 0.0 : cubic(signal_.torque, j, u, lo, hi);
@@ -83,6 +87,9 @@ class ForwardModel {
   /// Known stiffness K = k/Me [1/s^2] at u of interval j; `right` picks the part after the
   /// interval's break (the held value of sample j+1, or the cubic of the samples after it).
   double knownStiffness(Index j, double u, bool right, Index lo, Index hi) const;
+  /// knownStiffness of a segment whose stiffness is held (smoothStiffness false): the value of
+  /// sample j (right: of sample j + 1), without looking up the segment.
+  double heldStiffness(Index j, bool right) const;
   /// Greybox mesh state (0/1) of interval j before (right = false) or after the split.
   double meshState(Index j, bool right) const;
 

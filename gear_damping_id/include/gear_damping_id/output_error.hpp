@@ -33,7 +33,11 @@
 // state's RK4 step is taken first and each sensitivity pair stepped from its stage values (same
 // numbers to rounding; the generic RK4 with per-stage look-ups is kept as the reference path).
 // With an STE the basis values at the stages of every whole sample interval are tabled per
-// segment on first use (within a memory budget), not re-evaluated per iteration.
+// segment on first use (within a memory budget), not re-evaluated per iteration. On the tabled
+// path an evaluation (3 to 6 unknowns) is one fused loop: the sensitivity pairs stepped as AVX2
+// lanes, the residual row prewhitened and added to the Gram matrix as it is produced (the same
+// operations in the same order: bit-identical); a new noise round starts from the rows the last
+// accepted evaluation kept.
 // Standard errors: sigma^2 (J^T J)^-1 of the prewhitened problem, sigma^2 = prewhitened RSS /
 // (rows - unknowns) (per segment for segment-local unknowns, pooled for shared ones), plus the
 // torque-meter noise: the model takes the torque as the exact forcing, so white noise w on the

@@ -162,6 +162,25 @@ double ForwardModel::cubic(const double* ch, Index j, double u, Index lo, Index 
   return w[0] * ch[b] + w[1] * ch[b + 1] + w[2] * ch[b + 2] + w[3] * ch[b + 3];
 }
 
+int ForwardModel::cubicWeights(Index j, double u, Index lo, Index hi, Index* first,
+                               double* w) const {
+  *first = j;
+  if (u == 0.0) return w[0] = 1.0, 1;
+  if (u == 1.0 && j + 1 < signal_.n) return *first = j + 1, w[0] = 1.0, 1;
+  if (hi - lo < 4) {
+    if (j + 1 < signal_.n) return w[0] = (1.0 - u) * 1.0 + u * 0.0, w[1] = (1.0 - u) * 0.0 + u, 2;
+    return w[0] = (1.0 - u) * 1.0 + u * 1.0, 1;  // both terms are sample j
+  }
+  const CubicIntervalRule& r = rules_.forInterval(j, lo, hi);
+  const auto c = u != 0.5                 ? r.value(u)
+                 : &r == &rules_.interior ? mid_interior_
+                 : &r == &rules_.first    ? mid_first_
+                                          : mid_last_;
+  *first = j + r.offset();
+  for (int k = 0; k < 4; ++k) w[k] = c[k];
+  return 4;
+}
+
 double ForwardModel::heldSplit(Index j) const {
   const auto it = std::lower_bound(breaks_.begin(), breaks_.end(), j,
                                    [](const QuadratureBreak& b, Index v) { return b.j < v; });
@@ -170,10 +189,7 @@ double ForwardModel::heldSplit(Index j) const {
 
 double ForwardModel::knownStiffness(Index j, double u, bool right, Index lo, Index hi) const {
   const double* k = signal_.stiffness;
-  if (!smoothStiffness(j)) {
-    const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
-    return v * inv_me_;
-  }
+  if (!smoothStiffness(j)) return heldStiffness(j, right);
   QuadratureBreak near[5];
   const int nn = nearBreaks(j, near);
   if (nn == 0 || hi - lo < 4) return cubic(k, j, u, lo, hi) * inv_me_;
@@ -184,6 +200,12 @@ double ForwardModel::knownStiffness(Index j, double u, bool right, Index lo, Ind
   const auto w = p.rule->value(u);
   const Index b = j + p.rule->offset();
   return (w[0] * k[b] + w[1] * k[b + 1] + w[2] * k[b + 2] + w[3] * k[b + 3]) * inv_me_;
+}
+
+double ForwardModel::heldStiffness(Index j, bool right) const {
+  const double* k = signal_.stiffness;
+  const double v = right && j + 1 < signal_.n ? k[j + 1] : k[j];
+  return v * inv_me_;
 }
 
 double ForwardModel::meshState(Index j, bool right) const {

@@ -162,6 +162,59 @@ class SegmentSimulator {
     }
   }
 
+  struct AffineMap {
+    double K = 0, sv = 0;
+    double R[2][2], G[2][3];
+    double S[kMaxParams][2][2], H[kMaxParams][2][3];
+    bool coupled[kMaxParams];
+    // M: the number of unknowns when fixed at compile time (0: m).
+    template <int M>
+    void apply(double* z, int m_dyn, const double* T) const {
+      const int m = M > 0 ? M : m_dyn;
+      const double y = z[0], v = z[1];
+      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
+      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
+      for (int k = 0; k < m; ++k) {
+        double* w = z + 2 + 2 * k;
+        const double a = w[0], c = w[1];
+        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
+        if (coupled[k]) {
+          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
+                H[k][0][2] * T[2];
+          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
+                H[k][1][2] * T[2];
+        }
+        w[0] = n0, w[1] = n1;
+      }
+    }
+  };
+
+  // The affine maps of table t's held stiffness values at p (runTable's), into maps[0..n_keys):
+  // false where they do not apply (a smooth stiffness, a load-varying C).
+  bool heldMaps(const SegmentTable& t, const Params& p, AffineMap* maps) const {
+    if (t.smooth || !constantC(p)) return false;
+    const bool grey = fm_.formulation() == Formulation::Greybox;
+    for (int k = 0; k < t.n_keys; ++k) {
+      const double K = grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k];
+      maps[k] = affineMap(2 + 2 * p.m, p, K, t.key_sv[k], fm_.signal().dt);
+    }
+    return true;
+  }
+
+  // Interval i (from the segment's start) of table t stepped in parts by the generic RK4 (runTable
+  // for a kSplit interval); z: the state and the p.m sensitivity pairs.
+  void splitInterval(const SegmentTable& t, Index i, const Params& p, double* z) const {
+    genericInterval(t.b + i, fm_.heldSplit(t.b + i), t.b, t.e, p, 1, t.smooth, z, 2 + 2 * p.m);
+  }
+
+  // Whether C is constant over the segment (no load-law unknown).
+  static bool constantC(const Params& p) {
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Theta1) return false;
+    }
+    return true;
+  }
+
   // Whether runTable applies: the fast path, one step per sample, no shape and no STE.
   bool tableApplies(int substeps) const {
     return fast_ && substeps == 1 && shape_ == nullptr && ste_ == nullptr;
@@ -193,7 +246,7 @@ class SegmentSimulator {
         continue;
       }
       const double sv = grey ? fm_.meshState(j, false) : 0.0;
-      const double K = grey ? 0.0 : fm_.knownStiffness(j, 0.0, false, b, e);
+      const double K = grey ? 0.0 : fm_.heldStiffness(j, false);
       int k = 0;
       while (k < t->n_keys && !(t->key_K[k] == K && t->key_sv[k] == sv)) ++k;
       if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
@@ -410,14 +463,6 @@ class SegmentSimulator {
     return D;
   }
 
-  // Whether C is constant over the segment (no load-law unknown).
-  static bool constantC(const Params& p) {
-    for (int k = 0; k < p.m; ++k) {
-      if (p.role[k] == Role::Theta1) return false;
-    }
-    return true;
-  }
-
   // Interval j by the generic RK4, in two parts at its split fraction th (1: one part), each by
   // `substeps` steps with the coefficients looked up at the stage times.
   void genericInterval(Index j, double th, Index b, Index e, const Params& p, int substeps,
@@ -434,7 +479,7 @@ class SegmentSimulator {
         sv = fm_.meshState(j, right);
         Kc = p.K0 + p.dK * sv;
       } else if (!smooth) {
-        Kc = fm_.knownStiffness(j, 0.0, right, b, e);
+        Kc = fm_.heldStiffness(j, right);
       }
       const double du = (u1 - u0) / substeps;
       for (int q = 0; q < substeps; ++q) {
@@ -467,33 +512,6 @@ class SegmentSimulator {
       }
     }
   }
-
-  struct AffineMap {
-    double K = 0, sv = 0;
-    double R[2][2], G[2][3];
-    double S[kMaxParams][2][2], H[kMaxParams][2][3];
-    bool coupled[kMaxParams];
-    // M: the number of unknowns when fixed at compile time (0: m).
-    template <int M>
-    void apply(double* z, int m_dyn, const double* T) const {
-      const int m = M > 0 ? M : m_dyn;
-      const double y = z[0], v = z[1];
-      z[0] = R[0][0] * y + R[0][1] * v + G[0][0] * T[0] + G[0][1] * T[1] + G[0][2] * T[2];
-      z[1] = R[1][0] * y + R[1][1] * v + G[1][0] * T[0] + G[1][1] * T[1] + G[1][2] * T[2];
-      for (int k = 0; k < m; ++k) {
-        double* w = z + 2 + 2 * k;
-        const double a = w[0], c = w[1];
-        double n0 = R[0][0] * a + R[0][1] * c, n1 = R[1][0] * a + R[1][1] * c;
-        if (coupled[k]) {
-          n0 += S[k][0][0] * y + S[k][0][1] * v + H[k][0][0] * T[0] + H[k][0][1] * T[1] +
-                H[k][0][2] * T[2];
-          n1 += S[k][1][0] * y + S[k][1][1] * v + H[k][1][0] * T[0] + H[k][1][1] * T[1] +
-                H[k][1][2] * T[2];
-        }
-        w[0] = n0, w[1] = n1;
-      }
-    }
-  };
 
   // The affine map of one RK4 step of length h with K and the mesh state sv held.
   AffineMap affineMap(int D, const Params& p, double K, double sv, double h) const {
@@ -698,6 +716,286 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
   return d;
 }
 
+// ----------------------------------------------------------------------------------------------
+// The fused pass (issue 18): one evaluation of a segment's prewhitened normal equations in a
+// single loop, the state in scalars and the sensitivity pairs as lanes of AVX2 vectors (on the
+// held-stiffness path they share the step matrix R): step, residual, AR prewhitening and the
+// Gram of the whitened row, without storing the rows; the residual's autocovariances after the
+// loop from the residuals kept in reverse order. Every element is computed with the operations
+// of runTable + Accumulator in their order (no FMA contraction, no reassociation), and the sums
+// run in sample order, so both paths give the same bits. Intervals stepped in parts call back
+// into the generic RK4.
+
+// The passes are compiled for AVX2 as well as the baseline, chosen at load time (GCC
+// target_clones; other compilers build the baseline), their helpers inlined into each clone.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define GD_FUSED_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define GD_FUSED_CLONES
+#endif
+#define GD_FUSED_INLINE inline __attribute__((always_inline))
+
+constexpr int kFusedLanes = 8;  // sensitivities of the fused pass (two vectors of four)
+typedef double V4d __attribute__((vector_size(32)));  // a GCC vector: one AVX or two SSE2 registers
+
+// One held value's affine step in lanes: x+ = R x + G T (the state), and for sensitivity k
+// z_k+ = R z_k + S_k x + H_k T (zero S, H for the initial-state unknowns).
+struct FusedMap {
+  double R[2][2], G[2][3];
+  V4d S[2][2][2];  // [row][y, v][lanes k / 4]
+  V4d H[2][3][2];  // [row][stage][lanes k / 4]
+};
+
+struct FusedPass {
+  // In: the maps and keys of the segment's intervals (SegmentTable::kSplit: split(i) steps it),
+  // the stage torques, the measured y of its n samples, the noise model and the initial state.
+  const FusedMap* maps = nullptr;
+  const unsigned char* key = nullptr;
+  const double *T = nullptr, *T_mid = nullptr, *y = nullptr;
+  Index n = 0;
+  NoiseModel nm;
+  double x[2] = {0, 0};
+  alignas(32) double s[2][kFusedLanes] = {{0}};  // sensitivity k: (s[0][k], s[1][k])
+  void (*split)(const void* ctx, Index i, double* x, double (*s)[kFusedLanes]) = nullptr;
+  const void* ctx = nullptr;
+  double* rrev = nullptr;  // n + 8: the residuals in reverse order, then zeros
+  double* keep = nullptr;  // null or n x 4 (m / 4 + 1): the raw rows (r, J) (fusedRow)
+  // The RK4 step in lanes (fusedPassImpl<M, false>: a smooth stiffness or a load-varying C, as
+  // SegmentSimulator::stepLinear): K of the held keys (with the greybox mesh state) or three
+  // stage values per interval, C = theta0 + theta1 (T1 - t_ref), F = ff T1, and the weights of
+  // the sensitivities' forcing -((v0 + v1 (T1 - t_ref)) v + (y0 + y1 sv) y) in lanes.
+  const double* K3 = nullptr;
+  double key_K[kMaxMaps] = {0}, key_sv[kMaxMaps] = {0};
+  double theta0 = 0, theta1 = 0, t_ref = 0, ff = 0, h = 0;
+  V4d lv0[2] = {}, lv1[2] = {}, ly0[2] = {}, ly1[2] = {};
+  // Out: sums over the whitened rows (rhs_k = sum J_k e, N = sum J J^T) and the raw residual's.
+  alignas(32) double N[kFusedLanes][kFusedLanes], rhs[kFusedLanes];
+  double cost = 0, wlag = 0, acov[8] = {0};  // acov[0]: sum r^2
+  long rows = 0;
+};
+
+// SegmentSimulator::stepLinear of interval i in lanes: the state's RK4 (rk4Pair) keeping its
+// stage values, then every sensitivity pair's with the forcing of those stages.
+template <int V>
+GD_FUSED_INLINE void fusedLinearStep(const FusedPass* f, Index i, unsigned char key, double* y,
+                                     double* vel, V4d* a, V4d* c) {
+  double K[4], sv = 0.0;
+  if (f->K3 != nullptr) {
+    K[0] = f->K3[3 * i], K[1] = K[2] = f->K3[3 * i + 1], K[3] = f->K3[3 * i + 2];
+  } else {
+    K[0] = K[1] = K[2] = K[3] = f->key_K[key];
+    sv = f->key_sv[key];
+  }
+  const double T[4] = {f->T[i], f->T_mid[i], f->T_mid[i], f->T[i + 1]};
+  const double hs = f->h, h2 = 0.5 * hs, h6 = hs / 6.0;
+  double dT[4], C[4], ys[4], vs[4];
+  {
+    const double y0 = *y, v0 = *vel;
+    double ka[4], kb[4], ta = y0, tb = v0;
+    for (int q = 0; q < 4; ++q) {
+      dT[q] = T[q] - f->t_ref;
+      C[q] = f->theta0 + f->theta1 * dT[q];
+      ys[q] = ta, vs[q] = tb;
+      ka[q] = tb;
+      kb[q] = f->ff * T[q] - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = y0 + hq * ka[q], tb = v0 + hq * kb[q];
+    }
+    *y = y0 + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    *vel = v0 + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
+  }
+  for (int v = 0; v < V; ++v) {
+    const V4d cy = f->ly0[v] + f->ly1[v] * sv, a0 = a[v], b0 = c[v];
+    V4d ka[4], kb[4], ta = a0, tb = b0;
+    for (int q = 0; q < 4; ++q) {
+      const V4d fq = -((f->lv0[v] + f->lv1[v] * dT[q]) * vs[q] + cy * ys[q]);
+      ka[q] = tb;
+      kb[q] = fq - C[q] * tb - K[q] * ta;
+      const double hq = q < 2 ? h2 : hs;
+      ta = a0 + hq * ka[q], tb = b0 + hq * kb[q];
+    }
+    a[v] = a0 + h6 * (ka[0] + 2.0 * ka[1] + 2.0 * ka[2] + ka[3]);
+    c[v] = b0 + h6 * (kb[0] + 2.0 * kb[1] + 2.0 * kb[2] + kb[3]);
+  }
+}
+
+// The affine step of a held interval (FusedMap) with stage torques T0, T1 (midpoint), T2, in
+// AffineMap::apply's order of operations (the same numbers).
+template <int V>
+GD_FUSED_INLINE void fusedAffineStep(const FusedMap& mp, double T0, double T1, double T2, double* y,
+                                     double* vel, V4d* a, V4d* c) {
+  const double y0 = *y, v0 = *vel;
+  for (int v = 0; v < V; ++v) {
+    const V4d f0 = mp.S[0][0][v] * y0 + mp.S[0][1][v] * v0 + mp.H[0][0][v] * T0 +
+                   mp.H[0][1][v] * T1 + mp.H[0][2][v] * T2;
+    const V4d f1 = mp.S[1][0][v] * y0 + mp.S[1][1][v] * v0 + mp.H[1][0][v] * T0 +
+                   mp.H[1][1][v] * T1 + mp.H[1][2][v] * T2;
+    const V4d na = mp.R[0][0] * a[v] + mp.R[0][1] * c[v] + f0;
+    c[v] = mp.R[1][0] * a[v] + mp.R[1][1] * c[v] + f1;
+    a[v] = na;
+  }
+  *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
+  *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + mp.G[1][0] * T0 + mp.G[1][1] * T1 + mp.G[1][2] * T2;
+}
+
+// *out = {lo[3], hi[0], hi[1], hi[2]}.
+GD_FUSED_INLINE void shiftIn(const V4d& lo, const V4d& hi, V4d* out) {
+#if defined(__clang__)
+  *out = __builtin_shufflevector(lo, hi, 3, 4, 5, 6);
+#else
+  typedef long I4 __attribute__((vector_size(32)));
+  *out = __builtin_shuffle(lo, hi, I4{3, 4, 5, 6});
+#endif
+}
+
+// The raw row (r, J_1..J_M) of a sample in W = M / 4 + 1 vectors from the residual and the
+// sensitivities in lanes (a).
+template <int M>
+GD_FUSED_INLINE void fusedRow(double r, const V4d* a, V4d* w) {
+  constexpr int V = (M + 3) / 4, W = M / 4 + 1;
+  const V4d rb = {r, r, r, r}, zero = {0, 0, 0, 0};
+  shiftIn(rb, a[0], &w[0]);
+  for (int v = 1; v < W; ++v) shiftIn(a[v - 1], v < V ? a[v] : zero, &w[v]);
+}
+
+// The whitened rows' sums of a pass (fusedPassImpl, fusedRowsImpl): add() takes the raw row
+// w = (r, J_1..J_M) of sample i in sample order; Nv[q] sums e e_q (e the whitened row): lane 0
+// of Nv[0] the cost, Nv[0] the right-hand side, Nv[1..M] the normal matrix.
+template <int M>
+struct FusedSums {
+  static constexpr int W = M / 4 + 1;
+  V4d Nv[M + 1][W];
+  double wlag = 0.0, eprev = 0.0;
+  long rows = 0;
+
+  GD_FUSED_INLINE FusedSums() {
+    const V4d zero = {0, 0, 0, 0};
+    for (int v = 0; v < W; ++v) {
+      for (int q = 0; q <= M; ++q) Nv[q][v] = zero;
+    }
+  }
+
+  // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice.
+  GD_FUSED_INLINE void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
+    V4d e[W];
+    for (int v = 0; v < W; ++v) e[v] = w[v];
+    if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... in this order (zero a_k beyond the order)
+      V4d* slot = ring + (i & 7) * W;
+      for (int v = 0; v < W; ++v) slot[v] = slot[v + 8 * W] = w[v];
+      if (i < nm.p) return;
+      const V4d* prev = slot + 7 * W;
+      for (int k = 0; k < kMaxArOrder; ++k) {
+        const double ak = nm.a[k];
+        for (int v = 0; v < W; ++v) e[v] += ak * prev[v - k * W];
+      }
+    }
+    const double e0 = e[0][0];
+    if (rows > 0) wlag += e0 * eprev;
+    eprev = e0;
+    ++rows;
+    for (int q = 0; q <= M; ++q) {
+      const double eq = e[q / 4][q % 4];
+      for (int v = 0; v < W; ++v) Nv[q][v] += e[v] * eq;
+    }
+  }
+
+  // The sums into f, and the autocovariances (lag k in lane k: r_i times r_i, r_{i-1}, ... in
+  // sample order) from the residuals f->rrev.
+  GD_FUSED_INLINE void finish(FusedPass* f) const {
+    const Index n = f->n;
+    V4d acc_lo = {0, 0, 0, 0}, acc_hi = {0, 0, 0, 0};
+    for (Index i = 0; i < n; ++i) {
+      V4d lo, hi;
+      std::memcpy(&lo, f->rrev + (n - 1 - i), sizeof(V4d));
+      std::memcpy(&hi, f->rrev + (n + 3 - i), sizeof(V4d));
+      const double r = lo[0];
+      acc_lo += r * lo;
+      acc_hi += r * hi;
+    }
+    for (int q = 0; q < M; ++q) {
+      for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q + 1][(k + 1) / 4][(k + 1) % 4];
+    }
+    for (int k = 0; k < M; ++k) f->rhs[k] = Nv[0][(k + 1) / 4][(k + 1) % 4];
+    for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
+    f->cost = Nv[0][0][0], f->wlag = wlag, f->rows = rows;
+  }
+};
+
+template <int M, bool Affine>
+GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
+  constexpr int V = (M + 3) / 4;
+  V4d a[V], c[V];
+  std::memcpy(a, f->s[0], sizeof(a));
+  std::memcpy(c, f->s[1], sizeof(c));
+  FusedSums<M> sums;
+  double y = f->x[0], vel = f->x[1];
+  const Index n = f->n;
+  constexpr int W = M / 4 + 1;
+  V4d ring[16 * W] = {};
+  for (Index i = 0;; ++i) {
+    const double r = f->y[i] - y;
+    f->rrev[n - 1 - i] = r;
+    V4d w[W];
+    fusedRow<M>(r, a, w);
+    if (f->keep != nullptr) std::memcpy(f->keep + 4 * W * i, w, sizeof(w));
+    sums.add(f->nm, i, w, ring);
+    if (i + 1 >= n) break;
+    const unsigned char key = f->key[i];
+    if (key == SegmentTable::kSplit) {
+      double x[2] = {y, vel};
+      std::memcpy(f->s[0], a, sizeof(a));
+      std::memcpy(f->s[1], c, sizeof(c));
+      f->split(f->ctx, i, x, f->s);
+      y = x[0], vel = x[1];
+      std::memcpy(a, f->s[0], sizeof(a));
+      std::memcpy(c, f->s[1], sizeof(c));
+    } else if constexpr (Affine) {
+      fusedAffineStep<V>(f->maps[key], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
+    } else {
+      fusedLinearStep<V>(f, i, key, &y, &vel, a, c);
+    }
+  }
+  sums.finish(f);
+}
+
+// The sums of the rows a pass kept (f->rrev, f->keep) under the noise model f->nm: the numbers
+// of a new pass at the same unknowns.
+template <int M>
+GD_FUSED_INLINE void fusedRowsImpl(FusedPass* f) {
+  constexpr int W = M / 4 + 1;
+  FusedSums<M> sums;
+  V4d ring[16 * W] = {};
+  for (Index i = 0; i < f->n; ++i) {
+    V4d w[W];
+    std::memcpy(w, f->keep + 4 * W * i, sizeof(w));
+    sums.add(f->nm, i, w, ring);
+  }
+  sums.finish(f);
+}
+
+// The passes by number of unknowns (3 to 6), affine maps or the RK4 step.
+GD_FUSED_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
+GD_FUSED_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
+GD_FUSED_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
+GD_FUSED_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
+GD_FUSED_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
+GD_FUSED_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
+GD_FUSED_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
+GD_FUSED_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
+GD_FUSED_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
+GD_FUSED_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
+GD_FUSED_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
+GD_FUSED_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
+
+// kind 0: the RK4 step, 1: the affine maps, 2: the kept rows.
+void runFused(FusedPass* f, int m, int kind) {
+  static void (*const kPass[3][4])(FusedPass*) = {
+      {fusedLinear3, fusedLinear4, fusedLinear5, fusedLinear6},
+      {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6},
+      {fusedRows3, fusedRows4, fusedRows5, fusedRows6}};
+  kPass[kind][m - 3](f);
+}
+
 }  // namespace
 
 void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve, double* k_min,
@@ -893,9 +1191,17 @@ class Refinement {
     return p;
   }
 
+  // The rows of a fused pass of one segment (FusedPass::rrev, keep), kept for the first
+  // evaluation of its next noise round at the same unknowns (rewhiten).
+  struct KeptRows {
+    size_t seg = static_cast<size_t>(-1);  // none
+    int m = 0;
+    std::vector<double> rrev, J;
+  };
+
   Normal evaluate(size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
-                  const NoiseModel& nm) const {
-    return evaluateAt(i, makeParams(x, g), nm);
+                  const NoiseModel& nm, KeptRows* keep = nullptr) const {
+    return evaluateAt(i, makeParams(x, g), nm, keep);
   }
 
   // Accumulates the normal equations (Normal) of the prewhitened residuals: add() stores each
@@ -1000,30 +1306,150 @@ class Refinement {
   };
 
   // At parameters p (p.m unknowns: the problem's, or one more for the variation test).
-  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm) const {
+  // `keep` (may be null): receives the rows of a fused pass (seg = i), else seg = none.
+  Normal evaluateAt(size_t i, const Params& p, const NoiseModel& nm,
+                    KeptRows* keep = nullptr) const {
     switch (p.m) {  // the common problem sizes unrolled
       case 3:
-        return evaluateWith<3>(i, p, nm);
+        return evaluateWith<3>(i, p, nm, keep);
       case 4:
-        return evaluateWith<4>(i, p, nm);
+        return evaluateWith<4>(i, p, nm, keep);
       case 5:
-        return evaluateWith<5>(i, p, nm);
+        return evaluateWith<5>(i, p, nm, keep);
       case 6:
-        return evaluateWith<6>(i, p, nm);
+        return evaluateWith<6>(i, p, nm, keep);
       default:
-        return evaluateWith<0>(i, p, nm);
+        return evaluateWith<0>(i, p, nm, keep);
     }
   }
 
   template <int MT>
-  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm) const {
+  Normal evaluateWith(size_t i, const Params& p, const NoiseModel& nm, KeptRows* keep) const {
+    const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    Normal fused;
+    if (keep != nullptr) keep->seg = static_cast<size_t>(-1);
+    if (t != nullptr && evaluateFused(*t, p, nm, &fused, keep)) {
+      if (keep != nullptr) keep->seg = i, keep->m = p.m;
+      return fused;
+    }
     Accumulator<MT> acc(p.m, nm, s_.dte);
     auto visit = [&acc](Index n, const double* z) { acc.add(n, z); };
-    if (sim_.tableApplies(substeps_))
-      sim_.runTable<MT>(tableOf(i), p, visit);
-    else
+    if (t != nullptr) {
+      sim_.runTable<MT>(*t, p, visit);
+    } else {
       sim_.run(ranges_[i].first, ranges_[i].second, p, substeps_, visit);
+    }
     return acc.finish();
+  }
+
+  // The held value's affine map (SegmentSimulator::AffineMap) of m sensitivities in lanes.
+  static void toLanes(const SegmentSimulator::AffineMap& am, int m, FusedMap* out) {
+    *out = FusedMap{};
+    std::copy(&am.R[0][0], &am.R[0][0] + 4, &out->R[0][0]);
+    std::copy(&am.G[0][0], &am.G[0][0] + 6, &out->G[0][0]);
+    for (int k = 0; k < m; ++k) {
+      if (!am.coupled[k]) continue;
+      for (int row = 0; row < 2; ++row) {
+        for (int c = 0; c < 2; ++c) out->S[row][c][k / 4][k % 4] = am.S[k][row][c];
+        for (int q = 0; q < 3; ++q) out->H[row][q][k / 4][k % 4] = am.H[k][row][q];
+      }
+    }
+  }
+
+  // The RK4 step's coefficients of table t at p for the fused pass (stepLinear's: the tabled
+  // stiffness, C and F, the sensitivities' forcing weights).
+  void linearLanes(const SegmentTable& t, const Params& p, FusedPass* f) const {
+    const bool grey = o_.formulation == Formulation::Greybox;
+    if (t.smooth) f->K3 = t.K3.data();
+    for (int k = 0; k < t.n_keys; ++k) {
+      f->key_K[k] = grey ? p.K0 + p.dK * t.key_sv[k] : t.key_K[k];
+      f->key_sv[k] = grey ? t.key_sv[k] : 0.0;
+    }
+    f->theta0 = p.theta0, f->theta1 = p.theta1, f->t_ref = p.t_ref;
+    f->ff = fm_.gear().force_factor, f->h = s_.dt;
+    for (int k = 0; k < p.m; ++k) {
+      f->lv0[k / 4][k % 4] = p.role[k] == Role::Theta0 ? 1.0 : 0.0;
+      f->lv1[k / 4][k % 4] = p.role[k] == Role::Theta1 ? 1.0 : 0.0;
+      f->ly0[k / 4][k % 4] = p.role[k] == Role::K0 ? 1.0 : 0.0;
+      f->ly1[k / 4][k % 4] = p.role[k] == Role::DK ? 1.0 : 0.0;
+    }
+  }
+
+  // Segment t's normal equations at p by the fused pass (3 to 6 unknowns): the numbers of
+  // runTable + Accumulator (affine maps where the stiffness is held and C constant).
+  bool evaluateFused(const SegmentTable& t, const Params& p, const NoiseModel& nm, Normal* out,
+                     KeptRows* keep) const {
+    if (p.m < 3 || p.m > 6 || t.e - t.b < 2) return false;
+    SegmentSimulator::AffineMap am[kMaxMaps];
+    FusedMap maps[kMaxMaps];
+    FusedPass f;
+    const bool affine = sim_.heldMaps(t, p, am);
+    if (affine) {
+      for (int k = 0; k < t.n_keys; ++k) toLanes(am[k], p.m, &maps[k]);
+    } else {
+      linearLanes(t, p, &f);
+    }
+    f.maps = maps, f.key = t.key.data(), f.T = t.T.data(), f.T_mid = t.T_mid.data();
+    f.y = s_.dte + t.b, f.n = t.e - t.b, f.nm = nm;
+    f.x[0] = p.y0, f.x[1] = p.v0;
+    std::vector<double>& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
+    if (rrev.size() < static_cast<size_t>(f.n + 8)) rrev.resize(f.n + 8);
+    std::fill(rrev.begin() + f.n, rrev.begin() + f.n + 8, 0.0);
+    f.rrev = rrev.data();
+    if (keep != nullptr) {
+      keep->J.resize(static_cast<size_t>(f.n * 4 * (p.m / 4 + 1)));
+      f.keep = keep->J.data();
+    }
+    for (int k = 0; k < p.m; ++k) {
+      if (p.role[k] == Role::Y0) f.s[0][k] = 1.0;
+      if (p.role[k] == Role::V0) f.s[1][k] = 1.0;
+    }
+    struct Ctx {
+      const SegmentSimulator* sim;
+      const SegmentTable* t;
+      const Params* p;
+    } ctx{&sim_, &t, &p};
+    f.ctx = &ctx;
+    f.split = [](const void* c, Index i, double* x, double(*s)[kFusedLanes]) {
+      const Ctx& q = *static_cast<const Ctx*>(c);
+      double z[2 + 2 * kFusedLanes] = {x[0], x[1]};
+      for (int k = 0; k < q.p->m; ++k) z[2 + 2 * k] = s[0][k], z[3 + 2 * k] = s[1][k];
+      q.sim->splitInterval(*q.t, i, *q.p, z);
+      x[0] = z[0], x[1] = z[1];
+      for (int k = 0; k < q.p->m; ++k) s[0][k] = z[2 + 2 * k], s[1][k] = z[3 + 2 * k];
+    };
+    runFused(&f, p.m, affine ? 1 : 0);
+    *out = normalOf(f, p.m);
+    return true;
+  }
+
+  static Normal normalOf(const FusedPass& f, int m) {
+    Normal out;
+    out.N.resize(m, m);
+    out.rhs.resize(m);
+    for (int a = 0; a < m; ++a) {
+      out.rhs[a] = f.rhs[a];
+      for (int b = 0; b <= a; ++b) out.N(a, b) = out.N(b, a) = f.N[a][b];
+    }
+    out.cost = f.cost, out.rows = f.rows, out.raw = f.acov[0], out.samples = f.n;
+    std::copy(f.acov, f.acov + kMaxArOrder + 1, out.acov);
+    out.wlag1 = f.wlag;
+    return out;
+  }
+
+  // Segment i's normal equations under the noise model nm from the rows kept at its current
+  // unknowns (kept_[0]; the same numbers as a new pass there); false when none are kept.
+  bool rewhiten(size_t i, const NoiseModel& nm, Normal* out) const {
+    KeptRows& k = kept_[0];
+    if (k.seg != i || k.m != m_) return false;
+    FusedPass f;
+    f.n = ranges_[i].second - ranges_[i].first;
+    f.nm = nm;
+    f.rrev = k.rrev.data();
+    f.keep = k.J.data();
+    runFused(&f, m_, 2);
+    *out = normalOf(f, m_);
+    return true;
   }
 
   // Segment i's look-ups (SegmentSimulator::buildTable), cached while the cached intervals stay
@@ -1103,8 +1529,14 @@ class Refinement {
   int gaussNewton(const Set& set, const NoiseModel& nm, bool* converged, bool* finite) {
     constexpr double kConvergenceTol = 1e-10;
     double cost = 0.0;
+    // One segment: its rows at the accepted unknowns are kept (kept_[0]; the trial's in
+    // kept_[1]), so a new noise round starts without a pass.
+    KeptRows* keep = set.size() == 1 ? &kept_[1] : nullptr;
     for (size_t i : set) {
-      normals_[i] = evaluate(i, loc_[i], sh_, nm);
+      if (keep == nullptr || !rewhiten(i, nm, &normals_[i])) {
+        normals_[i] = evaluate(i, loc_[i], sh_, nm, keep);
+        if (keep != nullptr) std::swap(kept_[0], kept_[1]);
+      }
       cost += normals_[i].cost;
     }
     *finite = std::isfinite(cost);
@@ -1129,7 +1561,7 @@ class Refinement {
         double c1 = 0.0;
         for (size_t i : set) {
           x1[i] = loc_[i] + step * dl[i];
-          n1[i] = evaluate(i, x1[i], g1, nm);
+          n1[i] = evaluate(i, x1[i], g1, nm, keep);
           c1 += n1[i].cost;
         }
         if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
@@ -1140,6 +1572,7 @@ class Refinement {
             loc_[i] = x1[i];
             normals_[i] = std::move(n1[i]);
           }
+          if (keep != nullptr) std::swap(kept_[0], kept_[1]);
           sh_ = g1;
           cost = c1;
         }
@@ -1257,9 +1690,13 @@ class Refinement {
   static Eigen::MatrixXd whiten(const Eigen::MatrixXd& M, const NoiseModel& nm) {
     const Index rows = std::max<Index>(M.rows() - nm.p, 0);
     Eigen::MatrixXd out(rows, M.cols());
-    for (Index n = 0; n < rows; ++n) {
-      out.row(n) = M.row(n + nm.p);
-      for (int k = 0; k < nm.p; ++k) out.row(n) += nm.a[k] * M.row(n + nm.p - k - 1);
+    for (Index c = 0; c < M.cols(); ++c) {  // by columns: the same operations per element
+      const double* in = M.col(c).data();
+      double* o = out.col(c).data();
+      for (Index n = 0; n < rows; ++n) {
+        o[n] = in[n + nm.p];
+        for (int k = 0; k < nm.p; ++k) o[n] += nm.a[k] * in[n + nm.p - k - 1];
+      }
     }
     return out;
   }
@@ -1273,13 +1710,26 @@ class Refinement {
   }
 
   // Segment i's sensitivities at the solution, prewhitened (rows x m).
+  // Held stiffness and constant C: from the rows of a fused pass (the same numbers).
   Eigen::MatrixXd whitenedSensitivities(size_t i) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
     Eigen::MatrixXd J(e - b, m_);
     const int m = m_;
-    sim_.run(b, e, makeParams(loc_[i], sh_), substeps_, [&](Index n, const double* z) {
-      for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
-    });
+    const Params p = makeParams(loc_[i], sh_);
+    const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    KeptRows rows;
+    Normal unused;
+    if (t != nullptr && !t->smooth && SegmentSimulator::constantC(p) &&
+        evaluateFused(*t, p, NoiseModel{}, &unused, &rows)) {
+      const Index stride = 4 * (m / 4 + 1);  // the row (r, J_1..J_m) of each sample
+      for (Index n = 0; n < e - b; ++n) {
+        for (int a = 0; a < m; ++a) J(n, a) = rows.J[static_cast<size_t>(stride * n + a + 1)];
+      }
+    } else {
+      sim_.run(b, e, p, substeps_, [&](Index n, const double* z) {
+        for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
+      });
+    }
     return whiten(J, noise_of_[i]);
   }
 
@@ -1409,70 +1859,99 @@ class Refinement {
   // recursion of the state steps x_{j+1} = A_j x_j + (the torque samples' terms) carries the
   // weights to the torque samples. Split intervals' maps by unit inputs through the generic RK4.
   Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
+    switch (m_) {  // the common problem sizes unrolled
+      case 3:
+        return torqueResponseGramOf<3>(i, Jw);
+      case 4:
+        return torqueResponseGramOf<4>(i, Jw);
+      case 5:
+        return torqueResponseGramOf<5>(i, Jw);
+      default:
+        return torqueResponseGramOf<0>(i, Jw);
+    }
+  }
+  // MT: the number of unknowns when fixed at compile time (0: m_).
+  template <int MT>
+  Eigen::MatrixXd torqueResponseGramOf(size_t i, const Eigen::MatrixXd& Jw) {
     const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
     const NoiseModel& nm = noise_of_[i];
-    // Scratch reused over the segments (first touch of fresh pages is slow here).
-    Eigen::MatrixXd& U = adj_U_;  // W^T Jw
-    U.setZero(n, m_);
+    const int m = MT > 0 ? MT : m_;
+    // Row-major scratch reused over the segments (first touch of fresh pages is slow here).
+    std::vector<double>& U = adj_u_;  // W^T Jw, a row per sample
+    U.assign(static_cast<size_t>(n * m), 0.0);
     for (Index r = 0; r < Jw.rows(); ++r) {
-      U.row(r + nm.p) += Jw.row(r);
-      for (int k = 0; k < nm.p; ++k) U.row(r + nm.p - k - 1) += nm.a[k] * Jw.row(r);
+      double* u = &U[static_cast<size_t>((r + nm.p) * m)];
+      for (int a = 0; a < m; ++a) u[a] += Jw(r, a);
+      for (int k = 0; k < nm.p; ++k) {
+        double* uk = &U[static_cast<size_t>((r + nm.p - k - 1) * m)];
+        for (int a = 0; a < m; ++a) uk[a] += nm.a[k] * Jw(r, a);
+      }
     }
     const Params p = noiseParams(i);
     SegmentTable& tab = adj_tab_;
     noise_sim_->buildTable(b, e, &tab);
     std::vector<SegmentSimulator::StateMap>& maps = adj_maps_;
     noise_sim_->stateMaps(tab, p, &maps);
-    Eigen::MatrixXd& M = adj_M_;  // its transpose
-    M.setZero(n, m_);
-    using Row = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxParams>;
-    using Pair = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxParams>;
-    Pair lam = Pair::Zero(2, m_), next(2, m_);
-    // The torque samples that can reach interval j: the cubic stencils lie within j-2..j+3.
-    auto window = [&](Index j, Index* lo, Index* hi) {
-      *lo = std::max<Index>(b, j - 3), *hi = std::min<Index>(e, j + 5);
+    std::vector<double>& M = adj_m_;  // M^T, a row per torque sample
+    M.assign(static_cast<size_t>(n * m), 0.0);
+    auto addTo = [&](Index s, double w0, const double* x0, double w1, const double* x1) {
+      double* row = &M[static_cast<size_t>((s - b) * m)];
+      for (int a = 0; a < m; ++a) row[a] += w0 * x0[a] + w1 * x1[a];
     };
+    double lam0[kMaxParams] = {0}, lam1[kMaxParams] = {0}, g[kMaxParams], nx0[kMaxParams];
     for (Index idx = n - 1; idx >= 1; --idx) {
-      lam.row(0) += U.row(idx);  // the response sample idx = the state's first component
+      const double* u = &U[static_cast<size_t>(idx * m)];
+      for (int a = 0; a < m; ++a) lam0[a] += u[a];  // the response sample idx = the state's y
       const Index j = b + idx - 1;
-      Index lo, hi;
-      window(j, &lo, &hi);
+      double A[2][2];
       if (tab.key[static_cast<size_t>(idx - 1)] != SegmentTable::kSplit) {
         const SegmentSimulator::StateMap& sm = maps[static_cast<size_t>(idx - 1)];
         for (int q = 0; q < 3; ++q) {
-          const Row g = sm.c[0][q] * lam.row(0) + sm.c[1][q] * lam.row(1);
-          if (q == 0) M.row(j - b) += g;
-          if (q == 2) M.row(j + 1 - b) += g;
-          if (q != 1) continue;
-          for (Index s = lo; s < hi; ++s) {  // the midpoint torque's stencil weights
-            noise_torque_[static_cast<size_t>(s)] = 1.0;
-            const double w = noise_fm_->torque(j, 0.5, b, e);
-            noise_torque_[static_cast<size_t>(s)] = 0.0;
-            if (w != 0.0) M.row(s - b) += w * g;
+          for (int a = 0; a < m; ++a) g[a] = sm.c[0][q] * lam0[a] + sm.c[1][q] * lam1[a];
+          const Index at = q == 0 ? j : j + 1;
+          if (q != 1) {
+            double* row = &M[static_cast<size_t>((at - b) * m)];
+            for (int a = 0; a < m; ++a) row[a] += g[a];
+            continue;
+          }
+          Index first;  // the midpoint torque's stencil weights
+          double w[4];
+          const int nw = noise_fm_->cubicWeights(j, 0.5, b, e, &first, w);
+          for (int k = 0; k < nw; ++k) {
+            if (w[k] == 0.0) continue;
+            double* row = &M[static_cast<size_t>((first + k - b) * m)];
+            for (int a = 0; a < m; ++a) row[a] += w[k] * g[a];
           }
         }
-        next.row(0) = sm.A[0][0] * lam.row(0) + sm.A[1][0] * lam.row(1);
-        next.row(1) = sm.A[0][1] * lam.row(0) + sm.A[1][1] * lam.row(1);
+        std::copy(&sm.A[0][0], &sm.A[0][0] + 4, &A[0][0]);
       } else {
-        for (Index s = lo; s < hi; ++s) {  // unit torque samples, zero state
+        // Unit torque samples (zero state) that can reach interval j: the cubic stencils lie
+        // within j-2..j+3; then unit states (zero torque).
+        for (Index s = std::max<Index>(b, j - 3); s < std::min<Index>(e, j + 5); ++s) {
           double z[2] = {0.0, 0.0};
           noise_torque_[static_cast<size_t>(s)] = 1.0;
           noise_sim_->stepGeneric(j, b, e, p, z);
           noise_torque_[static_cast<size_t>(s)] = 0.0;
-          M.row(s - b) += z[0] * lam.row(0) + z[1] * lam.row(1);
+          addTo(s, z[0], lam0, z[1], lam1);
         }
-        double A[2][2];
-        for (int c = 0; c < 2; ++c) {  // unit states, zero torque
+        for (int c = 0; c < 2; ++c) {
           double z[2] = {c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0};
           noise_sim_->stepGeneric(j, b, e, p, z);
           A[0][c] = z[0], A[1][c] = z[1];
         }
-        next.row(0) = A[0][0] * lam.row(0) + A[1][0] * lam.row(1);
-        next.row(1) = A[0][1] * lam.row(0) + A[1][1] * lam.row(1);
       }
-      lam = next;
+      for (int a = 0; a < m; ++a) {
+        nx0[a] = A[0][0] * lam0[a] + A[1][0] * lam1[a];
+        lam1[a] = A[0][1] * lam0[a] + A[1][1] * lam1[a];
+        lam0[a] = nx0[a];
+      }
     }
-    return M.transpose() * M;
+    Eigen::MatrixXd& Mc = adj_M_;  // column-major for the product, as before
+    Mc.resize(n, m);
+    for (Index s = 0; s < n; ++s) {
+      for (int a = 0; a < m; ++a) Mc(s, a) = M[static_cast<size_t>(s * m + a)];
+    }
+    return Mc.transpose() * Mc;
   }
 
   // The reference (tests): exact by brute force, one unit impulse sigma e_s of the torque per
@@ -1776,6 +2255,8 @@ class Refinement {
   Locals dl_scratch_, x1_scratch_;
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
+  mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
+  mutable KeptRows kept_[2];                  // gaussNewton: accepted, trial
   mutable SegmentTable scratch_;
   mutable size_t cached_ = 0;
   // Torque noise (torqueNoise): per-segment level and added covariances, and the draws' model
@@ -1788,7 +2269,8 @@ class Refinement {
   std::unique_ptr<SegmentSimulator> noise_sim_;
   std::vector<Normal> draw_normals_;
   // torqueResponseGram's scratch.
-  Eigen::MatrixXd adj_U_, adj_M_;
+  std::vector<double> adj_u_, adj_m_;
+  Eigen::MatrixXd adj_M_;
   SegmentTable adj_tab_;
   std::vector<SegmentSimulator::StateMap> adj_maps_;
 };
