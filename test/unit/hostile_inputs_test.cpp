@@ -419,6 +419,124 @@ TEST_F(Hostile, ImplausibleChunkValuesAreCountedReportedAndReadAsNan) {
   EXPECT_TRUE(has(r.err, "2 values outside their channel's plausible range")) << r.err;
 }
 
+// The plausibility pass over every ranged channel (two values at a time, then a scalar tail)
+// and the branch-free copy: values at and just beyond each channel's range, -0, the smallest
+// negative subnormal, +-Inf and NaN, in chunks of 1, 2 and 3 samples (every lane position and
+// tail length), and a mesh_state byte of 2 and of 255. The counts are the element-wise
+// classification's; the whole read and a streamed read (ranges splitting chunks) give the same
+// values: finite values outside the range as NaN, the others as written.
+TEST_F(Hostile, EdgeValuesInEveryChannelAreClassifiedAtAnyChunkSize) {
+  const Eigen::Index n = 101;
+  gear_sim::SignalTable t = table_;
+  Eigen::VectorXd* channels[] = {&t.dte,    &t.dte_velocity, &t.stiffness,
+                                 &t.torque, &t.mesh_phase,   &t.damping};
+  const double inf = std::numeric_limits<double>::infinity();
+  std::int64_t non_finite = 0, outside = 0;
+  for (size_t k = 0; k < 6; ++k) {
+    const gear_sim_ros::PlausibleRange& r = gear_sim_ros::kPlausibleRanges[k];
+    const double values[] = {r.low,
+                             r.high,
+                             std::nextafter(r.low, -inf),
+                             std::nextafter(r.high, inf),
+                             -0.0,
+                             -std::numeric_limits<double>::denorm_min(),
+                             inf,
+                             -inf,
+                             std::numeric_limits<double>::quiet_NaN()};
+    for (size_t j = 0; j < std::size(values); ++j) {
+      const double v = values[j];
+      (*channels[k])[static_cast<Eigen::Index>(1 + 6 * j + k)] = v;
+      if (!std::isfinite(v))
+        ++non_finite;
+      else if (v < r.low || v > r.high)
+        ++outside;
+    }
+  }
+  gear_sim::SignalTable expected = t;
+  for (size_t k = 0; k < 6; ++k) {
+    const gear_sim_ros::PlausibleRange& r = gear_sim_ros::kPlausibleRanges[k];
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double v = (*channels[k])[i];
+      double& e = k == 0   ? expected.dte[i]
+                  : k == 1 ? expected.dte_velocity[i]
+                  : k == 2 ? expected.stiffness[i]
+                  : k == 3 ? expected.torque[i]
+                  : k == 4 ? expected.mesh_phase[i]
+                           : expected.damping[i];
+      e = std::isfinite(v) && (v < r.low || v > r.high) ? std::nan("") : v;
+    }
+  }
+  expected.mesh_state[40] = expected.mesh_state[77] = std::nan("");
+  // Bitwise equality, NaN equal to NaN.
+  auto same = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b, Eigen::Index from) {
+    for (Eigen::Index i = 0; i < a.size(); ++i) {
+      const double x = a[i], y = b[from + i];
+      if (!(std::isnan(x) && std::isnan(y)) && std::memcmp(&x, &y, sizeof x) != 0) return false;
+    }
+    return true;
+  };
+  for (const Eigen::Index chunk : {1, 2, 3}) {
+    SCOPED_TRACE("chunks of " + std::to_string(chunk));
+    const std::string p = path("edges_" + std::to_string(chunk) + ".bag");
+    {
+      rosbag::Bag bag(p, rosbag::bagmode::Write);
+      const ros::Time base(1.0);
+      bag.write("/gear/params", base, gear_sim_ros::toMsg(config_.gearModel()));
+      gear_damping::SignalChunk c;
+      for (Eigen::Index b = 0, k = 0; b < n; b += chunk, ++k) {
+        gear_sim_ros::toChunk(t, b, std::min(chunk, n - b), config_.simulation.sample_rate,
+                              static_cast<std::uint64_t>(b), &c);
+        for (size_t q = 0; q < c.mesh_state.size(); ++q) {
+          const Eigen::Index i = b + static_cast<Eigen::Index>(q);
+          if (i == 40) c.mesh_state[q] = 2;
+          if (i == 77) c.mesh_state[q] = 255;
+        }
+        bag.write("/gear/signal", base + ros::Duration(1e-6 * static_cast<double>(k + 1)), c);
+      }
+      bag.close();
+    }
+    gear_sim_ros::BagSignalInfo info;
+    std::string e;
+    ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(p, "", &info), &e)) << e;
+    EXPECT_EQ(info.samples, n);
+    EXPECT_EQ(info.non_finite_values, non_finite);
+    EXPECT_EQ(info.out_of_range_values, outside);
+    EXPECT_EQ(info.bad_mesh_states, 2);
+    gear_sim::SignalTable whole;
+    ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &whole), &e)) << e;
+    ASSERT_EQ(whole.size(), n);
+    EXPECT_TRUE(same(whole.dte, expected.dte, 0));
+    EXPECT_TRUE(same(whole.dte_velocity, expected.dte_velocity, 0));
+    EXPECT_TRUE(same(whole.stiffness, expected.stiffness, 0));
+    EXPECT_TRUE(same(whole.torque, expected.torque, 0));
+    EXPECT_TRUE(same(whole.mesh_phase, expected.mesh_phase, 0));
+    EXPECT_TRUE(same(whole.damping, expected.damping, 0));
+    EXPECT_TRUE(same(whole.mesh_state, expected.mesh_state, 0));
+    const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+        {0, 5}, {5, 6}, {8, 60}, {61, 101}};
+    int blocks = 0;
+    ASSERT_TRUE(
+        gear_test::ok(gear_sim_ros::streamSignalBag(
+                          info, ranges,
+                          [&](const gear_sim::SignalTable& block, size_t r) {
+                            const Eigen::Index from = ranges[r].first;
+                            EXPECT_EQ(block.size(), ranges[r].second - from) << r;
+                            EXPECT_TRUE(same(block.dte, expected.dte, from)) << r;
+                            EXPECT_TRUE(same(block.dte_velocity, expected.dte_velocity, from)) << r;
+                            EXPECT_TRUE(same(block.stiffness, expected.stiffness, from)) << r;
+                            EXPECT_TRUE(same(block.torque, expected.torque, from)) << r;
+                            EXPECT_TRUE(same(block.mesh_phase, expected.mesh_phase, from)) << r;
+                            EXPECT_TRUE(same(block.damping, expected.damping, from)) << r;
+                            EXPECT_TRUE(same(block.mesh_state, expected.mesh_state, from)) << r;
+                            ++blocks;
+                            return gear_sim::Status();
+                          }),
+                      &e))
+        << e;
+    EXPECT_EQ(blocks, 4);
+  }
+}
+
 // ---- YAML ----
 
 TEST_F(Hostile, NonScalarYamlKeysAreNamedNotAnAbort) {

@@ -265,6 +265,58 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksForAnyThreadCount)
   EXPECT_EQ(w, 3e-4);
 }
 
+// checkRecord at its blocks' edges: records shorter than a block and of one, two or four
+// blocks (more threads than blocks, up to 16), a bad step (a gap, or a NaN time) on either side
+// of a block edge, at the first and the last step, and stiffness with a NaN at a block edge, an
+// Inf first sample, no finite sample at all or a sum that overflows: always checkSignalTable's
+// message and defaultWindowLength's window, bit for bit.
+TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksAtBlockEdgesAndShortRecords) {
+  const double dt = 1e-6;
+  constexpr long kBlock = 8192;
+  for (const long n : {2L, 3L, 4L, 5L, 100L, kBlock - 1, kBlock, kBlock + 1, 3 * kBlock + 5}) {
+    SignalTable clean;
+    clean.time.resize(n), clean.dte.resize(n), clean.stiffness.resize(n), clean.torque.resize(n);
+    for (long i = 0; i < n; ++i) {
+      clean.time[i] = 0.25 + static_cast<double>(i) * dt;
+      clean.dte[i] = 1e-6 * std::sin(0.01 * static_cast<double>(i));
+      clean.stiffness[i] = 3e8 + 1e8 * std::cos(0.003 * static_cast<double>(i));
+      clean.torque[i] = 100.0;
+    }
+    for (const long bad : {-1L, 1L, 2L, 3L, n - 1, kBlock - 1, kBlock, kBlock + 1, 2 * kBlock}) {
+      if (bad >= n || (bad < 1 && bad != -1)) continue;
+      for (const int time_kind : {0, 1}) {  // a gap from `bad` on; a NaN time sample
+        for (const int k_kind : {0, 1, 2, 3, 4}) {
+          SignalTable t = clean;
+          if (bad > 0 && time_kind == 0) {
+            for (long i = bad; i < n; ++i) t.time[i] += 0.5 * dt;
+          } else if (bad > 0 && bad < n - 1) {
+            t.time[bad] = kNaN;
+          }
+          if (k_kind == 1) t.stiffness[std::min(kBlock, n - 1)] = kNaN;
+          if (k_kind == 2) t.stiffness[0] = kInf;
+          if (k_kind == 3) t.stiffness.setConstant(kNaN);
+          if (k_kind == 4) t.stiffness.setConstant(1e308);  // the sum overflows
+          const gear_sim::Status sep =
+              gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+          const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
+          for (const int threads : {1, 2, 3, 5, 16}) {
+            SCOPED_TRACE("n " + std::to_string(n) + ", bad " + std::to_string(bad) + ", time " +
+                         std::to_string(time_kind) + ", stiffness " + std::to_string(k_kind) +
+                         ", threads " + std::to_string(threads));
+            double w = kNaN;
+            const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), threads, &w);
+            ASSERT_EQ(s.ok(), sep.ok());
+            EXPECT_EQ(s.message(), sep.message());
+            if (sep.ok()) {
+              EXPECT_EQ(w, w_sep);  // bit-identical
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 TEST(IdentificationOptions, InvalidOptionsAreRejectedNamingTheField) {
   struct Case {
     const char* field;

@@ -208,6 +208,58 @@ TEST(MorletCwt, PrunedModulusRowsEqualTheFullInverseFft) {
   EXPECT_GT(differing, 0);  // some rows did take the pruned path
 }
 
+// One object reconfigured in turn (larger and smaller n, more and fewer threads, other rows,
+// double then single precision and back, a failed configure between) gives the bits of a fresh
+// object each time: the per-thread buffer sets are resized or replaced with the configuration,
+// never reused at a stale size.
+TEST(MorletScalogram, ReconfiguredObjectGivesTheBitsOfAFreshOne) {
+  struct Config {
+    long n;
+    int threads, rows;
+    double f_max;
+    Precision precision;
+  };
+  const Config configs[] = {
+      {1500, 1, 30, 0.4, Precision::Double},  {6000, 2, 45, 0.45, Precision::Double},
+      {700, 3, 20, 0.3, Precision::Double},   {6000, 1, 45, 0.45, Precision::Single},
+      {2500, 2, 60, 0.49, Precision::Single}, {9000, 3, 12, 0.2, Precision::Double},
+      {64, 2, 5, 0.4, Precision::Single},     {3000, 2, 40, 0.4, Precision::Double}};
+  MorletScalogram reused;
+  std::string e;
+  for (const Config& c : configs) {
+    SCOPED_TRACE("n = " + std::to_string(c.n) + ", threads " + std::to_string(c.threads));
+    const std::vector<double> y = testSignal(c.n, static_cast<unsigned>(c.n));
+    const std::vector<double> f = logSpacedFrequencies(10.0 / c.n, c.f_max, c.rows);
+    // A refused configuration first (the object must still be usable afterwards).
+    EXPECT_FALSE(gear_test::ok(reused.configure(c.n, 1.0, f, 6.0, FftPlanning::Estimate, 0), &e));
+    ASSERT_TRUE(gear_test::ok(
+        reused.configure(c.n, 1.0, f, 6.0, FftPlanning::Estimate, c.threads, c.precision), &e))
+        << e;
+    MorletScalogram fresh;
+    ASSERT_TRUE(gear_test::ok(
+        fresh.configure(c.n, 1.0, f, 6.0, FftPlanning::Estimate, c.threads, c.precision), &e))
+        << e;
+    EXPECT_EQ(reused.groups(), fresh.groups());
+    std::vector<double> a(f.size() * size_t(c.n)), b(a.size());
+    std::vector<float> af(a.size()), bf(a.size());
+    ASSERT_TRUE(gear_test::ok(reused.modulus(y.data(), a.data()), &e)) << e;
+    ASSERT_TRUE(gear_test::ok(fresh.modulus(y.data(), b.data()), &e)) << e;
+    EXPECT_TRUE(a == b);
+    ASSERT_TRUE(gear_test::ok(reused.modulus(y.data(), af.data()), &e)) << e;
+    ASSERT_TRUE(gear_test::ok(fresh.modulus(y.data(), bf.data()), &e)) << e;
+    EXPECT_TRUE(af == bf);
+    // forEachRow on the reused object: the same rows as modulus.
+    std::vector<double> rows(a.size());
+    ASSERT_TRUE(gear_test::ok(reused.forEachRow(y.data(),
+                                                [&](int r, const double* w) {
+                                                  std::copy(w, w + c.n, rows.begin() + r * c.n);
+                                                }),
+                              &e))
+        << e;
+    EXPECT_TRUE(rows == a);
+  }
+}
+
 TEST(MorletScalogram, RefusesBadThreadCountsAndNonFiniteSamples) {
   MorletScalogram s;
   std::string e;
