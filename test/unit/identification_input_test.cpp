@@ -201,6 +201,38 @@ TEST_F(IdentificationInput, MissingColumnIsNamed) {
       "");
 }
 
+// A column the formulation does not need but the analysis may still read (the default window
+// sums any stiffness column; the segments read the stiffness and mesh state for their levels) is
+// refused when its length differs from the time column's, instead of being read past its end.
+TEST_F(IdentificationInput, UnneededColumnOfAnotherLengthIsRefusedNamingIt) {
+  struct Case {
+    Formulation f;
+    Eigen::VectorXd SignalTable::*column;
+    const char* name;
+  };
+  const Case cases[] = {
+      {Formulation::Greybox, &SignalTable::stiffness, "stiffness"},
+      {Formulation::Paper, &SignalTable::stiffness, "stiffness"},
+      {Formulation::Known, &SignalTable::mesh_state, "mesh_state"},
+      {Formulation::Known, &SignalTable::mesh_phase, "mesh_phase"},
+  };
+  for (const Case& c : cases) {
+    for (const Eigen::Index len : {Eigen::Index{1}, clean_->size() / 2, clean_->size() + 3}) {
+      SignalTable t = *clean_;
+      if ((t.*c.column).size() == 0) (t.*c.column) = Eigen::VectorXd::Zero(t.size());
+      (t.*c.column).conservativeResize(len);
+      IdentificationResult r;
+      std::string err;
+      EXPECT_FALSE(gear_test::ok(
+          gear_damping_id::identify(t, gear(), opts(c.f, DampingModel::Piecewise), &r), &err))
+          << c.name << " of " << len;
+      EXPECT_NE(err.find(std::string("column '") + c.name + "' has " + std::to_string(len)),
+                std::string::npos)
+          << err;
+    }
+  }
+}
+
 TEST_F(IdentificationInput, NonUniformTimeIsRejectedNamingTheRow) {
   SignalTable t = *clean_;
   const double dt = 1e-6;

@@ -83,11 +83,13 @@
 namespace gear_damping_id {
 
 /// Checks that `table` can be analysed: the channels `formulation`/`model` need present (names the
-/// missing column) and a uniform time step within `rel_tolerance` of the sampling step (names the
-/// first offending sample, and its file line `first_line + sample` when `first_line` >= 0, e.g.
-/// 2 for a CSV with one header line). Non-finite values are not an error here: the segments that
-/// hold them are reported as not identifiable. Ok when fine, else InvalidInput with the column
-/// concerned as Status::field() ("time" for the time axis).
+/// missing column), every present stiffness, torque, mesh_state and mesh_phase column as long as
+/// the time column, needed or not (names the column and both lengths), and a uniform time step
+/// within `rel_tolerance` of the sampling step (names the first offending sample, and its file line
+/// `first_line + sample` when `first_line` >= 0, e.g. 2 for a CSV with one header line). Non-finite
+/// values are not an error here: the segments that hold them are reported as not identifiable. Ok
+/// when fine, else InvalidInput with the column concerned as Status::field() ("time" for the time
+/// axis).
 gear_sim::Status checkSignalTable(const gear_sim::SignalTable& table, Formulation formulation,
                                   DampingModel model, double rel_tolerance = 1e-6,
                                   Eigen::Index first_line = -1);

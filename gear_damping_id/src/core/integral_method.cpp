@@ -100,12 +100,15 @@ gear_sim::Status checkColumns(const gear_sim::SignalTable& t, Formulation f, Dam
     e << "column '" << name << "' has " << c.size() << " values for " << n << " time stamps";
     return false;
   };
-  if (needsStiffness(f) && !length(t.stiffness, "stiffness"))
+  // Every column the analysis may read (SignalView), needed or not: a present column of another
+  // length would be read past its end (the default window sums any stiffness column).
+  if (!length(t.stiffness, "stiffness"))
     return gear_sim::Status::invalidInput(e.str(), "stiffness");
-  if (needsMeshState(f) && !length(t.mesh_state, "mesh_state"))
+  if (!length(t.mesh_state, "mesh_state"))
     return gear_sim::Status::invalidInput(e.str(), "mesh_state");
-  if (needsTorque(f, m) && !length(t.torque, "torque"))
-    return gear_sim::Status::invalidInput(e.str(), "torque");
+  if (!length(t.torque, "torque")) return gear_sim::Status::invalidInput(e.str(), "torque");
+  if (!length(t.mesh_phase, "mesh_phase"))
+    return gear_sim::Status::invalidInput(e.str(), "mesh_phase");
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
   if (!(dt > 0.0) || !std::isfinite(dt))
     return gear_sim::Status::invalidInput("time is not increasing", "time");
