@@ -70,6 +70,9 @@ class ForwardModel {
   /// k < the returned count (at most 4) of w[k] * channel[*first + k], each w[k] the value
   /// cubic() gives for a unit sample there and zeros elsewhere.
   int cubicWeights(Index j, double u, Index lo, Index hi, Index* first, double* w) const;
+  /// The weights of cubic() at u = 0.5 of an interval whose stencil is the centred one
+  /// (samples j - 1 .. j + 2), which cubic() applies.
+  const CubicIntervalRule::Weights& interiorMidpointWeights() const { return mid_interior_; }
   /// Torque T1 [N*m] at u of interval j (0 without a torque channel).
   double torque(Index j, double u, Index lo, Index hi) const {
     return signal_.torque == nullptr ? 0.0 : cubic(signal_.torque, j, u, lo, hi);

@@ -2560,9 +2560,7 @@ class HeldKnownStages {
     *K = (right && j + 1 < cur_.s.n ? cur_.s.stiffness[j + 1] : cur_.s.stiffness[j]) * inv_me_;
     const double* T = cur_.s.torque;
     const double t0 = T == nullptr ? 0.0 : T[j];
-    const double tm = T == nullptr  ? 0.0
-                      : hi - lo < 4 ? cur_.fm.torque(j, 0.5, lo, hi)
-                                    : midpoint(T, j, lo, hi);
+    const double tm = T == nullptr ? 0.0 : cur_.fm.torque(j, 0.5, lo, hi);
     const double t1 =
         T == nullptr ? 0.0 : (j + 1 < cur_.s.n ? T[j + 1] : cur_.fm.torque(j, 1.0, lo, hi));
     *C = cur_.seg[cur_.si].C;
@@ -2599,32 +2597,11 @@ class HeldKnownStages {
     CubicIntervalRule::Weights w;  // the interior rule's midpoint weights (offset -1)
   };
   Plain plain() const {
-    return {cur_.s.stiffness, cur_.s.torque, inv_me_, force_factor_, begin_, mid().interior};
+    return {cur_.s.stiffness, cur_.s.torque, inv_me_,
+            force_factor_,    begin_,        cur_.fm.interiorMidpointWeights()};
   }
 
  private:
-  struct Mid {
-    CubicRules rules;
-    CubicIntervalRule::Weights first = rules.first.value(0.5), interior = rules.interior.value(0.5),
-                               last = rules.last.value(0.5);
-  };
-  static const Mid& mid() {
-    static const Mid m;
-    return m;
-  }
-
-  // ForwardModel::cubic at u = 0.5 for hi - lo >= 4, inline: the same rule, weights (the same
-  // rules evaluated at 0.5 by the same code) and sum.
-  static double midpoint(const double* ch, Index j, Index lo, Index hi) {
-    const Mid& m = mid();
-    const CubicIntervalRule& r = m.rules.forInterval(j, lo, hi);
-    const CubicIntervalRule::Weights& w = &r == &m.rules.interior ? m.interior
-                                          : &r == &m.rules.first  ? m.first
-                                                                  : m.last;
-    const Index b = j + r.offset();
-    return w[0] * ch[b] + w[1] * ch[b + 1] + w[2] * ch[b + 2] + w[3] * ch[b + 3];
-  }
-
   StageCursor cur_;
   const double force_factor_, inv_me_;
   const Index begin_;
