@@ -75,6 +75,28 @@ TEST(IdentificationAccuracy, IntegralMethodAloneIsWithin005PercentNoiseFree) {
                           "default known integral-only");
 }
 
+// Noise-free with the truth the model can represent (piecewise C aligned to the segments): the
+// residual, and so each segment's standard error, is at the quadrature's and the rounding's level;
+// the summation order of the rows and the Gram (docs/method.md §4, numeric contract) may move it
+// freely, but it stays below 1e-6 of |C|.
+TEST(IdentificationAccuracy, NoiseFreeStandardErrorsStayBelowOnePpmOfC) {
+  const SimConfig c = piecewiseDefault();
+  const SignalTable t = simulateOrFail(c);
+  for (const Formulation f : {Formulation::Known, Formulation::Greybox}) {
+    const IdentificationResult r = identifyOrFail(
+        t, c, options(f, DampingModel::Piecewise, IdentificationOptions::Refine::Never));
+    ASSERT_FALSE(r.segments.empty());
+    double worst = 0.0;
+    for (size_t i = 0; i < r.segments.size(); ++i) {
+      const auto& s = r.segments[i];
+      ASSERT_TRUE(s.identifiable) << s.reason;
+      EXPECT_LT(s.C_std, 1e-6 * std::abs(s.C)) << toString(f) << " segment " << i;
+      worst = std::max(worst, s.C_std / std::abs(s.C));
+    }
+    std::cout << "[ measured ] " << toString(f) << " noise-free: max C_std/|C| " << worst << "\n";
+  }
+}
+
 void expectGreyboxAccuracy(const SimConfig& c, IdentificationOptions::Refine refine,
                            const char* label) {
   const SignalTable t = simulateOrFail(c);

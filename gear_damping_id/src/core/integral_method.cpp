@@ -15,14 +15,20 @@
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
 
-// Hot loops compiled for AVX2 as well as the baseline, chosen at load time. Without FMA
-// contraction or reassociation both clones compute the same bits (each loop's accumulators are
-// independent lanes, summed in the same order by either).
+// Hot loops compiled for AVX2 as well as the baseline, chosen at load time. GD_AVX2_CLONES:
+// without FMA contraction or reassociation both clones compute the same bits (each loop's
+// accumulators are independent lanes, summed in the same order by either). GD_FMA_CLONES (the
+// row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted multiply-adds) or the
+// baseline; the two clones agree to rounding, not in every bit (docs/method.md §5, numeric
+// contract), and on one machine every run takes the same clone, so any thread count gives the
+// same bits.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#define GD_FMA_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #define GD_ALWAYS_INLINE __attribute__((always_inline))
 #else
 #define GD_AVX2_CLONES
+#define GD_FMA_CLONES
 #define GD_ALWAYS_INLINE
 #endif
 
@@ -279,8 +285,8 @@ namespace {
 // the smooth dynamics contribute (omega0 dt)^3 of the amplitude, negligible at the sampling rates
 // the method needs), and the standard deviation about the mean.
 // One pass for both sums, four independent accumulators each (a single add chain per sum is
-// latency-bound; the sums agree with the sequential ones to ~1e-16 relative).
-GD_AVX2_CLONES
+// latency-bound; the sums agree with the sequential ones to ~1e-16 relative). AVX2 + FMA clone.
+GD_FMA_CLONES
 void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, double* signal) {
   if (n < 4) return;
   // Lane k of the vectors is accumulator k (a GCC vector: one AVX register, or two SSE2 ones).
@@ -468,9 +474,8 @@ struct Taps4 {
 // Interior intervals [lo, hi) of the known formulation with held stiffness: the cubic rule's
 // area increments of y (ay) and the area/moment increments of K y - F (ag, mg), with yb, Tb
 // pointing one sample before the interval's left end and kb at it (the moment of y alone is not
-// needed by the known rows). Compiled for AVX2 as well as the baseline (chosen at load time):
-// without FMA contraction or reassociation both give the same bits.
-GD_AVX2_CLONES
+// needed by the known rows). AVX2 + FMA clone (contracted multiply-adds) and the baseline.
+GD_FMA_CLONES
 void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
                              const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
                              const double* wa, const double* wm, double inv_me, double ff,
@@ -488,8 +493,8 @@ void heldStiffnessIncrements(const double* __restrict__ yb, const double* __rest
 
 // Interior intervals [lo, hi) of the greybox formulation: the increments of y (ay, my), of -F
 // (ag, mg) and of s y (as, ms), yb and Tb pointing one sample before the interval's left end and
-// sb at it (the same expressions as the generic path, in one loop; AVX2 clone as above).
-GD_AVX2_CLONES
+// sb at it (the same expressions as the generic path, in one loop; clones as above).
+GD_FMA_CLONES
 void greyIncrements(const double* __restrict__ yb, const double* __restrict__ Tb,
                     const double* __restrict__ sb, Eigen::Index lo, Eigen::Index hi,
                     const double* wa, const double* wm, double ff, double* __restrict__ ay,
@@ -507,6 +512,58 @@ void greyIncrements(const double* __restrict__ yb, const double* __restrict__ Tb
     ms[i] = sb[i] * Mo;
   }
 }
+
+// Four doubles in one vector (one AVX register; two SSE2 registers in the baseline clone), with
+// unaligned loads/stores of n <= 4 lanes (the rest zero) and the in-register prefix sums of the
+// blocked row scans (forcedRows) and the four-row projected Gram (projectedGram).
+// The helpers pass V4 by value; they are always inlined, so no call uses the AVX argument ABI
+// that GCC's -Wpsabi warns about.
+typedef double V4 __attribute__((vector_size(32)));
+#if !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+#if defined(__clang__)
+#define GD_SHUFFLE(a, b, i0, i1, i2, i3) __builtin_shufflevector(a, b, i0, i1, i2, i3)
+#else
+typedef long GdI4 __attribute__((vector_size(32)));
+#define GD_SHUFFLE(a, b, i0, i1, i2, i3) __builtin_shuffle(a, b, GdI4{i0, i1, i2, i3})
+#endif
+
+GD_ALWAYS_INLINE inline V4 load4(const double* x, int n = 4) {
+  V4 v = {0.0, 0.0, 0.0, 0.0};
+  std::memcpy(&v, x, sizeof(double) * static_cast<size_t>(n));
+  return v;
+}
+GD_ALWAYS_INLINE inline void store4(double* x, const V4& v, int n = 4) {
+  std::memcpy(x, &v, sizeof(double) * static_cast<size_t>(n));
+}
+GD_ALWAYS_INLINE inline V4 lastLane(const V4& v) { return GD_SHUFFLE(v, v, 3, 3, 3, 3); }
+// [x0, x1, x2, x3] -> [0, x0, x1, x2]
+GD_ALWAYS_INLINE inline V4 shiftLanes(const V4& v) {
+  const V4 zero = {0.0, 0.0, 0.0, 0.0};
+  return GD_SHUFFLE(zero, v, 0, 4, 5, 6);
+}
+// Inclusive prefix sums of the four lanes (two shift-and-add steps).
+GD_ALWAYS_INLINE inline V4 scan4(V4 x) {
+  const V4 zero = {0.0, 0.0, 0.0, 0.0};
+  x += shiftLanes(x);
+  return x + GD_SHUFFLE(zero, x, 0, 1, 4, 5);
+}
+
+// A running single integral G and double integral Q over blocks of four rows: for row r,
+// Q_r = Q_{r-1} + h G_{r-1} + m_{r-1} and G_r = G_{r-1} + a_{r-1} (a, m: the interval's area and
+// moment increments). The carries hold the previous block's last row in every lane.
+struct DoubleIntegral {
+  V4 G = {0.0, 0.0, 0.0, 0.0}, Q = {0.0, 0.0, 0.0, 0.0};
+  // The four rows' Q from their increments a = inc[r-1 .. r+2], m likewise.
+  GD_ALWAYS_INLINE V4 step(const V4& h, const V4& a, const V4& m) {
+    const V4 g = scan4(a);
+    const V4 q = Q + scan4(h * (G + shiftLanes(g)) + m);
+    G += lastLane(g);
+    Q = lastLane(q);
+    return q;
+  }
+};
 
 // One window's row computation (IntegralMethod::windowRows) in named steps over the state they
 // share: the window, the step, the gear constants, which integrals the formulation needs, the
@@ -733,54 +790,6 @@ void basisIncrements(const WindowPass& p, const Eigen::MatrixXd& basis, int nb,
   }
 }
 
-// Pass 2 of the hot path (known, piecewise/constant: one column): prefix sums -> rows
-// [-P, y + IIKy - IIF] in colC, colb, from the increments ay, ag, mg and y (all from row 0 of the
-// window; the increments of row r's interval at r - 1). Two rows per step: each running sum
-// advances by the pair's total, so its add chain is half as long, and the odd row is formed off
-// the chain. P and G run in the two lanes of one vector V2 = [P, G] (each lane the same scalar
-// operations in the same order, so the same bits as two scalar sums); the pair's two rows are
-// stored as one vector per column. AVX2 clone (three-operand encodings), no FMA.
-GD_AVX2_CLONES
-void knownRowPairs(double h, const double* __restrict__ y, const double* __restrict__ ay,
-                   const double* __restrict__ ag, const double* __restrict__ mg, Eigen::Index L,
-                   double* __restrict__ colC, double* __restrict__ colb) {
-  typedef double V2 __attribute__((vector_size(16)));
-  V2 PG = {0.0, 0.0};
-  double Q = 0.0;
-  colC[0] = 0.0;
-  colb[0] = y[0];
-  Eigen::Index r = 1;
-  for (; r + 1 < L; r += 2) {
-    const V2 v1 = {ay[r - 1], ag[r - 1]}, v2 = {ay[r], ag[r]};
-    const V2 u = PG + v1;         // [P + ay, G1 = G + ag]
-    const V2 GG = {PG[1], u[1]};  // [G, G1]
-    V2 m;
-    std::memcpy(&m, mg + r - 1, sizeof(V2));
-    const V2 ii = h * GG + m;  // [i1, i2] = h G + mg
-    PG = PG + (v1 + v2);       // P += ay + ay, G += ag + ag
-    const double Q1 = Q + ii[0];
-    Q = Q + (ii[0] + ii[1]);
-    V2 yy;
-    std::memcpy(&yy, y + r, sizeof(V2));
-    const V2 b = yy + V2{Q1, Q};
-    const V2 c = -V2{u[0], PG[0]};
-    std::memcpy(colb + r, &b, sizeof(V2));
-    std::memcpy(colC + r, &c, sizeof(V2));
-  }
-  double P = PG[0], G = PG[1];
-  for (; r < L; ++r) {
-    Q += h * G + mg[r - 1];
-    G += ag[r - 1];
-    P += ay[r - 1];
-    colC[r] = -P;
-    colb[r] = y[r] + Q;
-  }
-}
-
-void knownRows(const WindowPass& p, double* colC, double* colb) {
-  knownRowPairs(p.h, p.y + p.w0, p.ay, p.ag, p.mg, p.L, colC, colb);
-}
-
 // Where each kind of column stands in the rows (-1: not a column of this problem).
 struct RowColumns {
   int C, L, K0, DK, F, B;  // damping, load law, stiffness K0 and dK, force, shape basis
@@ -788,11 +797,13 @@ struct RowColumns {
 };
 
 // Pass 2 of the known and the greybox square formulations (GREY), any damping model (LOAD: the
-// load law's column): prefix sums -> rows, the same sums as generalRows with the formulation's
-// choices compiled in (no per-row branches).
+// load law's column): prefix sums -> rows, the same integrals as generalRows with the
+// formulation's choices compiled in. Blocked: four rows per step, each running sum scanned in
+// the lanes of one vector with its carry from the previous block (a different summation order
+// from generalRows' one-row chains: equal to rounding).
 template <bool GREY, bool LOAD>
-void forcedRows(const WindowPass& p, const RowColumns& c, Eigen::MatrixXd* rows) {
-  const double h = p.h, T_c = p.T_c;
+GD_ALWAYS_INLINE inline void forcedRows(const WindowPass& p, const RowColumns& c,
+                                        Eigen::MatrixXd* rows) {
   const double *ay = p.ay, *my = p.my, *ag = p.ag, *mg = p.mg, *as = p.as, *ms = p.ms, *dS = p.dS;
   const double* y = p.y + p.w0;
   double* colb = &(*rows)(0, c.b);
@@ -800,20 +811,43 @@ void forcedRows(const WindowPass& p, const RowColumns& c, Eigen::MatrixXd* rows)
   double* colL = LOAD ? &(*rows)(0, c.L) : nullptr;
   double* colK0 = GREY ? &(*rows)(0, c.K0) : nullptr;
   double* colDK = GREY ? &(*rows)(0, c.DK) : nullptr;
-  double P = 0.0, Gy = 0.0, Qy = 0.0, Gs = 0.0, Qs = 0.0, Gkf = 0.0, Qkf = 0.0, Sr = 0.0, Dr = 0.0;
-  for (Eigen::Index r = 0; r < p.L; ++r) {
-    if (r > 0) {
-      const Eigen::Index i = r - 1;
-      if (GREY) Qy += h * Gy + my[i], Gy += ay[i];
-      Qkf += h * Gkf + mg[i], Gkf += ag[i];
-      if (GREY) Qs += h * Gs + ms[i], Gs += as[i];
-      if (LOAD) Dr += h * (Sr + 0.5 * dS[i]), Sr += dS[i];
-      P += ay[i];
+  const V4 h = V4{0.0, 0.0, 0.0, 0.0} + p.h, half_h = 0.5 * h, T_c = h * 0.0 + p.T_c;
+  V4 P = {0.0, 0.0, 0.0, 0.0};
+  DoubleIntegral Iy, Ikf, Is, Id;  // of y, K y - F (known) or -F, s y, (T1 - T_c) dy
+  colb[0] = y[0];                  // row 0: every integral zero
+  colC[0] = 0.0;
+  if (LOAD) colL[0] = 0.0;
+  if (GREY) colK0[0] = colDK[0] = 0.0;
+  // Rows r .. r + n - 1 (n <= 4) from the increments of intervals r - 1 .. r + n - 2.
+  auto block = [&](Eigen::Index r, int n) GD_ALWAYS_INLINE {
+    const Eigen::Index i = r - 1;
+    const V4 a = load4(ay + i, n);
+    const V4 Pr = P + scan4(a);
+    P = lastLane(Pr);
+    store4(colC + r, -Pr, n);
+    store4(colb + r, load4(y + r, n) + Ikf.step(h, load4(ag + i, n), load4(mg + i, n)), n);
+    if (GREY) {
+      store4(colK0 + r, -Iy.step(h, a, load4(my + i, n)), n);
+      store4(colDK + r, -Is.step(h, load4(as + i, n), load4(ms + i, n)), n);
     }
-    colb[r] = y[r] + Qkf;  // known: + IIKy - IIF; greybox: - IIF
-    colC[r] = -P;
-    if (LOAD) colL[r] = -(T_c * P + Dr);
-    if (GREY) colK0[r] = -Qy, colDK[r] = -Qs;
+    if (LOAD) {
+      const V4 d = load4(dS + i, n);
+      store4(colL + r, -(T_c * Pr + Id.step(h, d, half_h * d)), n);
+    }
+  };
+  const Eigen::Index L = p.L;  // (a local: the stores could alias p's)
+  Eigen::Index r = 1;
+  for (; r + 4 <= L; r += 4) block(r, 4);
+  if (r < L) block(r, static_cast<int>(L - r));
+}
+
+// forcedRows for the formulation's choices, AVX2 + FMA clone.
+GD_FMA_CLONES
+void forcedRowsOf(const WindowPass& p, const RowColumns& c, Eigen::MatrixXd* rows) {
+  if (p.grey) {
+    p.load ? forcedRows<true, true>(p, c, rows) : forcedRows<true, false>(p, c, rows);
+  } else {
+    p.load ? forcedRows<false, true>(p, c, rows) : forcedRows<false, false>(p, c, rows);
   }
 }
 
@@ -881,10 +915,6 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   if (p.load) loadIncrements(p);
   const int nb = shape_ ? n_basis_ : 0;
   if (nb > 0) basisIncrements(p, basis_, nb, &basis_inc_);
-  if (p.known && !p.load && q == 1) {
-    knownRows(p, &rows_(0, 0), &rows_(0, q));
-    return;
-  }
   const RowColumns c{columnIndex(Column::DampC),
                      columnIndex(Column::DampLoad),
                      columnIndex(Column::StiffK0),
@@ -892,13 +922,7 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
                      columnIndex(Column::ForceConst),
                      columnIndex(Column::StiffBasis),
                      q};
-  if (nb == 0 && (p.known || p.grey)) {
-    if (p.grey)
-      p.load ? forcedRows<true, true>(p, c, &rows_) : forcedRows<true, false>(p, c, &rows_);
-    else
-      p.load ? forcedRows<false, true>(p, c, &rows_) : forcedRows<false, false>(p, c, &rows_);
-    return;
-  }
+  if (nb == 0 && (p.known || p.grey)) return forcedRowsOf(p, c, &rows_);
   generalRows(p, c, basis_inc_, nb, fbar, &rows_);
 }
 
@@ -911,6 +935,7 @@ namespace {
 // remains is small and oscillatory, so forming the projected Gram from its moments,
 //   G_ab = sum z_a z_b - (sum z_a)(sum z_b)/L - (sum p1 z_a)(sum p1 z_b)/sum p1^2,
 // does not cancel the leading digits the way raw moments of the trend-dominated integrals would.
+// Four rows per step, one vector per column (lane j: rows = j mod 4), the lanes summed at the end.
 // NC = 0: the column count is the run-time `n_dyn` (at most CAP), for the greybox shapes' many
 // columns; otherwise NC is compiled in (the common small cases).
 template <int NC, int CAP = NC>
@@ -921,112 +946,65 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
   const double half = 0.5 * static_cast<double>(L - 1);
   const double Ld = static_cast<double>(L);
   const double sp2 = Ld * (Ld * Ld - 1.0) / 12.0;  // sum of p1^2
-  const double* col[CAP + 1] = {};
-  double d0[CAP + 1] = {}, d1[CAP + 1] = {};
+  const V4 zero = {0.0, 0.0, 0.0, 0.0};
+  const double* col[CAP] = {};
+  double d0[CAP] = {}, d1[CAP] = {};
+  V4 S[CAP], SP[CAP], M[CAP * (CAP + 1) / 2], raw4 = zero;
   for (int c = 0; c < n; ++c) {
     col[c] = &rows(0, c);
     d0[c] = col[c][0];
     d1[c] = L > 1 ? (col[c][L - 1] - col[c][0]) / static_cast<double>(L - 1) : 0.0;
+    S[c] = SP[c] = zero;
   }
-  // Two lanes per column (even and odd rows: rows r and r + 1 are adjacent in memory), two
-  // columns per vector V4 = [a even, a odd, b even, b odd] (one AVX register): every lane is the
-  // add chain of one column and one parity, whichever vector holds it, so the sums are the same
-  // as with one column per SSE2 pair. Products of columns a, b: z_k * z_l (a = 2k, b = 2l and
-  // a = 2k + 1, b = 2l + 1) and z_k * swap(z_l) (halves swapped: a = 2k, b = 2l + 1 and
-  // a = 2k + 1, b = 2l). Combined (even + odd) at the end.
-  typedef double V4 __attribute__((vector_size(32)));
-#if !defined(__clang__)
-  typedef long I4 __attribute__((vector_size(32)));
-#endif
-  constexpr int KC = (CAP + 1) / 2;
-  const int nk = (n + 1) / 2;  // column pairs (an odd count pads with a zero column)
-  V4 S4[KC], SP4[KC], Md[KC][KC], Ms[KC][KC];
-  for (int k = 0; k < nk; ++k) {
-    S4[k] = SP4[k] = V4{0, 0, 0, 0};
-    for (int l = 0; l < nk; ++l) Md[k][l] = Ms[k][l] = V4{0, 0, 0, 0};
-  }
-  V4 raw4 = {0, 0, 0, 0};  // lanes 0, 1: the raw damping column's even and odd rows
-#if !defined(__clang__)
-  const I4 swap = {2, 3, 0, 1};
-#endif
-  auto accumulate = [&](const V4* z, const V4& p, const V4& rc) {
-    for (int k = 0; k < nk; ++k) {
-      S4[k] += z[k];
-      SP4[k] += p * z[k];
+  for (int k = 0; k < n * (n + 1) / 2; ++k) M[k] = zero;
+  // Rows r .. r + cnt - 1 (cnt <= 4; lanes past cnt masked to zero), rl = their row numbers.
+  auto accumulate = [&](Eigen::Index r, int cnt, const V4& rl, const V4& mask) GD_ALWAYS_INLINE {
+    V4 z[CAP];
+    for (int c = 0; c < n; ++c) {
+      const V4 x = load4(col[c] + r, cnt);
+      z[c] = ((x - d0[c]) - d1[c] * rl) * mask;
+      if (c == raw_col) raw4 += x * x;
     }
-    for (int k = 0; k < nk; ++k) {
-      for (int l = k; l < nk; ++l) {
-        Md[k][l] += z[k] * z[l];
-#if defined(__clang__)  // the same lane permutation in clang's spelling
-        Ms[k][l] += z[k] * __builtin_shufflevector(z[l], z[l], 2, 3, 0, 1);
-#else
-        Ms[k][l] += z[k] * __builtin_shuffle(z[l], swap);
-#endif
-      }
+    const V4 pv = rl - half;
+    for (int c = 0; c < n; ++c) {
+      S[c] += z[c];
+      SP[c] += pv * z[c];
     }
-    raw4 += rc * rc;
+    int k = 0;
+    for (int a = 0; a < n; ++a) {
+      for (int b = a; b < n; ++b) M[k++] += z[a] * z[b];
+    }
   };
   Eigen::Index r = 0;
-  V4 rl = {0.0, 1.0, 0.0, 1.0};
-  // The raw column's lanes 0, 1 are those of the first pair's x when it is column 0 (only lanes
-  // 0, 1 of raw4 are summed).
-  const bool raw_first = raw_col == 0;
-  typedef double V2 __attribute__((vector_size(16)));
-  for (; r + 2 <= L; r += 2, rl += 2.0) {
-    V4 z[KC], x0 = {0, 0, 0, 0};
-    for (int k = 0; k < nk; ++k) {
-      const int a = 2 * k, b = 2 * k + 1;
-      const double* cb = b < n ? col[b] + r : col[a] + r;  // (padding: multiplied by 0)
-      const double bmask = b < n ? 1.0 : 0.0;
-      V2 xa, xb;  // rows r, r + 1 of columns a and b, one load each
-      std::memcpy(&xa, col[a] + r, sizeof(V2));
-      std::memcpy(&xb, cb, sizeof(V2));
-      const V4 x = {xa[0], xa[1], xb[0] * bmask, xb[1] * bmask};
-      if (k == 0) x0 = x;
-      const V4 o = {d0[a], d0[a], d0[b], d0[b]}, s = {d1[a], d1[a], d1[b], d1[b]};
-      z[k] = x - o - s * rl;
-    }
-    const V4 rc = raw_first ? x0 : V4{col[raw_col][r], col[raw_col][r + 1], 0.0, 0.0};
-    accumulate(z, rl - half, rc);
+  V4 rl = {0.0, 1.0, 2.0, 3.0};
+  for (; r + 4 <= L; r += 4, rl += 4.0) accumulate(r, 4, rl, zero + 1.0);
+  if (r < L) {
+    const int cnt = static_cast<int>(L - r);
+    const V4 mask = {1.0, cnt > 1 ? 1.0 : 0.0, cnt > 2 ? 1.0 : 0.0, 0.0};
+    accumulate(r, cnt, rl, mask);
   }
-  if (r < L) {  // odd L: the last row in the even lanes, the odd lanes zero (add nothing)
-    const double rd = static_cast<double>(r);
-    V4 z[KC];
-    for (int k = 0; k < nk; ++k) {
-      const int a = 2 * k, b = 2 * k + 1;
-      const double zb = b < n ? col[b][r] - d0[b] - d1[b] * rd : 0.0;
-      z[k] = V4{col[a][r] - d0[a] - d1[a] * rd, 0.0, zb, 0.0};
-    }
-    accumulate(z, V4{rd - half, 0.0, rd - half, 0.0}, V4{col[raw_col][r], 0.0, 0.0, 0.0});
-  }
-  // Lane sums: column a's lanes are 2 (a % 2) and 2 (a % 2) + 1 of vector a / 2.
-  auto laneSum = [](const V4& v, int half_index) {
-    return v[2 * half_index] + v[2 * half_index + 1];
-  };
-  double S[CAP], SP[CAP];
-  for (int a = 0; a < n; ++a) {
-    S[a] = laneSum(S4[a / 2], a % 2);
-    SP[a] = laneSum(SP4[a / 2], a % 2);
-  }
-  *raw_norm += laneSum(raw4, 0);
+  auto lanes = [](const V4& v) { return (v[0] + v[1]) + (v[2] + v[3]); };
+  double Sd[CAP], SPd[CAP];
   for (int c = 0; c < n; ++c) {
-    mean[c] = S[c] / Ld + d0[c] + d1[c] * half;
-    slope[c] = (sp2 > 0.0 ? SP[c] / sp2 : 0.0) + d1[c];
+    Sd[c] = lanes(S[c]);
+    SPd[c] = lanes(SP[c]);
+    mean[c] = Sd[c] / Ld + d0[c] + d1[c] * half;
+    slope[c] = (sp2 > 0.0 ? SPd[c] / sp2 : 0.0) + d1[c];
   }
+  *raw_norm += lanes(raw4);
+  int k = 0;
   for (int a = 0; a < n; ++a) {
     for (int b = a; b < n; ++b) {
-      // z_a z_b: same parity from Md (lanes of a), else Ms (lanes of a: z_a * z_b swapped in).
-      const int k = a / 2, l = b / 2;
-      const double m = (a % 2 == b % 2) ? laneSum(Md[k][l], a % 2) : laneSum(Ms[k][l], a % 2);
-      const double g = m - S[a] * S[b] / Ld - (sp2 > 0.0 ? SP[a] * SP[b] / sp2 : 0.0);
+      const double g =
+          lanes(M[k++]) - Sd[a] * Sd[b] / Ld - (sp2 > 0.0 ? SPd[a] * SPd[b] / sp2 : 0.0);
       (*gram)(a, b) += g;
       if (a != b) (*gram)(b, a) += g;
     }
   }
 }
 
-// projectedGram for nc columns (the compiled-in counts 2-6, else run-time), AVX2 clone.
-GD_AVX2_CLONES
+// projectedGram for nc columns (the compiled-in counts 2-6, else run-time), AVX2 + FMA clone.
+GD_FMA_CLONES
 void gramOf(int nc, const Eigen::MatrixXd& rows, Eigen::Index L, int rc, double* mean,
             double* slope, double* raw, Eigen::MatrixXd* gram) {
   switch (nc) {
