@@ -20,6 +20,7 @@
 #include <thread>
 #include <type_traits>
 
+#include "decimated_row.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -72,10 +73,7 @@ P* hugePages(P* p, size_t bytes) {
   return p;
 }
 
-std::mutex& plannerMutex() {
-  static std::mutex m;
-  return m;
-}
+std::mutex& plannerMutex() { return wavelet_detail::fftwPlannerMutex(); }
 
 // FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
 // so call it with plannerMutex() held: Measure planning is capped at kMeasureTimeLimitS
