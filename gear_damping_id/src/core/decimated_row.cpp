@@ -1,8 +1,13 @@
 // Decimated wavelet rows of the per-mode path: see decimated_row.hpp.
 #include "decimated_row.hpp"
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 
 #include "wavelet_detail.hpp"
@@ -18,6 +23,19 @@ constexpr long kRecurrenceBlock = 64;
 std::mutex& fftwPlannerMutex() {
   static std::mutex m;
   return m;
+}
+
+void adviseHugePages(void* p, size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  constexpr uintptr_t kPage = 4096, kHuge = uintptr_t(1) << 21;
+  if (p && bytes >= kHuge) {
+    const uintptr_t b = (reinterpret_cast<uintptr_t>(p) + kPage - 1) & ~(kPage - 1);
+    const uintptr_t e = (reinterpret_cast<uintptr_t>(p) + bytes) & ~(kPage - 1);
+    if (e > b) madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
+  }
+#endif
+  (void)p;
+  (void)bytes;
 }
 
 DecimatedRows::~DecimatedRows() {
@@ -69,8 +87,11 @@ const std::complex<double>* DecimatedRows::row(const std::complex<double>* spect
     // The plans stay valid on the new arrays (fftw_malloc's alignment, out of place).
     if (in_) fftw_free(in_);
     if (out_) fftw_free(out_);
+    const size_t bytes = sizeof(fftw_complex) * static_cast<size_t>(L);
     in_ = fftw_alloc_complex(static_cast<size_t>(L));
     out_ = fftw_alloc_complex(static_cast<size_t>(L));
+    adviseHugePages(in_, bytes);
+    adviseHugePages(out_, bytes);
     capacity_ = in_ && out_ ? L : 0;
     if (!capacity_) return nullptr;
   }
