@@ -337,6 +337,17 @@ TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
   for (long j = 0; j < n; ++j) EXPECT_DOUBLE_EQ(fast[size_t(j)], std::abs(w[j]));
 }
 
+// The two tests below: cwt configured for 10 rows from 2 to 400 Hz (omega0 6) holding
+// toneBursts(n, fs) with edge-cut bursts.
+void loadToneBursts(MorletCwt* cwt, long n, double fs) {
+  std::string error;
+  ASSERT_TRUE(gear_test::ok(
+      cwt->configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
+      &error))
+      << error;
+  ASSERT_TRUE(gear_test::ok(cwt->setSignal(toneBursts(n, fs, true).data()), &error)) << error;
+}
+
 // rowModulusSingleAt (the per-mode path's noise row at 0.45 fs) against |rowAt|: float rounding
 // only, on narrow (pruned) and wide (full inverse FFT, up to the Nyquist cut) rows; the
 // conditions of rowAt refuse the same rows.
@@ -344,14 +355,8 @@ TEST(MorletCwt, SinglePrecisionModulusAtAnyFrequencyMatchesTheDoubleRow) {
   constexpr double kSingleTol = 1e-6;  // relative to the row's peak (float: ~1e-7)
   const double fs = 1000.0;
   const long n = 6000;
-  const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
-  std::string error;
-  ASSERT_TRUE(gear_test::ok(
-      cwt.configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
-      &error))
-      << error;
-  ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
+  ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
   std::vector<float> single(static_cast<size_t>(n));
   double worst = 0.0;
   for (double f : {5.0, 37.0, 120.0, 310.0, 450.0}) {
@@ -381,14 +386,8 @@ TEST(MorletCwt, DecimatedRowsEqualTheFullRowAtTheirSamples) {
   constexpr double kDecimatedTol = 1e-12;
   const double fs = 1000.0;
   const long n = 6000;
-  const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
-  std::string error;
-  ASSERT_TRUE(gear_test::ok(
-      cwt.configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
-      &error))
-      << error;
-  ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
+  ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
   const long N = cwt.paddedSize();
   wavelet_detail::DecimatedRows rows;
   double worst = 0.0;
