@@ -314,15 +314,22 @@ struct RegionPoints {
 // the region (D = 1) or on its decimated quadrature points (D > 1; the phase is unwrapped about
 // the advance 2*pi*f*step/fs of the row's frequency f, which the ridge phase follows within
 // its bandwidth f/omega0, far inside the half turn unwrapping allows).
+// ln of the noise-corrected envelope and the raw phase arg W of a prepared row's grid points
+// [c0, c1], kept for the row's second fit pass, whose region lies inside the first's (the same
+// values: no log or atan2 computed twice). Emptied (c1 < c0) by prepareRow.
+struct PointCache {
+  long c0 = 0, c1 = -1;
+  std::vector<double> ly, arg;
+};
+
 void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, long m,
-                 std::vector<double>* work, RowFit* out) {
+                 std::vector<double>* work, PointCache* cache, RowFit* out) {
   const long D = r.D;
   const RegionPoints pts(j0, m, D);
   const long np = pts.count();
-  work->resize(static_cast<size_t>(4 * np));
+  work->resize(static_cast<size_t>(3 * np));
   double* x = work->data();
-  double* ly = x + np;
-  double* ph = ly + np;
+  double* ph = x + np;
   double* wt = ph + np;
   double emax = 0.0;
   for (long i = 0; i < np; ++i) emax = std::max(emax, env[static_cast<size_t>(pts.m0 + i)]);
@@ -335,15 +342,28 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   // noise-corrected envelope sqrt(|W|^2 - floor^2).
   const double floor2 = std::isfinite(out->floor) ? out->floor * out->floor : 0.0;
   const double turn = 2.0 * kPi * r.f / r.fs;  // phase advance of the row's frequency per sample
+  if (!(cache->c0 <= pts.m0 && pts.m0 + np - 1 <= cache->c1)) {
+    cache->c0 = pts.m0;
+    cache->c1 = pts.m0 + np - 1;
+    cache->ly.resize(static_cast<size_t>(np));
+    cache->arg.resize(static_cast<size_t>(np));
+    for (long i = 0; i < np; ++i) {
+      const long g = pts.m0 + i;
+      const double e = env[static_cast<size_t>(g)];
+      cache->ly[static_cast<size_t>(i)] = 0.5 * std::log(std::max(e * e - floor2, 1e-300));
+      cache->arg[static_cast<size_t>(i)] = std::arg(r.w[g]);
+    }
+  }
+  const double* ly = cache->ly.data() + (pts.m0 - cache->c0);
+  const double* arg = cache->arg.data() + (pts.m0 - cache->c0);
   double prev = 0.0, offset = 0.0;
   for (long i = 0; i < np; ++i) {
     const long g = pts.m0 + i, j = g * D;  // grid point, sample
     const double e = env[static_cast<size_t>(g)];
     const double e2 = std::max(e * e - floor2, 1e-300);
     x[i] = static_cast<double>(j) / r.fs;
-    ly[i] = 0.5 * std::log(e2);
     wt[i] = e2 / (emax * emax) * (D > 1 ? pts.weight(i) : 1.0);
-    const double p = std::arg(r.w[g]);
+    const double p = arg[i];
     if (D > 1) {
       if (i > 0) {
         const double pred = turn * static_cast<double>(D);
@@ -387,11 +407,15 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
 struct PreparedRow {
   RowEnvelope row;
   double peak = kNaN, floor = kNaN;
+  PointCache* cache = nullptr;  // the fits' ln|W| and arg W (emptied here)
 };
 
 PreparedRow prepareRow(const RowEnvelope& r, double noise_gain, double noise_std,
-                       const WaveletOptions& opt, std::vector<double>* env_scratch) {
+                       const WaveletOptions& opt, std::vector<double>* env_scratch,
+                       PointCache* cache) {
   PreparedRow p;
+  p.cache = cache;
+  cache->c1 = cache->c0 - 1;
   std::vector<double>& env = *env_scratch;
   env.resize(static_cast<size_t>(r.points));
   modulusOf(reinterpret_cast<const double*>(r.w), r.points, env.data());
@@ -422,7 +446,7 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
               " and >= one wavelet scale " + num(r.s) + " s)";
     return out;
   }
-  envelopeFit(r, env, j0, m, work, &out);
+  envelopeFit(r, env, j0, m, work, p.cache, &out);
   return out;
 }
 
@@ -556,6 +580,7 @@ struct Analysis {
   std::vector<float>& env_f;  // scratch: |W| of the noise row in float (per-mode path)
   BinnedPower& power;         // per-mode path: the Parseval sums of the wide rows (see above)
   wavelet_detail::DecimatedRows& decimated;  // per-mode path: the rows on their grids
+  PointCache& points;                        // scratch: the fits' ln|W| and arg W
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -908,7 +933,7 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
   row.omega0 = omega;
   row.coi = std::sqrt(2.0) * row.s;
   const double gain = gainOf(*a, *fit, f, omega), sn = a->res.noise_std;
-  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env);
+  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env, &a->points);
   RowFit r = fitRow(p, *env, sigma_guess, seed.region, a->opt, work);
   if (r.ok && !seed.region && r.sigma > 0.0) {
     RowFit r2 = fitRow(p, *env, r.sigma, nullptr, a->opt, work);
@@ -1226,6 +1251,7 @@ struct WaveletAnalyzer::Workspace {
   std::vector<float> env_f;
   BinnedPower power;
   wavelet_detail::DecimatedRows decimated;
+  PointCache points;
 };
 
 WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
@@ -1266,8 +1292,8 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   };
   if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
-  Analysis a{y,     n,     sample_rate, options, *result, {},      w.scal,
-             w.own, w.env, w.work,      w.psd,   w.env_f, w.power, w.decimated};
+  Analysis a{y,     n,      sample_rate, options, *result, {},          w.scal,  w.own,
+             w.env, w.work, w.psd,       w.env_f, w.power, w.decimated, w.points};
   if (Status s = checkInput(a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
   if (Status s = spectraAndNoise(&a); !s.ok()) return stop(s);
