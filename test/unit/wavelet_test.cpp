@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "../../gear_damping_id/src/core/decimated_row.hpp"
 #include "status_support.hpp"
 
 namespace gear_damping_id {
@@ -336,6 +337,17 @@ TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
   for (long j = 0; j < n; ++j) EXPECT_DOUBLE_EQ(fast[size_t(j)], std::abs(w[j]));
 }
 
+// The two tests below: cwt configured for 10 rows from 2 to 400 Hz (omega0 6) holding
+// toneBursts(n, fs) with edge-cut bursts.
+void loadToneBursts(MorletCwt* cwt, long n, double fs) {
+  std::string error;
+  ASSERT_TRUE(gear_test::ok(
+      cwt->configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
+      &error))
+      << error;
+  ASSERT_TRUE(gear_test::ok(cwt->setSignal(toneBursts(n, fs, true).data()), &error)) << error;
+}
+
 // rowModulusSingleAt (the per-mode path's noise row at 0.45 fs) against |rowAt|: float rounding
 // only, on narrow (pruned) and wide (full inverse FFT, up to the Nyquist cut) rows; the
 // conditions of rowAt refuse the same rows.
@@ -343,14 +355,8 @@ TEST(MorletCwt, SinglePrecisionModulusAtAnyFrequencyMatchesTheDoubleRow) {
   constexpr double kSingleTol = 1e-6;  // relative to the row's peak (float: ~1e-7)
   const double fs = 1000.0;
   const long n = 6000;
-  const std::vector<double> y = toneBursts(n, fs, true);
   MorletCwt cwt;
-  std::string error;
-  ASSERT_TRUE(gear_test::ok(
-      cwt.configure(n, fs, logSpacedFrequencies(2.0, 400.0, 10), 6.0, FftPlanning::Estimate),
-      &error))
-      << error;
-  ASSERT_TRUE(gear_test::ok(cwt.setSignal(y.data()), &error)) << error;
+  ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
   std::vector<float> single(static_cast<size_t>(n));
   double worst = 0.0;
   for (double f : {5.0, 37.0, 120.0, 310.0, 450.0}) {
@@ -369,6 +375,44 @@ TEST(MorletCwt, SinglePrecisionModulusAtAnyFrequencyMatchesTheDoubleRow) {
   EXPECT_FALSE(cwt.rowModulusSingleAt(600.0, 6.0, single.data())) << "above Nyquist";
   EXPECT_FALSE(cwt.rowModulusSingleAt(0.2, 6.0, single.data())) << "wider than the padding";
   EXPECT_FALSE(cwt.rowModulusSingleAt(100.0, 6.0, nullptr));
+}
+
+// DecimatedRows (the per-mode path's fit rows): W at every D-th sample from one inverse FFT of
+// length N/D of the band folded modulo N/D, against rowAt's full (or pruned) row at the same
+// samples, for narrow and wide rows (up to the Nyquist cut) and D from 1 to past the band's
+// rate (folded bins overlap: still exact at the samples). Bound 1e-12 of the row's peak: FFT
+// rounding of two transforms of different lengths (measured ~1e-15).
+TEST(MorletCwt, DecimatedRowsEqualTheFullRowAtTheirSamples) {
+  constexpr double kDecimatedTol = 1e-12;
+  const double fs = 1000.0;
+  const long n = 6000;
+  MorletCwt cwt;
+  ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
+  const long N = cwt.paddedSize();
+  wavelet_detail::DecimatedRows rows;
+  double worst = 0.0;
+  for (double f : {5.0, 37.0, 120.0, 310.0, 450.0}) {
+    const std::complex<double>* full = cwt.rowAt(f, 6.0);
+    ASSERT_NE(full, nullptr) << f;
+    const std::vector<std::complex<double>> w(full, full + n);
+    double peak = 0.0;
+    for (const auto& v : w) peak = std::max(peak, std::abs(v));
+    const double a = 6.0 * fs / (f * static_cast<double>(N));
+    const long band_d = wavelet_detail::DecimatedRows::bandDecimation(N, a, 6.0);
+    for (long d : {1L, 2L, 3L, 7L, band_d, 4 * band_d}) {
+      const long D = wavelet_detail::DecimatedRows::divisorAtMost(N, d);
+      ASSERT_EQ(N % D, 0) << D;
+      const std::complex<double>* dec = rows.row(cwt.spectrum(), N, a, 6.0, D);
+      ASSERT_NE(dec, nullptr) << f << " Hz, D " << D;
+      double err = 0.0;
+      for (long m = 0; m * D < n; ++m) err = std::max(err, std::abs(dec[m] - w[size_t(m * D)]));
+      EXPECT_LT(err / peak, kDecimatedTol) << f << " Hz, D " << D;
+      worst = std::max(worst, err / peak);
+    }
+  }
+  std::printf("[ measured ] decimated vs full rows: max error %.2e of the row's peak\n", worst);
+  EXPECT_EQ(wavelet_detail::DecimatedRows::divisorAtMost(N, 0), 1);
+  EXPECT_EQ(rows.row(cwt.spectrum(), N, 6.0 * fs / (100.0 * N), 6.0, N + 1), nullptr);
 }
 
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {

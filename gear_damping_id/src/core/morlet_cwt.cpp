@@ -20,6 +20,7 @@
 #include <thread>
 #include <type_traits>
 
+#include "decimated_row.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -54,28 +55,14 @@ constexpr long kMinPrunedBatches = 16;
 constexpr long kPrunedChunk = 8192;         // complex values per chunk of batches (128 KiB, in L2)
 constexpr double kMeasureTimeLimitS = 5.0;  // FFTW_MEASURE planning cap per plan [s]
 
-// Asks the kernel for transparent huge pages on a large buffer (where THP is in `madvise`
-// mode): its first touch then faults once per 2 MiB instead of once per 4 KiB page (fresh
-// pages cost ~10 us each on the reference machines; a one-shot analysis of 1e6 samples touches
-// ~100 MB). Advisory only: contents and results are unchanged; ignored where unsupported.
+// Transparent huge pages for a large buffer (wavelet_detail::adviseHugePages).
 template <typename P>
 P* hugePages(P* p, size_t bytes) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  constexpr uintptr_t kPage = 4096, kHuge = uintptr_t(1) << 21;
-  if (p && bytes >= kHuge) {
-    const uintptr_t b = (reinterpret_cast<uintptr_t>(p) + kPage - 1) & ~(kPage - 1);
-    const uintptr_t e = (reinterpret_cast<uintptr_t>(p) + bytes) & ~(kPage - 1);
-    if (e > b) madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
-  }
-#endif
-  (void)bytes;
+  wavelet_detail::adviseHugePages(p, bytes);
   return p;
 }
 
-std::mutex& plannerMutex() {
-  static std::mutex m;
-  return m;
-}
+std::mutex& plannerMutex() { return wavelet_detail::fftwPlannerMutex(); }
 
 // FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
 // so call it with plannerMutex() held: Measure planning is capped at kMeasureTimeLimitS

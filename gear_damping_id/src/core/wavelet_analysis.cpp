@@ -11,6 +11,7 @@
 #include <memory>
 #include <type_traits>
 
+#include "decimated_row.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -145,21 +146,27 @@ struct RowFit {
 };
 
 // One row's envelope and where the fit may look: everything the decay-region step needs.
+// The row is known at the samples 0, D, 2D, ... (w[m] = W at sample m*D, `points` values):
+// every sample (D = 1) on the full path, the row's decimated grid on the per-mode path
+// (docs/wavelet.md "Speed").
 struct RowEnvelope {
   const std::complex<double>* w = nullptr;
-  long n = 0;
+  long n = 0, D = 1, points = 0;
   double fs = 0.0, f = 0.0, omega0 = 0.0, s = 0.0, coi = 0.0;
-  long j_peak = 0;
+  long j_peak = 0;  // sample index of the envelope's maximum
 };
 
-// Decimation D of a row's fits and noise median on the per-mode path (see envelopeFit):
-// floor(s*fs/kFitSamplesPerScale), at least 1; 1 with the full scalogram (fits unchanged).
-// 16 samples per scale: 4 gave 8e-6 (xi) on the paper's modes and 4e-4 on the gear case.
+// The per-mode path's grid: every D-th sample, D = the largest divisor of the FFT length <=
+// s*fs/kFitSamplesPerScale (at least 1). 16 samples per scale: the decimated fits then match
+// the full path within 6e-7 (xi) and 4e-9 (f_d) on the paper's modes and 3e-5 on the gear case
+// (PerModePathMatchesTheFullPathOnThreeModes, the gear case test); at the band's rate (about 2.7
+// samples per scale, docs/wavelet.md "Speed") 2e-5 and 1e-6 on the paper's modes and 8e-4 (xi)
+// on the gear case, whose region end moves with the row's noise median over fewer samples.
 constexpr double kFitSamplesPerScale = 16.0;
-long fitDecimation(const RowEnvelope& r, const WaveletOptions& opt) {
-  if (opt.full_scalogram) return 1;
-  return std::max(1L, static_cast<long>(r.s * r.fs / kFitSamplesPerScale));
-}
+
+// First grid point at or after sample j (j >= 0), last at or before it.
+long gridCeil(long j, long D) { return (j + D - 1) / D; }
+long gridFloor(long j, long D) { return j / D; }
 
 // Median of count non-negative values v[0], v[stride], ..., v[(count-1)*stride]: the upper
 // middle element, exactly wavelet_detail::medianInPlace's value, without copying or reordering
@@ -222,10 +229,11 @@ double rowNoiseFloor(const RowEnvelope& r, const std::vector<double>& env, doubl
   const long a = static_cast<long>(std::ceil(std::max(0.0, lo) * r.fs));
   const long b = static_cast<long>(std::floor(std::max(0.0, hi) * r.fs));
   if (b <= a) return floor_spec;
-  // Per-mode path: the median of every D-th sample (|W| of noise is correlated over ~s, so the
-  // D = s*fs/16 spaced samples hold all its independent values).
-  const long D = fitDecimation(r, opt);
-  const double med = medianOfNonNegative(env.data() + a, (b - a) / D + 1, D);
+  // Per-mode path: the median of the row's grid points in [a, b] (spaced below a scale: |W| of
+  // noise is correlated over ~s, so they hold nearly all its independent values).
+  const long m0 = gridCeil(a, r.D), m1 = std::min(gridFloor(b, r.D), r.points - 1);
+  if (m1 < m0) return floor_spec;
+  const double med = medianOfNonNegative(env.data() + m0, m1 - m0 + 1, 1);
   return std::min(floor_spec, med / std::sqrt(std::log(2.0)));
 }
 
@@ -253,16 +261,18 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
   const double t0 = std::max(lo_coi, static_cast<double>(r.j_peak) * dt + r.coi) + shift;
   double t1 = hi_coi;
   const double limit = opt.floor_factor * out->floor;
-  const long j0 = static_cast<long>(std::ceil(t0 * r.fs));
-  const long j1 = static_cast<long>(std::floor(t1 * r.fs));
-  if (j0 <= j1 && j0 < r.n && env[static_cast<size_t>(j0)] < limit) {
+  // On the row's grid (every sample when D = 1): the first point at or after t0, and the
+  // region ends at the last point before the first one below the limit.
+  const long m0 = gridCeil(std::max(0L, static_cast<long>(std::ceil(t0 * r.fs))), r.D);
+  const long m1 = gridFloor(static_cast<long>(std::floor(t1 * r.fs)), r.D);
+  if (m0 <= m1 && m0 < r.points && env[static_cast<size_t>(m0)] < limit) {
     out->why = "envelope is below " + num(opt.floor_factor) + " x noise floor (" + num(out->floor) +
                ") at the start of the decay region (" + num(t0) + " s)";
     return false;
   }
-  for (long j = std::max(0L, j0); j <= j1 && j < r.n; ++j) {
-    if (env[static_cast<size_t>(j)] < limit) {
-      t1 = static_cast<double>(j - 1) * dt;
+  for (long m = m0; m <= m1 && m < r.points; ++m) {
+    if (env[static_cast<size_t>(m)] < limit) {
+      t1 = static_cast<double>((m - 1) * r.D) * dt;
       out->reached_floor = true;
       break;
     }
@@ -272,28 +282,30 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
   return true;
 }
 
-// Decimation of the envelope fits on the per-mode path: every D-th sample of the region with
-// D = floor(s*fs/kFitSamplesPerScale) (1 with the full scalogram, whose fits are unchanged).
-// The row is the signal filtered by the wavelet, whose spectrum is a Gaussian of standard
-// deviation 1/s in omega: sampled every s/16 seconds, its Nyquist frequency 16*pi/s lies 50
-// standard deviations out, so the integrands of the line fits (ln|W|, the phase and the
-// weights: nonlinear in W, their spectra wider than W's, much wider when the envelope jumps as
-// in the parametrically excited gear case) are summed by the trapezoid rule on the decimated
-// points (with the end weights below) as the full sum does: measured 7e-8 (xi) and 8e-10 (f_d)
-// relative on the paper's three modes, 2e-5 (f_d) on the gear case's jumping envelope.
-// See fitDecimation.
-// Quadrature points of the region [j0, j0 + m): j0 + i*D (i = 0..I) with weights D (ends
-// (D+1)/2: the trapezoid rule plus the half samples the full sum has at its ends), then the
-// < D samples after the last one, each with weight 1 (sum of weights: m).
-// Computed on the fly (no index arrays: their allocation faulted in fresh pages every call).
+// Quadrature points of the region of samples [j0, j1] on the row's grid (samples m*D): the
+// grid points m0*D <= ... <= m1*D inside it with the trapezoid rule's weights D, the first and
+// last widened to the region's ends (weight D/2 + (m0*D - j0) + 1/2 and D/2 + (j1 - m1*D) +
+// 1/2: the half sample the full sum has beyond its end samples, and the samples between the
+// region's ends and the outermost grid points, taken at those points); the weights sum to
+// j1 - j0 + 1, the full sum's count. With D = 1 every sample, weight 1.
+// The decimated row is the signal filtered by the wavelet, whose spectrum is a Gaussian of
+// standard deviation 1/s in omega, sampled at its band's rate (see fitModes): the line fits'
+// integrands that are linear or quadratic in W (|W|^2, Re/Im cross terms with the noise) have
+// spectra within twice that band, where the trapezoid sum of the points equals the full sum up
+// to the Gaussian at the grid's sampling frequency (< e^-30); ln|W| and the phase are
+// nonlinear in W and their spectra wider (where the envelope jumps or nears zero). Measured
+// against the full path in PerModePathMatchesTheFullPathOnThreeModes and the gear case.
 struct RegionPoints {
-  long j0, m, D, I;
-  RegionPoints(long j0_, long m_, long D_) : j0(j0_), m(m_), D(D_), I((m_ - 1) / D_) {}
-  long count() const { return I + 1 + (m - 1 - I * D); }
-  long index(long i) const { return i <= I ? j0 + i * D : j0 + I * D + (i - I); }
+  long j0, j1, D, m0, m1;
+  RegionPoints(long j0_, long m, long D_)
+      : j0(j0_), j1(j0_ + m - 1), D(D_), m0(gridCeil(j0_, D_)), m1(gridFloor(j0_ + m - 1, D_)) {}
+  long count() const { return std::max(0L, m1 - m0 + 1); }
   double weight(long i) const {
-    if (i > I || I == 0) return 1.0;
-    return i == 0 || i == I ? 0.5 * static_cast<double>(D + 1) : static_cast<double>(D);
+    if (m0 == m1) return static_cast<double>(j1 - j0 + 1);
+    const double half = 0.5 * static_cast<double>(D);
+    if (i == 0) return half + static_cast<double>(m0 * D - j0) + 0.5;
+    if (i == m1 - m0) return half + static_cast<double>(j1 - m1 * D) + 0.5;
+    return static_cast<double>(D);
   }
 };
 
@@ -302,17 +314,25 @@ struct RegionPoints {
 // the region (D = 1) or on its decimated quadrature points (D > 1; the phase is unwrapped about
 // the advance 2*pi*f*step/fs of the row's frequency f, which the ridge phase follows within
 // its bandwidth f/omega0, far inside the half turn unwrapping allows).
-void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, long m, long D,
-                 std::vector<double>* work, RowFit* out) {
+// ln of the noise-corrected envelope and the raw phase arg W of a prepared row's grid points
+// [c0, c1], kept for the row's second fit pass, whose region lies inside the first's (the same
+// values: no log or atan2 computed twice). Emptied (c1 < c0) by prepareRow.
+struct PointCache {
+  long c0 = 0, c1 = -1;
+  std::vector<double> ly, arg;
+};
+
+void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, long m,
+                 std::vector<double>* work, PointCache* cache, RowFit* out) {
+  const long D = r.D;
   const RegionPoints pts(j0, m, D);
-  const long np = D > 1 ? pts.count() : m;
-  work->resize(static_cast<size_t>(4 * np));
+  const long np = pts.count();
+  work->resize(static_cast<size_t>(3 * np));
   double* x = work->data();
-  double* ly = x + np;
-  double* ph = ly + np;
+  double* ph = x + np;
   double* wt = ph + np;
   double emax = 0.0;
-  for (long i = 0; i < m; ++i) emax = std::max(emax, env[static_cast<size_t>(j0 + i)]);
+  for (long i = 0; i < np; ++i) emax = std::max(emax, env[static_cast<size_t>(pts.m0 + i)]);
   if (!(emax > 0.0)) {
     out->why = "envelope is zero in the decay region";
     return;
@@ -322,18 +342,31 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   // noise-corrected envelope sqrt(|W|^2 - floor^2).
   const double floor2 = std::isfinite(out->floor) ? out->floor * out->floor : 0.0;
   const double turn = 2.0 * kPi * r.f / r.fs;  // phase advance of the row's frequency per sample
+  if (!(cache->c0 <= pts.m0 && pts.m0 + np - 1 <= cache->c1)) {
+    cache->c0 = pts.m0;
+    cache->c1 = pts.m0 + np - 1;
+    cache->ly.resize(static_cast<size_t>(np));
+    cache->arg.resize(static_cast<size_t>(np));
+    for (long i = 0; i < np; ++i) {
+      const long g = pts.m0 + i;
+      const double e = env[static_cast<size_t>(g)];
+      cache->ly[static_cast<size_t>(i)] = 0.5 * std::log(std::max(e * e - floor2, 1e-300));
+      cache->arg[static_cast<size_t>(i)] = std::arg(r.w[g]);
+    }
+  }
+  const double* ly = cache->ly.data() + (pts.m0 - cache->c0);
+  const double* arg = cache->arg.data() + (pts.m0 - cache->c0);
   double prev = 0.0, offset = 0.0;
   for (long i = 0; i < np; ++i) {
-    const long j = D > 1 ? pts.index(i) : j0 + i;
-    const double e = env[static_cast<size_t>(j)];
+    const long g = pts.m0 + i, j = g * D;  // grid point, sample
+    const double e = env[static_cast<size_t>(g)];
     const double e2 = std::max(e * e - floor2, 1e-300);
     x[i] = static_cast<double>(j) / r.fs;
-    ly[i] = 0.5 * std::log(e2);
     wt[i] = e2 / (emax * emax) * (D > 1 ? pts.weight(i) : 1.0);
-    const double p = std::arg(r.w[j]);
+    const double p = arg[i];
     if (D > 1) {
       if (i > 0) {
-        const double pred = turn * static_cast<double>(j - pts.index(i - 1));
+        const double pred = turn * static_cast<double>(D);
         double d = p - prev - pred;
         d -= 2.0 * kPi * std::round(d / (2.0 * kPi));
         ph[i] = ph[i - 1] + pred + d;
@@ -374,17 +407,22 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
 struct PreparedRow {
   RowEnvelope row;
   double peak = kNaN, floor = kNaN;
+  PointCache* cache = nullptr;  // the fits' ln|W| and arg W (emptied here)
 };
 
 PreparedRow prepareRow(const RowEnvelope& r, double noise_gain, double noise_std,
-                       const WaveletOptions& opt, std::vector<double>* env_scratch) {
+                       const WaveletOptions& opt, std::vector<double>* env_scratch,
+                       PointCache* cache) {
   PreparedRow p;
+  p.cache = cache;
+  cache->c1 = cache->c0 - 1;
   std::vector<double>& env = *env_scratch;
-  env.resize(static_cast<size_t>(r.n));
-  modulusOf(reinterpret_cast<const double*>(r.w), r.n, env.data());
+  env.resize(static_cast<size_t>(r.points));
+  modulusOf(reinterpret_cast<const double*>(r.w), r.points, env.data());
   p.row = r;
-  p.row.j_peak = static_cast<long>(std::max_element(env.begin(), env.end()) - env.begin());
-  p.peak = env[static_cast<size_t>(p.row.j_peak)];
+  const long g = static_cast<long>(std::max_element(env.begin(), env.end()) - env.begin());
+  p.row.j_peak = g * r.D;
+  p.peak = env[static_cast<size_t>(g)];
   p.floor = rowNoiseFloor(p.row, env, noise_gain, noise_std, opt);
   return p;
 }
@@ -408,7 +446,7 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
               " and >= one wavelet scale " + num(r.s) + " s)";
     return out;
   }
-  envelopeFit(r, env, j0, m, fitDecimation(r, opt), work, &out);
+  envelopeFit(r, env, j0, m, work, p.cache, &out);
   return out;
 }
 
@@ -537,10 +575,28 @@ struct Analysis {
   MorletCwt& own;             // the fit rows' own transform (per-mode path, or when scal's
                               // padding does not hold them)
   std::vector<double>& env;   // scratch: |W| of a row
-  std::vector<float>& env_f;  // scratch: |W| of the noise row in float (per-mode path)
   std::vector<double>& work;  // scratch: fits, medians
+  std::vector<double>& psd;   // scratch: |Y_k|^2 for the noise median (keeps its size)
+  std::vector<float>& env_f;  // scratch: |W| of the noise row in float (per-mode path)
   BinnedPower& power;         // per-mode path: the Parseval sums of the wide rows (see above)
+  wavelet_detail::DecimatedRows& decimated;  // per-mode path: the rows on their grids
+  PointCache& points;                        // scratch: the fits' ln|W| and arg W
 };
+
+// Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
+// ~1e-10 of the sum; DecimatedRows::noiseGain).
+double gainOf(const Analysis& a, const MorletCwt& fit, double f, double omega) {
+  if (a.opt.full_scalogram) return fit.noiseGainAt(f, omega);
+  const double coef = omega * a.fs / (f * static_cast<double>(fit.paddedSize()));
+  return wavelet_detail::DecimatedRows::noiseGain(coef, omega, fit.paddedSize());
+}
+
+// Per-mode path: row (f, omega) of fit's spectrum at every D-th sample (see fitModes).
+const std::complex<double>* decimatedRow(Analysis* a, const MorletCwt& fit, double f, double omega,
+                                         long D) {
+  const double coef = omega * a->fs / (f * static_cast<double>(fit.paddedSize()));  // s*w_k
+  return a->decimated.row(fit.spectrum(), fit.paddedSize(), coef, omega, D);
+}
 
 // Whether cwt is configured for exactly these signals and rows (then configure is skipped:
 // its plans and buffers are reused, and the results are those of a fresh configure).
@@ -641,7 +697,7 @@ Status spectraAndNoise(Analysis* a) {
   WaveletResult& res = a->res;
   res.spectrum_freq.resize(static_cast<size_t>(kmax + 1));
   res.spectrum_power.resize(static_cast<size_t>(kmax + 1));
-  std::vector<double>& p2 = a->work;
+  std::vector<double>& p2 = a->psd;
   p2.resize(static_cast<size_t>(kmax));
   for (long k = 0; k <= kmax; ++k) {
     const double p = std::norm(Y[k]);
@@ -829,6 +885,8 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
     // (PerModePathMatchesTheFullPathOnThreeModes), when noise dominates the row (median >=
     // kNoiseRowMedianPerRms of its RMS; white noise: 0.83). Otherwise (a clean record: the
     // float rounding would be taken for its noise) the row is computed again in double.
+    // Every sample: a median over a subset (e.g. every 2nd or 4th sample) moves noise_std by
+    // ~1e-3, and through the region ends f_d by up to 1e-7 on the paper's modes (measured).
     a->env_f.resize(static_cast<size_t>(a->n));
     if (fit->rowModulusSingleAt(f_hf, w0, a->env_f.data())) {
       med = medianOfNonNegative(a->env_f.data() + lo, hi - lo + 1, 1);
@@ -842,7 +900,8 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
     modulusOf(reinterpret_cast<const double*>(w), a->n, env->data());
     med = medianOfNonNegative(env->data() + lo, hi - lo + 1, 1);
   }
-  const double hf = med / std::sqrt(std::log(2.0) * fit->noiseGainAt(f_hf, w0));
+  const double gain = gainOf(*a, *fit, f_hf, w0);
+  const double hf = med / std::sqrt(std::log(2.0) * gain);
   if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
 }
 
@@ -852,20 +911,29 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
              std::vector<double>* env, std::vector<double>* work) {
   const double f = seed.f_spec;
   RowEnvelope row;
-  row.w = fit->rowAt(f, omega);
+  row.s = morletScale(f, omega);
+  row.n = a->n;
+  if (a->opt.full_scalogram) {
+    row.w = fit->rowAt(f, omega);
+    row.points = a->n;
+  } else {
+    // Per-mode path: the row on its grid of every D-th sample (see fitModes).
+    row.D = wavelet_detail::DecimatedRows::divisorAtMost(
+        fit->paddedSize(), static_cast<long>(row.s * a->fs / kFitSamplesPerScale));
+    row.points = (a->n + row.D - 1) / row.D;
+    if (fit->fitsPadding(f, omega)) row.w = decimatedRow(a, *fit, f, omega, row.D);
+  }
   if (!row.w) {
     RowFit r;
     r.why = "could not compute the wavelet row";
     return r;
   }
-  row.n = a->n;
   row.fs = a->fs;
   row.f = f;
   row.omega0 = omega;
-  row.s = morletScale(f, omega);
   row.coi = std::sqrt(2.0) * row.s;
-  const double gain = fit->noiseGainAt(f, omega), sn = a->res.noise_std;
-  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env);
+  const double gain = gainOf(*a, *fit, f, omega), sn = a->res.noise_std;
+  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env, &a->points);
   RowFit r = fitRow(p, *env, sigma_guess, seed.region, a->opt, work);
   if (r.ok && !seed.region && r.sigma > 0.0) {
     RowFit r2 = fitRow(p, *env, r.sigma, nullptr, a->opt, work);
@@ -1043,11 +1111,13 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   // padding holds them (the usual case: the modes lie above the grid's lowest row); else, and
   // always on the per-mode path (docs/wavelet.md "Speed"), from their own transform, padded
   // for the fit rows alone. The noise row comes from a->scal whenever it holds the fit rows.
+  // On the per-mode path each fit row is computed on its grid of every D-th sample
+  // (kFitSamplesPerScale), exact at those samples: one inverse FFT of length N/D of the row's
+  // band folded modulo N/D (DecimatedRows) instead of the full or pruned inverse FFT.
   bool held = true;
   for (size_t i = 0; i < seeds.size(); ++i) held = held && a->scal.fitsPadding(fit_f[i], fit_w[i]);
-  const bool reuse = held && a->opt.full_scalogram;
   MorletCwt* fit = &a->scal;
-  if (!reuse) {
+  if (!held || !a->opt.full_scalogram) {
     Status s;
     if (!sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w))
       s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
@@ -1177,9 +1247,11 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
 // the scratch vectors, so a repeated analysis neither re-plans nor faults in fresh pages.
 struct WaveletAnalyzer::Workspace {
   MorletCwt scal, own;
-  std::vector<double> env, work;
+  std::vector<double> env, work, psd;
   std::vector<float> env_f;
   BinnedPower power;
+  wavelet_detail::DecimatedRows decimated;
+  PointCache points;
 };
 
 WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
@@ -1189,7 +1261,8 @@ WaveletAnalyzer& WaveletAnalyzer::operator=(WaveletAnalyzer&&) noexcept = defaul
 
 namespace {
 // Empties *r like WaveletResult{} but keeps its vectors' capacity (a reused result's large
-// spectra then need no fresh pages).
+// spectra then need no fresh pages), and the spectra's sizes: spectraAndNoise overwrites them
+// (no zero fill of 2 x N/2 values first); analyze empties them when it stops before.
 void clearKeepingCapacity(WaveletResult* r) {
   r->frequencies.clear();
   r->coi.clear();
@@ -1197,8 +1270,6 @@ void clearKeepingCapacity(WaveletResult* r) {
   r->modulus.resize(0, 0);
   r->scalogram_times.clear();
   r->scalogram_decimation = 1;
-  r->spectrum_freq.clear();
-  r->spectrum_power.clear();
   r->scalogram_power.clear();
   r->peak_freq.clear();
   r->peak_power.clear();
@@ -1214,13 +1285,18 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   if (!result) return Status::internal("analyzeWavelet: null result");
   if (!ws_) ws_ = std::make_unique<Workspace>();
   clearKeepingCapacity(result);
-  if (Status s = options.check(); !s.ok()) return s;
+  auto stop = [result](Status s) {
+    result->spectrum_freq.clear();
+    result->spectrum_power.clear();
+    return s;
+  };
+  if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
-  Analysis a{y,      n,     sample_rate, options, *result, {},
-             w.scal, w.own, w.env,       w.env_f, w.work,  w.power};
-  if (Status s = checkInput(a); !s.ok()) return s;
-  if (Status s = frequencyGrid(&a); !s.ok()) return s;
-  if (Status s = spectraAndNoise(&a); !s.ok()) return s;
+  Analysis a{y,     n,      sample_rate, options, *result, {},          w.scal,  w.own,
+             w.env, w.work, w.psd,       w.env_f, w.power, w.decimated, w.points};
+  if (Status s = checkInput(a); !s.ok()) return stop(s);
+  if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
+  if (Status s = spectraAndNoise(&a); !s.ok()) return stop(s);
   if (options.full_scalogram)
     if (Status s = fullScalogram(&a); !s.ok()) return s;
   peakSpectrum(&a);
