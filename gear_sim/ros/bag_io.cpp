@@ -388,13 +388,20 @@ class ChunkReader {
     return item;
   }
 
-  // Queues an item once there is room; false when the reader is to stop.
-  bool push(Chunk item) {
-    const size_t n = samples(item);
+  // Waits until the queue has room; false when the reader is to stop.
+  bool room() {
     std::unique_lock<std::mutex> lock(mutex_);
     producer_waiting_ = true;
     cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
     producer_waiting_ = false;
+    return !stop_;
+  }
+
+  // Queues an item once there is room; false when the reader is to stop.
+  bool push(Chunk item) {
+    const size_t n = samples(item);
+    if (!room()) return false;
+    std::unique_lock<std::mutex> lock(mutex_);
     if (stop_) return false;
     queue_.push_back(std::move(item));
     queued_ += n;
@@ -409,7 +416,10 @@ class ChunkReader {
     if (direct.empty()) return false;
     const DirectFile file(info_.path);
     if (!file.is(info_.stamp)) return false;
-    for (size_t i = 0; i < direct.size();) {
+    // A chunk is read only once the queue has room: it holds about kQueueSamples samples of
+    // chunks or one larger chunk, so with the consumer's at most two large chunks' data are held
+    // (rosbag held one chunk and copies of the queued messages).
+    for (size_t i = 0; i < direct.size() && room();) {
       Chunk item = emptyItem();
       const BagSignalInfo::DirectMessage& first = direct[i];
       if (!file.read(first.chunk_pos, first.chunk_len, &item.bytes))
