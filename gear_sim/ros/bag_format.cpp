@@ -292,6 +292,10 @@ class BagWalker {
  public:
   BagWalker(int fd, std::uint64_t file_size) : src_(fd), file_size_(file_size) {}
 
+  // The chunk records (BagStructure::chunks).
+  const std::vector<BagStructure::Chunk>& chunks() const { return chunks_; }
+  bool encrypted() const { return encrypted_; }
+
   // Whether every message data record names a connection of the index (checkBagStructure).
   bool messagesIndexed() const {
     // rosbag reads conn_count connection records from index_pos on (refusing other records);
@@ -345,6 +349,7 @@ class BagWalker {
         index_pos_ = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
         conn_count_ = field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
         field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
+        encrypted_ = r.fields.count("encryptor") > 0;
         break;
       case kChunk:
         chunk(r);
@@ -398,6 +403,7 @@ class BagWalker {
           r.start};
     }
     last_chunk_ = r.start;
+    chunks_.push_back({r.start, r.data_pos, r.data_len, c->second == "none"});
   }
 
   // An index data record: every entry points at a message of the chunk before it (read in
@@ -469,13 +475,17 @@ class BagWalker {
   std::uint32_t conn_count_ = 0;
   std::map<std::uint64_t, std::uint32_t> top_connections_;  // top-level connection: start -> conn
   std::set<std::uint32_t> message_conns_;                   // conn of every message data record
+  std::vector<BagStructure::Chunk> chunks_;
+  bool encrypted_ = false;
 };
 
-// Walks the file; returns BagWalker::messagesIndexed.
-bool walk(int fd, std::uint64_t file_size) {
+// Walks the file into *structure.
+void walk(int fd, std::uint64_t file_size, BagStructure* structure) {
   BagWalker walker(fd, file_size);
   walker.walk();
-  return walker.messagesIndexed();
+  structure->messages_indexed = walker.messagesIndexed();
+  structure->chunks = walker.chunks();
+  structure->encrypted = walker.encrypted();
 }
 
 }  // namespace
@@ -515,8 +525,9 @@ gear_sim::Status walkFile(int fd, const std::string& path, BagStructure* structu
   const off_t end = ::lseek(fd, 0, SEEK_END);
   if (end < 0) return Status::ioError(path + ": cannot read as a bag (cannot determine its size)");
   try {
-    structure->messages_indexed = walk(fd, static_cast<std::uint64_t>(end));
+    walk(fd, static_cast<std::uint64_t>(end), structure);
   } catch (const Corrupt& c) {
+    *structure = BagStructure{};
     return Status::invalidInput(
         path + ": cannot read as a bag (" + c.what + " at byte " + std::to_string(c.at) + ")" +
         (c.truncated ? "; if it is truncated, `rosbag reindex` may recover it" : ""));
@@ -525,6 +536,27 @@ gear_sim::Status walkFile(int fd, const std::string& path, BagStructure* structu
 }
 
 }  // namespace
+
+namespace {
+// BagStructure::stamp of a regular file's status.
+void stampOf(const struct stat& st, std::uint64_t out[5]) {
+  const auto ns = [](const timespec& t) {
+    return static_cast<std::uint64_t>(t.tv_sec) * 1000000000u +
+           static_cast<std::uint64_t>(t.tv_nsec);
+  };
+  out[0] = static_cast<std::uint64_t>(st.st_dev);
+  out[1] = static_cast<std::uint64_t>(st.st_ino);
+  out[2] = static_cast<std::uint64_t>(st.st_size);
+  out[3] = ns(st.st_mtim);
+  out[4] = ns(st.st_ctim);
+}
+}  // namespace
+
+void fileStamp(int fd, std::uint64_t out[5]) {
+  struct stat st {};
+  std::fill(out, out + 5, 0);
+  if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)) stampOf(st, out);
+}
 
 gear_sim::Status checkBagStructure(const std::string& path, BagStructure* structure) {
   using gear_sim::Status;
@@ -548,6 +580,7 @@ gear_sim::Status checkBagStructure(const std::string& path, BagStructure* struct
     }
   }
   Status status = walkFile(fd, path, structure);
+  if (known && status.ok()) stampOf(st, structure->stamp);  // as it was before the walk
   ::close(fd);
   if (known && settled(st, start)) {
     std::lock_guard<std::mutex> lock(mutex);

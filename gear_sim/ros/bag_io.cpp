@@ -1,12 +1,15 @@
 #include "gear_sim_ros/bag_io.hpp"
 
+#include <fcntl.h>
 #include <gear_damping/GearParams.h>
 #include <gear_damping/SignalChunk.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
@@ -194,29 +197,136 @@ double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   return m;
 }
 
+// ---- Direct reading (BagSignalInfo::direct) ----
+// rosbag reads a bag's chunk messages by reading each chunk's data into a buffer and copying a
+// message's bytes out of it; for the common bag (one connection on the topic, uncompressed
+// chunks, every message indexed) the same bytes are read here with one pread per chunk and used
+// where they lie, in the order rosbag::View gives (its index entries).
+
+// ros::Header::parse refuses a field longer than this (rosbag then throws): a record header no
+// longer than it has no such field, so rosbag reads it as the direct reading does.
+constexpr std::uint64_t kRosHeaderFieldLimit = 1000000;
+
+// The bag file, read by pread.
+class DirectFile {
+ public:
+  explicit DirectFile(const std::string& path) : fd_(::open(path.c_str(), O_RDONLY | O_CLOEXEC)) {}
+  ~DirectFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  DirectFile(const DirectFile&) = delete;
+  DirectFile& operator=(const DirectFile&) = delete;
+  // Whether the open file is the one stamped (BagStructure::stamp; an unknown stamp: never).
+  bool is(const std::uint64_t stamp[5]) const {
+    if (fd_ < 0 || stamp[1] == 0) return false;  // a regular file's inode number is never 0
+    std::uint64_t now[5];
+    fileStamp(fd_, now);
+    return std::equal(now, now + 5, stamp);
+  }
+  // The n bytes at pos into *buf (grown as needed, never shrunk); false unless all were read.
+  bool read(std::uint64_t pos, std::uint32_t n, std::vector<std::uint8_t>* buf) const {
+    if (buf->size() < std::max<std::uint32_t>(n, 1)) buf->resize(std::max<std::uint32_t>(n, 1));
+    std::uint64_t got = 0;
+    while (got < n) {
+      const ssize_t r = ::pread(fd_, buf->data() + got, n - got, static_cast<off_t>(pos + got));
+      if (r < 0 && errno == EINTR) continue;
+      if (r <= 0) return false;
+      got += static_cast<std::uint64_t>(r);
+    }
+    return true;
+  }
+
+ private:
+  int fd_;
+};
+
+// Where the data of the message record at `offset` of a chunk's `n` data bytes lie: into
+// *data (offset in the chunk's data) and *size. False when the record does not fit or its header
+// is longer than kRosHeaderFieldLimit.
+bool messageData(const std::uint8_t* chunk, std::uint64_t n, std::uint64_t offset,
+                 std::uint32_t* data, std::uint32_t* size) {
+  std::uint32_t header_len = 0;
+  if (offset > n || n - offset < 4) return false;
+  std::memcpy(&header_len, chunk + offset, 4);
+  const std::uint64_t at = offset + 4 + std::uint64_t{header_len};  // the data length
+  if (header_len > kRosHeaderFieldLimit || at > n || n - at < 4) return false;
+  std::memcpy(size, chunk + at, 4);
+  if (n - at - 4 < *size) return false;
+  *data = static_cast<std::uint32_t>(at + 4);
+  return true;
+}
+
+// A View of one topic whose index entries can be read (rosbag::View keeps its ranges
+// protected).
+class IndexView : public rosbag::View {
+ public:
+  IndexView(const rosbag::Bag& bag, const std::string& topic)
+      : View(bag, rosbag::TopicQuery(topic)) {}
+  // The only connection range holding messages (the View iterates it in its order), null when
+  // none or several do.
+  const rosbag::MessageRange* onlyRange() const {
+    const rosbag::MessageRange* only = nullptr;
+    for (const rosbag::MessageRange* r : ranges_) {
+      if (r->begin == r->end) continue;
+      if (only != nullptr) return nullptr;
+      only = r;
+    }
+    return only;
+  }
+};
+
+// The topic's messages for direct reading, in rosbag::View's order, into *out (their record's
+// offset in `offset`, size 0); false (and *out empty) when rosbag must read them: messages not
+// all indexed, an encryptor, an unknown file, several connections holding messages, a type other
+// than SignalChunk as compiled, a compressed chunk or a chunk header rosbag may parse otherwise.
+bool directMessages(const rosbag::Bag& bag, const std::string& topic, const BagStructure& s,
+                    std::vector<BagSignalInfo::DirectMessage>* out) {
+  out->clear();
+  if (!s.messages_indexed || s.encrypted || s.stamp[1] == 0) return false;
+  const IndexView view(bag, topic);
+  const rosbag::MessageRange* range = view.onlyRange();
+  if (range == nullptr || range->connection_info->datatype != kChunkType ||
+      range->connection_info->md5sum !=
+          ros::message_traits::MD5Sum<gear_damping::SignalChunk>::value())
+    return false;
+  for (auto e = range->begin; e != range->end; ++e) {
+    const auto c = std::lower_bound(
+        s.chunks.begin(), s.chunks.end(), e->chunk_pos,
+        [](const BagStructure::Chunk& a, std::uint64_t pos) { return a.start < pos; });
+    if (c == s.chunks.end() || c->start != e->chunk_pos || !c->uncompressed ||
+        c->data_pos - c->start - 8 > kRosHeaderFieldLimit) {
+      out->clear();
+      return false;
+    }
+    out->push_back({c->data_pos, c->data_len, e->offset, 0});
+  }
+  return true;
+}
+
 // Reads the messages of a SignalChunk topic on a thread of its own, so that what the caller does
 // with one chunk overlaps the read of the next (issue 18: `analyze` reads and computes at the
 // same time). The queue between them is bounded by samples, so memory stays at about
-// kQueueSamples samples (or one chunk when chunks are larger); the byte buffers are recycled.
-// With `in_place` (BagSignalInfo::messages_indexed) a SignalChunk is passed on as its serialized
-// bytes, its fields read in place (chunkLayout), not deserialised; any other message goes
-// through rosbag's deserialisation as before. A message that does not instantiate as a
-// SignalChunk arrives with valid == false; an exception of the read ends the stream and is
-// reported by error().
+// kQueueSamples samples (or one item when items are larger); the byte buffers are recycled.
+// Messages the scan read directly (BagSignalInfo::direct) are read the same way while the file
+// is the one scanned, a chunk's data per item; otherwise through rosbag::View, one message per
+// item: with BagSignalInfo::messages_indexed a SignalChunk is passed on as its serialized bytes,
+// its fields read in place (chunkLayout), not deserialised; any other message goes through
+// rosbag's deserialisation as before. A message that does not instantiate as a SignalChunk
+// arrives with valid == false; an exception of the read ends the stream and is reported by
+// error().
 class ChunkReader {
  public:
-  struct Chunk {
-    std::vector<std::uint8_t> bytes;  // the serialized message
-    RawChunk c;                       // its fields, in `bytes`
+  struct Message {
+    RawChunk c;  // its fields, in the item's bytes
     bool valid = false;
+  };
+  struct Chunk {
+    std::vector<std::uint8_t> bytes;  // a serialized message, or a chunk's data (direct)
+    std::vector<Message> messages;    // in `bytes`
   };
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
-  ChunkReader(std::string path, std::string topic, bool in_place)
-      : path_(std::move(path)),
-        topic_(std::move(topic)),
-        in_place_(in_place),
-        thread_([this] { run(); }) {}
+  explicit ChunkReader(const BagSignalInfo& info) : info_(info), thread_([this] { run(); }) {}
   ~ChunkReader() {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -228,7 +338,7 @@ class ChunkReader {
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
 
-  /// The next message into *c (whose previous bytes are recycled); false at the end of the
+  /// The next item into *c (whose previous bytes are recycled); false at the end of the
   /// topic or after a read error.
   bool next(Chunk* c) {
     std::unique_lock<std::mutex> lock(mutex_);
@@ -239,54 +349,111 @@ class ChunkReader {
     if (queue_.empty()) return false;
     *c = std::move(queue_.front());
     queue_.pop_front();
-    queued_ -= c->valid ? c->c.dte.size() : 0;
-    if (producer_waiting_) cv_.notify_all();  // (a wake-up per chunk costs two system calls)
+    queued_ -= samples(*c);
+    if (producer_waiting_) cv_.notify_all();  // (a wake-up per item costs two system calls)
     return true;
   }
   /// The read error (empty when none); valid once next() returned false.
   const std::string& error() const { return error_; }
 
  private:
-  void read(const rosbag::MessageInstance& m, Chunk* item) const {
-    if (in_place_ && m.getDataType() == kChunkType && m.isType<gear_damping::SignalChunk>()) {
-      const std::uint32_t n = copyMessage(m, &item->bytes);
-      item->valid = chunkLayout(item->bytes.data(), n, &item->c).empty();
+  static size_t samples(const Chunk& c) {
+    size_t n = 0;
+    for (const Message& m : c.messages) n += m.valid ? m.c.dte.size() : 0;
+    return n;
+  }
+
+  void read(const rosbag::MessageInstance& m, Message* item,
+            std::vector<std::uint8_t>* bytes) const {
+    if (info_.messages_indexed && m.getDataType() == kChunkType &&
+        m.isType<gear_damping::SignalChunk>()) {
+      const std::uint32_t n = copyMessage(m, bytes);
+      item->valid = chunkLayout(bytes->data(), n, &item->c).empty();
       if (item->valid) return;
     }
     const auto p = m.instantiate<gear_damping::SignalChunk>();
     item->valid = p != nullptr;
     if (!p) return;
-    layoutDeserialised(*p, &item->bytes, &item->c);
+    layoutDeserialised(*p, bytes, &item->c);
+  }
+
+  // An item with recycled bytes when there are some.
+  Chunk emptyItem() {
+    Chunk item;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!spare_.empty()) {
+      item.bytes = std::move(spare_.back());
+      spare_.pop_back();
+    }
+    return item;
+  }
+
+  // Waits until the queue has room; false when the reader is to stop.
+  bool room() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    producer_waiting_ = true;
+    cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
+    producer_waiting_ = false;
+    return !stop_;
+  }
+
+  // Queues an item once there is room; false when the reader is to stop.
+  bool push(Chunk item) {
+    const size_t n = samples(item);
+    if (!room()) return false;
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (stop_) return false;
+    queue_.push_back(std::move(item));
+    queued_ += n;
+    if (consumer_waiting_) cv_.notify_all();
+    return true;
+  }
+
+  // The messages of info_.direct, a chunk's data per item; false (nothing read) when the file is
+  // not the one scanned.
+  bool runDirect() {
+    const auto& direct = info_.direct;
+    if (direct.empty()) return false;
+    const DirectFile file(info_.path);
+    if (!file.is(info_.stamp)) return false;
+    // A chunk is read only once the queue has room: it holds about kQueueSamples samples of
+    // chunks or one larger chunk, so with the consumer's at most two large chunks' data are held
+    // (rosbag held one chunk and copies of the queued messages).
+    for (size_t i = 0; i < direct.size() && room();) {
+      Chunk item = emptyItem();
+      const BagSignalInfo::DirectMessage& first = direct[i];
+      if (!file.read(first.chunk_pos, first.chunk_len, &item.bytes))
+        throw std::runtime_error("the file was changed while it was read");
+      for (; i < direct.size() && direct[i].chunk_pos == first.chunk_pos; ++i) {
+        const BagSignalInfo::DirectMessage& d = direct[i];
+        Message m;
+        m.valid = d.offset <= first.chunk_len && d.size <= first.chunk_len - d.offset &&
+                  chunkLayout(item.bytes.data() + d.offset, d.size, &m.c).empty();
+        item.messages.push_back(m);
+      }
+      if (!push(std::move(item))) break;
+    }
+    return true;
+  }
+
+  void runView() {
+    rosbag::Bag bag;
+    bag.open(info_.path, rosbag::bagmode::Read);
+    rosbag::View view(bag, rosbag::TopicQuery(info_.topic));
+    for (const rosbag::MessageInstance& m : view) {
+      Chunk item = emptyItem();
+      item.messages.resize(1);
+      read(m, &item.messages[0], &item.bytes);
+      if (!push(std::move(item))) break;
+    }
   }
 
   void run() {
     std::string error;
     try {
-      rosbag::Bag bag;
-      bag.open(path_, rosbag::bagmode::Read);
-      rosbag::View view(bag, rosbag::TopicQuery(topic_));
-      for (const rosbag::MessageInstance& m : view) {
-        Chunk item;
-        {
-          std::lock_guard<std::mutex> lock(mutex_);
-          if (!spare_.empty()) {
-            item.bytes = std::move(spare_.back());
-            spare_.pop_back();
-          }
-        }
-        read(m, &item);
-        const size_t n = item.valid ? item.c.dte.size() : 0;
-        std::unique_lock<std::mutex> lock(mutex_);
-        producer_waiting_ = true;
-        cv_.wait(lock, [this] { return stop_ || queue_.empty() || queued_ < kQueueSamples; });
-        producer_waiting_ = false;
-        if (stop_) break;
-        queue_.push_back(std::move(item));
-        queued_ += n;
-        if (consumer_waiting_) cv_.notify_all();
-      }
+      if (!runDirect()) runView();
     } catch (const std::exception& e) {
-      error = openError(path_, e);
+      error = openError(info_.path, e);
     }
     std::lock_guard<std::mutex> lock(mutex_);
     error_ = error;
@@ -294,8 +461,7 @@ class ChunkReader {
     cv_.notify_all();
   }
 
-  const std::string path_, topic_;
-  const bool in_place_;
+  const BagSignalInfo& info_;
   std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Chunk> queue_;
@@ -377,25 +543,30 @@ class ChunkScan {
 
   Status add(const rosbag::MessageInstance& m) {
     RawChunk c;
-    bool in_place = false;
     if (m.getDataType() == kChunkType) {
       const std::uint32_t n = copyMessage(m, &buffer_);
-      if (const std::string bad = chunkLayout(buffer_.data(), n, &c); !bad.empty()) {
-        return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
-                                    " message " + std::to_string(out_.chunks + 1) + ": corrupt " +
-                                    kChunkType + " (" + bad + ")");
-      }
-      in_place = raw_ && m.isType<gear_damping::SignalChunk>();
+      if (Status s = layout(buffer_.data(), n, &c); !s.ok()) return s;
+      if (raw_ && m.isType<gear_damping::SignalChunk>()) return add(c);
     }
-    if (!in_place) {  // rosbag's deserialisation, with its checks and exceptions
-      const auto p = m.instantiate<gear_damping::SignalChunk>();
-      if (!p) {
-        return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
-                                    " message " + std::to_string(out_.chunks + 1) +
-                                    " (first_index ?): not a " + std::string(kChunkType));
-      }
-      layoutDeserialised(*p, &buffer_, &c);
+    // rosbag's deserialisation, with its checks and exceptions
+    const auto p = m.instantiate<gear_damping::SignalChunk>();
+    if (!p) {
+      return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
+                                  " message " + std::to_string(out_.chunks + 1) +
+                                  " (first_index ?): not a " + std::string(kChunkType));
     }
+    layoutDeserialised(*p, &buffer_, &c);
+    return add(c);
+  }
+
+  // A SignalChunk's `n` serialized bytes read in place (as add(m) reads an indexed one).
+  Status addInPlace(const std::uint8_t* bytes, std::uint32_t n) {
+    RawChunk c;
+    if (Status s = layout(bytes, n, &c); !s.ok()) return s;
+    return add(c);
+  }
+
+  Status add(const RawChunk& c) {
     const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
                               std::to_string(out_.chunks + 1) + " (first_index " +
                               std::to_string(c.first_index) + ")";
@@ -454,6 +625,16 @@ class ChunkScan {
   }
 
  private:
+  // The layout of a SignalChunk's bytes into *c; an error naming the message when it does not fit.
+  Status layout(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) const {
+    if (const std::string bad = chunkLayout(bytes, n, c); !bad.empty()) {
+      return Status::invalidInput(path_ + ": " + gear_sim::quoteForMessage(out_.topic) +
+                                  " message " + std::to_string(out_.chunks + 1) + ": corrupt " +
+                                  kChunkType + " (" + bad + ")");
+    }
+    return {};
+  }
+
   // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
   static Status checkChunk(const RawChunk& c, const std::string& where) {
     if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
@@ -636,6 +817,36 @@ std::string layoutProblem(const rosbag::MessageInstance& m) {
 }
 }  // namespace
 
+namespace {
+// The scan of the messages in out->direct, read directly (their `offset` and `size` set to their
+// data's): false when one cannot be read as rosbag reads it (the file changed since its walk, a
+// record that does not fit or has a long header; the caller then scans through rosbag), else
+// true with the scan's outcome in *status.
+bool scanDirect(const std::string& path, const BagStructure& structure, BagSignalInfo* out,
+                Status* status) {
+  const DirectFile file(path);
+  if (!file.is(structure.stamp)) return false;
+  ChunkScan scan(path, out, true);
+  std::vector<std::uint8_t> chunk;
+  bool loaded = false;
+  std::uint64_t at = 0;  // the loaded chunk's position
+  for (BagSignalInfo::DirectMessage& d : out->direct) {
+    if (!loaded || d.chunk_pos != at) {
+      if (!file.read(d.chunk_pos, d.chunk_len, &chunk)) return false;
+      loaded = true;
+      at = d.chunk_pos;
+    }
+    if (!messageData(chunk.data(), d.chunk_len, d.offset, &d.offset, &d.size)) return false;
+    if (Status s = scan.addInPlace(chunk.data() + d.offset, d.size); !s.ok()) {
+      *status = s;
+      return true;
+    }
+  }
+  *status = scan.finish();
+  return true;
+}
+}  // namespace
+
 Status checkMessageLayout(const rosbag::MessageInstance& m) {
   const std::string problem = layoutProblem(m);
   return problem.empty() ? Status() : Status::invalidInput(problem);
@@ -654,6 +865,17 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
     if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
     out.messages_indexed = structure.messages_indexed;
+    if (directMessages(bag, out.topic, structure, &out.direct)) {
+      BagSignalInfo direct = out;
+      Status status;
+      if (scanDirect(path, structure, &direct, &status)) {
+        if (!status.ok()) return status;
+        std::copy(structure.stamp, structure.stamp + 5, direct.stamp);
+        *info = std::move(direct);
+        return {};
+      }
+      out.direct.clear();  // rosbag reads them
+    }
     ChunkScan scan(path, &out, structure.messages_indexed);
     rosbag::View view(bag, rosbag::TopicQuery(out.topic));
     for (const rosbag::MessageInstance& m : view)
@@ -753,18 +975,17 @@ Status streamSignalBag(const BagSignalInfo& info,
   startRange();
   try {
     // Reads ahead on its own thread.
-    ChunkReader reader(info.path, info.topic, info.messages_indexed);
+    ChunkReader reader(info);
     const unsigned channels = channelSet(info);
-    ChunkReader::Chunk item;
-    while (reader.next(&item)) {
-      const RawChunk& c = item.c;
-      // Validated by scanSignalBag; a chunk of a bag changed since is not read out of bounds
-      // (outside the scanned indices, other channels or channels of other lengths: its samples
-      // stay a gap).
-      if (!item.valid || c.first_index < info.first_index ||
+    // One message into the ranges. Validated by scanSignalBag; a chunk of a bag changed since is
+    // not read out of bounds (outside the scanned indices, other channels or channels of other
+    // lengths: its samples stay a gap).
+    auto take = [&](const ChunkReader::Message& m) {
+      const RawChunk& c = m.c;
+      if (!m.valid || c.first_index < info.first_index ||
           c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples) ||
           channelSet(c) != channels || !channelLengthError(c).empty())
-        continue;
+        return Status();
       const Eigen::Index b = static_cast<Eigen::Index>(c.first_index - info.first_index);
       const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());
       if (Status s = flushUpTo(b); !s.ok()) return s;
@@ -774,7 +995,12 @@ Status streamSignalBag(const BagSignalInfo& info,
         if (hi < ranges[r].second) break;  // the range continues in the next chunk
         if (Status s = emit(); !s.ok()) return s;
       }
-    }
+      return Status();
+    };
+    ChunkReader::Chunk item;
+    while (reader.next(&item))
+      for (const ChunkReader::Message& m : item.messages)
+        if (Status s = take(m); !s.ok()) return s;
     if (!reader.error().empty()) return Status::invalidInput(reader.error());
     if (Status s = flushUpTo(std::numeric_limits<Eigen::Index>::max()); !s.ok()) return s;
   } catch (const std::exception& e) {

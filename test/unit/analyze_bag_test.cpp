@@ -7,12 +7,14 @@
 #include <rosbag/bag.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <tuple>
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -155,6 +157,102 @@ TEST_F(AnalyzeBag, ABagChangedSinceItsScanIsNotReadOutOfBounds) {
     ASSERT_TRUE(std::isnan(t.dte[i])) << i;
     ASSERT_TRUE(std::isnan(t.stiffness[i])) << i;
   }
+}
+
+// A bag's chunks read from the file directly (one connection, uncompressed chunks) and through
+// rosbag (the same chunks lz4-compressed, and the same bag on two connections of the topic):
+// the same scan (counts, warnings, flags, stiffness mean), the same record and the same streamed
+// ranges, bit for bit; implausible values, a NaN chunk and a gap included.
+TEST_F(AnalyzeBag, DirectReadingEqualsReadingThroughRosbag) {
+  const auto write = [&](const std::string& name, rosbag::compression::CompressionType type,
+                         bool two_connections) {
+    const fs::path p = dir() / name;
+    rosbag::Bag bag(p.string(), rosbag::bagmode::Write);
+    bag.setCompression(type);
+    bag.setChunkThreshold(3000);  // a few messages per chunk
+    gear_damping::SignalChunk c;
+    for (Eigen::Index b = 0, k = 0; b < table_.size(); b += 300, ++k) {
+      if (k == 3) continue;  // a gap
+      gear_sim_ros::toChunk(table_, b, std::min<Eigen::Index>(300, table_.size() - b),
+                            config_.simulation.sample_rate, static_cast<std::uint64_t>(b), &c);
+      if (k == 5) c.dte[7] = 2.0;                                         // out of range
+      if (k == 6) c.torque[0] = std::numeric_limits<double>::infinity();  // non-finite
+      if (k == 8) std::fill(c.dte.begin(), c.dte.end(), std::nan(""));
+      if (k == 9) c.mesh_state[3] = 7;
+      auto header = boost::make_shared<ros::M_string>();
+      using Traits = ros::message_traits::DataType<gear_damping::SignalChunk>;
+      (*header)["type"] = Traits::value();
+      (*header)["md5sum"] = ros::message_traits::MD5Sum<gear_damping::SignalChunk>::value();
+      (*header)["message_definition"] =
+          ros::message_traits::Definition<gear_damping::SignalChunk>::value();
+      (*header)["callerid"] = two_connections && k % 2 ? "/b" : "/a";
+      bag.write("/gear/signal", ros::Time(1.0 + 1e-3 * static_cast<double>(k)), c, header);
+    }
+    bag.close();
+    return p.string();
+  };
+  const std::string direct = write("direct.bag", rosbag::compression::Uncompressed, false);
+  std::string e;
+  gear_sim_ros::BagSignalInfo a;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(direct, "", &a), &e)) << e;
+  EXPECT_FALSE(a.direct.empty());
+  EXPECT_EQ(a.gaps, 1);
+  EXPECT_GT(a.non_finite_values, 300);
+  EXPECT_EQ(a.out_of_range_values, 1);
+  EXPECT_EQ(a.bad_mesh_states, 1);
+  gear_sim::SignalTable ta;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(a, &ta), &e)) << e;
+  const auto same = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
+    return x.size() == y.size() &&
+           std::memcmp(x.data(), y.data(), sizeof(double) * static_cast<size_t>(x.size())) == 0;
+  };
+  for (const auto& [name, type, two] :
+       {std::tuple{"lz4.bag", rosbag::compression::LZ4, false},
+        std::tuple{"two_connections.bag", rosbag::compression::Uncompressed, true}}) {
+    gear_sim_ros::BagSignalInfo b;
+    ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(write(name, type, two), "", &b), &e))
+        << e;
+    EXPECT_TRUE(b.direct.empty()) << name;
+    EXPECT_EQ(a.warnings, b.warnings) << name;
+    EXPECT_EQ(std::tie(a.chunks, a.samples, a.gaps, a.gap_samples, a.real_samples,
+                       a.non_finite_values, a.out_of_range_values, a.bad_mesh_states,
+                       a.outlier_chunks, a.first_index, a.sample_rate, a.has_params),
+              std::tie(b.chunks, b.samples, b.gaps, b.gap_samples, b.real_samples,
+                       b.non_finite_values, b.out_of_range_values, b.bad_mesh_states,
+                       b.outlier_chunks, b.first_index, b.sample_rate, b.has_params))
+        << name;
+    EXPECT_EQ(std::memcmp(&a.stiffness_mean, &b.stiffness_mean, sizeof(double)), 0) << name;
+    gear_sim::SignalTable tb;
+    ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(b, &tb), &e)) << e;
+    for (const auto& [x, y] : {std::pair{&ta.time, &tb.time},
+                               {&ta.dte, &tb.dte},
+                               {&ta.dte_velocity, &tb.dte_velocity},
+                               {&ta.stiffness, &tb.stiffness},
+                               {&ta.torque, &tb.torque},
+                               {&ta.mesh_state, &tb.mesh_state},
+                               {&ta.mesh_phase, &tb.mesh_phase},
+                               {&ta.damping, &tb.damping}})
+      EXPECT_TRUE(same(*x, *y)) << name;
+    const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+        {0, 250}, {280, 950}, {1000, 1001}, {2500, 4000}};
+    std::vector<Eigen::VectorXd> ra, rb;
+    for (auto [info, out] : {std::pair{&a, &ra}, {&b, &rb}})
+      ASSERT_TRUE(
+          gear_test::ok(gear_sim_ros::streamSignalBag(*info, ranges,
+                                                      [&](const gear_sim::SignalTable& t, size_t) {
+                                                        out->push_back(t.dte);
+                                                        out->push_back(t.torque);
+                                                        return gear_sim::Status();
+                                                      }),
+                        &e))
+          << e;
+    ASSERT_EQ(ra.size(), rb.size()) << name;
+    for (size_t k = 0; k < ra.size(); ++k) EXPECT_TRUE(same(ra[k], rb[k])) << name << " " << k;
+  }
+  // Cut after its scan: no longer the file walked, so rosbag reads it (and refuses it).
+  fs::resize_file(direct, fs::file_size(direct) / 2);
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::readSignalBag(a, &ta), &e));
+  EXPECT_NE(e.find("cannot read as a bag"), std::string::npos) << e;
 }
 
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,

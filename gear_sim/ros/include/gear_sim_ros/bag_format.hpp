@@ -18,7 +18,9 @@
 //     the chunk they follow; chunk info records: version 1, count x 8 bytes, chunk_pos a chunk.
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "gear_sim/status.hpp"
 
@@ -34,7 +36,24 @@ struct BagStructure {
   /// Every message data record names a connection of the bag's index (rosbag's deserialisation
   /// throws "Unknown connection ID" for the others; the raw readers of bag_io need it).
   bool messages_indexed = false;
+  /// A chunk record: where it starts and where its data lie in the file.
+  struct Chunk {
+    std::uint64_t start = 0;     ///< the chunk record's first byte
+    std::uint64_t data_pos = 0;  ///< its data's first byte
+    std::uint32_t data_len = 0;  ///< its data's length
+    bool uncompressed = false;   ///< compression "none": the data are the records
+  };
+  /// Every chunk record, in file order (ascending `start`).
+  std::vector<Chunk> chunks;
+  /// The bag header names an encryptor (rosbag decrypts its chunks on reading).
+  bool encrypted = false;
+  /// The walked file's identity (device, inode, size, modification and status-change times in
+  /// ns); all 0 when unknown (not a regular file).
+  std::uint64_t stamp[5] = {0, 0, 0, 0, 0};
 };
+
+/// The identity of an open file as BagStructure::stamp holds it; all 0 when unknown.
+void fileStamp(int fd, std::uint64_t out[5]);
 
 /// Ok when `path` is a structurally sound bag of format 2.0; else InvalidInput (IoError when it
 /// cannot be opened) with a one-line message ("<path>: cannot read as a bag (<reason> at byte N)").

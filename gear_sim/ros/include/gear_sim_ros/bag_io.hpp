@@ -83,6 +83,18 @@ struct BagSignalInfo {
   /// Every message record names a connection of the bag's index (BagStructure): the chunks are
   /// read in place from their bytes instead of through rosbag's deserialisation.
   bool messages_indexed = false;
+  /// Where the scan read each chunk message when it read them from the file itself (one
+  /// connection on the topic, uncompressed chunks, no encryptor, every message indexed), in
+  /// rosbag::View's order; empty when rosbag read them. streamSignalBag reads the same bytes the
+  /// same way while the file is the one walked (`stamp`, BagStructure::stamp).
+  struct DirectMessage {
+    std::uint64_t chunk_pos = 0;  ///< the first byte of its chunk's data in the file
+    std::uint32_t chunk_len = 0;  ///< the chunk's data length
+    std::uint32_t offset = 0;     ///< its data's offset in the chunk's data
+    std::uint32_t size = 0;       ///< its data's length
+  };
+  std::vector<DirectMessage> direct;
+  std::uint64_t stamp[5] = {0, 0, 0, 0, 0};
 };
 
 /// Opens `path` and validates its signal record in one pass: the topic is `topic` or, when
