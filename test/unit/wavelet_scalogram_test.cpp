@@ -35,6 +35,22 @@ std::vector<double> testSignal(long n, unsigned seed) {
   return y;
 }
 
+// Every row of b (row-major, n values per row of the grid f) within kGroupVsSingleTol of the
+// largest |W| of a, the reference.
+void expectRowsWithinGroupBound(const std::vector<double>& a, const std::vector<double>& b,
+                                const std::vector<double>& f, long n) {
+  double peak = 0.0;
+  for (double v : a) peak = std::max(peak, v);
+  for (size_t r = 0; r < f.size(); ++r) {
+    double worst = 0.0;
+    for (long j = 0; j < n; ++j) {
+      worst =
+          std::max(worst, std::abs(a[r * size_t(n) + size_t(j)] - b[r * size_t(n) + size_t(j)]));
+    }
+    EXPECT_LE(worst, kGroupVsSingleTol * peak) << "row " << r << " f = " << f[r];
+  }
+}
+
 TEST(MorletScalogram, MatchesOneMorletCwtOverAllRowsWithShorterFftsForHighRows) {
   for (const long n : {3000L, 5011L}) {
     SCOPED_TRACE("n = " + std::to_string(n));
@@ -52,16 +68,7 @@ TEST(MorletScalogram, MatchesOneMorletCwtOverAllRowsWithShorterFftsForHighRows) 
     std::vector<double> a(f.size() * size_t(n)), b(a.size());
     ASSERT_TRUE(gear_test::ok(single.transformModulus(y.data(), a.data()), &e)) << e;
     ASSERT_TRUE(gear_test::ok(grouped.modulus(y.data(), b.data()), &e)) << e;
-    double peak = 0.0;
-    for (double v : a) peak = std::max(peak, v);
-    for (size_t r = 0; r < f.size(); ++r) {
-      double worst = 0.0;
-      for (long j = 0; j < n; ++j) {
-        worst =
-            std::max(worst, std::abs(a[r * size_t(n) + size_t(j)] - b[r * size_t(n) + size_t(j)]));
-      }
-      EXPECT_LE(worst, kGroupVsSingleTol * peak) << "row " << r;
-    }
+    expectRowsWithinGroupBound(a, b, f, n);
   }
 }
 
@@ -87,16 +94,7 @@ TEST(MorletScalogram, BlockedRowsMatchOneMorletCwtOverAllRows) {
     std::vector<double> a(f.size() * size_t(n)), b(a.size());
     ASSERT_TRUE(gear_test::ok(single.transformModulus(y.data(), a.data()), &e)) << e;
     ASSERT_TRUE(gear_test::ok(blocked.modulus(y.data(), b.data()), &e)) << e;
-    double peak = 0.0;
-    for (double v : a) peak = std::max(peak, v);
-    for (size_t r = 0; r < f.size(); ++r) {
-      double worst = 0.0;
-      for (long j = 0; j < n; ++j) {
-        worst =
-            std::max(worst, std::abs(a[r * size_t(n) + size_t(j)] - b[r * size_t(n) + size_t(j)]));
-      }
-      EXPECT_LE(worst, kGroupVsSingleTol * peak) << "row " << r << " f = " << f[r];
-    }
+    expectRowsWithinGroupBound(a, b, f, n);
   }
 }
 
