@@ -54,6 +54,13 @@ constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
 constexpr long kMinPrunedBatches = 16;
 constexpr long kPrunedChunk = 8192;         // complex values per chunk of batches (128 KiB, in L2)
 constexpr double kMeasureTimeLimitS = 5.0;  // FFTW_MEASURE planning cap per plan [s]
+// Blocked rows (MorletScalogram::Blocks): a row whose wavelet spans K = ceil(8 s) samples either
+// side is computed in blocks of L samples, L the smallest power of two >= kMinBlock and >=
+// kBlockOverlap * (2K + 1) (at least 7/8 of each block kept), when L <= kMaxBlock and L is at
+// most half the row's own FFT length. Measured (CPU time, 1e5 x 200 rows): kMaxBlock 16384
+// beat 8192 and 32768, kBlockOverlap 8 beat 4 and 6.
+constexpr long kMinBlock = 1024, kMaxBlock = 16384;
+constexpr double kBlockOverlap = 8.0;
 
 // Transparent huge pages for a large buffer (wavelet_detail::adviseHugePages).
 template <typename P>
@@ -217,6 +224,26 @@ void advanceBand(double* __restrict u, const double* __restrict sr, const double
     u[2 * k] = ur * sr[k] - ui * si[k];
     u[2 * k + 1] = ur * si[k] + ui * sr[k];
   }
+}
+
+// p[k] = x[k] * g[k] for count complex x, p (interleaved) and real g; and w[i] += c[i] for n
+// doubles w, floats c: a blocked row's band and its cut's part (MorletScalogram::blockedRow). AVX2
+// clones as twiddleBand's (no FMA: the results do not depend on the clone).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void bandTimes(const double* __restrict x, const double* __restrict g, double* __restrict p,
+               long count) {
+  for (long k = 0; k < count; ++k) {
+    p[2 * k] = x[2 * k] * g[k];
+    p[2 * k + 1] = x[2 * k + 1] * g[k];
+  }
+}
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void addFloats(double* __restrict w, const float* __restrict c, long n) {
+  for (long i = 0; i < n; ++i) w[i] += static_cast<double>(c[i]);
 }
 
 // out[i] = |w_i| = sqrt(re^2 + im^2) for n complex doubles w (interleaved), bit-identical to
@@ -691,7 +718,33 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   // not prunable, or pruning off), so a group of pruned rows never plans it nor touches `in`.
   const bool pruned_only =
       pruned_ && (lo > hi || prunedBatchLength(f.divisors, n_fft_, hi - lo + 1) > 0);
-  const bool full_double = !pruned_only && precision_ == Precision::Double;
+  if (!setBand(lo, hi, !pruned_only && precision_ == Precision::Double)) return false;
+  // in_k = Y_k * Psi(a*k) / N (the 1/N normalises FFTW's unnormalised backward transform).
+  const double scale = 2.0 / static_cast<double>(n_fft_);
+  const double q = std::exp(-a * a);
+  const double* y = reinterpret_cast<const double*>(b.spec);
+  double* p = reinterpret_cast<double*>(b.in);
+  for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
+    const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
+    const double x = a * static_cast<double>(k0) - omega0;
+    double g = scale * std::exp(-0.5 * x * x);  // Psi(a*k)/N at k
+    double r = std::exp(-a * x - 0.5 * a * a);  // g(k+1)/g(k)
+    for (long k = k0; k < k1; ++k) {
+      p[2 * k] = y[2 * k] * g;
+      p[2 * k + 1] = y[2 * k + 1] * g;
+      g *= r;
+      r *= q;
+    }
+  }
+  return true;
+}
+
+// Makes [lo, hi] the band of `in` (zeroing what the previous band left outside it), after
+// planning the double inverse FFT if a full-length double row needs it (full_double). False if
+// FFTW cannot plan.
+bool MorletCwt::setBand(long lo, long hi, bool full_double) {
+  Fftw& f = *fftw_;
+  Buffers& b = *f.buf;
   if (!f.c2c && full_double) {
     std::lock_guard<std::mutex> lock(plannerMutex());
     const unsigned flags = fftwFlags(planning_);
@@ -722,23 +775,23 @@ bool MorletCwt::fillRow(double frequency_hz, double omega0) {
   }
   b.band_lo = lo;
   b.band_hi = hi;
-  // in_k = Y_k * Psi(a*k) / N (the 1/N normalises FFTW's unnormalised backward transform).
-  const double scale = 2.0 / static_cast<double>(n_fft_);
-  const double q = std::exp(-a * a);
-  const double* y = reinterpret_cast<const double*>(b.spec);
-  double* p = reinterpret_cast<double*>(b.in);
-  for (long k0 = lo; k0 <= hi; k0 += kRecurrenceBlock) {
-    const long k1 = std::min(hi + 1, k0 + kRecurrenceBlock);
-    const double x = a * static_cast<double>(k0) - omega0;
-    double g = scale * std::exp(-0.5 * x * x);  // Psi(a*k)/N at k
-    double r = std::exp(-a * x - 0.5 * a * a);  // g(k+1)/g(k)
-    for (long k = k0; k < k1; ++k) {
-      p[2 * k] = y[2 * k] * g;
-      p[2 * k + 1] = y[2 * k + 1] * g;
-      g *= r;
-      r *= q;
-    }
+  return true;
+}
+
+// The inverse FFT of the loaded spectrum times g[k - lo] over the bins [lo, hi] (zero
+// elsewhere), its first n samples into out: MorletScalogram's jump parts. False if FFTW cannot
+// plan.
+bool MorletCwt::bandRow(long lo, long hi, const double* g, std::complex<double>* out) {
+  if (!setBand(lo, hi, true)) return false;
+  const double* y = reinterpret_cast<const double*>(fftw_->buf->spec);
+  double* p = reinterpret_cast<double*>(fftw_->buf->in);
+  for (long k = lo; k <= hi; ++k) {
+    p[2 * k] = y[2 * k] * g[k - lo];
+    p[2 * k + 1] = y[2 * k + 1] * g[k - lo];
   }
+  if (!fullInverse()) return false;
+  std::memcpy(static_cast<void*>(out), fftw_->buf->out,
+              sizeof(std::complex<double>) * static_cast<size_t>(n_));
   return true;
 }
 
@@ -1023,6 +1076,227 @@ const std::complex<double>* MorletCwt::spectrum() const {
 // ------------------------------------------------------------------------------------------
 // MorletScalogram
 
+// Rows computed in overlapping blocks (overlap-save): a row whose wavelet spans K = ceil(8 s)
+// samples either side needs, for the outputs [b*H, b*H + H), the samples [b*H - A, b*H - A + L)
+// with A >= K and H = L - 2A: one circular convolution of length L per block gives them with
+// the same 8-scale margin as the row's own padding (the wrap-around of the Gaussian at e^-32).
+// Per class of rows with the same L, the blocks' r2c spectra are computed once per signal and
+// shared by the class's rows and all threads; per row and block, the band times the row's
+// Psi(a*k)/L, one inverse FFT of L (in cache) and |W| of the H samples kept.
+struct MorletScalogram::Blocks {
+  struct Class {
+    long L = 0, A = 0, H = 0, nb = 0, stride = 0;  // stride: bins between two blocks' spectra
+    double* seg = nullptr;                         // one block's samples (L doubles)
+    fftw_complex* spectra = nullptr;               // nb spectra of L/2 + 1 bins
+    fftw_plan r2c = nullptr;
+  };
+  struct Row {
+    int row = 0, cls = 0;
+    double s = 0.0;           // scale [samples]
+    long lo = 0, hi = 0;      // bins of the band
+    std::vector<double> psi;  // the block's multiplier over [lo, hi] (see multipliers())
+  };
+  struct Thread {
+    fftw_complex* in = nullptr;  // zero outside [lo, hi]
+    fftw_complex* out = nullptr;
+    long lo = 1, hi = 0;
+    std::vector<fftw_plan> c2c;  // per class
+  };
+  long n = 0;
+  std::vector<Class> classes;
+  std::vector<Row> rows;
+  std::vector<Thread> threads;
+  // The analytic cut (Psi jumps from 0 to Psi(0) = 2 e^{-omega0^2/2} at zero frequency; for
+  // omega0 = 6, 1.5e-8 of the peak) rings over the whole record: blocks alone would lose that
+  // ringing beyond their margin (measured up to 4.8e-8 of the record's largest |W| at 1e6
+  // samples). Its part, Psi(0) G(w) with G = e^{-(sigma w)^2/2} (sigma = the smallest blocked
+  // scale [samples]) for w > 0, is transformed once per signal on the lowest group's FFT length
+  // N0 (that of one MorletCwt over all rows) and added to every blocked row; the blocks
+  // transform the rest, Psi(s w) - Psi(0) G(w), continuous at zero frequency, whose kernel
+  // decays within the margin. Off when omega0 > kBandHalfWidth (Psi(0) < e^-37).
+  bool cut = false;
+  double sigma = 0.0, cut_weight = 0.0;     // cut_weight = Psi(0)
+  long n0 = 0, cut_lo = 1, cut_hi = 0;      // N0 and G's bins on it (G > e^-18.4)
+  std::vector<double> cut_g;                // G(w_k)/N0 over [cut_lo, cut_hi]
+  std::vector<std::complex<double>> cut_w;  // its transform (n samples)
+  // Psi(0) times it in float (interleaved): ~1e-8 of the peak, so float rounding moves |W| by
+  // ~1e-15 of it; read by every blocked row, so half the memory traffic.
+  std::vector<float> cut_f;
+
+  // G's bins on N0 and each row's block multiplier (Psi(s w_k) - Psi(0) G(w_k)) / L over the
+  // union of its band and G's bins.
+  void multipliers(double omega0) {
+    cut = omega0 <= kBandHalfWidth;
+    cut_weight = cut ? 2.0 * std::exp(-0.5 * omega0 * omega0) : 0.0;
+    const double w_hi = 6.07 / sigma;  // G = e^-18.4 (1e-8)
+    if (cut) {
+      const double d = 2.0 * kPi / static_cast<double>(n0);
+      cut_hi = std::min(n0 / 2, static_cast<long>(std::floor(w_hi / d)));
+      for (long k = cut_lo; k <= cut_hi; ++k) {
+        const double z = sigma * d * static_cast<double>(k);
+        cut_g.push_back(std::exp(-0.5 * z * z) / static_cast<double>(n0));
+      }
+      cut_w.resize(static_cast<size_t>(n));
+      cut_f.resize(2 * static_cast<size_t>(n));
+    }
+    for (Row& r : rows) {
+      const long L = classes[size_t(r.cls)].L;
+      const double a = r.s * 2.0 * kPi / static_cast<double>(L);  // s*w_k = a*k
+      const double c = sigma * 2.0 * kPi / static_cast<double>(L);
+      bandOf(a, omega0, L, &r.lo, &r.hi);
+      if (cut) r.hi = std::min(L / 2, std::max(r.hi, static_cast<long>(std::floor(w_hi / c))));
+      r.psi.clear();
+      for (long k = r.lo; k <= r.hi; ++k) {
+        const double x = a * static_cast<double>(k) - omega0, z = c * static_cast<double>(k);
+        const double g = cut ? cut_weight * std::exp(-0.5 * z * z) : 0.0;
+        r.psi.push_back((2.0 * std::exp(-0.5 * x * x) - g) / static_cast<double>(L));
+      }
+    }
+  }
+
+  // The blocks' spectra of the checked samples y minus their mean (zero outside [0, n)).
+  void load(const double* y, double mean) {
+    for (Class& c : classes) {
+      for (long b = 0; b < c.nb; ++b) {
+        const long j0 = b * c.H - c.A;
+        const long i0 = std::max(0L, -j0), i1 = std::min(c.L, n - j0);
+        std::fill(c.seg, c.seg + i0, 0.0);
+        for (long i = i0; i < i1; ++i) c.seg[i] = y[j0 + i] - mean;
+        std::fill(c.seg + std::max(i0, i1), c.seg + c.L, 0.0);
+        fftw_execute_dft_r2c(c.r2c, c.seg, c.spectra + b * c.stride);
+      }
+    }
+  }
+  // Plans the classes' r2c FFTs and the threads' inverse FFTs, allocates their buffers.
+  Status plan(FftPlanning planning, int n_threads) {
+    long l_max = 0;
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    for (Class& c : classes) {
+      c.H = c.L - 2 * c.A;
+      c.nb = (n + c.H - 1) / c.H;
+      c.stride = c.L / 2 + 2;  // even: every block's spectrum as aligned as the first
+      c.seg = fftw_alloc_real(static_cast<size_t>(c.L));
+      c.spectra = fftw_alloc_complex(static_cast<size_t>(c.nb * c.stride));
+      if (!c.seg || !c.spectra) return Status::resourceLimit("MorletScalogram: out of memory");
+      c.r2c = fftw_plan_dft_r2c_1d(static_cast<int>(c.L), c.seg, c.spectra, fftwFlags(planning));
+      if (!c.r2c) return Status::internal("MorletScalogram: FFTW could not plan a block FFT");
+      l_max = std::max(l_max, c.L);
+    }
+    threads.resize(static_cast<size_t>(n_threads));
+    for (Thread& t : threads) {
+      t.in = fftw_alloc_complex(static_cast<size_t>(l_max));
+      t.out = fftw_alloc_complex(static_cast<size_t>(l_max));
+      if (!t.in || !t.out) return Status::resourceLimit("MorletScalogram: out of memory");
+      for (const Class& c : classes) {
+        t.c2c.push_back(fftw_plan_dft_1d(static_cast<int>(c.L), t.in, t.out, FFTW_BACKWARD,
+                                         fftwFlags(planning)));
+        if (!t.c2c.back()) {
+          return Status::internal("MorletScalogram: FFTW could not plan a block FFT");
+        }
+      }
+      std::fill(reinterpret_cast<double*>(t.in), reinterpret_cast<double*>(t.in + l_max), 0.0);
+    }
+    return {};
+  }
+  ~Blocks() {
+    std::lock_guard<std::mutex> lock(plannerMutex());
+    for (Class& c : classes) {
+      if (c.r2c) fftw_destroy_plan(c.r2c);
+      fftw_free(c.seg);
+      fftw_free(c.spectra);
+    }
+    for (Thread& t : threads) {
+      for (fftw_plan p : t.c2c) {
+        if (p) fftw_destroy_plan(p);
+      }
+      fftw_free(t.in);
+      fftw_free(t.out);
+    }
+  }
+};
+
+int MorletScalogram::blockedRows() const {
+  return blocks_ ? static_cast<int>(blocks_->rows.size()) : 0;
+}
+
+// Chooses the blocked rows (marked -2 in own) and plans their blocks.
+Status MorletScalogram::configureBlocks(long n, double sample_rate,
+                                        const std::vector<double>& frequencies_hz, double omega0,
+                                        FftPlanning planning, int threads, std::vector<long>* own) {
+  auto bl = std::make_shared<Blocks>();
+  bl->n = n;
+  std::map<long, int> class_of;  // L -> class
+  for (size_t i = 0; i < frequencies_hz.size(); ++i) {
+    if ((*own)[i] < 0) continue;
+    const double f = frequencies_hz[i], s = morletScale(f, omega0) * sample_rate;  // [samples]
+    // A band that reaches the Nyquist frequency is cut there too: that row rings over the whole
+    // record and keeps the lowest row's padding.
+    if (s * kPi - omega0 < kBandHalfWidth) continue;
+    const long K = static_cast<long>(std::ceil(kPadScales * s));
+    long L = kMinBlock;
+    while (static_cast<double>(L) < kBlockOverlap * static_cast<double>(2 * K + 1)) L *= 2;
+    if (L > kMaxBlock || 2 * L > (*own)[i]) continue;
+    auto it = class_of.find(L);
+    if (it == class_of.end()) {
+      it = class_of.emplace(L, static_cast<int>(bl->classes.size())).first;
+      bl->classes.emplace_back();
+      bl->classes.back().L = L;
+    }
+    Blocks::Class& c = bl->classes[size_t(it->second)];
+    c.A = std::max(c.A, K);
+    Blocks::Row r;
+    r.row = static_cast<int>(i);
+    r.cls = it->second;
+    r.s = s;
+    bl->sigma = bl->rows.empty() ? s : std::min(bl->sigma, s);
+    bl->rows.push_back(std::move(r));
+  }
+  // At least one row left for the groups: the lowest group's FFT length N0 (that of one
+  // MorletCwt over all rows) carries the cut's part.
+  bl->n0 = -1;
+  for (size_t i = 0; i < own->size(); ++i) {
+    const bool blocked = std::any_of(bl->rows.begin(), bl->rows.end(),
+                                     [i](const Blocks::Row& r) { return size_t(r.row) == i; });
+    if (!blocked) bl->n0 = std::max(bl->n0, (*own)[i]);
+  }
+  if (bl->rows.empty() || bl->n0 < 0) return {};
+  for (const Blocks::Row& r : bl->rows) (*own)[size_t(r.row)] = -2;
+  bl->multipliers(omega0);
+  if (Status st = bl->plan(planning, threads); !st.ok()) return st;
+  blocks_ = std::move(bl);
+  return {};
+}
+
+// |W| of blocked row b (index into blocks_->rows) on thread `thread` into out (n values).
+template <typename T>
+void MorletScalogram::blockedRow(int thread, int b, T* out) {
+  Blocks& bl = *blocks_;
+  const Blocks::Row& r = bl.rows[size_t(b)];
+  const Blocks::Class& c = bl.classes[size_t(r.cls)];
+  Blocks::Thread& th = bl.threads[size_t(thread)];
+  double* in = reinterpret_cast<double*>(th.in);
+  if (th.lo <= th.hi) std::fill(in + 2 * th.lo, in + 2 * (th.hi + 1), 0.0);
+  th.lo = r.lo;
+  th.hi = r.hi;
+  const double* w = reinterpret_cast<const double*>(th.out) + 2 * c.A;
+  const long count = r.hi - r.lo + 1;
+  const double* psi = r.psi.data();
+  for (long q = 0; q < c.nb; ++q) {
+    const double* sp = reinterpret_cast<const double*>(c.spectra + q * c.stride) + 2 * r.lo;
+    bandTimes(sp, psi, in + 2 * r.lo, count);
+    fftw_execute(th.c2c[size_t(r.cls)]);
+    const long j0 = q * c.H, m = std::min(c.H, bl.n - j0);
+    if (bl.cut) {
+      addFloats(reinterpret_cast<double*>(th.out) + 2 * c.A, bl.cut_f.data() + 2 * j0, 2 * m);
+    }
+    if constexpr (std::is_same<T, double>::value) {
+      modulusRun(w, m, out + j0);
+    } else {
+      modulusOf(w, m, out + j0);
+    }
+  }
+}
+
 Status MorletScalogram::configure(long n, double sample_rate,
                                   const std::vector<double>& frequencies_hz, double omega0,
                                   FftPlanning planning, int threads, Precision precision) {
@@ -1030,6 +1304,7 @@ Status MorletScalogram::configure(long n, double sample_rate,
   frequencies_.clear();
   group_rows_.clear();
   workers_.clear();
+  blocks_.reset();
   if (threads < 1 || threads > 256) {
     return Status::invalidArgument(
         "MorletScalogram: threads = " + std::to_string(threads) + " must be in [1, 256]",
@@ -1050,6 +1325,14 @@ Status MorletScalogram::configure(long n, double sample_rate,
     const double pad = std::ceil(kPadScales * (at_nyquist ? s_max : s) * sample_rate);
     own[i] = pad < 4e15 ? fastFftLength(n + static_cast<long>(pad)) : -1;
   }
+  if (precision == Precision::Double) {
+    if (Status st =
+            configureBlocks(n, sample_rate, frequencies_hz, omega0, planning, threads, &own);
+        !st.ok()) {
+      blocks_.reset();
+      return st;
+    }
+  }
   std::vector<int> order(m);
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(),
@@ -1057,6 +1340,7 @@ Status MorletScalogram::configure(long n, double sample_rate,
   std::vector<std::vector<int>> groups;
   long group_length = 0;
   for (int i : order) {
+    if (own[size_t(i)] == -2) continue;  // blocked
     if (groups.empty() || static_cast<double>(group_length) > kGroupLengthRatio * own[size_t(i)]) {
       groups.emplace_back();
       group_length = own[size_t(i)];
@@ -1103,19 +1387,44 @@ Status MorletScalogram::runRows(const double* y, Dest dest, Done done) {
       items.push_back({g, k});
     }
   }
+  for (int b = 0; b < blockedRows(); ++b) items.push_back({-1, b});
   // The samples are checked and their mean computed once (as MorletCwt::setSignal does), not
   // once per group and thread.
   double mean = 0.0;
   if (Status st = MorletCwt::checkedMean(y, n_, &mean); !st.ok()) return st;
+  bool group0_loaded = false;  // thread 0's first group holds the signal's spectrum already
+  if (blocks_) {
+    Blocks& bl = *blocks_;
+    if (bl.cut) {
+      MorletCwt& lowest = workers_[0][0];
+      lowest.loadChecked(y, mean);
+      if (!lowest.bandRow(bl.cut_lo, bl.cut_hi, bl.cut_g.data(), bl.cut_w.data())) {
+        return Status::internal("MorletScalogram: FFTW could not plan the inverse FFT");
+      }
+      group0_loaded = true;
+      const double* w = reinterpret_cast<const double*>(bl.cut_w.data());
+      for (size_t i = 0; i < bl.cut_f.size(); ++i) {
+        bl.cut_f[i] = static_cast<float>(bl.cut_weight * w[i]);
+      }
+    }
+    blocks_->load(y, mean);
+  }
   const int nt = threads();
   std::vector<Status> errors(static_cast<size_t>(nt));
   auto work = [&](int t) {
     std::vector<MorletCwt>& cwts = workers_[size_t(t)];
     // The thread's groups share one buffer set: the signal is loaded (its spectrum computed)
     // whenever the group changes; items come in group order, so once per group.
-    int loaded = -1;
+    int loaded = t == 0 && group0_loaded ? 0 : -1;
     for (size_t it = static_cast<size_t>(t); it < items.size(); it += static_cast<size_t>(nt)) {
       const int g = items[it].first, k = items[it].second;
+      if (g < 0) {
+        const int row = blocks_->rows[size_t(k)].row;
+        T* d = dest(t, row);
+        blockedRow(t, k, d);
+        done(t, row, d);
+        continue;
+      }
       if (g != loaded) {
         cwts[size_t(g)].loadChecked(y, mean);
         loaded = g;
