@@ -1525,9 +1525,14 @@ class Refinement {
   // Gauss-Newton with step halving on the segments of `set` (one segment for the piecewise
   // model, whose segments are independent problems; all for shared unknowns). Returns the
   // iterations; *converged false when the iteration limit stopped it. Converged when the
-  // damping (and stiffness) unknowns move by less than 1e-10 relative.
+  // Gauss-Newton step would move the damping (and stiffness) unknowns by less than 1e-10
+  // relative. One segment: the step is taken with the Gauss-Newton matrix plus the residual
+  // curvature term S (sum e d2e/dp2) estimated by secant updates (structured quasi-Newton,
+  // secantStep, secantUpdate), which converges faster where Gauss-Newton converges linearly;
+  // the stopping test, at 1e-11, is Gauss-Newton's, so the minimiser is the same.
   int gaussNewton(const Set& set, const NoiseModel& nm, bool* converged, bool* finite) {
     constexpr double kConvergenceTol = 1e-10;
+    constexpr double kSecantTol = 1e-11;  // one segment: closer to the minimiser for few passes
     double cost = 0.0;
     // One segment: its rows at the accepted unknowns are kept (kept_[0]; the trial's in
     // kept_[1]), so a new noise round starts without a pass.
@@ -1542,16 +1547,20 @@ class Refinement {
     *finite = std::isfinite(cost);
     *converged = false;
     if (!*finite) return 0;
+    const bool secant = keep != nullptr && ns_ == 0;
+    if (secant) curvature_.setZero(m_, m_);  // S of another noise model does not carry over
+    const double tol = secant ? kSecantTol : kConvergenceTol;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
       // Scratch sized for every segment, used on the set's (no O(segments) work per step).
       Locals& dl = dl_scratch_;
       Eigen::VectorXd dg;
       solveStep(set, normals_, &dl, &dg, nullptr, nullptr);
-      if (relativeChange(set, dl, dg, 1.0) < kConvergenceTol) {
+      if (relativeChange(set, dl, dg, 1.0) < tol) {
         *converged = true;  // the full step would move nothing: no need to evaluate it
         break;
       }
+      bool quasi = secant && secantStep(set[0], &dl[set[0]]);
       double step = 1.0;
       bool accepted = false;
       for (int halving = 0; halving < 30 && !accepted; ++halving, step *= 0.5) {
@@ -1567,7 +1576,8 @@ class Refinement {
         if (std::isfinite(c1) && c1 <= cost * (1.0 + 1e-12)) {
           accepted = true;
           *converged =
-              relativeChange(set, dl, dg, step) < kConvergenceTol || c1 >= cost * (1.0 - 1e-14);
+              relativeChange(set, dl, dg, step) < tol || (!quasi && c1 >= cost * (1.0 - 1e-14));
+          if (secant) secantUpdate(set[0], step * dl[set[0]], n1[set[0]]);
           for (size_t i : set) {
             loc_[i] = x1[i];
             normals_[i] = std::move(n1[i]);
@@ -1575,11 +1585,45 @@ class Refinement {
           if (keep != nullptr) std::swap(kept_[0], kept_[1]);
           sh_ = g1;
           cost = c1;
+        } else if (quasi) {
+          // The quasi-Newton step did not descend: forget S, retry with Gauss-Newton's step.
+          quasi = false;
+          curvature_.setZero(m_, m_);
+          solveStep(set, normals_, &dl, &dg, nullptr, nullptr);
+          step = 2.0;
         }
       }
       if (!accepted) *converged = true;  // no descent left: at the minimum to rounding
     }
     return it;
+  }
+
+  // Segment i's step with the curvature estimate: (N + S) d = rhs into *d when S is set and
+  // N + S is positive definite (else *d stays Gauss-Newton's and false).
+  bool secantStep(size_t i, Eigen::VectorXd* d) const {
+    if (curvature_.isZero(0.0)) return false;
+    const Eigen::MatrixXd H = normals_[i].N + curvature_;
+    Eigen::LLT<Eigen::MatrixXd> llt(H);
+    if (llt.info() != Eigen::Success) return false;
+    const Eigen::VectorXd q = llt.solve(normals_[i].rhs);
+    if (!q.allFinite()) return false;
+    *d = q;
+    return true;
+  }
+
+  // The secant condition of a step s from normals_[i] to `next`: the gradient -rhs changes by
+  // (N + S) s with N averaged over the step's two ends, so S s = rhs - rhs' - N s; a symmetric
+  // rank-one update of S meets it. Skipped when the update is ill-defined.
+  void secantUpdate(size_t i, const Eigen::VectorXd& s, const Normal& next) {
+    const Eigen::VectorXd y = normals_[i].rhs - next.rhs;
+    const Eigen::VectorXd ns = 0.5 * (normals_[i].N * s + next.N * s);  // N along the step
+    const Eigen::VectorXd u = y - ns - curvature_ * s;
+    const double den = u.dot(s);
+    // In the unknowns scaled by N's diagonal (their magnitudes differ by ten orders).
+    const Eigen::VectorXd d = next.N.diagonal().cwiseSqrt();
+    const double scale = u.cwiseQuotient(d).norm() * s.cwiseProduct(d).norm();
+    if (!(std::abs(den) > 1e-8 * scale)) return;
+    curvature_ += u * u.transpose() / den;
   }
 
   // AR model fitted to the pooled residual autocovariances of a set of segments.
@@ -2253,6 +2297,7 @@ class Refinement {
   // Per-segment scratch of solveStep and gaussNewton (sized once).
   mutable std::vector<Eigen::MatrixXd> nll_inv_scratch_;
   Locals dl_scratch_, x1_scratch_;
+  Eigen::MatrixXd curvature_;  // gaussNewton: the secant estimate S of one segment
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
   mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
