@@ -16,6 +16,7 @@ set +e
 build_only=0
 if [ "${1:-}" = "--build-only" ]; then build_only=1; shift; fi
 fuzz_seconds=${1:-25}
+fuzz_targets="csv yaml bag stream rig"
 ASAN_WS=${GEAR_DAMPING_ASAN_WS:-${GEAR_WS}_asan}
 results=${GEAR_SANITIZE_RESULTS:-$GEAR_WS/build/test_results/gear_damping/sanitize}
 # A report aborts with a code no tool documents (86), so a tool test sees it as a failure too.
@@ -103,27 +104,6 @@ run_unit_test() {  # run_unit_test BINARY: XML, log and exit status in $results
   echo $? >"$results/asan_$name.rc"
 }
 
-failed=0
-start=$(date +%s)
-for t in "$bin"/*_test; do
-  throttle
-  run_unit_test "$t" &
-done
-wait
-for t in "$bin"/*_test; do
-  name=$(basename "$t")
-  rc=$(cat "$results/asan_$name.rc" 2>/dev/null || echo "no status")
-  rm -f "$results/asan_$name.rc"
-  if [ "$rc" != 0 ]; then
-    failed=1
-    echo "sanitize: $name exited $rc (log: $results/asan_$name.log)" >&2
-    grep -m5 -E "ERROR: AddressSanitizer|runtime error|LeakSanitizer" "$results/asan_$name.log" >&2
-    junit "$results/asan_${name}_exit.xml" "sanitize.$name" exit_status \
-      "exit status $rc (a sanitizer report or a failed test; see asan_$name.log)"
-  fi
-done
-echo "sanitize: unit tests $(($(date +%s) - start)) s" >&2
-
 run_fuzz_target() {  # run_fuzz_target TARGET: JUnit case and log in $results
   local target=$1 work log rc execs
   work=$(mktemp -d)
@@ -145,14 +125,33 @@ run_fuzz_target() {  # run_fuzz_target TARGET: JUnit case and log in $results
   rm -rf "$work"
 }
 
+# One pool for both: a fuzz target starts as soon as a test binary's slot frees, so no core idles
+# while the last test binaries run (each fuzz target still gets one core for FUZZ_SECONDS).
+failed=0
+start=$(date +%s)
+for t in "$bin"/*_test; do
+  throttle
+  run_unit_test "$t" &
+done
 if [ "$fuzz_seconds" -gt 0 ]; then
-  start=$(date +%s)
-  for target in csv yaml bag stream rig; do
+  for target in $fuzz_targets; do
     throttle
     run_fuzz_target "$target" &
   done
-  wait
-  grep -l "<failure" "$results"/fuzz_*.xml >/dev/null 2>&1 && failed=1
-  echo "sanitize: fuzzing $(($(date +%s) - start)) s" >&2
 fi
+wait
+for t in "$bin"/*_test; do
+  name=$(basename "$t")
+  rc=$(cat "$results/asan_$name.rc" 2>/dev/null || echo "no status")
+  rm -f "$results/asan_$name.rc"
+  if [ "$rc" != 0 ]; then
+    failed=1
+    echo "sanitize: $name exited $rc (log: $results/asan_$name.log)" >&2
+    grep -m5 -E "ERROR: AddressSanitizer|runtime error|LeakSanitizer" "$results/asan_$name.log" >&2
+    junit "$results/asan_${name}_exit.xml" "sanitize.$name" exit_status \
+      "exit status $rc (a sanitizer report or a failed test; see asan_$name.log)"
+  fi
+done
+grep -l "<failure" "$results"/fuzz_*.xml >/dev/null 2>&1 && failed=1
+echo "sanitize: unit tests and fuzzing $(($(date +%s) - start)) s" >&2
 exit $failed
