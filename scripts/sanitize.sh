@@ -33,6 +33,10 @@ sanitize_build() {
   local flags="-fsanitize=address,undefined -fno-sanitize-recover=all -fsanitize=fuzzer-no-link"
   # Line tables only: reports keep file:line in every frame, and the build is ~15 % faster than -g.
   flags+=" -fno-omit-frame-pointer -gline-tables-only"
+  # The libraries, tools and fuzz targets at -O1; the unit test sources at -O0
+  # (GEAR_UNIT_TEST_FLAGS, test/tests.cmake), the code they test unchanged. Measured (CPU s,
+  # compile without PCH + sanitized run): wavelet_test 20.6 + 9.2 at -O1, 10.4 + 17.0 at -O0
+  # (its own loops run slower); stream_assembler_test 11.9 + 1.9 and 8.8 + 2.4.
   local unit_tests
   unit_tests=$(cd "$GEAR_REPO/test/unit" && ls ./*_test.cpp | sed 's|^\./||; s|\.cpp$||')
   # shellcheck disable=SC2086
@@ -41,7 +45,8 @@ sanitize_build() {
       -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_C_FLAGS="$flags" \
       -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" \
       -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=address,undefined" \
-      -DGEAR_DAMPING_FUZZ=ON -DGEAR_TEST_PCH=ON -DPYTHON_EXECUTABLE=/usr/bin/python3 \
+      -DGEAR_DAMPING_FUZZ=ON -DGEAR_TEST_PCH=ON -DGEAR_UNIT_TEST_FLAGS=-O0 \
+      -DPYTHON_EXECUTABLE=/usr/bin/python3 \
       simulate convert analyze fuzz_targets $unit_tests)
 }
 
