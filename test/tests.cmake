@@ -17,8 +17,10 @@ option(GEAR_TEST_PCH "precompile the unit tests' common headers once" OFF)
 set(GEAR_UNIT_TEST_FLAGS "" CACHE STRING "extra compile options of the unit test sources")
 separate_arguments(GEAR_UNIT_TEST_FLAG_LIST UNIX_COMMAND "${GEAR_UNIT_TEST_FLAGS}")
 set(GEAR_TEST_PCH_FIRST "")
+set(GEAR_UNIT_TEST_NAMES "")
 foreach(src IN LISTS GEAR_UNIT_TESTS)
   get_filename_component(name ${src} NAME_WE)
+  list(APPEND GEAR_UNIT_TEST_NAMES ${name})
   catkin_add_gtest(${name} ${src} WORKING_DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR})
   if(GEAR_TEST_PCH AND TARGET ${name})
     if(GEAR_TEST_PCH_FIRST STREQUAL "")
@@ -41,6 +43,11 @@ foreach(src IN LISTS GEAR_UNIT_TESTS)
                              GEAR_TOOL_DIR="$<TARGET_FILE_DIR:analyze>")
   add_dependencies(${name} analyze convert simulate)  # tests of the tools run the executables
 endforeach()
+# Every unit test as one target: make's top-level Makefile builds the goals named on its command
+# line one after the other (.NOTPARALLEL), each with -j, so naming the ~45 one-source test
+# targets one by one (as scripts/sanitize.sh did) compiled them one at a time.
+add_custom_target(gear_unit_tests)
+add_dependencies(gear_unit_tests ${GEAR_UNIT_TEST_NAMES})
 
 # Integration tests (rostest): tester executables in test/rostest/*_tester.cpp, reused by
 # the .test files beside them. Each .test file is registered with add_rostest.
