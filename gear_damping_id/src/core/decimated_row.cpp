@@ -14,12 +14,6 @@
 
 namespace gear_damping_id {
 namespace wavelet_detail {
-namespace {
-// MorletCwt's band (Psi(a k) above 1e-16 of its peak) and Gaussian recurrence block.
-constexpr double kBandHalfWidth = 8.6;
-constexpr long kRecurrenceBlock = 64;
-}  // namespace
-
 std::mutex& fftwPlannerMutex() {
   static std::mutex m;
   return m;
@@ -46,10 +40,7 @@ DecimatedRows::~DecimatedRows() {
 }
 
 void DecimatedRows::band(double a, double omega0, long n_fft, long* lo, long* hi) {
-  const double k_lo = std::ceil((omega0 - kBandHalfWidth) / a);
-  const double k_hi = std::floor((omega0 + kBandHalfWidth) / a);
-  *lo = static_cast<long>(std::max(1.0, k_lo));
-  *hi = static_cast<long>(std::min(static_cast<double>(n_fft / 2), k_hi));
+  bandOf(a, omega0, n_fft, lo, hi);
 }
 
 long DecimatedRows::divisorAtMost(long n_fft, long d) {
@@ -68,9 +59,8 @@ long DecimatedRows::bandDecimation(long n_fft, double a, double omega0) {
 
 double DecimatedRows::noiseGain(double a, double omega0, long n_fft) {
   // The Parseval sums' band (|a k - omega0| <= kPowerBandHalfWidth), clipped to 1..N/2.
-  const long lo = static_cast<long>(std::max(1.0, std::ceil((omega0 - kPowerBandHalfWidth) / a)));
-  const long hi = static_cast<long>(
-      std::min(static_cast<double>(n_fft / 2), std::floor((omega0 + kPowerBandHalfWidth) / a)));
+  long lo = 0, hi = 0;
+  bandOf(a, omega0, n_fft, &lo, &hi, kPowerBandHalfWidth);
   if (lo > hi) return 0.0;
   // sum_{k=lo..hi} 4 exp(-(a k - omega0)^2) ~ (4/a) (sqrt(pi)/2) [erf(x_hi) - erf(x_lo)].
   const double x_lo = a * (static_cast<double>(lo) - 0.5) - omega0;

@@ -32,16 +32,13 @@ using wavelet_detail::kPi;
 using wavelet_detail::modulusOf;
 using wavelet_detail::num;
 
-// Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
-// (exp(-8.6^2/2) = 8.7e-17): those bins are set to zero, not multiplied.
-constexpr double kBandHalfWidth = 8.6;
+using wavelet_detail::bandOf;
+using wavelet_detail::kBandHalfWidth;
 using wavelet_detail::kPowerBandHalfWidth;
 // Zero padding of 8 scales after the record: the wavelet's Gaussian exp(-u^2/2) is exp(-32) =
 // 1.3e-14 where it would wrap around the circular convolution.
 constexpr double kPadScales = 8.0;
-// The Gaussian multiplier is advanced by a two-multiplication recurrence and recomputed with
-// exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
-constexpr long kRecurrenceBlock = 64;
+using wavelet_detail::kRecurrenceBlock;
 // The pruned rows' twiddle phasors are advanced by one complex multiplication per batch and
 // re-seeded with sin/cos every kTwiddleSeedBlock batches (drift < 256 * 4 eps = 2.3e-13 of the
 // row's peak, inside PrunedComplexRowsEqualTheFullInverseFft's 1e-12; the seeds were 5 % of
@@ -154,16 +151,6 @@ void modulusOfFloats(const float* w, long n, T* out) {
 #endif
   for (; i < n; ++i)
     out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
-}
-
-// Bins [lo, hi] of the band where Psi(s*w_k) > 1e-16 of its peak, with a = s * 2*pi*fs/N
-// (so s*w_k = a*k), clipped to the positive frequencies 1..N/2. lo > hi when empty.
-void bandOf(double a, double omega0, long n_fft, long* lo, long* hi,
-            double half_width = kBandHalfWidth) {
-  const double k_lo = std::ceil((omega0 - half_width) / a);
-  const double k_hi = std::floor((omega0 + half_width) / a);
-  *lo = static_cast<long>(std::max(1.0, k_lo));
-  *hi = static_cast<long>(std::min(static_cast<double>(n_fft / 2), k_hi));
 }
 
 // bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the

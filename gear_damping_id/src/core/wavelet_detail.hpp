@@ -46,6 +46,24 @@ inline void modulusOf(const double* w, long n, T* out) {
     out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
 }
 
+// Psi(s*w) = 2*exp(-(s*w - omega0)^2/2) is below 1e-16 of its peak when |s*w - omega0| > 8.6
+// (exp(-8.6^2/2) = 8.7e-17): a row's band; the bins outside it are set to zero, not multiplied.
+constexpr double kBandHalfWidth = 8.6;
+// A row's Gaussian multiplier is advanced by a two-multiplication recurrence and recomputed with
+// exp() every kRecurrenceBlock bins (relative drift < kRecurrenceBlock * 2 eps = 3e-14).
+constexpr long kRecurrenceBlock = 64;
+
+// Bins [lo, hi] of the band where |a k - omega0| <= half_width (by default: Psi(s*w_k) above
+// 1e-16 of its peak), with a = s * 2*pi*fs/N (so s*w_k = a*k), clipped to the positive
+// frequencies 1..N/2. lo > hi when empty.
+inline void bandOf(double a, double omega0, long n_fft, long* lo, long* hi,
+                   double half_width = kBandHalfWidth) {
+  const double k_lo = std::ceil((omega0 - half_width) / a);
+  const double k_hi = std::floor((omega0 + half_width) / a);
+  *lo = static_cast<long>(std::max(1.0, k_lo));
+  *hi = static_cast<long>(std::min(static_cast<double>(n_fft / 2), k_hi));
+}
+
 // Psi(s*w)^2 = 4*exp(-(s*w - omega0)^2) is below 1e-16 of its peak when |s*w - omega0| > 6.07
 // (exp(-6.07^2) = 1e-16): the band of the Parseval sums (meanPower, noiseGain).
 constexpr double kPowerBandHalfWidth = 6.07;
