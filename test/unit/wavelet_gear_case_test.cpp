@@ -21,6 +21,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -29,6 +30,7 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/models.hpp"
 #include "gear_sim/simulator.hpp"
+#include "per_mode_agreement.hpp"
 #include "status_support.hpp"
 
 namespace {
@@ -164,29 +166,52 @@ TEST(WaveletGearCase, ExplicitNaturalFrequencyGivesTheTrueDampingRatioWithinTenP
   EXPECT_NEAR(m.damping_ratio, truth, kGearCaseXiTol * truth);
 }
 
-// The per-mode path (full_scalogram = false: decimated fits, fit rows on their own padding and in
-// single precision, the noise row in single precision) against the full path on the gear case's
-// row at f0, whose envelope jumps at every stiffness switch (the hardest case for the decimated
-// fits, docs/wavelet.md "Speed"): xi within 1e-4 and f_d within 3e-5 relative (measured 2e-5 for
-// f_d since the decimated fits; both far below the 10 % bar of the case).
-TEST(WaveletGearCase, PerModePathStaysWithinItsTolerancesOfTheFullPath) {
+// The per-mode path (full_scalogram = false: fits, region ends and noise medians on decimated
+// grids) against the full path on the gear case's row at f0, whose envelope jumps at every
+// stiffness switch (the hardest case for the decimated fits, docs/wavelet.md "Speed"). The
+// contract (gear_test::perModeAgreement): statistically indistinguishable from the full path.
+// The free decay plus white noise at 40 dB (the trust tests' SNR) over 10 seeds gives the full
+// path's seed-to-seed standard deviation of xi and f_d (measured: xi 4.4e-4, f_d 4.6 Hz); on
+// every seed, and on the noise-free record, the per-mode xi and f_d lie within 1/10 of it, with
+// the same decisions (free decay, damping ratio given, warning codes).
+TEST(WaveletGearCase, PerModePathIsStatisticallyIndistinguishableFromTheFullPath) {
   const GearCase& g = defaultGearCase();
-  const WaveletResult full = analyzeCase(g, g.free_decay, true, {g.f0});
-  const WaveletResult fast = analyzeCase(g, g.free_decay, false, {g.f0});
-  ASSERT_TRUE(full.ok()) << full.status.message();
-  ASSERT_TRUE(fast.ok()) << fast.status.message();
-  ASSERT_EQ(full.modes.size(), 1u);
-  ASSERT_EQ(fast.modes.size(), 1u);
-  const WaveletMode &a = full.modes[0], &b = fast.modes[0];
-  const double xi_rel = std::abs(b.damping_ratio / a.damping_ratio - 1.0);
-  const double f_rel = std::abs(b.frequency_hz / a.frequency_hz - 1.0);
+  const Eigen::VectorXd& clean = g.free_decay;
+  const double rms = std::sqrt((clean.array() - clean.mean()).square().mean());
+  const double sd = rms / std::pow(10.0, 40.0 / 20.0);
+  std::vector<std::vector<gear_test::ModePair>> noisy, noise_free;
+  for (unsigned seed = 0; seed <= 10; ++seed) {
+    Eigen::VectorXd y = clean;
+    if (seed > 0) {
+      std::mt19937_64 rng(seed);
+      std::normal_distribution<double> noise(0.0, sd);
+      for (Eigen::Index j = 0; j < y.size(); ++j) y[j] += noise(rng);
+    }
+    const WaveletResult full = analyzeCase(g, y, true, {g.f0});
+    const WaveletResult fast = analyzeCase(g, y, false, {g.f0});
+    ASSERT_TRUE(full.ok()) << full.status.message();
+    ASSERT_TRUE(fast.ok()) << fast.status.message();
+    ASSERT_EQ(full.modes.size(), 1u);
+    ASSERT_EQ(fast.modes.size(), 1u);
+    const WaveletMode &a = full.modes[0], &b = fast.modes[0];
+    EXPECT_EQ(gear_test::modeDecisions(a), gear_test::modeDecisions(b)) << "seed " << seed;
+    ASSERT_TRUE(std::isfinite(a.damping_ratio)) << "seed " << seed;
+    (seed == 0 ? noise_free : noisy)
+        .push_back({{a.damping_ratio, b.damping_ratio, a.frequency_hz, b.frequency_hz}});
+    if (seed == 0) {
+      std::printf(
+          "[ measured ] gear case row at f0, noise-free, per-mode vs full path: xi %.10g vs "
+          "%.10g, f_d %.10g vs %.10g Hz, region end %.6g vs %.6g s\n",
+          b.damping_ratio, a.damping_ratio, b.frequency_hz, a.frequency_hz, b.t_end, a.t_end);
+    }
+  }
+  const gear_test::PerModeAgreement r = gear_test::perModeAgreement(noisy, noise_free);
   std::printf(
-      "[ measured ] gear case row at f0, per-mode vs full path: xi %.10g vs %.10g (%.2e), f_d "
-      "%.10g vs %.10g Hz (%.2e), region end %.6g vs %.6g s\n",
-      b.damping_ratio, a.damping_ratio, xi_rel, b.frequency_hz, a.frequency_hz, f_rel, b.t_end,
-      a.t_end);
-  EXPECT_LT(xi_rel, 1e-4);
-  EXPECT_LT(f_rel, 3e-5);
+      "[ measured ] gear case at 40 dB, full path's scatter over 10 seeds: xi %.2e, f_d %.3g Hz; "
+      "per-mode vs full path: worst |dxi|/sd %.3f, |df_d|/sd %.3f\n",
+      r.sd_xi[0], r.sd_fd[0], r.worst_xi, r.worst_fd);
+  EXPECT_LT(r.worst_xi, gear_test::kPerModeShareOfScatter);
+  EXPECT_LT(r.worst_fd, gear_test::kPerModeShareOfScatter);
 }
 
 // The case of the issue "wavelet on a forced response": on the raw, forced DTE the peaks are

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "../../gear_damping_id/src/core/decimated_row.hpp"
+#include "per_mode_agreement.hpp"
 #include "status_support.hpp"
 
 namespace gear_damping_id {
@@ -675,23 +676,26 @@ TEST(AnalyzeWavelet, GivesTheSameModesWithoutTheFullScalogram) {
   EXPECT_EQ(b.modulus.size(), 0);
   ASSERT_EQ(a.modes.size(), b.modes.size());
   for (size_t i = 0; i < a.modes.size(); ++i) {
-    // The per-mode path's tolerances (PerModePathMatchesTheFullPathOnThreeModes).
-    EXPECT_LT(relErr(b.modes[i].damping_ratio, a.modes[i].damping_ratio), 1e-6);
-    EXPECT_LT(relErr(b.modes[i].frequency_hz, a.modes[i].frequency_hz), 1e-8);
+    // The same decisions; the numbers' agreement is PerModePathMatchesTheFullPathOnThreeModes's.
+    EXPECT_EQ(gear_test::modeDecisions(b.modes[i]), gear_test::modeDecisions(a.modes[i]));
   }
 }
 
 // The per-mode path (full_scalogram = false: binned Parseval sums for the wide rows, envelope
-// fits and noise medians on every D-th sample, D = s*fs/16) against the full path (exact sums,
-// every sample) on the paper's three modes, clean and at 30 dB over seeds. Bars: the spectra
-// within 1e-6 relative (the bound of the binned sums' Taylor remainder); the damping ratio
-// within 1e-6 and the frequency within 1e-8 relative (measured 6.7e-8 and 8.2e-10; the bars are
-// below 1/300 of the smallest error of xi at 30 dB, 3.5e-4, and 1/600 of f's, 6e-6, in
-// KeepsThePapersThreeModesWithinFivePercentAt30dBSnr: no estimate moves by a measurable
-// fraction of its uncertainty).
+// fits, region ends and noise medians on decimated grids) is its own estimator, required to be
+// statistically indistinguishable from the full path (exact sums, every sample), not equal to it
+// (docs/wavelet.md "Speed", gear_test::perModeAgreement): on the paper's three modes at 30 dB
+// over 10 seeds, and on the clean record, every per-mode xi and f_d lies within 1/10 of the full
+// path's seed-to-seed standard deviation of that mode's xi and f_d, and every mode's decisions
+// (omega0, free decay, damping ratio given, warning codes) are the same. Measured standard
+// deviations (full path, seeds 1-10): see the printed line and docs/wavelet.md. The reported
+// spectra (PSD, time-averaged and peak spectra, noise_std) are on the per-mode path's own
+// padding (n/32 instead of the grid's 0.76 n), so they and the peaks' spectral frequencies
+// differ from the full path's by what that padding changes; the picked modes are the same.
 TEST(AnalyzeWavelet, PerModePathMatchesTheFullPathOnThreeModes) {
-  double worst_xi = 0.0, worst_f = 0.0, worst_power = 0.0;
-  for (unsigned seed = 0; seed <= 6; ++seed) {
+  double worst_spec = 0.0;
+  std::vector<std::vector<gear_test::ModePair>> noisy, clean;
+  for (unsigned seed = 0; seed <= 10; ++seed) {
     const std::vector<double> y = seed == 0 ? freeDecay(kPaperModes, kPaperFs, kPaperN)
                                             : freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, seed);
     WaveletOptions full, fast;
@@ -700,30 +704,26 @@ TEST(AnalyzeWavelet, PerModePathMatchesTheFullPathOnThreeModes) {
     std::string error;
     ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, full, &a), &error)) << error;
     ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, fast, &b), &error)) << error;
-    ASSERT_EQ(a.spectrum_power, b.spectrum_power);
-    ASSERT_EQ(a.peak_power.size(), b.peak_power.size());
-    for (size_t i = 0; i < a.peak_power.size(); ++i)
-      worst_power = std::max(worst_power, relErr(b.peak_power[i], a.peak_power[i]));
-    for (size_t i = 0; i < a.scalogram_power.size(); ++i)
-      worst_power = std::max(worst_power, relErr(b.scalogram_power[i], a.scalogram_power[i]));
     ASSERT_EQ(a.modes.size(), 3u) << seed;
     ASSERT_EQ(b.modes.size(), 3u) << seed;
+    std::vector<gear_test::ModePair> pairs;
     for (size_t i = 0; i < 3; ++i) {
       const WaveletMode &x = a.modes[i], &z = b.modes[i];
-      EXPECT_EQ(x.spectrum_frequency_hz, z.spectrum_frequency_hz) << seed;
-      EXPECT_EQ(x.omega0, z.omega0) << seed;
-      EXPECT_EQ(warningText(x.warnings), warningText(z.warnings)) << seed;
-      worst_xi = std::max(worst_xi, relErr(z.damping_ratio, x.damping_ratio));
-      worst_f = std::max(worst_f, relErr(z.frequency_hz, x.frequency_hz));
-      EXPECT_LT(relErr(z.sigma, x.sigma), 1e-6) << seed << " mode " << i;
-      EXPECT_LT(std::abs(z.r2 - x.r2), 1e-6) << seed << " mode " << i;
+      worst_spec = std::max(worst_spec, relErr(z.spectrum_frequency_hz, x.spectrum_frequency_hz));
+      EXPECT_EQ(gear_test::modeDecisions(x), gear_test::modeDecisions(z)) << seed;
+      pairs.push_back({x.damping_ratio, z.damping_ratio, x.frequency_hz, z.frequency_hz});
     }
+    (seed == 0 ? clean : noisy).push_back(pairs);
   }
-  std::printf("[ measured ] per-mode vs full path: xi %.2e, f_d %.2e, spectra %.2e (relative)\n",
-              worst_xi, worst_f, worst_power);
-  EXPECT_LT(worst_power, 1e-6);
-  EXPECT_LT(worst_xi, 1e-6);
-  EXPECT_LT(worst_f, 1e-8);
+  const gear_test::PerModeAgreement g = gear_test::perModeAgreement(noisy, clean);
+  std::printf(
+      "[ measured ] full path's scatter over 10 seeds at 30 dB: xi %.2e %.2e %.2e, f_d %.2e "
+      "%.2e %.2e Hz; per-mode vs full path: worst |dxi|/sd %.3f, |df_d|/sd %.3f; spectral "
+      "frequencies %.2e (relative)\n",
+      g.sd_xi[0], g.sd_xi[1], g.sd_xi[2], g.sd_fd[0], g.sd_fd[1], g.sd_fd[2], g.worst_xi,
+      g.worst_fd, worst_spec);
+  EXPECT_LT(g.worst_xi, gear_test::kPerModeShareOfScatter);
+  EXPECT_LT(g.worst_fd, gear_test::kPerModeShareOfScatter);
 }
 
 // Every number of two results, compared exactly (NaN equals NaN).

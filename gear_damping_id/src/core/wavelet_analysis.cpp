@@ -153,7 +153,8 @@ struct RowEnvelope {
   const std::complex<double>* w = nullptr;
   long n = 0, D = 1, points = 0;
   double fs = 0.0, f = 0.0, omega0 = 0.0, s = 0.0, coi = 0.0;
-  long j_peak = 0;  // sample index of the envelope's maximum
+  long j_peak = 0;    // sample index of the envelope's maximum
+  bool full = false;  // the full path's row (every sample, medians over every sample)
 };
 
 // The per-mode path's grid: every D-th sample, D = the largest divisor of the FFT length <=
@@ -218,6 +219,16 @@ double medianOfNonNegative(const T* v, long count, long stride) {
   return medianInPlace(&bucket);
 }
 
+// The row's noise median on the per-mode path takes every k-th point of its grid, k =
+// s*fs/(D*kMedianPointsPerScale) (at least 1): |W| of noise is correlated over ~s, so 4 points
+// per scale hold nearly all its independent values (the full path: every sample).
+constexpr double kMedianPointsPerScale = 4.0;
+long medianStride(const RowEnvelope& r) {
+  if (r.full) return 1;
+  const double k = r.s * r.fs / (static_cast<double>(r.D) * kMedianPointsPerScale);
+  return std::max(1L, static_cast<long>(k));
+}
+
 // Noise floor of |W| on a row (RMS of |W| for noise alone): the smaller of the spectral estimate
 // sqrt(gain) * sigma_n and the Rayleigh median of |W| outside the COI (right once the mode has
 // decayed into the noise).
@@ -229,11 +240,11 @@ double rowNoiseFloor(const RowEnvelope& r, const std::vector<double>& env, doubl
   const long a = static_cast<long>(std::ceil(std::max(0.0, lo) * r.fs));
   const long b = static_cast<long>(std::floor(std::max(0.0, hi) * r.fs));
   if (b <= a) return floor_spec;
-  // Per-mode path: the median of the row's grid points in [a, b] (spaced below a scale: |W| of
-  // noise is correlated over ~s, so they hold nearly all its independent values).
+  // Per-mode path: the median of every k-th grid point in [a, b] (medianStride).
   const long m0 = gridCeil(a, r.D), m1 = std::min(gridFloor(b, r.D), r.points - 1);
   if (m1 < m0) return floor_spec;
-  const double med = medianOfNonNegative(env.data() + m0, m1 - m0 + 1, 1);
+  const long k = medianStride(r);
+  const double med = medianOfNonNegative(env.data() + m0, (m1 - m0) / k + 1, k);
   return std::min(floor_spec, med / std::sqrt(std::log(2.0)));
 }
 
@@ -577,7 +588,6 @@ struct Analysis {
   std::vector<double>& env;   // scratch: |W| of a row
   std::vector<double>& work;  // scratch: fits, medians
   std::vector<double>& psd;   // scratch: |Y_k|^2 for the noise median (keeps its size)
-  std::vector<float>& env_f;  // scratch: |W| of the noise row in float (per-mode path)
   BinnedPower& power;         // per-mode path: the Parseval sums of the wide rows (see above)
   wavelet_detail::DecimatedRows& decimated;  // per-mode path: the rows on their grids
   PointCache& points;                        // scratch: the fits' ln|W| and arg W
@@ -862,9 +872,9 @@ std::vector<double> separationOmega0(const std::vector<ModeSeed>& seeds, double 
   return need;
 }
 
-// The per-mode path's single-precision noise row is kept when its median is at least this
-// fraction of its RMS (noise-dominated; see highFrequencyNoise).
-constexpr double kNoiseRowMedianPerRms = 0.5;
+// Per-mode path: the noise row is computed at every kNoiseRowStep-th sample only (exact there,
+// DecimatedRows), on the fit rows' padding, and its median taken over those points.
+constexpr long kNoiseRowStep = 4;
 
 // Noise estimate from the wavelet row at 0.45*fs (far above the modes for omega0 >= 3: a mode at
 // <= 0.3*fs leaks < exp(-4.5) into it): the median of its modulus outside its COI is the Rayleigh
@@ -878,28 +888,22 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
   const double edge = a->opt.coi_factor * morletConeOfInfluence(f_hf, w0) * a->fs;
   const long lo = static_cast<long>(std::ceil(edge)), hi = a->n - 1 - lo;
   if (!clear || hi - lo < kMinRegionSamples) return;
-  double med = kNaN;
-  if (!a->opt.full_scalogram) {
-    // Per-mode path: the row in single precision (half the inverse FFT's time). Its rounding
-    // (~3e-7 of the row's RMS) moves the median by ~1e-7 relative, the damping ratios by less
-    // (PerModePathMatchesTheFullPathOnThreeModes), when noise dominates the row (median >=
-    // kNoiseRowMedianPerRms of its RMS; white noise: 0.83). Otherwise (a clean record: the
-    // float rounding would be taken for its noise) the row is computed again in double.
-    // Every sample: a median over a subset (e.g. every 2nd or 4th sample) moves noise_std by
-    // ~1e-3, and through the region ends f_d by up to 1e-7 on the paper's modes (measured).
-    a->env_f.resize(static_cast<size_t>(a->n));
-    if (fit->rowModulusSingleAt(f_hf, w0, a->env_f.data())) {
-      med = medianOfNonNegative(a->env_f.data() + lo, hi - lo + 1, 1);
-      if (!(med >= kNoiseRowMedianPerRms * std::sqrt(meanPowerOf(*a, f_hf, w0)))) med = kNaN;
-    }
-  }
-  if (std::isnan(med)) {
-    const std::complex<double>* w = fit->rowAt(f_hf, w0);
-    if (!w) return;
-    env->resize(static_cast<size_t>(a->n));
-    modulusOf(reinterpret_cast<const double*>(w), a->n, env->data());
-    med = medianOfNonNegative(env->data() + lo, hi - lo + 1, 1);
-  }
+  // Per-mode path: the row's points m*D (D = kNoiseRowStep, or the largest divisor of the
+  // padded length below it) in [lo, hi]; s*fs is ~2 samples at omega0 = 6, so points 4 samples
+  // apart are nearly independent and the median keeps ~1/4 of the values it had over every
+  // sample (its statistical scatter doubles: ~1e-3 relative at 1e6 samples; the per-mode
+  // contract, docs/wavelet.md "Speed", bounds what that does to the damping ratios).
+  const long D = a->opt.full_scalogram ? 1
+                                       : wavelet_detail::DecimatedRows::divisorAtMost(
+                                             fit->paddedSize(), kNoiseRowStep);
+  const std::complex<double>* w =
+      a->opt.full_scalogram ? fit->rowAt(f_hf, w0) : decimatedRow(a, *fit, f_hf, w0, D);
+  if (!w) return;
+  const long points = (a->n + D - 1) / D, m0 = gridCeil(lo, D), m1 = gridFloor(hi, D);
+  if (m1 < m0) return;
+  env->resize(static_cast<size_t>(points));
+  modulusOf(reinterpret_cast<const double*>(w), points, env->data());
+  const double med = medianOfNonNegative(env->data() + m0, m1 - m0 + 1, 1);
   const double gain = gainOf(*a, *fit, f_hf, w0);
   const double hf = med / std::sqrt(std::log(2.0) * gain);
   if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
@@ -916,6 +920,7 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
   if (a->opt.full_scalogram) {
     row.w = fit->rowAt(f, omega);
     row.points = a->n;
+    row.full = true;
   } else {
     // Per-mode path: the row on its grid of every D-th sample (see fitModes).
     row.D = wavelet_detail::DecimatedRows::divisorAtMost(
@@ -1110,7 +1115,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   // The full path's fit rows come from the spectrum already computed (a->scal) when its
   // padding holds them (the usual case: the modes lie above the grid's lowest row); else, and
   // always on the per-mode path (docs/wavelet.md "Speed"), from their own transform, padded
-  // for the fit rows alone. The noise row comes from a->scal whenever it holds the fit rows.
+  // for the fit rows alone. The noise row comes from the fit rows' transform.
   // On the per-mode path each fit row is computed on its grid of every D-th sample
   // (kFitSamplesPerScale), exact at those samples: one inverse FFT of length N/D of the row's
   // band folded modulo N/D (DecimatedRows) instead of the full or pruned inverse FFT.
@@ -1127,7 +1132,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   }
   std::vector<double>& env = a->env;
   std::vector<double>& work = a->work;
-  highFrequencyNoise(a, held ? &a->scal : fit, seeds, &env);
+  highFrequencyNoise(a, fit, seeds, &env);
   const std::vector<double> orders = resolvedOrders(a);
   for (size_t i = 0; i < seeds.size(); ++i) {
     WaveletMode m;
@@ -1248,7 +1253,6 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
 struct WaveletAnalyzer::Workspace {
   MorletCwt scal, own;
   std::vector<double> env, work, psd;
-  std::vector<float> env_f;
   BinnedPower power;
   wavelet_detail::DecimatedRows decimated;
   PointCache points;
@@ -1292,8 +1296,8 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   };
   if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
-  Analysis a{y,     n,      sample_rate, options, *result, {},          w.scal,  w.own,
-             w.env, w.work, w.psd,       w.env_f, w.power, w.decimated, w.points};
+  Analysis a{y,     n,     sample_rate, options, *result, {},          w.scal,
+             w.own, w.env, w.work,      w.psd,   w.power, w.decimated, w.points};
   if (Status s = checkInput(a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
   if (Status s = spectraAndNoise(&a); !s.ok()) return stop(s);
