@@ -412,6 +412,13 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   out->ok = true;
 }
 
+// Makes *v hold at least n values without shrinking it: the rows' |W| scratch alternates between
+// rows of different lengths (noise row, decimated and full fit rows), and resize() would zero
+// every value past the previous size on each growth. Only the first n values are meaningful.
+void growScratch(std::vector<double>* v, long n) {
+  if (v->size() < static_cast<size_t>(n)) v->resize(static_cast<size_t>(n));
+}
+
 // One row's envelope |W|, its peak and noise floor: what every fit on that row shares (the
 // two passes of fitAt reuse it instead of recomputing |W|, its maximum and its median).
 struct PreparedRow {
@@ -427,10 +434,11 @@ PreparedRow prepareRow(const RowEnvelope& r, double noise_gain, double noise_std
   p.cache = cache;
   cache->c1 = cache->c0 - 1;
   std::vector<double>& env = *env_scratch;
-  env.resize(static_cast<size_t>(r.points));
+  growScratch(&env, r.points);
   modulusOf(reinterpret_cast<const double*>(r.w), r.points, env.data());
   p.row = r;
-  const long g = static_cast<long>(std::max_element(env.begin(), env.end()) - env.begin());
+  const long g =
+      static_cast<long>(std::max_element(env.begin(), env.begin() + r.points) - env.begin());
   p.row.j_peak = g * r.D;
   p.peak = env[static_cast<size_t>(g)];
   p.floor = rowNoiseFloor(p.row, env, noise_gain, noise_std, opt);
@@ -900,7 +908,7 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
   if (!w) return;
   const long points = (a->n + D - 1) / D, m0 = gridCeil(lo, D), m1 = gridFloor(hi, D);
   if (m1 < m0) return;
-  env->resize(static_cast<size_t>(points));
+  growScratch(env, points);
   modulusOf(reinterpret_cast<const double*>(w), points, env->data());
   const double med = medianOfNonNegative(env->data() + m0, m1 - m0 + 1, 1);
   const double gain = gainOf(*a, *fit, f_hf, w0);
