@@ -55,22 +55,29 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
 // The sums of nch <= 4 channels x[c][lo, hi) in one loop, each with blockSum's eight
 // accumulators and order (so each equals blockSum's, bit for bit): the channels stream from
 // memory together (several independent miss streams at once) instead of one after another.
+typedef double SumV __attribute__((vector_size(32)));  // four lanes of blockSum's accumulators
 template <int NCH>
 GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index lo, Eigen::Index hi,
                                            double* out) {
-  double a[NCH][8] = {};
+  SumV a[NCH][2];  // lanes 0-3 and 4-7 of blockSum's a[8], per channel (explicit vectors keep
+                   // them in registers for several channels at once)
+  for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
   Eigen::Index i = lo;
   for (; i + 8 <= hi; i += 8) {
     for (int c = 0; c < NCH; ++c) {
-      for (int k = 0; k < 8; ++k) a[c][k] += x[c][i + k];
+      SumV v0, v1;
+      std::memcpy(&v0, x[c] + i, sizeof v0);
+      std::memcpy(&v1, x[c] + i + 4, sizeof v1);
+      a[c][0] += v0;
+      a[c][1] += v1;
     }
   }
-  for (; i < hi; ++i) {
-    for (int c = 0; c < NCH; ++c) a[c][0] += x[c][i];
-  }
   for (int c = 0; c < NCH; ++c) {
-    out[c] =
-        ((a[c][0] + a[c][1]) + (a[c][2] + a[c][3])) + ((a[c][4] + a[c][5]) + (a[c][6] + a[c][7]));
+    double t[8];
+    std::memcpy(t, &a[c][0], sizeof(SumV));
+    std::memcpy(t + 4, &a[c][1], sizeof(SumV));
+    for (Eigen::Index j = i; j < hi; ++j) t[0] += x[c][j];
+    out[c] = ((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7]));
   }
 }
 
