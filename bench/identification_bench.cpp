@@ -137,6 +137,7 @@ void BM_StreamKnownPiecewiseReused(benchmark::State& state) {
 
 BENCHMARK(BM_IdentifyKnownPiecewiseIntegral)
     ->Arg(10000)
+    ->Arg(100000)
     ->Arg(1000000)
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_StreamKnownPiecewiseReused)->Arg(1000000)->Unit(benchmark::kMillisecond);

@@ -297,6 +297,29 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksForAnyThreadCount)
   EXPECT_EQ(w, 3e-4);
 }
 
+// The step check runs in chunks of 512 samples, each in blocks of 64 checked branch-free, the
+// stiffness summed per chunk in the same loop: a bad step at any edge of those (and of the
+// 8192-sample record blocks) is the one named, by checkSignalTable and checkRecord alike.
+TEST_F(IdentificationInput, BadStepAtChunkEdgesIsNamedExactly) {
+  const Eigen::Index n = clean_->size();
+  ASSERT_GT(n, 8192 + 600);
+  for (const Eigen::Index at :
+       {Eigen::Index{1}, Eigen::Index{2}, Eigen::Index{63}, Eigen::Index{64}, Eigen::Index{65},
+        Eigen::Index{511}, Eigen::Index{512}, Eigen::Index{513}, Eigen::Index{8191},
+        Eigen::Index{8192}, Eigen::Index{8193}, Eigen::Index{8704}, n - 1}) {
+    SignalTable t = *clean_;
+    t.time[at] += 0.01e-6;  // 1 % of a step
+    const std::string sep =
+        gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise).message();
+    EXPECT_NE(sep.find("sample " + std::to_string(at) + " "), std::string::npos) << sep;
+    for (const int threads : {1, 2}) {
+      double w = kNaN;
+      EXPECT_EQ(gear_damping_id::checkRecord(t, gear(), opts(), threads, &w).message(), sep)
+          << at << " " << threads;
+    }
+  }
+}
+
 // checkRecord at its blocks' edges: records shorter than a block and of one, two or four
 // blocks (more threads than blocks, up to 16), a bad step (a gap, or a NaN time) on either side
 // of a block edge, at the first and the last step, and stiffness with a NaN at a block edge, an

@@ -122,8 +122,11 @@ class SegmentDriver {
   SegmentOutput add(const SignalView& view, Eigen::Index begin, Eigen::Index end,
                     bool refine_allowed = true);
 
-  /// add() for every range of `view` (ascending), with DriverLimits::threads workers.
-  std::vector<SegmentOutput> addAll(const SignalView& view, const SampleRanges& ranges);
+  /// add() for every range of `view` (ascending), with DriverLimits::threads workers. With
+  /// `outputs` false the per-segment outputs are not collected (an empty vector is returned;
+  /// result()/finish() are the same): for callers that only want the run's result.
+  std::vector<SegmentOutput> addAll(const SignalView& view, const SampleRanges& ranges,
+                                    bool outputs = true);
 
   /// The last `last` segments kept, with the shared unknowns solved, xi from the record's
   /// omega0 so far, the flags applied and the run warnings. Not refined for shared models.

@@ -39,30 +39,6 @@ namespace gear_damping_id {
 
 namespace {
 
-// The first step i in [lo, hi) (lo >= 1) from which the steps of tt may not all be within tol of
-// ref: blocks of 64 steps are checked branch-free (vectorised); the caller searches on from the
-// returned index for the first bad step (hi when every block passed).
-GD_AVX2_CLONES
-Eigen::Index uniformStepsUpTo(const double* tt, Eigen::Index lo, Eigen::Index hi, double ref,
-                              double tol) {
-  Eigen::Index i0 = lo;
-  for (; i0 + 64 <= hi; i0 += 64) {
-    long good = 0;  // an integer count vectorises (a bool reduction does not)
-    for (int k = 0; k < 64; ++k) good += std::abs(tt[i0 + k] - tt[i0 + k - 1] - ref) <= tol;
-    if (good != 64) break;
-  }
-  return i0;
-}
-
-// The first step i in [lo, hi) (lo >= 1) not within tol of ref, hi when there is none.
-Eigen::Index firstBadStep(const double* tt, Eigen::Index lo, Eigen::Index hi, double ref,
-                          double tol) {
-  for (Eigen::Index i = uniformStepsUpTo(tt, lo, hi, ref, tol); i < hi; ++i) {
-    if (!(std::abs(tt[i] - tt[i - 1] - ref) <= tol)) return i;
-  }
-  return hi;
-}
-
 // Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
 // full; a non-finite term makes the sum non-finite).
 GD_AVX2_CLONES
@@ -74,6 +50,82 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   }
   for (; i < hi; ++i) a[0] += x[i];
   return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+// The sums of nch <= 4 channels x[c][lo, hi) in one loop, each with blockSum's eight
+// accumulators and order (so each equals blockSum's, bit for bit): the channels stream from
+// memory together (several independent miss streams at once) instead of one after another.
+typedef double SumV __attribute__((vector_size(32)));  // four lanes of blockSum's accumulators
+template <int NCH>
+GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index lo, Eigen::Index hi,
+                                           double* out) {
+  SumV a[NCH][2];  // lanes 0-3 and 4-7 of blockSum's a[8], per channel (explicit vectors keep
+                   // them in registers for several channels at once)
+  for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
+  Eigen::Index i = lo;
+  for (; i + 8 <= hi; i += 8) {
+    for (int c = 0; c < NCH; ++c) {
+      SumV v0, v1;
+      std::memcpy(&v0, x[c] + i, sizeof v0);
+      std::memcpy(&v1, x[c] + i + 4, sizeof v1);
+      a[c][0] += v0;
+      a[c][1] += v1;
+    }
+  }
+  for (int c = 0; c < NCH; ++c) {
+    double t[8];
+    std::memcpy(t, &a[c][0], sizeof(SumV));
+    std::memcpy(t + 4, &a[c][1], sizeof(SumV));
+    for (Eigen::Index j = i; j < hi; ++j) t[0] += x[c][j];
+    out[c] = ((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7]));
+  }
+}
+
+GD_AVX2_CLONES
+void channelSums(const double* const* x, int nch, Eigen::Index lo, Eigen::Index hi, double* out) {
+  switch (nch) {
+    case 1:
+      return channelSumsOf<1>(x, lo, hi, out);
+    case 2:
+      return channelSumsOf<2>(x, lo, hi, out);
+    case 3:
+      return channelSumsOf<3>(x, lo, hi, out);
+    default:
+      return channelSumsOf<4>(x, lo, hi, out);
+  }
+}
+
+// checkRecord's work on one block [lo, hi) of the record: the first step i in [max(lo, 1), hi)
+// not within tol of ref (hi when there is none) and, when that is hi and k is given, *sum = the
+// block's sum of k (blockSum's accumulators and order, so its bits). In chunks of 512 samples,
+// the steps of a chunk checked (blocks of 64 branch-free, vectorised; then one by one from the
+// block that failed), then its stiffness summed: both columns stream from memory together
+// instead of one pass each.
+GD_AVX2_CLONES
+Eigen::Index stepsAndSum(const double* tt, const double* k, Eigen::Index lo, Eigen::Index hi,
+                         double ref, double tol, double* sum) {
+  constexpr Eigen::Index kChunk = 512;
+  double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  for (Eigen::Index c0 = lo; c0 < hi; c0 += kChunk) {
+    const Eigen::Index c1 = std::min(hi, c0 + kChunk);
+    Eigen::Index i = std::max<Eigen::Index>(c0, 1);
+    for (; i + 64 <= c1; i += 64) {
+      long good = 0;  // an integer count vectorises (a bool reduction does not)
+      for (int j = 0; j < 64; ++j) good += std::abs(tt[i + j] - tt[i + j - 1] - ref) <= tol;
+      if (good != 64) break;
+    }
+    for (; i < c1; ++i) {
+      if (!(std::abs(tt[i] - tt[i - 1] - ref) <= tol)) return i;
+    }
+    if (k == nullptr) continue;
+    Eigen::Index j = c0;
+    for (; j + 8 <= c1; j += 8) {
+      for (int c = 0; c < 8; ++c) a[c] += k[j + c];
+    }
+    for (; j < c1; ++j) a[0] += k[j];
+  }
+  *sum = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+  return hi;
 }
 
 // Whole-record passes go in blocks of this many samples; a whole-record sum is the sum of the
@@ -159,7 +211,9 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f,
   double ref = 0.0;
   if (gear_sim::Status s = checkColumns(t, f, m, &ref); !s.ok()) return s;
   const Eigen::Index n = t.size();
-  const Eigen::Index i = firstBadStep(t.time.data(), 1, n, ref, rel_tolerance * ref);
+  double unused = 0.0;
+  const Eigen::Index i =
+      stepsAndSum(t.time.data(), nullptr, 0, n, ref, rel_tolerance * ref, &unused);
   return i < n ? badStep(t, i, ref, rel_tolerance, first_line) : gear_sim::Status();
 }
 
@@ -178,13 +232,13 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
   auto run = [&](Eigen::Index b0, Eigen::Index b1) {
     for (Eigen::Index b = b0; b < b1; ++b) {
       const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
-      const Eigen::Index i =
-          firstBadStep(t.time.data(), std::max<Eigen::Index>(lo, 1), hi, ref, tol);
+      double sum = 0.0;
+      const Eigen::Index i = stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum);
       if (i < hi) {
         bad[static_cast<size_t>(b)] = i;
         return;
       }
-      if (k != nullptr) sums[static_cast<size_t>(b)] = blockSum(k, lo, hi);
+      if (k != nullptr) sums[static_cast<size_t>(b)] = sum;
     }
   };
   const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
@@ -1081,7 +1135,7 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
 
 // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
 // search runs only when it is not). Leaves each needed channel's sum in channel_sum (dte,
-// stiffness, torque, mesh_state).
+// stiffness, torque, mesh_state), and a present stiffness's sum even when it is not needed.
 gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index begin,
                                                    Eigen::Index end, double channel_sum[4]) const {
   const Formulation f = options_.formulation;
@@ -1089,10 +1143,19 @@ gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::I
                               needsTorque(f, options_.model) ? s.torque : nullptr,
                               needsMeshState(f) ? s.mesh_state : nullptr};
   const char* names[] = {"dte", "stiffness", "torque", "mesh_state"};
+  // One fused pass sums every needed channel and a present stiffness (segmentMeans' k_integral
+  // needs it in any formulation): their first read of the segment, together (channelSums).
+  const double* present[4];
+  int idx[4], np = 0;
   for (int c = 0; c < 4; ++c) {
-    if (channels[c] == nullptr) continue;
-    channel_sum[c] = blockSum(channels[c], begin, end);
-    if (std::isfinite(channel_sum[c])) continue;
+    const double* x = c == 1 ? s.stiffness : channels[c];
+    if (x != nullptr) present[np] = x, idx[np++] = c;
+  }
+  double sums[4] = {0, 0, 0, 0};
+  if (np > 0) channelSums(present, np, begin, end, sums);
+  for (int p = 0; p < np; ++p) channel_sum[idx[p]] = sums[p];
+  for (int c = 0; c < 4; ++c) {
+    if (channels[c] == nullptr || std::isfinite(channel_sum[c])) continue;
     for (Eigen::Index i = begin; i < end; ++i) {
       if (!std::isfinite(channels[c][i])) {
         std::ostringstream m;
@@ -1146,7 +1209,7 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
     }
   }
   if (s.stiffness) {
-    double sum = needsStiffness(f) ? channel_sum[1] : blockSum(s.stiffness, begin, end);
+    double sum = channel_sum[1];  // (checkFiniteInputs sums a present stiffness)
     if (held_k_) {
       for (const QuadratureBreak& b : breaks_) {
         sum += (1.0 - b.th) * (s.stiffness[b.j + 1] - s.stiffness[b.j]);

@@ -322,18 +322,25 @@ SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Inde
 }
 
 std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView& v,
-                                                                const SampleRanges& ranges) {
+                                                                const SampleRanges& ranges,
+                                                                bool outputs) {
   resolveWindow(v);
   const bool missing = !checkChannels(v, options_.formulation, options_.model).ok();
   const bool sliding = limits_.shared_segments != std::numeric_limits<size_t>::max();
   std::vector<SegmentOutput> outs;
   if (limits_.threads <= 1 || ranges.size() < 2 || missing || sliding ||
       limits_.solve_shared_each_segment || ste_on_) {
-    for (const auto& r : ranges) outs.push_back(add(v, r.first, r.second));
+    // (Each output is ~1.5 kB: collected only when asked for, into storage reserved once.)
+    if (outputs) outs.reserve(ranges.size());
+    for (const auto& r : ranges) {
+      SegmentOutput out = add(v, r.first, r.second);
+      if (outputs) outs.push_back(std::move(out));
+    }
     return outs;
   }
   if (shared_) {
     addSharedParallel(v, ranges);
+    if (!outputs) return outs;
     for (auto it = kept_.end() - static_cast<std::ptrdiff_t>(ranges.size()); it != kept_.end();
          ++it) {
       SegmentOutput o;
@@ -370,6 +377,7 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
     else
       recordPiecewise(outs[i], unlocated[i], v.dt);
   }
+  if (!outputs) outs.clear();
   return outs;
 }
 
@@ -445,7 +453,7 @@ gear_sim::Status identify(const gear_sim::SignalTable& table, const GearConstant
   SegmentDriver driver(o, gear, limits);
   if (o.formulation == Formulation::Legacy && view.torque != nullptr)
     driver.setLegacyForcing(legacyForcing(view, ranges, gear));
-  driver.addAll(view, ranges);
+  driver.addAll(view, ranges, /*outputs=*/false);
   *result = driver.finish(&view, &ranges);
   return {};
 }
