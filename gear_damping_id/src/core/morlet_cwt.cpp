@@ -153,13 +153,19 @@ void modulusOfFloats(const float* w, long n, T* out) {
     out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
 }
 
-// bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the
-// twiddles advance one step: t[k] *= (sr[k] + i si[k]). Built for AVX2 too (runtime dispatch,
-// GCC target_clones) where the compiler supports it: the same operations in the same order, so
-// results do not depend on the clone (no FMA contraction in either).
+// The element-wise loops below are built for AVX-512 and AVX2 too where the compiler supports it
+// (runtime dispatch, GCC target_clones), with FP contraction off: the same operations in the
+// same order in every clone, so results do not depend on the clone (no FMA in any of them).
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
+#define GD_CWT_CLONES \
+  __attribute__((target_clones("avx512f", "avx2", "default"), optimize("fp-contract=off")))
+#else
+#define GD_CWT_CLONES
 #endif
+
+// bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the
+// twiddles advance one step: t[k] *= (sr[k] + i si[k]) (GD_CWT_CLONES).
+GD_CWT_CLONES
 void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
                  const double* __restrict sr, const double* __restrict si, double* __restrict bc,
                  long count) {
@@ -172,9 +178,7 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
   }
 }
 // Same, rounded to float for the single-precision batches (twiddles kept in double).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
                  const double* __restrict sr, const double* __restrict si, float* __restrict bc,
                  long count) {
@@ -189,10 +193,8 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
 
 // bc[k] = u[k] * (sr[k] + i si[k]) for k < count (interleaved complex u, bc; distinct arrays),
 // and the same in place (u[k] *= ...): the pruned |W|'s band of batch p from batch p-1's.
-// AVX2 clones as twiddleBand's (no FMA: the results do not depend on the clone).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+// GD_CWT_CLONES.
+GD_CWT_CLONES
 void advanceBand(const double* __restrict u, const double* __restrict sr,
                  const double* __restrict si, double* __restrict bc, long count) {
   for (long k = 0; k < count; ++k) {
@@ -201,9 +203,7 @@ void advanceBand(const double* __restrict u, const double* __restrict sr,
     bc[2 * k + 1] = ur * si[k] + ui * sr[k];
   }
 }
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void advanceBand(double* __restrict u, const double* __restrict sr, const double* __restrict si,
                  long count) {
   for (long k = 0; k < count; ++k) {
@@ -214,11 +214,9 @@ void advanceBand(double* __restrict u, const double* __restrict sr, const double
 }
 
 // p[k] = x[k] * g[k] for count complex x, p (interleaved) and real g; and w[i] += c[i] for n
-// doubles w, floats c: a blocked row's band and its cut's part (MorletScalogram::blockedRow). AVX2
-// clones as twiddleBand's (no FMA: the results do not depend on the clone).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+// doubles w, floats c: a blocked row's band and its cut's part (MorletScalogram::blockedRow).
+// GD_CWT_CLONES.
+GD_CWT_CLONES
 void bandTimes(const double* __restrict x, const double* __restrict g, double* __restrict p,
                long count) {
   for (long k = 0; k < count; ++k) {
@@ -226,16 +224,14 @@ void bandTimes(const double* __restrict x, const double* __restrict g, double* _
     p[2 * k + 1] = x[2 * k + 1] * g[k];
   }
 }
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void addFloats(double* __restrict w, const float* __restrict c, long n) {
   for (long i = 0; i < n; ++i) w[i] += static_cast<double>(c[i]);
 }
 
 // out[i] = |w_i| = sqrt(re^2 + im^2) for n complex doubles w (interleaved), bit-identical to
-// modulusOf (no FMA; IEEE square root): four per instruction with AVX2 where the CPU has it
-// (runtime check), else modulusOf's SSE2.
+// modulusOf (no FMA; IEEE square root): eight per instruction with AVX-512 or four with AVX2
+// where the CPU has it (runtime check), else modulusOf's SSE2.
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target("avx2"))) void modulusAvx2(const double* w, long n, double* out) {
   long i = 0;
@@ -247,9 +243,35 @@ __attribute__((target("avx2"))) void modulusAvx2(const double* w, long n, double
   }
   modulusOf(w + 2 * i, n - i, out + i);
 }
+// modulusOf compiled for the baseline and not inlined into the wider targets below, where a
+// compiler may contract its scalar re*re + im*im into an FMA (AVX-512 implies FMA): the ends of
+// runs keep modulusOf's bits.
+__attribute__((noinline)) void modulusTail(const double* w, long n, double* out) {
+  modulusOf(w, n, out);
+}
+// Same with AVX-512, eight per instruction: the squares are formed before the shuffle that
+// pairs re^2 with im^2, so no compiler can contract them into an FMA (the same bits as
+// modulusOf). About half the time of the AVX2 version, whose lane-crossing shuffle limits it.
+__attribute__((target("avx512f"))) void modulusAvx512(const double* w, long n, double* out) {
+  const __m512i re = _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0);
+  const __m512i im = _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1);
+  long i = 0;
+  for (; i + 7 < n; i += 8) {
+    const __m512d a = _mm512_loadu_pd(w + 2 * i), b = _mm512_loadu_pd(w + 2 * i + 8);
+    const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
+    const __m512d h =
+        _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
+    // The masked form (all lanes): GCC 12's _mm512_sqrt_pd trips -Wmaybe-uninitialized.
+    _mm512_storeu_pd(out + i, _mm512_mask_sqrt_pd(h, static_cast<__mmask8>(0xFF), h));
+  }
+  modulusTail(w + 2 * i, n - i, out + i);
+}
 void modulusRun(const double* w, long n, double* out) {
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) {
+  static const int level =
+      __builtin_cpu_supports("avx512f") ? 2 : (__builtin_cpu_supports("avx2") ? 1 : 0);
+  if (level == 2) {
+    modulusAvx512(w, n, out);
+  } else if (level == 1) {
     modulusAvx2(w, n, out);
   } else {
     modulusOf(w, n, out);
