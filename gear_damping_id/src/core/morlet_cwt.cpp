@@ -952,7 +952,9 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
     return false;
   }
   if (precision_ == Precision::Single) {
-    if (pruned_ && prunedRow<float>(out)) return true;
+    // Pruned rows stay double: their size-M transforms are in cache, where float gains little,
+    // and the double path advances the twiddles by table (the float batches use sin/cos).
+    if (pruned_ && prunedRow<double>(out)) return true;
     if (!fullRowSingle()) return false;
     modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
     return true;
@@ -1334,13 +1336,12 @@ Status MorletScalogram::configure(long n, double sample_rate,
     const double pad = std::ceil(kPadScales * (at_nyquist ? s_max : s) * sample_rate);
     own[i] = pad < 4e15 ? fastFftLength(n + static_cast<long>(pad)) : -1;
   }
-  if (precision == Precision::Double) {
-    if (Status st =
-            configureBlocks(n, sample_rate, frequencies_hz, omega0, planning, threads, &own);
-        !st.ok()) {
-      blocks_.reset();
-      return st;
-    }
+  // Blocked rows in either precision (their in-cache double transforms are faster than the
+  // float full-length or pruned rows they replace, and more accurate).
+  if (Status st = configureBlocks(n, sample_rate, frequencies_hz, omega0, planning, threads, &own);
+      !st.ok()) {
+    blocks_.reset();
+    return st;
   }
   std::vector<int> order(m);
   std::iota(order.begin(), order.end(), 0);
