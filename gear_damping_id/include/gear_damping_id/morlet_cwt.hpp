@@ -243,9 +243,10 @@ class MorletCwt {
 ///   length whatever the thread count, so results are bit-identical to one thread.
 /// - Memory: one set of FFT buffers per thread, sized for the longest group and shared by the
 ///   thread's groups (its plans per group point into it), not one set per group.
-/// - Blocked rows (either precision; their transforms are double): a row whose wavelet spans K = ceil(8 s fs) samples either
-///   side, with a block length L (a power of two, 1024..16384, >= 8 (2K + 1)) at most half its
-///   own FFT length and a band below the Nyquist frequency, is computed in overlapping blocks
+/// - Blocked rows (either precision; their transforms are double): a row whose wavelet spans
+///   K = ceil(8 s fs) samples either side, with a block length L (a power of two, 1024..16384,
+///   >= 8 (2K + 1)) at most half its own FFT length and a band below the Nyquist frequency, is
+///   computed in overlapping blocks
 ///   (overlap-save): per block of L samples one inverse FFT of L (in cache) gives L - 2A
 ///   outputs, A >= K the margin, so each output keeps the 8-scale margin of the row's padding.
 ///   The blocks' spectra are computed once per signal per L. The analytic cut at zero frequency
