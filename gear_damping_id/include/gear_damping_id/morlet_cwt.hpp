@@ -199,10 +199,11 @@ class MorletCwt {
   /// configure() on the buffers *shared when they hold the padded length (MorletScalogram's
   /// groups, used in turn by one thread; each use must start with setSignal, since another
   /// object's setSignal overwrites the spectrum); otherwise on new buffers, stored in *shared
-  /// when shared is not null.
+  /// when shared is not null. fft_length > 0: the padded length, if at least the rows' own.
   gear_sim::Status configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
                                const std::vector<double>& frequencies_hz,
-                               const std::vector<double>& omega0s, FftPlanning planning);
+                               const std::vector<double>& omega0s, FftPlanning planning,
+                               long fft_length = 0);
   /// setSignal's check of n samples (all finite; InvalidInput naming the first that is not)
   /// and their mean; then its transform of samples already checked, whose mean is `mean`.
   static gear_sim::Status checkedMean(const double* y, long n, double* mean);
