@@ -363,13 +363,12 @@ class Phasors {
   std::vector<double> lo_, hi_;
 };
 
-// Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
-// smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
-// kMinPrunedBatches batches (the full inverse FFT is then as fast).
-// Smallest multiple of 8 >= min_length (>= 1) whose only prime factors are 2, 3, 5 and 7.
-long fastFftLength8(long min_length) {
+// Smallest multiple of `factor` (>= 1) >= min_length (>= 1) whose only prime factors are 2, 3,
+// 5 and 7 (factor's among them): fastFftLength (factor 1) and the scalogram's group lengths (8).
+long smoothLength(long min_length, long factor) {
   long best = -1;
-  for (long p7 = 8;; p7 *= 7) {
+  // Enumerate factor 2^a 3^b 5^c 7^d >= min_length, keep the smallest.
+  for (long p7 = factor;; p7 *= 7) {
     for (long p5 = p7;; p5 *= 5) {
       for (long p3 = p5;; p3 *= 3) {
         long v = p3;
@@ -384,6 +383,9 @@ long fastFftLength8(long min_length) {
   return best;
 }
 
+// Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
+// smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
+// kMinPrunedBatches batches (the full inverse FFT is then as fast).
 long prunedBatchLength(const std::vector<long>& divisors, long n_fft, long band) {
   const auto it = std::lower_bound(divisors.begin(), divisors.end(), band);
   return it == divisors.end() || *it * kMinPrunedBatches > n_fft ? -1 : *it;
@@ -397,21 +399,7 @@ long prunedBatchLength(const std::vector<long>& divisors, long n_fft, long band)
 long fastFftLength(long min_length) {
   if (min_length < 1) return -1;
   if (min_length > (1L << 52)) return -1;
-  long best = -1;
-  // Enumerate 2^a 3^b 5^c 7^d >= min_length, keep the smallest.
-  for (long p7 = 1;; p7 *= 7) {
-    for (long p5 = p7;; p5 *= 5) {
-      for (long p3 = p5;; p3 *= 3) {
-        long v = p3;
-        while (v < min_length) v *= 2;
-        if (best < 0 || v < best) best = v;
-        if (p3 >= min_length) break;
-      }
-      if (p5 >= min_length) break;
-    }
-    if (p7 >= min_length) break;
-  }
-  return best;
+  return smoothLength(min_length, 1);
 }
 
 double morletScale(double frequency_hz, double omega0) {
@@ -1361,7 +1349,7 @@ Status MorletScalogram::configure(long n, double sample_rate,
   // samples), whose r2c FFT took 1.8 ms against 0.47 ms for the next group's even length.
   const long n0 = *std::max_element(own.begin(), own.end());
   for (long& len : own) {
-    if (len > 0 && len < n0) len = std::min(n0, fastFftLength8(len));
+    if (len > 0 && len < n0) len = std::min(n0, smoothLength(len, 8));
   }
   // Blocked rows in either precision (their in-cache double transforms are faster than the
   // float full-length or pruned rows they replace, and more accurate).
