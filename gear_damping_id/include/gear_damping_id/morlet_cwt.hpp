@@ -58,10 +58,12 @@ enum class FftPlanning { Estimate, Measure };
 
 /// Arithmetic of the per-row inverse FFTs of |W| (MorletCwt::rowModulus, MorletScalogram).
 /// The signal's FFT, the Morlet multiplier and the complex rows (row(), rowAt()) are always
-/// double. kSingle rounds each row's band to float and runs FFTW's single-precision
-/// transforms: about half the time of the FFTs and half the memory traffic; |W| agrees with
+/// double. kSingle rounds the band of each row that takes a full-length inverse FFT to float
+/// and runs FFTW's single-precision transform: about half the time of that FFT and half the
+/// memory traffic. Pruned rows (rowModulus) and MorletScalogram's blocked rows stay double in
+/// either precision: their transforms are in cache, where float gains little. |W| agrees with
 /// kDouble within 1e-6 of the scalogram's largest |W| (wavelet_scalogram_test bounds it;
-/// measured ~1e-7), the precision fCWT works in.
+/// measured ~2e-7), the precision fCWT works in.
 enum class Precision { Double, Single };
 
 /// Smallest length >= min_length whose only prime factors are 2, 3, 5 and 7 (fast for FFTW).
@@ -197,10 +199,11 @@ class MorletCwt {
   /// configure() on the buffers *shared when they hold the padded length (MorletScalogram's
   /// groups, used in turn by one thread; each use must start with setSignal, since another
   /// object's setSignal overwrites the spectrum); otherwise on new buffers, stored in *shared
-  /// when shared is not null.
+  /// when shared is not null. fft_length > 0: the padded length, if at least the rows' own.
   gear_sim::Status configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
                                const std::vector<double>& frequencies_hz,
-                               const std::vector<double>& omega0s, FftPlanning planning);
+                               const std::vector<double>& omega0s, FftPlanning planning,
+                               long fft_length = 0);
   /// setSignal's check of n samples (all finite; InvalidInput naming the first that is not)
   /// and their mean; then its transform of samples already checked, whose mean is `mean`.
   static gear_sim::Status checkedMean(const double* y, long n, double* mean);
@@ -241,9 +244,10 @@ class MorletCwt {
 ///   length whatever the thread count, so results are bit-identical to one thread.
 /// - Memory: one set of FFT buffers per thread, sized for the longest group and shared by the
 ///   thread's groups (its plans per group point into it), not one set per group.
-/// - Blocked rows (Precision::kDouble): a row whose wavelet spans K = ceil(8 s fs) samples either
-///   side, with a block length L (a power of two, 1024..16384, >= 8 (2K + 1)) at most half its
-///   own FFT length and a band below the Nyquist frequency, is computed in overlapping blocks
+/// - Blocked rows (either precision; their transforms are double): a row whose wavelet spans
+///   K = ceil(8 s fs) samples either side, with a block length L (a power of two, 1024..16384,
+///   >= 8 (2K + 1)) at most half its own FFT length and a band below the Nyquist frequency, is
+///   computed in overlapping blocks
 ///   (overlap-save): per block of L samples one inverse FFT of L (in cache) gives L - 2A
 ///   outputs, A >= K the margin, so each output keeps the 8-scale margin of the row's padding.
 ///   The blocks' spectra are computed once per signal per L. The analytic cut at zero frequency
@@ -275,7 +279,7 @@ class MorletScalogram {
   int groups() const { return static_cast<int>(group_rows_.size()); }
   /// FFT length of group g.
   long groupLength(int g) const;
-  /// Rows computed in overlapping blocks (see the class notes); 0 for Precision::kSingle.
+  /// Rows computed in overlapping blocks (see the class notes).
   int blockedRows() const;
 
  private:

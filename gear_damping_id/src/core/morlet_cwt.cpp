@@ -153,13 +153,19 @@ void modulusOfFloats(const float* w, long n, T* out) {
     out[i] = static_cast<T>(std::sqrt(w[2 * i] * w[2 * i] + w[2 * i + 1] * w[2 * i + 1]));
 }
 
-// bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the
-// twiddles advance one step: t[k] *= (sr[k] + i si[k]). Built for AVX2 too (runtime dispatch,
-// GCC target_clones) where the compiler supports it: the same operations in the same order, so
-// results do not depend on the clone (no FMA contraction in either).
+// The element-wise loops below are built for AVX-512 and AVX2 too where the compiler supports it
+// (runtime dispatch, GCC target_clones), with FP contraction off: the same operations in the
+// same order in every clone, so results do not depend on the clone (no FMA in any of them).
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
+#define GD_CWT_CLONES \
+  __attribute__((target_clones("avx512f", "avx2", "default"), optimize("fp-contract=off")))
+#else
+#define GD_CWT_CLONES
 #endif
+
+// bc[k] = x[k] * (tr[k] + i ti[k]) for k < count (interleaved complex x and bc), then the
+// twiddles advance one step: t[k] *= (sr[k] + i si[k]) (GD_CWT_CLONES).
+GD_CWT_CLONES
 void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
                  const double* __restrict sr, const double* __restrict si, double* __restrict bc,
                  long count) {
@@ -172,9 +178,7 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
   }
 }
 // Same, rounded to float for the single-precision batches (twiddles kept in double).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
                  const double* __restrict sr, const double* __restrict si, float* __restrict bc,
                  long count) {
@@ -189,10 +193,8 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
 
 // bc[k] = u[k] * (sr[k] + i si[k]) for k < count (interleaved complex u, bc; distinct arrays),
 // and the same in place (u[k] *= ...): the pruned |W|'s band of batch p from batch p-1's.
-// AVX2 clones as twiddleBand's (no FMA: the results do not depend on the clone).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+// GD_CWT_CLONES.
+GD_CWT_CLONES
 void advanceBand(const double* __restrict u, const double* __restrict sr,
                  const double* __restrict si, double* __restrict bc, long count) {
   for (long k = 0; k < count; ++k) {
@@ -201,9 +203,7 @@ void advanceBand(const double* __restrict u, const double* __restrict sr,
     bc[2 * k + 1] = ur * si[k] + ui * sr[k];
   }
 }
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void advanceBand(double* __restrict u, const double* __restrict sr, const double* __restrict si,
                  long count) {
   for (long k = 0; k < count; ++k) {
@@ -214,11 +214,9 @@ void advanceBand(double* __restrict u, const double* __restrict sr, const double
 }
 
 // p[k] = x[k] * g[k] for count complex x, p (interleaved) and real g; and w[i] += c[i] for n
-// doubles w, floats c: a blocked row's band and its cut's part (MorletScalogram::blockedRow). AVX2
-// clones as twiddleBand's (no FMA: the results do not depend on the clone).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+// doubles w, floats c: a blocked row's band and its cut's part (MorletScalogram::blockedRow).
+// GD_CWT_CLONES.
+GD_CWT_CLONES
 void bandTimes(const double* __restrict x, const double* __restrict g, double* __restrict p,
                long count) {
   for (long k = 0; k < count; ++k) {
@@ -226,16 +224,14 @@ void bandTimes(const double* __restrict x, const double* __restrict g, double* _
     p[2 * k + 1] = x[2 * k + 1] * g[k];
   }
 }
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GD_CWT_CLONES
 void addFloats(double* __restrict w, const float* __restrict c, long n) {
   for (long i = 0; i < n; ++i) w[i] += static_cast<double>(c[i]);
 }
 
 // out[i] = |w_i| = sqrt(re^2 + im^2) for n complex doubles w (interleaved), bit-identical to
-// modulusOf (no FMA; IEEE square root): four per instruction with AVX2 where the CPU has it
-// (runtime check), else modulusOf's SSE2.
+// modulusOf (no FMA; IEEE square root): eight per instruction with AVX-512 or four with AVX2
+// where the CPU has it (runtime check), else modulusOf's SSE2.
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target("avx2"))) void modulusAvx2(const double* w, long n, double* out) {
   long i = 0;
@@ -247,9 +243,35 @@ __attribute__((target("avx2"))) void modulusAvx2(const double* w, long n, double
   }
   modulusOf(w + 2 * i, n - i, out + i);
 }
+// modulusOf compiled for the baseline and not inlined into the wider targets below, where a
+// compiler may contract its scalar re*re + im*im into an FMA (AVX-512 implies FMA): the ends of
+// runs keep modulusOf's bits.
+__attribute__((noinline)) void modulusTail(const double* w, long n, double* out) {
+  modulusOf(w, n, out);
+}
+// Same with AVX-512, eight per instruction: the squares are formed before the shuffle that
+// pairs re^2 with im^2, so no compiler can contract them into an FMA (the same bits as
+// modulusOf). About half the time of the AVX2 version, whose lane-crossing shuffle limits it.
+__attribute__((target("avx512f"))) void modulusAvx512(const double* w, long n, double* out) {
+  const __m512i re = _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0);
+  const __m512i im = _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1);
+  long i = 0;
+  for (; i + 7 < n; i += 8) {
+    const __m512d a = _mm512_loadu_pd(w + 2 * i), b = _mm512_loadu_pd(w + 2 * i + 8);
+    const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
+    const __m512d h =
+        _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
+    // The masked form (all lanes): GCC 12's _mm512_sqrt_pd trips -Wmaybe-uninitialized.
+    _mm512_storeu_pd(out + i, _mm512_mask_sqrt_pd(h, static_cast<__mmask8>(0xFF), h));
+  }
+  modulusTail(w + 2 * i, n - i, out + i);
+}
 void modulusRun(const double* w, long n, double* out) {
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) {
+  static const int level =
+      __builtin_cpu_supports("avx512f") ? 2 : (__builtin_cpu_supports("avx2") ? 1 : 0);
+  if (level == 2) {
+    modulusAvx512(w, n, out);
+  } else if (level == 1) {
     modulusAvx2(w, n, out);
   } else {
     modulusOf(w, n, out);
@@ -257,6 +279,45 @@ void modulusRun(const double* w, long n, double* out) {
 }
 #else
 void modulusRun(const double* w, long n, double* out) { modulusOf(w, n, out); }
+#endif
+
+// out[i] = |w_i + c_i| for n complex doubles w and complex floats c (interleaved): w is w + c
+// (addFloats) and then out its modulus (modulusRun), bit for bit. With AVX-512 in one pass
+// (a blocked row's block plus the cut's part: one read of each instead of two of w).
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx512f"))) void modulusPlusAvx512(double* w, const float* c, long n,
+                                                          double* out) {
+  const __m512i re = _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0);
+  const __m512i im = _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1);
+  const __mmask8 all = 0xFF;  // masked forms: GCC 12's unmasked ones trip -Wmaybe-uninitialized
+  long i = 0;
+  for (; i + 7 < n; i += 8) {
+    const __m512d a = _mm512_add_pd(_mm512_loadu_pd(w + 2 * i),
+                                    _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i)));
+    const __m512d b = _mm512_add_pd(_mm512_loadu_pd(w + 2 * i + 8),
+                                    _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i + 8)));
+    const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
+    const __m512d h =
+        _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
+    _mm512_storeu_pd(out + i, _mm512_mask_sqrt_pd(h, all, h));
+  }
+  addFloats(w + 2 * i, c + 2 * i, 2 * (n - i));
+  modulusTail(w + 2 * i, n - i, out + i);
+}
+void modulusPlusRun(double* w, const float* c, long n, double* out) {
+  static const bool avx512 = __builtin_cpu_supports("avx512f");
+  if (avx512) {
+    modulusPlusAvx512(w, c, n, out);
+  } else {
+    addFloats(w, c, 2 * n);
+    modulusRun(w, n, out);
+  }
+}
+#else
+void modulusPlusRun(double* w, const float* c, long n, double* out) {
+  addFloats(w, c, 2 * n);
+  modulusRun(w, n, out);
+}
 #endif
 
 // Output of one chunk of a pruned row (MorletCwt::prunedRow): the transforms of batches
@@ -341,6 +402,26 @@ class Phasors {
   std::vector<double> lo_, hi_;
 };
 
+// Smallest multiple of `factor` (>= 1) >= min_length (>= 1) whose only prime factors are 2, 3,
+// 5 and 7 (factor's among them): fastFftLength (factor 1) and the scalogram's group lengths (8).
+long smoothLength(long min_length, long factor) {
+  long best = -1;
+  // Enumerate factor 2^a 3^b 5^c 7^d >= min_length, keep the smallest.
+  for (long p7 = factor;; p7 *= 7) {
+    for (long p5 = p7;; p5 *= 5) {
+      for (long p3 = p5;; p3 *= 3) {
+        long v = p3;
+        while (v < min_length) v *= 2;
+        if (best < 0 || v < best) best = v;
+        if (p3 >= min_length) break;
+      }
+      if (p5 >= min_length) break;
+    }
+    if (p7 >= min_length) break;
+  }
+  return best;
+}
+
 // Batch length M of the pruned inverse of a band of `band` bins (MorletCwt::prunedRow): the
 // smallest divisor of n_fft (divisors ascending) >= band, or -1 when there is none with at least
 // kMinPrunedBatches batches (the full inverse FFT is then as fast).
@@ -357,21 +438,7 @@ long prunedBatchLength(const std::vector<long>& divisors, long n_fft, long band)
 long fastFftLength(long min_length) {
   if (min_length < 1) return -1;
   if (min_length > (1L << 52)) return -1;
-  long best = -1;
-  // Enumerate 2^a 3^b 5^c 7^d >= min_length, keep the smallest.
-  for (long p7 = 1;; p7 *= 7) {
-    for (long p5 = p7;; p5 *= 5) {
-      for (long p3 = p5;; p3 *= 3) {
-        long v = p3;
-        while (v < min_length) v *= 2;
-        if (best < 0 || v < best) best = v;
-        if (p3 >= min_length) break;
-      }
-      if (p5 >= min_length) break;
-    }
-    if (p7 >= min_length) break;
-  }
-  return best;
+  return smoothLength(min_length, 1);
 }
 
 double morletScale(double frequency_hz, double omega0) {
@@ -541,7 +608,8 @@ Status MorletCwt::configure(long n, double sample_rate, const std::vector<double
 
 Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
                               const std::vector<double>& frequencies_hz,
-                              const std::vector<double>& omega0s, FftPlanning planning) {
+                              const std::vector<double>& omega0s, FftPlanning planning,
+                              long fft_length) {
   release();
   if (n < 2)
     return Status::invalidArgument("MorletCwt: n = " + std::to_string(n) + " must be >= 2", "n");
@@ -576,7 +644,8 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
     s_max = std::max(s_max, morletScale(f, w) * sample_rate);
   }
   const double padded = static_cast<double>(n) + std::ceil(kPadScales * s_max);
-  const long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+  long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+  if (n_fft > 0 && fft_length > static_cast<long>(padded)) n_fft = fft_length;
   if (n_fft < 0 || n_fft > (1L << 40)) {
     return Status::resourceLimit("MorletCwt: padded length for n = " + std::to_string(n) +
                                  " and the lowest frequency is too large");
@@ -930,7 +999,9 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
     return false;
   }
   if (precision_ == Precision::Single) {
-    if (pruned_ && prunedRow<float>(out)) return true;
+    // Pruned rows stay double: their size-M transforms are in cache, where float gains little,
+    // and the double path advances the twiddles by table (the float batches use sin/cos).
+    if (pruned_ && prunedRow<double>(out)) return true;
     if (!fullRowSingle()) return false;
     modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
     return true;
@@ -1265,7 +1336,7 @@ void MorletScalogram::blockedRow(int thread, int b, T* out) {
   if (th.lo <= th.hi) std::fill(in + 2 * th.lo, in + 2 * (th.hi + 1), 0.0);
   th.lo = r.lo;
   th.hi = r.hi;
-  const double* w = reinterpret_cast<const double*>(th.out) + 2 * c.A;
+  double* w = reinterpret_cast<double*>(th.out) + 2 * c.A;
   const long count = r.hi - r.lo + 1;
   const double* psi = r.psi.data();
   for (long q = 0; q < c.nb; ++q) {
@@ -1273,12 +1344,14 @@ void MorletScalogram::blockedRow(int thread, int b, T* out) {
     bandTimes(sp, psi, in + 2 * r.lo, count);
     fftw_execute(th.c2c[size_t(r.cls)]);
     const long j0 = q * c.H, m = std::min(c.H, bl.n - j0);
-    if (bl.cut) {
-      addFloats(reinterpret_cast<double*>(th.out) + 2 * c.A, bl.cut_f.data() + 2 * j0, 2 * m);
-    }
     if constexpr (std::is_same<T, double>::value) {
-      modulusRun(w, m, out + j0);
+      if (bl.cut) {
+        modulusPlusRun(w, bl.cut_f.data() + 2 * j0, m, out + j0);
+      } else {
+        modulusRun(w, m, out + j0);
+      }
     } else {
+      if (bl.cut) addFloats(w, bl.cut_f.data() + 2 * j0, 2 * m);
       modulusOf(w, m, out + j0);
     }
   }
@@ -1312,13 +1385,19 @@ Status MorletScalogram::configure(long n, double sample_rate,
     const double pad = std::ceil(kPadScales * (at_nyquist ? s_max : s) * sample_rate);
     own[i] = pad < 4e15 ? fastFftLength(n + static_cast<long>(pad)) : -1;
   }
-  if (precision == Precision::Double) {
-    if (Status st =
-            configureBlocks(n, sample_rate, frequencies_hz, omega0, planning, threads, &own);
-        !st.ok()) {
-      blocks_.reset();
-      return st;
-    }
+  // Below the lowest row's length N0 (kept: the cut's part and the Nyquist rows use it), a
+  // multiple of 8: the smallest 7-smooth length can be odd (165375 = 3^3 5^3 7^2 at 1e5
+  // samples), whose r2c FFT took 1.8 ms against 0.47 ms for the next group's even length.
+  const long n0 = *std::max_element(own.begin(), own.end());
+  for (long& len : own) {
+    if (len > 0 && len < n0) len = std::min(n0, smoothLength(len, 8));
+  }
+  // Blocked rows in either precision (their in-cache double transforms are faster than the
+  // float full-length or pruned rows they replace, and more accurate).
+  if (Status st = configureBlocks(n, sample_rate, frequencies_hz, omega0, planning, threads, &own);
+      !st.ok()) {
+    blocks_.reset();
+    return st;
   }
   std::vector<int> order(m);
   std::iota(order.begin(), order.end(), 0);
@@ -1342,7 +1421,9 @@ Status MorletScalogram::configure(long n, double sample_rate,
       std::vector<double> f;
       for (int i : g) f.push_back(frequencies_hz[size_t(i)]);
       MorletCwt cwt;
-      if (Status st = cwt.configureOn(&buffers, n, sample_rate, f, {omega0}, planning); !st.ok()) {
+      if (Status st = cwt.configureOn(&buffers, n, sample_rate, f, {omega0}, planning,
+                                      own[size_t(g.front())]);
+          !st.ok()) {
         return st;
       }
       cwt.setPrecision(precision);
