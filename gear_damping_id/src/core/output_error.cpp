@@ -729,7 +729,7 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // The passes are compiled for AVX2 as well as the baseline, chosen at load time (GCC
 // target_clones; other compilers build the baseline), their helpers inlined into each clone.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_FUSED_CLONES __attribute__((target_clones("avx2", "default")))
+#define GD_FUSED_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #else
 #define GD_FUSED_CLONES
 #endif
