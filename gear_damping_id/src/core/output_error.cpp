@@ -722,14 +722,16 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // held-stiffness path they share the step matrix R): step, residual, AR prewhitening and the
 // Gram of the whitened row, without storing the rows; the residual's autocovariances after the
 // loop from the residuals kept in reverse order. Every element is computed with the operations
-// of runTable + Accumulator in their order (no FMA contraction, no reassociation), and the sums
-// run in sample order, so both paths give the same bits. Intervals stepped in parts call back
-// into the generic RK4.
+// of runTable + Accumulator in their order (no reassociation) and the sums run in sample order;
+// the baseline clone gives their bits, the x86-64-v3 clone contracts multiply-adds (FMA), the
+// same numbers to rounding (~1e-16 per step; refine_fast_path_test holds the fast path to the
+// generic RK4 at 1e-9). Intervals stepped in parts call back into the generic RK4.
 
-// The passes are compiled for AVX2 as well as the baseline, chosen at load time (GCC
-// target_clones; other compilers build the baseline), their helpers inlined into each clone.
+// The passes are compiled for x86-64-v3 (AVX2 + FMA) as well as the baseline, chosen at load
+// time (GCC target_clones; other compilers build the baseline), their helpers inlined into each
+// clone. On one machine every run takes the same clone, so results do not depend on the run.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_FUSED_CLONES __attribute__((target_clones("avx2", "default")))
+#define GD_FUSED_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #else
 #define GD_FUSED_CLONES
 #endif
@@ -737,6 +739,9 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 
 constexpr int kFusedLanes = 8;  // sensitivities of the fused pass (two vectors of four)
 typedef double V4d __attribute__((vector_size(32)));  // a GCC vector: one AVX or two SSE2 registers
+// The same at any double's address: stores of kept rows straight from the registers (a memcpy
+// went through the stack in two halves, whose reload stalled the pass).
+typedef double V4dU __attribute__((vector_size(32), aligned(8), may_alias));
 
 // One held value's affine step in lanes: x+ = R x + G T (the state), and for sensitivity k
 // z_k+ = R z_k + S_k x + H_k T (zero S, H for the initial-state unknowns).
@@ -877,20 +882,26 @@ struct FusedSums {
 
   // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice.
   GD_FUSED_INLINE void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
+    accumulate(nm, i, w, ring, Nv, wlag, eprev, rows);
+  }
+
+  // add() on sums held elsewhere (fusedSpan's locals, kept in registers).
+  static GD_FUSED_INLINE void accumulate(const NoiseModel& nm, Index i, const V4d* w, V4d* ring,
+                                         V4d (*Nv)[W], double& wlag, double& eprev, long& rows) {
     V4d e[W];
     for (int v = 0; v < W; ++v) e[v] = w[v];
-    if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... in this order (zero a_k beyond the order)
+    if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... + a_p w_{i-p} in this order
       V4d* slot = ring + (i & 7) * W;
       for (int v = 0; v < W; ++v) slot[v] = slot[v + 8 * W] = w[v];
       if (i < nm.p) return;
       const V4d* prev = slot + 7 * W;
-      for (int k = 0; k < kMaxArOrder; ++k) {
+      for (int k = 0; k < nm.p; ++k) {
         const double ak = nm.a[k];
         for (int v = 0; v < W; ++v) e[v] += ak * prev[v - k * W];
       }
     }
     const double e0 = e[0][0];
-    if (rows > 0) wlag += e0 * eprev;
+    wlag += e0 * eprev;  // eprev = 0 before the first row (a branch here went through memory)
     eprev = e0;
     ++rows;
     for (int q = 0; q <= M; ++q) {
@@ -921,41 +932,80 @@ struct FusedSums {
   }
 };
 
-template <int M, bool Affine>
-GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
-  constexpr int V = (M + 3) / 4;
+// The state, the sensitivities in lanes and the sums of a pass between calls (fusedPassImpl).
+template <int M>
+struct FusedCarry {
+  static constexpr int V = (M + 3) / 4, W = M / 4 + 1;
   V4d a[V], c[V];
-  std::memcpy(a, f->s[0], sizeof(a));
-  std::memcpy(c, f->s[1], sizeof(c));
+  double y = 0.0, vel = 0.0;
   FusedSums<M> sums;
-  double y = f->x[0], vel = f->x[1];
-  const Index n = f->n;
-  constexpr int W = M / 4 + 1;
   V4d ring[16 * W] = {};
-  for (Index i = 0;; ++i) {
+};
+
+// Samples i..end of a pass (rows i..end, intervals i..end - 1, none stepped in parts) in local
+// copies of the carried values (kept in registers: no call, no address taken).
+template <int M, bool Affine>
+GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarry<M>* k) {
+  constexpr int V = (M + 3) / 4, W = M / 4 + 1;
+  V4d a[V], c[V];
+  for (int v = 0; v < V; ++v) a[v] = k->a[v], c[v] = k->c[v];
+  V4d Nv[M + 1][W];
+  for (int q = 0; q <= M; ++q) {
+    for (int v = 0; v < W; ++v) Nv[q][v] = k->sums.Nv[q][v];
+  }
+  double wlag = k->sums.wlag, eprev = k->sums.eprev;
+  long rows = k->sums.rows;
+  double y = k->y, vel = k->vel;
+  const Index n = f->n;
+  for (;; ++i) {
     const double r = f->y[i] - y;
     f->rrev[n - 1 - i] = r;
     V4d w[W];
     fusedRow<M>(r, a, w);
-    if (f->keep != nullptr) std::memcpy(f->keep + 4 * W * i, w, sizeof(w));
-    sums.add(f->nm, i, w, ring);
-    if (i + 1 >= n) break;
-    const unsigned char key = f->key[i];
-    if (key == SegmentTable::kSplit) {
-      double x[2] = {y, vel};
-      std::memcpy(f->s[0], a, sizeof(a));
-      std::memcpy(f->s[1], c, sizeof(c));
-      f->split(f->ctx, i, x, f->s);
-      y = x[0], vel = x[1];
-      std::memcpy(a, f->s[0], sizeof(a));
-      std::memcpy(c, f->s[1], sizeof(c));
-    } else if constexpr (Affine) {
-      fusedAffineStep<V>(f->maps[key], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
+    if (f->keep != nullptr) {
+      V4dU* out = reinterpret_cast<V4dU*>(f->keep + 4 * W * i);
+      for (int v = 0; v < W; ++v) out[v] = w[v];
+    }
+    FusedSums<M>::accumulate(f->nm, i, w, k->ring, Nv, wlag, eprev, rows);
+    if (i == end) break;
+    if constexpr (Affine) {
+      fusedAffineStep<V>(f->maps[f->key[i]], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
     } else {
-      fusedLinearStep<V>(f, i, key, &y, &vel, a, c);
+      fusedLinearStep<V>(f, i, f->key[i], &y, &vel, a, c);
     }
   }
-  sums.finish(f);
+  for (int v = 0; v < V; ++v) k->a[v] = a[v], k->c[v] = c[v];
+  for (int q = 0; q <= M; ++q) {
+    for (int v = 0; v < W; ++v) k->sums.Nv[q][v] = Nv[q][v];
+  }
+  k->sums.wlag = wlag, k->sums.eprev = eprev, k->sums.rows = rows;
+  k->y = y, k->vel = vel;
+}
+
+template <int M, bool Affine>
+GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
+  constexpr int V = (M + 3) / 4;
+  FusedCarry<M> k;
+  std::memcpy(k.a, f->s[0], sizeof(k.a));
+  std::memcpy(k.c, f->s[1], sizeof(k.c));
+  k.y = f->x[0], k.vel = f->x[1];
+  const Index n = f->n;
+  for (Index i = 0;;) {
+    // Up to the next interval stepped in parts (a call: the carried values through memory).
+    Index end = i;
+    while (end + 1 < n && f->key[end] != SegmentTable::kSplit) ++end;
+    fusedSpan<M, Affine>(f, i, end, &k);
+    if (end + 1 >= n) break;
+    double x[2] = {k.y, k.vel};
+    std::memcpy(f->s[0], k.a, sizeof(V4d) * V);
+    std::memcpy(f->s[1], k.c, sizeof(V4d) * V);
+    f->split(f->ctx, end, x, f->s);
+    k.y = x[0], k.vel = x[1];
+    std::memcpy(k.a, f->s[0], sizeof(V4d) * V);
+    std::memcpy(k.c, f->s[1], sizeof(V4d) * V);
+    i = end + 1;
+  }
+  k.sums.finish(f);
 }
 
 // The sums of the rows a pass kept (f->rrev, f->keep) under the noise model f->nm: the numbers
