@@ -1055,7 +1055,8 @@ int Analysis::write() {
       {"topic", is_bag ? nlohmann::json(bag_info.topic) : nlohmann::json(nullptr)},
       {"gaps", is_bag ? bag_info.gaps : 0}};
   if (rig_input) in["encoder"] = gd::toJson(rig_report);
-  nlohmann::json doc = gd::analysisJson(runs, in);
+  // The segments are written from `runs` by writeAnalysisJsonAtomically (no tree of them).
+  nlohmann::json doc = gd::analysisJson(runs, in, /*segments=*/false);
   if (!ste_results.empty()) {  // the STE of the primary run, and of every run (docs/ste.md)
     doc["identification"]["ste"] = gd::steJson(ste_results.front());
     for (size_t k = 0; k < ste_results.size() && k < doc["runs"].size(); ++k) {
@@ -1076,7 +1077,7 @@ int Analysis::write() {
   }
   gd::OutputStage stage;  // every output renamed only once all are written
   gear_sim::Status s;
-  if (!output.empty()) s = gd::writeJsonAtomically(output, doc, &stage);
+  if (!output.empty()) s = gd::writeAnalysisJsonAtomically(output, doc, runs, &stage);
   doc = nullptr;  // the tables below and the bag do not need the document
   if (s.ok() && !csv_out.empty()) {
     if (!runs.empty()) s = gd::writeRunCsv(csv_out, runs, &stage);

@@ -158,7 +158,8 @@ class RecordSource {
   }
 
   // A connection record: its conn and topic fields, and the connection header in its data.
-  void checkConnection(const Record& r) {
+  // Returns its topic and the connection header's type ("" when it has none).
+  BagStructure::Connection checkConnection(const Record& r) {
     field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
     if (r.fields.find("topic") == r.fields.end())
       throw Corrupt{"connection record without its 'topic' field", r.start};
@@ -167,7 +168,9 @@ class RecordSource {
     std::string b;
     if (!read(r.data_pos, r.data_len, &b))
       throw Corrupt{"a connection header cut by the end of the file", r.data_pos, true};
-    parseFields(b.data(), r.data_len, r.data_pos, "connection header");
+    const Fields header = parseFields(b.data(), r.data_len, r.data_pos, "connection header");
+    const auto type = header.find("type");
+    return {r.fields.find("topic")->second, type == header.end() ? std::string() : type->second};
   }
 };
 
@@ -230,7 +233,8 @@ class MemorySource : public RecordSource {
 // message-data records, ascending. `base` is the file offset of the chunk's data (for messages).
 std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t begin,
                                              std::uint64_t size, std::uint64_t base, bool in_file,
-                                             std::set<std::uint32_t>* conns) {
+                                             std::set<std::uint32_t>* conns,
+                                             std::vector<BagStructure::Connection>* connections) {
   std::vector<std::uint32_t> messages;
   const std::uint64_t end = begin + size;
   for (std::uint64_t pos = begin; pos < end;) {
@@ -249,7 +253,7 @@ std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t be
       messages.push_back(static_cast<std::uint32_t>(r.start - begin));
     } else if (r.op == kConnection) {
       try {
-        src->checkConnection(r);
+        connections->push_back(src->checkConnection(r));
       } catch (Corrupt& c) {
         if (!in_file) c.at = base;
         throw;
@@ -295,6 +299,7 @@ class BagWalker {
   // The chunk records (BagStructure::chunks).
   const std::vector<BagStructure::Chunk>& chunks() const { return chunks_; }
   bool encrypted() const { return encrypted_; }
+  const std::vector<BagStructure::Connection>& connections() const { return connections_; }
 
   // Whether every message data record names a connection of the index (checkBagStructure).
   bool messagesIndexed() const {
@@ -361,7 +366,7 @@ class BagWalker {
         chunkInfo(r);
         break;
       case kConnection:
-        src_.checkConnection(r);
+        connections_.push_back(src_.checkConnection(r));
         top_connections_[r.start] =
             field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
         break;
@@ -386,8 +391,8 @@ class BagWalker {
         throw Corrupt{"an uncompressed chunk of " + std::to_string(r.data_len) +
                           " bytes whose header says " + std::to_string(size),
                       r.start};
-      chunk_messages_[r.start] =
-          checkChunkRecords(&src_, r.data_pos, r.data_len, r.data_pos, true, &message_conns_);
+      chunk_messages_[r.start] = checkChunkRecords(&src_, r.data_pos, r.data_len, r.data_pos, true,
+                                                   &message_conns_, &connections_);
     } else if (c->second == "bz2" || c->second == "lz4") {
       if (size > kMaxBagChunkBytes || r.data_len > kMaxBagChunkBytes)
         throw Corrupt{"a compressed chunk of " + std::to_string(size) + " bytes", r.start};
@@ -396,7 +401,8 @@ class BagWalker {
         throw Corrupt{"a chunk cut by the end of the file", r.data_pos, true};
       const std::unique_ptr<char[]> bytes = decompress(c->second, &packed, size, r.start);
       MemorySource mem(bytes.get(), size);
-      chunk_messages_[r.start] = checkChunkRecords(&mem, 0, size, r.start, false, &message_conns_);
+      chunk_messages_[r.start] =
+          checkChunkRecords(&mem, 0, size, r.start, false, &message_conns_, &connections_);
     } else {
       throw Corrupt{
           "chunk compression " + gear_sim::quoteForMessage(c->second) + " (none, bz2 or lz4)",
@@ -476,6 +482,7 @@ class BagWalker {
   std::map<std::uint64_t, std::uint32_t> top_connections_;  // top-level connection: start -> conn
   std::set<std::uint32_t> message_conns_;                   // conn of every message data record
   std::vector<BagStructure::Chunk> chunks_;
+  std::vector<BagStructure::Connection> connections_;  // every connection record, in file order
   bool encrypted_ = false;
 };
 
@@ -486,6 +493,7 @@ void walk(int fd, std::uint64_t file_size, BagStructure* structure) {
   structure->messages_indexed = walker.messagesIndexed();
   structure->chunks = walker.chunks();
   structure->encrypted = walker.encrypted();
+  structure->connections = walker.connections();
 }
 
 }  // namespace

@@ -75,7 +75,16 @@ Status layoutFits(const std::string& path, const rosbag::MessageInstance& m) {
 bool isRigBag(const std::string& path, const RigBagTopics& topics) {
   // rosbag trusts the lengths in the file: a corrupt bag is not opened here (the signal-bag
   // reader then refuses it with the reason).
-  if (!checkBagStructure(path).ok()) return false;
+  BagStructure structure;
+  if (!checkBagStructure(path, &structure).ok()) return false;
+  // rosbag's connections are connection records the walk saw (with the same field parsing): a
+  // bag none of whose connection records is the joints topic's JointState is not a rig bag, and
+  // is not opened a second time only to find that out.
+  const auto joints = [&](const BagStructure::Connection& c) {
+    return c.topic == topics.joints && c.type == kJointStateType;
+  };
+  if (std::none_of(structure.connections.begin(), structure.connections.end(), joints))
+    return false;
   try {
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);

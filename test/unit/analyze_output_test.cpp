@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <string>
@@ -122,6 +123,8 @@ TEST_F(AnalyzeOutput, JsonRecordsVersionCommandLineInputAndOptions) {
                                std::regex("[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9:]{8}Z")));
 }
 
+double kNaNForTest() { return std::numeric_limits<double>::quiet_NaN(); }
+
 gear_damping_id::AnalysisRun fakeRun(gear_damping_id::Formulation f,
                                      gear_damping_id::DampingModel m, int segments) {
   gear_damping_id::AnalysisRun run;
@@ -178,6 +181,62 @@ TEST(AnalysisJson, IdentificationIsThePrimaryRunPlusSharedBlocksAndTheWriterStre
   const gear_sim::Status bad = gd::writeJsonAtomically((out / "not_a_dir.json").string(), doc);
   EXPECT_EQ(bad.code(), gear_sim::StatusCode::IoError);
   EXPECT_EQ(bad.field(), "path");
+}
+
+// writeAnalysisJsonAtomically (the segments written from the runs, no tree of them) writes the
+// bytes of writeJsonAtomically(analysisJson(runs, input)): segments with every optional field
+// present and absent (reason, stiffness levels, torque, integral/weighted estimates, curves,
+// warnings, NaN and infinite values as null, a text needing escapes), runs without segments,
+// and keys added to the document after analysisJson (as analyze adds metadata and STE blocks).
+TEST(AnalysisJson, SegmentsWrittenFromTheRunsGiveTheBytesOfTheDocument) {
+  namespace gd = gear_damping_id;
+  std::vector<gd::AnalysisRun> runs{
+      fakeRun(gd::Formulation::Greybox, gd::DampingModel::Piecewise, 4),
+      fakeRun(gd::Formulation::Known, gd::DampingModel::LoadLaw, 0),
+      fakeRun(gd::Formulation::Legacy, gd::DampingModel::Constant, 2)};
+  std::vector<gd::SegmentEstimate>& s = runs[0].result.segments;
+  s[0].C_std = 1.0 / 3.0, s[0].c = -2.5e-310, s[0].xi = 1e300, s[0].samples = 1234567890123;
+  s[0].windows = 7, s[0].condition = std::numeric_limits<double>::infinity();
+  s[0].refined = true, s[0].k_min = 1e7, s[0].k_max_std = 0.1;
+  s[1].identifiable = false, s[1].reason = "a \"quoted\" reason\twith \\ and \u00e9";
+  s[1].mean_torque = 3.25, s[1].forcing = -1.0, s[1].C_integral = 99.5;
+  s[1].variation_z = 1.5, s[1].C_weighted = 98.0, s[1].C_torque_std = 0.5;
+  s[1].torque_noise_std = 1e-3;
+  s[2].stiffness_curve = {1.0, kNaNForTest(), 3.0};
+  s[2].stiffness_curve_std = {0.1};
+  s[2].warnings = {{"low_snr", "signal below noise"}, {"x", "y\n"}};
+  s[3].noise_std = 0.25, s[3].signal_std = 2.0, s[3].residual_rms = 1e-17;
+  runs[2].result.segments[1].identifiable = false;
+  runs[2].result.constant = runs[2].result.segments.front();
+  runs[2].response_error = "diverged";
+  const nlohmann::json input = {{"file", "x"}, {"samples", 10}};
+  nlohmann::json tree = gd::analysisJson(runs, input);
+  nlohmann::json doc = gd::analysisJson(runs, input, /*segments=*/false);
+  EXPECT_TRUE(doc["identification"]["segments"].is_null());
+  for (nlohmann::json* d : {&tree, &doc}) {
+    (*d)["metadata"] = {{"a", 1}};
+    (*d)["identification"]["ste"] = {{"segments", {1, 2}}};
+    (*d)["runs"][1]["ste"] = nlohmann::json::object();
+  }
+  gear_test::ScratchDir dir("analysis_json_segments");
+  const fs::path a = dir.path() / "tree.json", b = dir.path() / "streamed.json";
+  ASSERT_TRUE(gd::writeJsonAtomically(a.string(), tree).ok());
+  ASSERT_TRUE(gd::writeAnalysisJsonAtomically(b.string(), doc, runs).ok());
+  EXPECT_EQ(gear_test::readText(b), gear_test::readText(a));
+  EXPECT_EQ(gear_test::readText(a), tree.dump(2) + "\n");
+  // Each formulation's field set (stiffness levels for all but known), one run each.
+  for (const gd::Formulation f : {gd::Formulation::Known, gd::Formulation::Greybox,
+                                  gd::Formulation::Paper, gd::Formulation::Legacy}) {
+    std::vector<gd::AnalysisRun> one{runs[0]};
+    one[0].options.formulation = one[0].result.formulation = f;
+    ASSERT_TRUE(gd::writeJsonAtomically(a.string(), gd::analysisJson(one, input)).ok());
+    ASSERT_TRUE(
+        gd::writeAnalysisJsonAtomically(b.string(), gd::analysisJson(one, input, false), one).ok());
+    EXPECT_EQ(gear_test::readText(b), gear_test::readText(a)) << gd::toString(f);
+  }
+  const gear_sim::Status bad =
+      gd::writeAnalysisJsonAtomically((b / "not_a_dir.json").string(), doc, runs);
+  EXPECT_EQ(bad.code(), gear_sim::StatusCode::IoError);
 }
 
 }  // namespace

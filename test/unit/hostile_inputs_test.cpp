@@ -372,6 +372,48 @@ TEST_F(Hostile, RigBagArrayLengthsBeyondTheMessageAreRefusedBeforeAllocating) {
 }
 
 // A compressed chunk is decompressed and its records checked the same way.
+// isRigBag tells a rig bag from the structure walk's connection records (topic and type) before
+// opening it through rosbag: a JointState on the joints topic is one (with or without the
+// torque topic, compressed or not); a JointState on another topic, another type on the joints
+// topic, a missing file and a cut rig bag are not.
+TEST_F(Hostile, RigBagsAreToldByTheJointsTopicsJointStateConnection) {
+  const gear_sim_ros::RigBagTopics topics;
+  const auto write = [&](const std::string& name, const std::string& joints_topic, bool wrench,
+                         bool state, rosbag::CompressionType compression) {
+    rosbag::Bag bag;
+    bag.open(path(name), rosbag::bagmode::Write);
+    bag.setCompression(compression);
+    const ros::Time t(1.0);
+    if (state) {
+      sensor_msgs::JointState js;
+      js.header.stamp = t;
+      js.name = {topics.joint1, topics.joint2};
+      js.position = {0.125, 0.25};
+      bag.write(joints_topic, t, js);
+    } else {
+      geometry_msgs::WrenchStamped w;
+      w.header.stamp = t;
+      bag.write(joints_topic, t, w);
+    }
+    if (wrench) bag.write(topics.torque, t, geometry_msgs::WrenchStamped());
+    return path(name);
+  };
+  const auto none = rosbag::compression::Uncompressed;
+  EXPECT_TRUE(gear_sim_ros::isRigBag(write("rig_a.bag", topics.joints, true, true, none), topics));
+  EXPECT_TRUE(gear_sim_ros::isRigBag(write("rig_b.bag", topics.joints, false, true, none), topics));
+  EXPECT_TRUE(gear_sim_ros::isRigBag(
+      write("rig_c.bag", topics.joints, true, true, rosbag::compression::LZ4), topics));
+  EXPECT_FALSE(gear_sim_ros::isRigBag(write("rig_d.bag", "/other", true, true, none), topics));
+  EXPECT_FALSE(
+      gear_sim_ros::isRigBag(write("rig_e.bag", topics.joints, true, false, none), topics));
+  EXPECT_FALSE(gear_sim_ros::isRigBag(path("missing.bag"), topics));
+  // A rig bag cut in half fails the structure walk: not a rig bag (the signal reader then
+  // refuses it with the reason).
+  std::string b = readBytes(write("rig_f.bag", topics.joints, false, true, none));
+  writeBytes(path("rig_g.bag"), b.substr(0, b.size() / 2));  // cut: the walk refuses it
+  EXPECT_FALSE(gear_sim_ros::isRigBag(path("rig_g.bag"), topics));
+}
+
 TEST_F(Hostile, CorruptCompressedChunksAreRefused) {
   const std::string good = readBytes(writeBag(
       "bz2.bag", [](size_t k) { return 500 * k; }, nullptr, rosbag::compression::BZ2));

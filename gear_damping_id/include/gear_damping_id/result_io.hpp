@@ -51,13 +51,16 @@ class OutputStage {
 nlohmann::json segmentJson(const SegmentEstimate& s, Formulation f);
 
 /// JSON of one run: formulation, model, options, segments[], constant, load_law, warnings and
-/// response {nrmse, fit_percent}.
-nlohmann::json runJson(const AnalysisRun& run);
+/// response {nrmse, fit_percent}. Without `segments`, "segments" is null (a placeholder that
+/// writeAnalysisJsonAtomically fills).
+nlohmann::json runJson(const AnalysisRun& run, bool segments = true);
 
 /// The docs/method.md §6 document: `identification` and `response` from the primary (first) run,
 /// with the `constant` and `load_law` blocks taken from whichever run computed them, and
 /// `runs[]` with every run in full. `input` describes the analysed record.
-nlohmann::json analysisJson(const std::vector<AnalysisRun>& runs, const nlohmann::json& input);
+/// Without `segments`, every run's (and identification's) "segments" is a null placeholder.
+nlohmann::json analysisJson(const std::vector<AnalysisRun>& runs, const nlohmann::json& input,
+                            bool segments = true);
 
 /// Readable tables on `os`: one per run (segments with C, its standard error, c, xi, k levels)
 /// and a summary line per run (constant / load-law estimates, fit %).
@@ -104,5 +107,13 @@ gear_sim::Status writeFileAtomically(const std::string& path, const std::string&
 /// text is never held in memory). ioError (field "path") when the file cannot be written.
 gear_sim::Status writeJsonAtomically(const std::string& path, const nlohmann::json& doc,
                                      OutputStage* stage = nullptr);
+
+/// writeJsonAtomically of the document analysisJson(runs, input) would give, from
+/// `doc` = analysisJson(runs, input, false) (and keys added to it): the null "segments" of
+/// doc["runs"][k] and doc["identification"] are written from runs[k] and runs[0] with the same
+/// bytes, without building their tree (a 1e7-sample record has 1e4 segments per run).
+gear_sim::Status writeAnalysisJsonAtomically(const std::string& path, const nlohmann::json& doc,
+                                             const std::vector<AnalysisRun>& runs,
+                                             OutputStage* stage = nullptr);
 
 }  // namespace gear_damping_id

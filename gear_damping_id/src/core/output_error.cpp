@@ -2412,15 +2412,36 @@ gear_sim::Status refineOutputError(const SignalView& s,
 void fitMetrics(const Eigen::VectorXd& y, const Eigen::VectorXd& yh, double* nrmse, double* fit) {
   // Over the samples where both series are finite (a NaN sample of the record must not turn
   // the whole record's fit into NaN); NaN when there are none or y is constant there.
-  double n = 0.0, sum = 0.0;
-  for (Eigen::Index i = 0; i < y.size(); ++i)
-    if (std::isfinite(y[i]) && std::isfinite(yh[i])) sum += y[i], n += 1.0;
-  const double mean = n > 0.0 ? sum / n : 0.0;
-  double den = 0.0, num = 0.0;
-  for (Eigen::Index i = 0; i < y.size(); ++i) {
-    if (!std::isfinite(y[i]) || !std::isfinite(yh[i])) continue;
-    den += (y[i] - mean) * (y[i] - mean);
-    num += (y[i] - yh[i]) * (y[i] - yh[i]);
+  // Every sum keeps its sample order (the values are bit for bit those of the plain loops);
+  // when both series are finite (the usual case, checked with vector instructions) the loops
+  // have no per-sample test, else a skipped sample adds +0.0, which leaves a sum as it was
+  // (none of them is ever -0.0). The squared errors are summed in the first pass.
+  const double* a = y.data();
+  const double* b = yh.data();
+  const Eigen::Index m = y.size();
+  double n = 0.0, sum = 0.0, num = 0.0, den = 0.0;
+  if (y.allFinite() && yh.allFinite()) {
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const double e = a[i] - b[i];
+      sum += a[i];
+      num += e * e;
+    }
+    n = static_cast<double>(m);  // exact: the count of a vector's elements is below 2^53
+    const double mean = n > 0.0 ? sum / n : 0.0;
+    for (Eigen::Index i = 0; i < m; ++i) den += (a[i] - mean) * (a[i] - mean);
+  } else {
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const bool ok = std::isfinite(a[i]) && std::isfinite(b[i]);
+      const double e = a[i] - b[i];
+      sum += ok ? a[i] : 0.0;
+      n += ok ? 1.0 : 0.0;
+      num += ok ? e * e : 0.0;
+    }
+    const double mean = n > 0.0 ? sum / n : 0.0;
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const bool ok = std::isfinite(a[i]) && std::isfinite(b[i]);
+      den += ok ? (a[i] - mean) * (a[i] - mean) : 0.0;
+    }
   }
   *nrmse = den > 0.0 ? std::sqrt(num / den) : kNaN;
   *fit = 100.0 * (1.0 - *nrmse);

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -116,7 +117,7 @@ json loadLawJson(const LoadLawEstimate& l) {
 
 }  // namespace
 
-json runJson(const AnalysisRun& run) {
+json runJson(const AnalysisRun& run, bool segments) {
   const IdentificationResult& r = run.result;
   json j;
   j["formulation"] = toString(r.formulation);
@@ -131,8 +132,9 @@ json runJson(const AnalysisRun& run) {
   if (r.formulation == Formulation::Greybox) {
     j["stiffness_shape"] = toString(run.options.stiffness_shape);
   }
-  j["segments"] = json::array();
-  for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
+  j["segments"] = segments ? json::array() : json(nullptr);  // null: written by the writer
+  if (segments)
+    for (const auto& s : r.segments) j["segments"].push_back(segmentJson(s, r.formulation));
   if (const SegmentEstimate* c = sharedEstimate(r)) j["constant"] = segmentJson(*c, r.formulation);
   if (r.load_law) j["load_law"] = loadLawJson(*r.load_law);
   j["warnings"] = warningsJson(r.warnings);
@@ -145,14 +147,14 @@ json runJson(const AnalysisRun& run) {
   return j;
 }
 
-json analysisJson(const std::vector<AnalysisRun>& runs, const json& input) {
+json analysisJson(const std::vector<AnalysisRun>& runs, const json& input, bool segments) {
   json doc;
   doc["input"] = input;
   if (runs.empty()) return doc;
   // Each run's JSON is built once; `identification` is the primary run's copy (a record of 1e7
   // samples has 1e4 segments: every extra copy of their DOM costs ~20 MB of peak memory).
   json& all = doc["runs"] = json::array();
-  for (const auto& run : runs) all.push_back(runJson(run));
+  for (const auto& run : runs) all.push_back(runJson(run, segments));
   json id = all.front();
   doc["response"] = id["response"];
   id.erase("response");
@@ -418,6 +420,205 @@ gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, O
     const auto out = std::make_shared<BufferedJsonOutput>(f);
     nlohmann::detail::serializer<json> s(out, ' ');
     s.dump(doc, true, false, 2);
+    out->write_character('\n');
+    out->flush();
+    return static_cast<bool>(f);
+  });
+}
+
+namespace {
+
+// The document as serializer::dump(doc, true, false, 2) writes it (nlohmann's pretty printer:
+// objects with their keys sorted, "{}" / "[]" when empty, indent 2), except that a null
+// "segments" of runs[k] or of identification (analysisJson(..., false)) is written straight
+// from runs[k] / runs[0] with the bytes segmentJson's array would have: the 2e4 segment
+// objects of a 1e7-sample record are never built as a tree. Scalars go through nlohmann's
+// serializer, so every number is formatted by it.
+class AnalysisJsonWriter {
+ public:
+  AnalysisJsonWriter(std::shared_ptr<BufferedJsonOutput> out, const std::vector<AnalysisRun>& runs)
+      : out_(out), s_(out, ' '), runs_(runs) {}
+
+  void document(const json& doc) {
+    if (!doc.is_object() || doc.empty()) return scalar(doc, 0);
+    out_->write_characters("{\n", 2);
+    size_t left = doc.size();
+    for (auto it = doc.begin(); it != doc.end(); ++it) {
+      const std::string& key = it.key();
+      const json& value = it.value();
+      keyText(key, 2);
+      if (key == "runs" && value.is_array() && !value.empty()) {
+        out_->write_characters("[\n", 2);
+        for (size_t k = 0; k < value.size(); ++k) {
+          indent(4);
+          run(value[k], k < runs_.size() ? &runs_[k] : nullptr, 4);
+          separator(k + 1 < value.size());
+        }
+        indent(2);
+        out_->write_character(']');
+      } else if (key == "identification") {
+        run(value, runs_.empty() ? nullptr : &runs_.front(), 2);
+      } else {
+        scalar(value, 2);
+      }
+      separator(--left > 0);
+    }
+    out_->write_character('}');
+  }
+
+ private:
+  // After an element: ",\n" when another follows, else "\n".
+  void separator(bool more) { out_->write_characters(more ? ",\n" : "\n", more ? 2 : 1); }
+  void indent(unsigned n) {
+    static const std::string spaces(64, ' ');
+    out_->write_characters(spaces.data(), n);
+  }
+  void keyText(const std::string& key, unsigned at) {
+    indent(at);
+    s_.dump(json(key), true, false, 2, at);
+    out_->write_characters(": ", 2);
+  }
+  // Any value as the serializer writes it at indentation `at`.
+  void scalar(const json& v, unsigned at) { s_.dump(v, true, false, 2, at); }
+  void number(double v) {
+    if (std::isfinite(v))
+      s_.dump(json(v), true, false, 2, 0);
+    else
+      out_->write_characters("null", 4);
+  }
+
+  // A run object at indentation `at`, its null "segments" from `r`.
+  void run(const json& v, const AnalysisRun* r, unsigned at) {
+    if (!v.is_object() || v.empty() || r == nullptr) return scalar(v, at);
+    out_->write_characters("{\n", 2);
+    size_t left = v.size();
+    for (auto it = v.begin(); it != v.end(); ++it) {
+      const std::string& key = it.key();
+      const json& value = it.value();
+      keyText(key, at + 2);
+      if (key == "segments" && value.is_null())
+        segments(*r, at + 2);
+      else
+        scalar(value, at + 2);
+      separator(--left > 0);
+    }
+    indent(at);
+    out_->write_character('}');
+  }
+
+  void segments(const AnalysisRun& r, unsigned at) {
+    const auto& segs = r.result.segments;
+    if (segs.empty()) return out_->write_characters("[]", 2);
+    out_->write_characters("[\n", 2);
+    for (size_t i = 0; i < segs.size(); ++i) {
+      indent(at + 2);
+      segment(segs[i], r.result.formulation, at + 2);
+      separator(i + 1 < segs.size());
+    }
+    indent(at);
+    out_->write_character(']');
+  }
+
+  // One field of a segment object: separator, indentation, key.
+  void field(const char* key, unsigned at, bool* first) {
+    out_->write_characters(*first ? "\n" : ",\n", *first ? 1 : 2);
+    *first = false;
+    indent(at);
+    out_->write_character('"');
+    out_->write_characters(key, std::strlen(key));
+    out_->write_characters("\": ", 3);
+  }
+  void numberField(const char* key, double v, unsigned at, bool* first) {
+    field(key, at, first);
+    number(v);
+  }
+  void curve(const std::vector<double>& c, size_t n, unsigned at) {
+    out_->write_characters("[\n", 2);
+    for (size_t i = 0; i < n; ++i) {
+      indent(at + 2);
+      number(i < c.size() ? c[i] : kNaN);
+      separator(i + 1 < n);
+    }
+    indent(at);
+    out_->write_character(']');
+  }
+
+  // segmentJson(s, f) at indentation `at`: its keys in the order of a std::map (bytewise).
+  void segment(const SegmentEstimate& s, Formulation f, unsigned at);
+
+  std::shared_ptr<BufferedJsonOutput> out_;
+  nlohmann::detail::serializer<json> s_;
+  const std::vector<AnalysisRun>& runs_;
+};
+
+void AnalysisJsonWriter::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
+  const unsigned in = at + 2;
+  const bool levels = hasStiffnessLevels(f), curve_given = !s.stiffness_curve.empty();
+  bool first = true;
+  out_->write_character('{');
+  numberField("C", s.C, in, &first);
+  if (std::isfinite(s.C_integral)) {
+    numberField("C_integral", s.C_integral, in, &first);
+    numberField("C_integral_std", s.C_integral_std, in, &first);
+  }
+  numberField("C_std", s.C_std, in, &first);
+  if (std::isfinite(s.C_torque_std)) numberField("C_torque_std", s.C_torque_std, in, &first);
+  if (std::isfinite(s.variation_z)) {
+    numberField("C_weighted", s.C_weighted, in, &first);
+    numberField("C_weighted_std", s.C_weighted_std, in, &first);
+  }
+  numberField("c", s.c, in, &first);
+  numberField("condition", s.condition, in, &first);
+  if (std::isfinite(s.forcing)) numberField("forcing", s.forcing, in, &first);
+  field("identifiable", in, &first);
+  scalar(json(s.identifiable), in);
+  if (levels) {
+    numberField("k_max", s.k_max, in, &first);
+    numberField("k_max_std", s.k_max_std, in, &first);
+    numberField("k_min", s.k_min, in, &first);
+    numberField("k_min_std", s.k_min_std, in, &first);
+  }
+  if (std::isfinite(s.mean_torque)) numberField("mean_torque", s.mean_torque, in, &first);
+  numberField("noise_std", s.noise_std, in, &first);
+  if (!s.identifiable) {
+    field("reason", in, &first);
+    scalar(json(s.reason), in);
+  }
+  field("refined", in, &first);
+  scalar(json(s.refined), in);
+  numberField("residual_rms", s.residual_rms, in, &first);
+  field("samples", in, &first);
+  scalar(json(s.samples), in);
+  numberField("signal_std", s.signal_std, in, &first);
+  if (curve_given) {
+    field("stiffness_curve", in, &first);
+    curve(s.stiffness_curve, s.stiffness_curve.size(), in);
+    field("stiffness_curve_std", in, &first);
+    curve(s.stiffness_curve_std, s.stiffness_curve.size(), in);
+  }
+  numberField("t_end", s.t_end, in, &first);
+  numberField("t_start", s.t_start, in, &first);
+  if (std::isfinite(s.torque_noise_std))
+    numberField("torque_noise_std", s.torque_noise_std, in, &first);
+  if (std::isfinite(s.variation_z)) numberField("variation_z", s.variation_z, in, &first);
+  field("warnings", in, &first);
+  scalar(warningsJson(s.warnings), in);
+  field("windows", in, &first);
+  scalar(json(s.windows), in);
+  numberField("xi", s.xi, in, &first);
+  out_->write_character('\n');
+  indent(at);
+  out_->write_character('}');
+}
+
+}  // namespace
+
+gear_sim::Status writeAnalysisJsonAtomically(const std::string& path, const json& doc,
+                                             const std::vector<AnalysisRun>& runs,
+                                             OutputStage* stage) {
+  return writeThroughPartial(path, stage, "path", [&](std::ostream& f) {
+    const auto out = std::make_shared<BufferedJsonOutput>(f);
+    AnalysisJsonWriter(out, runs).document(doc);
     out->write_character('\n');
     out->flush();
     return static_cast<bool>(f);

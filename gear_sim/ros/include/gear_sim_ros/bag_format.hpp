@@ -47,6 +47,14 @@ struct BagStructure {
   std::vector<Chunk> chunks;
   /// The bag header names an encryptor (rosbag decrypts its chunks on reading).
   bool encrypted = false;
+  /// A connection record: its header's topic and its connection header's type ("" if none).
+  struct Connection {
+    std::string topic;
+    std::string type;
+  };
+  /// Every connection record of the file (top level and inside chunks), in file order: a
+  /// superset of the connections rosbag reads (those at index_pos), with the same fields.
+  std::vector<Connection> connections;
   /// The walked file's identity (device, inode, size, modification and status-change times in
   /// ns); all 0 when unknown (not a regular file).
   std::uint64_t stamp[5] = {0, 0, 0, 0, 0};
