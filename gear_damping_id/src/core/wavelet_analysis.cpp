@@ -470,7 +470,8 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
 
 // Parseval sums sum_k w_k Psi(a*k)^2 (the time-averaged scalogram, MorletCwt::meanPowerAt, and
 // the noise gain) of the per-mode path. A row whose Gaussian spans sigma_k = 1/(a sqrt 2) bins
-// is summed bin by bin (bit-identical to MorletCwt) when sigma_k < kBinnedMinSigma; wider rows
+// is summed bin by bin (bit-identical to MorletCwt) when sigma_k < 2^kBinnedMinLevel *
+// kBinnedSigmaPerGroup = 128 bins (the smallest group, h = 4, needs that width); wider rows
 // sum groups of h = 2^L <= sigma_k/kBinnedSigmaPerGroup bins through the second-order Taylor
 // expansion of Psi^2 about each group's centre c, with the group's moments
 // S0 = sum w, S1 = sum w (k - c), S2 = sum w (k - c)^2:
@@ -480,7 +481,6 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
 // bins each) then cost ~1000 groups instead of ~1e5 bins. The groups' moments are built once
 // per signal in O(N) (a pyramid: level L from level L-1).
 constexpr double kBinnedSigmaPerGroup = 32.0;
-constexpr double kBinnedMinSigma = 4.0 * kBinnedSigmaPerGroup;  // h >= 4
 constexpr int kBinnedMinLevel = 2;
 using wavelet_detail::kPowerBandHalfWidth;
 using wavelet_detail::kSumRecurrenceBlock;
