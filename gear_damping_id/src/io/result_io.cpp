@@ -9,6 +9,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <type_traits>
 
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -62,44 +63,81 @@ std::string AnalysisRun::name() const {
   return toString(options.formulation) + "_" + toString(options.model);
 }
 
-json segmentJson(const SegmentEstimate& s, Formulation f) {
-  json j = {{"t_start", num(s.t_start)},      {"t_end", num(s.t_end)}, {"C", num(s.C)},
-            {"C_std", num(s.C_std)},          {"c", num(s.c)},         {"xi", num(s.xi)},
-            {"identifiable", s.identifiable}, {"samples", s.samples},  {"windows", s.windows},
-            {"condition", num(s.condition)},  {"refined", s.refined}};
-  if (!s.identifiable) j["reason"] = s.reason;
-  if (hasStiffnessLevels(f)) {
-    j["k_min"] = num(s.k_min);
-    j["k_max"] = num(s.k_max);
-    j["k_min_std"] = num(s.k_min_std);
-    j["k_max_std"] = num(s.k_max_std);
-  }
-  if (std::isfinite(s.mean_torque)) j["mean_torque"] = s.mean_torque;
-  if (std::isfinite(s.forcing)) j["forcing"] = s.forcing;
+namespace {
+
+// A segment's stiffness curve and its standard errors (NaN where the latter is missing): JSON
+// arrays of num() values, stiffness_curve.size() long.
+struct SegmentCurve {
+  const std::vector<double>& values;
+  size_t n;
+  double at(size_t i) const { return i < values.size() ? values[i] : kNaN; }
+};
+
+// segmentJson's fields, the one list of them: emit(key, value) in bytewise key order (the
+// order of nlohmann's std::map, so AnalysisJsonWriter streams the same bytes as dump()). A
+// double becomes num(value) (null when not finite), a SegmentCurve an array of those; other
+// values are written as json(value).
+template <class Emit>
+void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
+  const bool levels = hasStiffnessLevels(f);
+  const size_t n = s.stiffness_curve.size();
+  emit("C", s.C);
   if (std::isfinite(s.C_integral)) {
-    j["C_integral"] = s.C_integral;
-    j["C_integral_std"] = num(s.C_integral_std);
+    emit("C_integral", s.C_integral);
+    emit("C_integral_std", s.C_integral_std);
   }
+  emit("C_std", s.C_std);
+  if (std::isfinite(s.C_torque_std)) emit("C_torque_std", s.C_torque_std);
   if (std::isfinite(s.variation_z)) {
-    j["variation_z"] = s.variation_z;
-    j["C_weighted"] = s.C_weighted;
-    j["C_weighted_std"] = num(s.C_weighted_std);
+    emit("C_weighted", s.C_weighted);
+    emit("C_weighted_std", s.C_weighted_std);
   }
-  if (std::isfinite(s.torque_noise_std)) j["torque_noise_std"] = s.torque_noise_std;
-  if (std::isfinite(s.C_torque_std)) j["C_torque_std"] = s.C_torque_std;
-  if (!s.stiffness_curve.empty()) {
-    json k = json::array(), ks = json::array();
-    for (size_t i = 0; i < s.stiffness_curve.size(); ++i) {
-      k.push_back(num(s.stiffness_curve[i]));
-      ks.push_back(num(i < s.stiffness_curve_std.size() ? s.stiffness_curve_std[i] : kNaN));
+  emit("c", s.c);
+  emit("condition", s.condition);
+  if (std::isfinite(s.forcing)) emit("forcing", s.forcing);
+  emit("identifiable", s.identifiable);
+  if (levels) {
+    emit("k_max", s.k_max);
+    emit("k_max_std", s.k_max_std);
+    emit("k_min", s.k_min);
+    emit("k_min_std", s.k_min_std);
+  }
+  if (std::isfinite(s.mean_torque)) emit("mean_torque", s.mean_torque);
+  emit("noise_std", s.noise_std);
+  if (!s.identifiable) emit("reason", s.reason);
+  emit("refined", s.refined);
+  emit("residual_rms", s.residual_rms);
+  emit("samples", s.samples);
+  emit("signal_std", s.signal_std);
+  if (n > 0) {
+    emit("stiffness_curve", SegmentCurve{s.stiffness_curve, n});
+    emit("stiffness_curve_std", SegmentCurve{s.stiffness_curve_std, n});
+  }
+  emit("t_end", s.t_end);
+  emit("t_start", s.t_start);
+  if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
+  if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
+  emit("warnings", warningsJson(s.warnings));
+  emit("windows", s.windows);
+  emit("xi", s.xi);
+}
+
+}  // namespace
+
+json segmentJson(const SegmentEstimate& s, Formulation f) {
+  json j = json::object();
+  segmentFields(s, f, [&j](const char* key, const auto& v) {
+    using V = std::decay_t<decltype(v)>;
+    if constexpr (std::is_same_v<V, double>) {
+      j[key] = num(v);
+    } else if constexpr (std::is_same_v<V, SegmentCurve>) {
+      json a = json::array();
+      for (size_t i = 0; i < v.n; ++i) a.push_back(num(v.at(i)));
+      j[key] = std::move(a);
+    } else {
+      j[key] = v;
     }
-    j["stiffness_curve"] = k;
-    j["stiffness_curve_std"] = ks;
-  }
-  j["noise_std"] = num(s.noise_std);
-  j["signal_std"] = num(s.signal_std);
-  j["residual_rms"] = num(s.residual_rms);
-  j["warnings"] = warningsJson(s.warnings);
+  });
   return j;
 }
 
@@ -528,16 +566,12 @@ class AnalysisJsonWriter {
     out_->write_characters(key, std::strlen(key));
     out_->write_characters("\": ", 3);
   }
-  void numberField(const char* key, double v, unsigned at, bool* first) {
-    field(key, at, first);
-    number(v);
-  }
-  void curve(const std::vector<double>& c, size_t n, unsigned at) {
+  void curve(const SegmentCurve& c, unsigned at) {
     out_->write_characters("[\n", 2);
-    for (size_t i = 0; i < n; ++i) {
+    for (size_t i = 0; i < c.n; ++i) {
       indent(at + 2);
-      number(i < c.size() ? c[i] : kNaN);
-      separator(i + 1 < n);
+      number(c.at(i));
+      separator(i + 1 < c.n);
     }
     indent(at);
     out_->write_character(']');
@@ -553,59 +587,19 @@ class AnalysisJsonWriter {
 
 void AnalysisJsonWriter::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
   const unsigned in = at + 2;
-  const bool levels = hasStiffnessLevels(f), curve_given = !s.stiffness_curve.empty();
   bool first = true;
   out_->write_character('{');
-  numberField("C", s.C, in, &first);
-  if (std::isfinite(s.C_integral)) {
-    numberField("C_integral", s.C_integral, in, &first);
-    numberField("C_integral_std", s.C_integral_std, in, &first);
-  }
-  numberField("C_std", s.C_std, in, &first);
-  if (std::isfinite(s.C_torque_std)) numberField("C_torque_std", s.C_torque_std, in, &first);
-  if (std::isfinite(s.variation_z)) {
-    numberField("C_weighted", s.C_weighted, in, &first);
-    numberField("C_weighted_std", s.C_weighted_std, in, &first);
-  }
-  numberField("c", s.c, in, &first);
-  numberField("condition", s.condition, in, &first);
-  if (std::isfinite(s.forcing)) numberField("forcing", s.forcing, in, &first);
-  field("identifiable", in, &first);
-  scalar(json(s.identifiable), in);
-  if (levels) {
-    numberField("k_max", s.k_max, in, &first);
-    numberField("k_max_std", s.k_max_std, in, &first);
-    numberField("k_min", s.k_min, in, &first);
-    numberField("k_min_std", s.k_min_std, in, &first);
-  }
-  if (std::isfinite(s.mean_torque)) numberField("mean_torque", s.mean_torque, in, &first);
-  numberField("noise_std", s.noise_std, in, &first);
-  if (!s.identifiable) {
-    field("reason", in, &first);
-    scalar(json(s.reason), in);
-  }
-  field("refined", in, &first);
-  scalar(json(s.refined), in);
-  numberField("residual_rms", s.residual_rms, in, &first);
-  field("samples", in, &first);
-  scalar(json(s.samples), in);
-  numberField("signal_std", s.signal_std, in, &first);
-  if (curve_given) {
-    field("stiffness_curve", in, &first);
-    curve(s.stiffness_curve, s.stiffness_curve.size(), in);
-    field("stiffness_curve_std", in, &first);
-    curve(s.stiffness_curve_std, s.stiffness_curve.size(), in);
-  }
-  numberField("t_end", s.t_end, in, &first);
-  numberField("t_start", s.t_start, in, &first);
-  if (std::isfinite(s.torque_noise_std))
-    numberField("torque_noise_std", s.torque_noise_std, in, &first);
-  if (std::isfinite(s.variation_z)) numberField("variation_z", s.variation_z, in, &first);
-  field("warnings", in, &first);
-  scalar(warningsJson(s.warnings), in);
-  field("windows", in, &first);
-  scalar(json(s.windows), in);
-  numberField("xi", s.xi, in, &first);
+  segmentFields(s, f, [&](const char* key, const auto& v) {
+    using V = std::decay_t<decltype(v)>;
+    field(key, in, &first);
+    if constexpr (std::is_same_v<V, double>) {
+      number(v);
+    } else if constexpr (std::is_same_v<V, SegmentCurve>) {
+      curve(v, in);
+    } else {
+      scalar(json(v), in);
+    }
+  });
   out_->write_character('\n');
   indent(at);
   out_->write_character('}');
