@@ -234,7 +234,7 @@ class MemorySource : public RecordSource {
 std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t begin,
                                              std::uint64_t size, std::uint64_t base, bool in_file,
                                              std::set<std::uint32_t>* conns,
-                                             std::vector<BagStructure::Connection>* connections) {
+                                             std::set<BagStructure::Connection>* connections) {
   std::vector<std::uint32_t> messages;
   const std::uint64_t end = begin + size;
   for (std::uint64_t pos = begin; pos < end;) {
@@ -253,7 +253,7 @@ std::vector<std::uint32_t> checkChunkRecords(RecordSource* src, std::uint64_t be
       messages.push_back(static_cast<std::uint32_t>(r.start - begin));
     } else if (r.op == kConnection) {
       try {
-        connections->push_back(src->checkConnection(r));
+        connections->insert(src->checkConnection(r));
       } catch (Corrupt& c) {
         if (!in_file) c.at = base;
         throw;
@@ -299,7 +299,7 @@ class BagWalker {
   // The chunk records (BagStructure::chunks).
   const std::vector<BagStructure::Chunk>& chunks() const { return chunks_; }
   bool encrypted() const { return encrypted_; }
-  const std::vector<BagStructure::Connection>& connections() const { return connections_; }
+  const std::set<BagStructure::Connection>& connections() const { return connections_; }
 
   // Whether every message data record names a connection of the index (checkBagStructure).
   bool messagesIndexed() const {
@@ -366,7 +366,7 @@ class BagWalker {
         chunkInfo(r);
         break;
       case kConnection:
-        connections_.push_back(src_.checkConnection(r));
+        connections_.insert(src_.checkConnection(r));
         top_connections_[r.start] =
             field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
         break;
@@ -482,7 +482,7 @@ class BagWalker {
   std::map<std::uint64_t, std::uint32_t> top_connections_;  // top-level connection: start -> conn
   std::set<std::uint32_t> message_conns_;                   // conn of every message data record
   std::vector<BagStructure::Chunk> chunks_;
-  std::vector<BagStructure::Connection> connections_;  // every connection record, in file order
+  std::set<BagStructure::Connection> connections_;  // distinct (topic, type) of connection records
   bool encrypted_ = false;
 };
 

@@ -19,7 +19,9 @@
 #pragma once
 
 #include <cstdint>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "gear_sim/status.hpp"
@@ -51,10 +53,14 @@ struct BagStructure {
   struct Connection {
     std::string topic;
     std::string type;
+    bool operator<(const Connection& o) const {
+      return std::tie(topic, type) < std::tie(o.topic, o.type);
+    }
   };
-  /// Every connection record of the file (top level and inside chunks), in file order: a
-  /// superset of the connections rosbag reads (those at index_pos), with the same fields.
-  std::vector<Connection> connections;
+  /// The distinct (topic, type) pairs of every connection record of the file (top level and
+  /// inside chunks, where rosbag repeats them per chunk): a superset of the connections rosbag
+  /// reads (those at index_pos), with the same fields.
+  std::set<Connection> connections;
   /// The walked file's identity (device, inode, size, modification and status-change times in
   /// ns); all 0 when unknown (not a regular file).
   std::uint64_t stamp[5] = {0, 0, 0, 0, 0};
