@@ -39,28 +39,16 @@ namespace gear_damping_id {
 
 namespace {
 
-// Sum of x[lo, hi) with eight accumulators (independent add chains keep the adder pipelines
-// full; a non-finite term makes the sum non-finite).
-GD_AVX2_CLONES
-double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
-  double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-  Eigen::Index i = lo;
-  for (; i + 8 <= hi; i += 8) {
-    for (int k = 0; k < 8; ++k) a[k] += x[i + k];
-  }
-  for (; i < hi; ++i) a[0] += x[i];
-  return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-}
-
-// The sums of nch <= 4 channels x[c][lo, hi) in one loop, each with blockSum's eight
-// accumulators and order (so each equals blockSum's, bit for bit): the channels stream from
-// memory together (several independent miss streams at once) instead of one after another.
-typedef double SumV __attribute__((vector_size(32)));  // four lanes of blockSum's accumulators
+// The sums of nch <= 4 channels x[c][lo, hi) in one loop, each with eight accumulators
+// (independent add chains keep the adder pipelines full; a non-finite term makes the sum
+// non-finite) reduced in a fixed order, the same for every channel count: the channels stream
+// from memory together (several independent miss streams at once) instead of one after another.
+typedef double SumV __attribute__((vector_size(32)));  // four lanes of the eight accumulators
 template <int NCH>
 GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index lo, Eigen::Index hi,
                                            double* out) {
-  SumV a[NCH][2];  // lanes 0-3 and 4-7 of blockSum's a[8], per channel (explicit vectors keep
-                   // them in registers for several channels at once)
+  SumV a[NCH][2];  // lanes 0-3 and 4-7 of the eight accumulators, per channel (explicit vectors
+                   // keep them in registers for several channels at once)
   for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
   Eigen::Index i = lo;
   for (; i + 8 <= hi; i += 8) {
@@ -93,6 +81,13 @@ void channelSums(const double* const* x, int nch, Eigen::Index lo, Eigen::Index 
     default:
       return channelSumsOf<4>(x, lo, hi, out);
   }
+}
+
+// Sum of x[lo, hi): channelSums of one channel.
+double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
+  double sum = 0.0;
+  channelSums(&x, 1, lo, hi, &sum);
+  return sum;
 }
 
 // checkRecord's work on one block [lo, hi) of the record: the first step i in [max(lo, 1), hi)
