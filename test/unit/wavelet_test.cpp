@@ -338,7 +338,7 @@ TEST(MorletCwt, PrunedModulusOfNarrowBandRowsEqualsTheFullInverseFft) {
   for (long j = 0; j < n; ++j) EXPECT_DOUBLE_EQ(fast[size_t(j)], std::abs(w[j]));
 }
 
-// The two tests below: cwt configured for 10 rows from 2 to 400 Hz (omega0 6) holding
+// The test below: cwt configured for 10 rows from 2 to 400 Hz (omega0 6) holding
 // toneBursts(n, fs) with edge-cut bursts.
 void loadToneBursts(MorletCwt* cwt, long n, double fs) {
   std::string error;
@@ -347,35 +347,6 @@ void loadToneBursts(MorletCwt* cwt, long n, double fs) {
       &error))
       << error;
   ASSERT_TRUE(gear_test::ok(cwt->setSignal(toneBursts(n, fs, true).data()), &error)) << error;
-}
-
-// rowModulusSingleAt (the per-mode path's noise row at 0.45 fs) against |rowAt|: float rounding
-// only, on narrow (pruned) and wide (full inverse FFT, up to the Nyquist cut) rows; the
-// conditions of rowAt refuse the same rows.
-TEST(MorletCwt, SinglePrecisionModulusAtAnyFrequencyMatchesTheDoubleRow) {
-  constexpr double kSingleTol = 1e-6;  // relative to the row's peak (float: ~1e-7)
-  const double fs = 1000.0;
-  const long n = 6000;
-  MorletCwt cwt;
-  ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
-  std::vector<float> single(static_cast<size_t>(n));
-  double worst = 0.0;
-  for (double f : {5.0, 37.0, 120.0, 310.0, 450.0}) {
-    ASSERT_TRUE(cwt.rowModulusSingleAt(f, 6.0, single.data())) << f;
-    const std::complex<double>* w = cwt.rowAt(f, 6.0);
-    ASSERT_NE(w, nullptr) << f;
-    double peak = 0.0, err = 0.0;
-    for (long j = 0; j < n; ++j) peak = std::max(peak, std::abs(w[j]));
-    for (long j = 0; j < n; ++j) err = std::max(err, std::abs(single[size_t(j)] - std::abs(w[j])));
-    ASSERT_GT(peak, 0.0) << f;
-    EXPECT_LT(err / peak, kSingleTol) << f << " Hz";
-    worst = std::max(worst, err / peak);
-  }
-  std::printf("[ measured ] single-precision |W| at any frequency: max error %.2e of the peak\n",
-              worst);
-  EXPECT_FALSE(cwt.rowModulusSingleAt(600.0, 6.0, single.data())) << "above Nyquist";
-  EXPECT_FALSE(cwt.rowModulusSingleAt(0.2, 6.0, single.data())) << "wider than the padding";
-  EXPECT_FALSE(cwt.rowModulusSingleAt(100.0, 6.0, nullptr));
 }
 
 // DecimatedRows (the per-mode path's fit rows): W at every D-th sample from one inverse FFT of

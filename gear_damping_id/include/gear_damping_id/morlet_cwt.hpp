@@ -151,11 +151,6 @@ class MorletCwt {
   bool rowModulus(int i, double* out);
   bool rowModulus(int i, float* out);
   void setPrunedModulus(bool enabled) { pruned_ = enabled; }
-  /// |W| at an arbitrary (frequency [Hz], omega0) under rowAt's conditions, computed like
-  /// rowModulus in single precision whatever precision() is (the band rounded to float, float
-  /// inverse FFT: |W| within ~1e-7 of its double value relative to the row's largest |W|);
-  /// about half the time of rowAt's double inverse FFT. False where rowAt would return null.
-  bool rowModulusSingleAt(double frequency_hz, double omega0, float* out);
   /// Precision of rowModulus's inverse FFTs (default kDouble; see Precision).
   void setPrecision(Precision precision) { precision_ = precision; }
   Precision precision() const { return precision_; }
@@ -213,7 +208,7 @@ class MorletCwt {
   bool fillRow(double frequency_hz, double omega0);
   bool setBand(long lo, long hi, bool full_double);
   bool bandRow(long lo, long hi, const double* g, std::complex<double>* out);
-  template <typename R, typename T>
+  template <typename T>
   bool prunedRow(T* out);
   bool fullRowSingle();
   bool fullInverse();

@@ -77,62 +77,6 @@ unsigned fftwFlags(FftPlanning planning) {
   return planning == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE;
 }
 
-// FFTW's double and single-precision interfaces behind one name, for the code templated on
-// the real type R of the inverse FFTs (Precision::Double: double, kSingle: float).
-template <typename R>
-struct FftwApi;
-template <>
-struct FftwApi<double> {
-  using Complex = fftw_complex;
-  using Plan = fftw_plan;
-  static Complex* alloc(size_t n) { return fftw_alloc_complex(n); }
-  static void free(void* p) { fftw_free(p); }
-  static void destroy(Plan p) { fftw_destroy_plan(p); }
-  static void execute(Plan p) { fftw_execute(p); }
-  static void timeLimit(double s) { fftw_set_timelimit(s); }
-  static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
-    return fftw_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
-  }
-  // howmany transforms of size m, out of place: input i at in[i*m..], output i strided at
-  // out[i], out[howmany + i], ... (transposed: element q of every transform contiguous).
-  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
-    return fftw_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
-                              FFTW_BACKWARD, flags);
-  }
-};
-template <>
-struct FftwApi<float> {
-  using Complex = fftwf_complex;
-  using Plan = fftwf_plan;
-  static Complex* alloc(size_t n) { return fftwf_alloc_complex(n); }
-  static void free(void* p) { fftwf_free(p); }
-  static void destroy(Plan p) { fftwf_destroy_plan(p); }
-  static void execute(Plan p) { fftwf_execute(p); }
-  static void timeLimit(double s) { fftwf_set_timelimit(s); }
-  static Plan c2c(int n, Complex* in, Complex* out, unsigned flags) {
-    return fftwf_plan_dft_1d(n, in, out, FFTW_BACKWARD, flags);
-  }
-  static Plan many(int m, int howmany, Complex* in, Complex* out, unsigned flags) {
-    return fftwf_plan_many_dft(1, &m, howmany, in, nullptr, 1, m, out, nullptr, howmany, 1,
-                               FFTW_BACKWARD, flags);
-  }
-};
-
-// out[i] = sqrt(sq[i]) for n non-negative values, two per SSE2 instruction (see modulusOf).
-template <typename T>
-void sqrtOf(const double* sq, long n, T* out) {
-  long i = 0;
-#if defined(__SSE2__)
-  for (; i + 1 < n; i += 2) {
-    alignas(16) double tmp[2];
-    _mm_store_pd(tmp, _mm_sqrt_pd(_mm_loadu_pd(sq + i)));
-    out[i] = static_cast<T>(tmp[0]);
-    out[i + 1] = static_cast<T>(tmp[1]);
-  }
-#endif
-  for (; i < n; ++i) out[i] = static_cast<T>(std::sqrt(sq[i]));
-}
-
 // |w| of n complex floats (interleaved re, im) into out, four per SSE instruction (computed in
 // float: relative error ~1e-7, the precision of the single-precision path).
 template <typename T>
@@ -173,19 +117,6 @@ void twiddleBand(const double* __restrict x, double* __restrict tr, double* __re
     const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
     bc[2 * k] = xr * ar - xi * ai;
     bc[2 * k + 1] = xr * ai + xi * ar;
-    tr[k] = ar * sr[k] - ai * si[k];
-    ti[k] = ar * si[k] + ai * sr[k];
-  }
-}
-// Same, rounded to float for the single-precision batches (twiddles kept in double).
-GD_CWT_CLONES
-void twiddleBand(const double* __restrict x, double* __restrict tr, double* __restrict ti,
-                 const double* __restrict sr, const double* __restrict si, float* __restrict bc,
-                 long count) {
-  for (long k = 0; k < count; ++k) {
-    const double xr = x[2 * k], xi = x[2 * k + 1], ar = tr[k], ai = ti[k];
-    bc[2 * k] = static_cast<float>(xr * ar - xi * ai);
-    bc[2 * k + 1] = static_cast<float>(xr * ai + xi * ar);
     tr[k] = ar * sr[k] - ai * si[k];
     ti[k] = ar * si[k] + ai * sr[k];
   }
@@ -252,17 +183,20 @@ __attribute__((noinline)) void modulusTail(const double* w, long n, double* out)
 // Same with AVX-512, eight per instruction: the squares are formed before the shuffle that
 // pairs re^2 with im^2, so no compiler can contract them into an FMA (the same bits as
 // modulusOf). About half the time of the AVX2 version, whose lane-crossing shuffle limits it.
-__attribute__((target("avx512f"))) void modulusAvx512(const double* w, long n, double* out) {
+// out[0, 8) = moduli of the 8 complex values whose (re, im) pairs fill a then b.
+__attribute__((target("avx512f"))) inline void modulus8(__m512d a, __m512d b, double* out) {
   const __m512i re = _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0);
   const __m512i im = _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1);
+  const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
+  const __m512d h =
+      _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
+  // The masked form (all lanes): GCC 12's _mm512_sqrt_pd trips -Wmaybe-uninitialized.
+  _mm512_storeu_pd(out, _mm512_mask_sqrt_pd(h, static_cast<__mmask8>(0xFF), h));
+}
+__attribute__((target("avx512f"))) void modulusAvx512(const double* w, long n, double* out) {
   long i = 0;
   for (; i + 7 < n; i += 8) {
-    const __m512d a = _mm512_loadu_pd(w + 2 * i), b = _mm512_loadu_pd(w + 2 * i + 8);
-    const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
-    const __m512d h =
-        _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
-    // The masked form (all lanes): GCC 12's _mm512_sqrt_pd trips -Wmaybe-uninitialized.
-    _mm512_storeu_pd(out + i, _mm512_mask_sqrt_pd(h, static_cast<__mmask8>(0xFF), h));
+    modulus8(_mm512_loadu_pd(w + 2 * i), _mm512_loadu_pd(w + 2 * i + 8), out + i);
   }
   modulusTail(w + 2 * i, n - i, out + i);
 }
@@ -287,19 +221,14 @@ void modulusRun(const double* w, long n, double* out) { modulusOf(w, n, out); }
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target("avx512f"))) void modulusPlusAvx512(double* w, const float* c, long n,
                                                           double* out) {
-  const __m512i re = _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0);
-  const __m512i im = _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1);
   const __mmask8 all = 0xFF;  // masked forms: GCC 12's unmasked ones trip -Wmaybe-uninitialized
   long i = 0;
   for (; i + 7 < n; i += 8) {
-    const __m512d a = _mm512_add_pd(_mm512_loadu_pd(w + 2 * i),
-                                    _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i)));
-    const __m512d b = _mm512_add_pd(_mm512_loadu_pd(w + 2 * i + 8),
-                                    _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i + 8)));
-    const __m512d sa = _mm512_mul_pd(a, a), sb = _mm512_mul_pd(b, b);
-    const __m512d h =
-        _mm512_add_pd(_mm512_permutex2var_pd(sa, re, sb), _mm512_permutex2var_pd(sa, im, sb));
-    _mm512_storeu_pd(out + i, _mm512_mask_sqrt_pd(h, all, h));
+    modulus8(_mm512_add_pd(_mm512_loadu_pd(w + 2 * i),
+                           _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i))),
+             _mm512_add_pd(_mm512_loadu_pd(w + 2 * i + 8),
+                           _mm512_maskz_cvtps_pd(all, _mm256_loadu_ps(c + 2 * i + 8))),
+             out + i);
   }
   addFloats(w + 2 * i, c + 2 * i, 2 * (n - i));
   modulusTail(w + 2 * i, n - i, out + i);
@@ -323,8 +252,8 @@ void modulusPlusRun(double* w, const float* c, long n, double* out) {
 // Output of one chunk of a pruned row (MorletCwt::prunedRow): the transforms of batches
 // p0..p0+C-1 are o[q*C + c] = W_{q*P + p0 + c}, so each q gives C contiguous samples of the row
 // out (n samples; complex W, or |W| as double or float). mod: scratch for C * M moduli.
-template <typename R, typename T>
-void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out) {
+template <typename T>
+void writeChunk(const double* o, long C, long P, long p0, long n, double* mod, T* out) {
   if (p0 >= n) return;
   const long q_hi = (n - p0 + P - 1) / P;  // q with q*P + p0 < n
   if constexpr (std::is_same<T, std::complex<double>>::value) {
@@ -332,7 +261,7 @@ void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out
       const long j0 = q * P + p0, ce = std::min(C, n - j0);
       for (long c = 0; c < ce; ++c) out[j0 + c] = {o[2 * (q * C + c)], o[2 * (q * C + c) + 1]};
     }
-  } else if constexpr (std::is_same<R, double>::value) {
+  } else {
     // The moduli of the whole chunk in one vectorised pass, then runs of C values to their
     // places (single values P apart when C = 1).
     modulusRun(o, q_hi * C, mod);
@@ -347,16 +276,6 @@ void writeChunk(const R* o, long C, long P, long p0, long n, double* mod, T* out
       } else {
         for (long c = 0; c < ce; ++c) out[j0 + c] = static_cast<T>(mod[q * C + c]);
       }
-    }
-  } else {
-    for (long q = 0; q < q_hi; ++q) {
-      const long j0 = q * P + p0, ce = std::min(C, n - j0);
-      const R* oq = o + 2 * q * C;
-      for (long c = 0; c < ce; ++c) {
-        const double re = oq[2 * c], im = oq[2 * c + 1];  // float -> double
-        mod[c] = re * re + im * im;
-      }
-      sqrtOf(mod, ce, out + j0);
     }
   }
 }
@@ -508,15 +427,11 @@ struct MorletCwt::Buffers {
   // band), C squares.
   fftw_complex* batch = nullptr;
   std::vector<double> tw;
-  // Precision::Single: the band rounded to float (in_f, zero outside [band_lo_f, band_hi_f]),
-  // the float inverse FFT's output (out_f) and the float batches of the pruned path.
+  // Precision::Single: the band rounded to float (in_f, zero outside [band_lo_f, band_hi_f])
+  // and the float inverse FFT's output (out_f).
   fftwf_complex* in_f = nullptr;
   fftwf_complex* out_f = nullptr;
   long band_lo_f = 1, band_hi_f = 0;
-  fftwf_complex* batch_f = nullptr;
-  // The batch buffer of real type R (double or float).
-  template <typename R>
-  typename FftwApi<R>::Complex*& batchOf();
   long batchCapacity() const { return std::max(kPrunedChunk, capacity / kMinPrunedBatches); }
   ~Buffers() {
     fftw_free(spec);
@@ -525,18 +440,8 @@ struct MorletCwt::Buffers {
     fftw_free(batch);
     fftwf_free(in_f);
     fftwf_free(out_f);
-    fftwf_free(batch_f);
   }
 };
-
-template <>
-fftw_complex*& MorletCwt::Buffers::batchOf<double>() {
-  return batch;
-}
-template <>
-fftwf_complex*& MorletCwt::Buffers::batchOf<float>() {
-  return batch_f;
-}
 
 // The plans of a MorletCwt (made for its own padded length N on its Buffers).
 struct MorletCwt::Fftw {
@@ -547,31 +452,17 @@ struct MorletCwt::Fftw {
   // size-M plan per M used.
   std::vector<long> divisors;
   std::map<long, fftw_plan> batch_plans;
-  // Precision::Single: the float inverse FFT (in_f into out_f) and the float batch plans.
+  // Precision::Single: the float inverse FFT (in_f into out_f).
   fftwf_plan c2c_f = nullptr;
-  std::map<long, fftwf_plan> batch_plans_f;
   Phasors phasors;  // the pruned |W|'s twiddles
-  // The batch plans of real type R (double or float).
-  template <typename R>
-  std::map<long, typename FftwApi<R>::Plan>& batchPlansOf();
   ~Fftw() {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (r2c) fftw_destroy_plan(r2c);
     if (c2c) fftw_destroy_plan(c2c);
     for (auto& p : batch_plans) fftw_destroy_plan(p.second);
     if (c2c_f) fftwf_destroy_plan(c2c_f);
-    for (auto& p : batch_plans_f) fftwf_destroy_plan(p.second);
   }
 };
-
-template <>
-std::map<long, fftw_plan>& MorletCwt::Fftw::batchPlansOf<double>() {
-  return batch_plans;
-}
-template <>
-std::map<long, fftwf_plan>& MorletCwt::Fftw::batchPlansOf<float>() {
-  return batch_plans_f;
-}
 
 // Buffers for `capacity` complex values: spec, in and out allocated (not touched: fresh pages
 // cost the kernel's zeroing, and a spectrum-only or pruned-rows use never faults most of them
@@ -731,7 +622,7 @@ const std::complex<double>* MorletCwt::computeRow(double frequency_hz, double om
   if (!fillRow(frequency_hz, omega0)) return nullptr;
   // The r2c input in `out` is no longer needed once the spectrum is computed.
   auto* w = reinterpret_cast<std::complex<double>*>(fftw_->buf->out);
-  if (pruned_ && prunedRow<double>(w)) return w;
+  if (pruned_ && prunedRow(w)) return w;
   if (!fullInverse()) return nullptr;
   return w;
 }
@@ -861,9 +752,8 @@ bool MorletCwt::bandRow(long lo, long hi, const double* g, std::complex<double>*
 // values) so twiddling, the FFTs and the transposition into time order all stay in cache.
 // Returns false when no divisor makes it worthwhile (M > N/kMinPrunedBatches): the caller then
 // uses the full inverse FFT.
-template <typename R, typename T>
+template <typename T>
 bool MorletCwt::prunedRow(T* out) {
-  using Api = FftwApi<R>;
   Fftw& f = *fftw_;
   Buffers& buf = *f.buf;
   const long lo = buf.band_lo, hi = buf.band_hi;
@@ -877,8 +767,8 @@ bool MorletCwt::prunedRow(T* out) {
   const long P = n_fft_ / M;
   long C = std::max(1L, std::min(P, kPrunedChunk / M));
   while (P % C != 0) --C;  // chunks of equal size: one plan
-  typename Api::Plan plan = nullptr;
-  typename Api::Complex*& batch = buf.template batchOf<R>();
+  fftw_plan plan = nullptr;
+  fftw_complex*& batch = buf.batch;
   // One chunk: C*M <= kPrunedChunk values, or one batch of M <= N/kMinPrunedBatches; the
   // chunk's transforms go after chunk_capacity values (this object's own, so the plans' arrays
   // keep their alignment whatever the shared buffers' capacity).
@@ -886,21 +776,23 @@ bool MorletCwt::prunedRow(T* out) {
   {
     std::lock_guard<std::mutex> lock(plannerMutex());
     if (!batch) {
-      batch = Api::alloc(static_cast<size_t>(2 * buf.batchCapacity()));
+      batch = fftw_alloc_complex(static_cast<size_t>(2 * buf.batchCapacity()));
       if (!batch) return false;
     }
     if (buf.tw.empty()) {
       buf.tw.resize(static_cast<size_t>(4 * (buf.capacity / kMinPrunedBatches + 1) + buf.capacity));
     }
-    auto& plans = f.template batchPlansOf<R>();
+    auto& plans = f.batch_plans;
     auto found = plans.find(M);
     if (found == plans.end()) {
       // The object's planning: FFTW_MEASURE times the batch's algorithms (up to one plan per row
       // size, a few ms each: the sizes are small), FFTW_ESTIMATE plans in ~1 ms.
-      Api::timeLimit(planning_ == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
-      const typename Api::Plan pl =
-          Api::many(static_cast<int>(M), static_cast<int>(C), batch, batch + chunk_capacity,
-                    planning_ == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE);
+      // howmany = C transforms of size M, out of place: input c at batch[c*M..], output c
+      // strided at out[c], out[C + c], ... (transposed: element q of every transform contiguous).
+      const int m = static_cast<int>(M);
+      const fftw_plan pl = fftw_plan_many_dft(1, &m, static_cast<int>(C), batch, nullptr, 1, m,
+                                              batch + chunk_capacity, nullptr, static_cast<int>(C),
+                                              1, FFTW_BACKWARD, fftwFlags(planning_));
       if (!pl) return false;
       found = plans.emplace(M, pl).first;
     }
@@ -916,8 +808,8 @@ bool MorletCwt::prunedRow(T* out) {
   double* sr = ti + B;
   double* si = sr + B;
   double* sq = si + B;  // the chunk's moduli (C * M values at most)
-  // |W| in double (kChained): the phasors from tables; W and float batches: sin/cos per bin.
-  constexpr bool kChained = std::is_same<R, double>::value && std::is_arithmetic<T>::value;
+  // |W| (kChained): the phasors from tables; complex W: sin/cos per bin.
+  constexpr bool kChained = std::is_arithmetic<T>::value;
   const double two_pi_over_n = 2.0 * kPi / static_cast<double>(n_fft_);
   if constexpr (kChained) {
     f.phasors.fill(n_fft_, lo, 1, B, sr, si);
@@ -930,26 +822,27 @@ bool MorletCwt::prunedRow(T* out) {
   // Bin k of the band goes to index (r0 + k) mod M of each batch: [r0, r0 + B1) then [0, B - B1).
   const long r0 = lo % M, B1 = std::min(B, M - r0);
   const double* x = reinterpret_cast<const double*>(buf.in + lo);
-  R* b = reinterpret_cast<R*>(batch);
-  const R* o = reinterpret_cast<const R*>(batch + chunk_capacity);  // o[q*C + c]: W_{q*P+p0+c}
+  double* b = reinterpret_cast<double*>(batch);
+  const double* o =
+      reinterpret_cast<const double*>(batch + chunk_capacity);  // o[q*C + c]: W_{q*P+p0+c}
   // Outside the band's slots every batch is zero: cleared once per row (the out-of-place
   // transforms leave their input as it is).
   for (long c = 0; c < C; ++c) {
-    R* bc = b + 2 * c * M;
+    double* bc = b + 2 * c * M;
     if (B1 == B) {
-      std::fill(bc, bc + 2 * r0, R(0));
-      std::fill(bc + 2 * (r0 + B), bc + 2 * M, R(0));
+      std::fill(bc, bc + 2 * r0, 0.0);
+      std::fill(bc + 2 * (r0 + B), bc + 2 * M, 0.0);
     } else {
-      std::fill(bc + 2 * (B - B1), bc + 2 * r0, R(0));
+      std::fill(bc + 2 * (B - B1), bc + 2 * r0, 0.0);
     }
   }
-  // |W| in double: between seeds, batch p's band is batch p-1's times the step (one complex
-  // multiplication per bin instead of two; the same drift bound). W (the fits' complex rows)
-  // and float batches: the band times the twiddles.
+  // |W|: between seeds, batch p's band is batch p-1's times the step (one complex
+  // multiplication per bin instead of two; the same drift bound). W (the fits' complex rows):
+  // the band times the twiddles.
   for (long p0 = 0; p0 < P; p0 += C) {
     for (long c = 0; c < C; ++c) {
       const long p = p0 + c;
-      R* bc = b + 2 * c * M;
+      double* bc = b + 2 * c * M;
       if (p % kTwiddleSeedBlock == 0 && kChained) {
         f.phasors.fill(n_fft_, (lo % n_fft_) * p, p, B, tr, ti);
       } else if (p % kTwiddleSeedBlock == 0) {
@@ -963,7 +856,7 @@ bool MorletCwt::prunedRow(T* out) {
           advanceBand(bc + 2 * r0, sr, si, B1);
           advanceBand(bc, sr + B1, si + B1, B - B1);
         } else {
-          const R* u = b + 2 * ((c + C - 1) % C) * M;  // batch p-1 (the previous chunk's last)
+          const double* u = b + 2 * ((c + C - 1) % C) * M;  // batch p-1 (the previous chunk's last)
           advanceBand(u + 2 * r0, sr, si, bc + 2 * r0, B1);
           advanceBand(u, sr + B1, si + B1, bc, B - B1);
         }
@@ -972,7 +865,7 @@ bool MorletCwt::prunedRow(T* out) {
       twiddleBand(x, tr, ti, sr, si, bc + 2 * r0, B1);
       twiddleBand(x + 2 * B1, tr + B1, ti + B1, sr + B1, si + B1, bc, B - B1);
     }
-    Api::execute(plan);
+    fftw_execute(plan);
     writeChunk(o, C, P, p0, n_, sq, out);
   }
   return true;
@@ -999,28 +892,20 @@ bool MorletCwt::rowModulusImpl(int i, T* out) {
     return false;
   }
   if (precision_ == Precision::Single) {
-    // Pruned rows stay double: their size-M transforms are in cache, where float gains little,
-    // and the double path advances the twiddles by table (the float batches use sin/cos).
-    if (pruned_ && prunedRow<double>(out)) return true;
+    // Pruned rows stay double: their size-M transforms are in cache, where float gains little
+    // (the double path also advances the twiddles by table).
+    if (pruned_ && prunedRow(out)) return true;
     if (!fullRowSingle()) return false;
     modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
     return true;
   }
-  if (pruned_ && prunedRow<double>(out)) return true;
+  if (pruned_ && prunedRow(out)) return true;
   if (!fullInverse()) return false;
   if constexpr (std::is_same<T, double>::value) {
     modulusRun(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
   } else {
     modulusOf(reinterpret_cast<const double*>(fftw_->buf->out), n_, out);
   }
-  return true;
-}
-
-bool MorletCwt::rowModulusSingleAt(double frequency_hz, double omega0, float* out) {
-  if (!out || !rowAtAllowed(frequency_hz, omega0) || !fillRow(frequency_hz, omega0)) return false;
-  if (pruned_ && prunedRow<float>(out)) return true;
-  if (!fullRowSingle()) return false;
-  modulusOfFloats(reinterpret_cast<const float*>(fftw_->buf->out_f), n_, out);
   return true;
 }
 
