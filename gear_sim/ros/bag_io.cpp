@@ -829,17 +829,75 @@ namespace {
 // data's): false when one cannot be read as rosbag reads it (the file changed since its walk, a
 // record that does not fit or has a long header; the caller then scans through rosbag), else
 // true with the scan's outcome in *status.
+// Reads a list of byte ranges of a file in order on a thread of its own, one range ahead of the
+// caller, so that the scan's checks of one chunk overlap the read of the next (two buffers).
+class Prefetch {
+ public:
+  Prefetch(const DirectFile& file, std::vector<std::pair<std::uint64_t, std::uint32_t>> reads)
+      : file_(file), reads_(std::move(reads)), thread_([this] { run(); }) {}
+  ~Prefetch() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  Prefetch(const Prefetch&) = delete;
+  Prefetch& operator=(const Prefetch&) = delete;
+
+  /// The next range's bytes into *buf (swapped with the read-ahead buffer); false when they
+  /// could not all be read.
+  bool next(std::vector<std::uint8_t>* buf) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [this] { return full_; });
+    buf->swap(ahead_);
+    full_ = false;
+    cv_.notify_all();
+    return ok_;
+  }
+
+ private:
+  void run() {
+    std::vector<std::uint8_t> bytes;
+    for (const auto& [pos, len] : reads_) {
+      const bool ok = file_.read(pos, len, &bytes);
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [this] { return stop_ || !full_; });
+      if (stop_) return;
+      ahead_.swap(bytes);
+      ok_ = ok;
+      full_ = true;
+      cv_.notify_all();
+    }
+  }
+
+  const DirectFile& file_;
+  const std::vector<std::pair<std::uint64_t, std::uint32_t>> reads_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<std::uint8_t> ahead_;
+  bool full_ = false, ok_ = false, stop_ = false;
+  std::thread thread_;  // last: started once the members above exist
+};
+
 bool scanDirect(const std::string& path, const BagStructure& structure, BagSignalInfo* out,
                 Status* status) {
   const DirectFile file(path);
   if (!file.is(structure.stamp)) return false;
   ChunkScan scan(path, out, true);
+  // The chunk reads, in the order the messages need them.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> reads;
+  for (const BagSignalInfo::DirectMessage& d : out->direct)
+    if (reads.empty() || d.chunk_pos != reads.back().first)
+      reads.emplace_back(d.chunk_pos, d.chunk_len);
+  Prefetch prefetch(file, reads);
   std::vector<std::uint8_t> chunk;
   bool loaded = false;
   std::uint64_t at = 0;  // the loaded chunk's position
   for (BagSignalInfo::DirectMessage& d : out->direct) {
     if (!loaded || d.chunk_pos != at) {
-      if (!file.read(d.chunk_pos, d.chunk_len, &chunk)) return false;
+      if (!prefetch.next(&chunk)) return false;
       loaded = true;
       at = d.chunk_pos;
     }
@@ -1009,9 +1067,13 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   return {};
 }
 
-Status streamSignalBag(const BagSignalInfo& info,
-                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+namespace {
+// streamSignalBag with the ranges' samples in `block` (the caller's storage: a record read whole
+// is read into its table, not copied out of the stream's).
+Status streamInto(const BagSignalInfo& info,
+                  const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                  const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
+                  gear_sim::SignalTable& block) {
   if (ranges.empty()) return {};
   for (size_t k = 0; k < ranges.size(); ++k)
     if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
@@ -1022,7 +1084,6 @@ Status streamSignalBag(const BagSignalInfo& info,
           ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
     }
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  gear_sim::SignalTable block;
   size_t r = 0;  // current range
   // The range's channels are written where chunks cover them; the samples up to `filled` are
   // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
@@ -1130,12 +1191,20 @@ Status streamSignalBag(const BagSignalInfo& info,
   return {};
 }
 
+}  // namespace
+
+Status streamSignalBag(const BagSignalInfo& info,
+                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+  gear_sim::SignalTable block;
+  return streamInto(info, ranges, sink, block);
+}
+
 Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out) {
-  return streamSignalBag(info, {{0, static_cast<Eigen::Index>(info.samples)}},
-                         [&](const gear_sim::SignalTable& t, size_t) {
-                           *out = t;
-                           return Status();
-                         });
+  *out = gear_sim::SignalTable{};  // one range: the record, read into *out
+  return streamInto(
+      info, {{0, static_cast<Eigen::Index>(info.samples)}},
+      [](const gear_sim::SignalTable&, size_t) { return Status(); }, *out);
 }
 
 Status checkBagTimes(const gear_sim::SignalTable& t, double sample_rate) {
