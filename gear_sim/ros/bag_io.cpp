@@ -1191,13 +1191,89 @@ Status streamInto(const BagSignalInfo& info,
   return {};
 }
 
+// Fills the ranges' blocks (streamInto) on a thread of its own while the caller's sink works on
+// the previous block: the plausibility copy of the chunks into a block overlaps the analysis of
+// the block before (issue 18: reading and computing overlapped). One block waits at most; the
+// blocks are handed over by swapping tables, so two are held.
+class BlockPipe {
+ public:
+  BlockPipe(const BagSignalInfo& info,
+            const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges)
+      : thread_([this, &info, &ranges] { run(info, ranges); }) {}
+  ~BlockPipe() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  BlockPipe(const BlockPipe&) = delete;
+  BlockPipe& operator=(const BlockPipe&) = delete;
+
+  /// Every block to `sink` in order, then the stream's outcome; a failed sink stops it.
+  Status drain(const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+    for (;;) {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [this] { return full_ || done_; });
+      if (!full_) return status_;  // done, every block handed over
+      lock.unlock();
+      // `ready_` is the caller's until full_ is cleared.
+      if (Status s = sink(ready_, range_); !s.ok()) return s;  // the destructor stops the thread
+      lock.lock();
+      full_ = false;
+      cv_.notify_all();
+    }
+  }
+
+ private:
+  void run(const BagSignalInfo& info,
+           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges) {
+    gear_sim::SignalTable block;
+    const Status s = streamInto(
+        info, ranges,
+        [&](const gear_sim::SignalTable&, size_t r) {
+          std::unique_lock<std::mutex> lock(mutex_);
+          cv_.wait(lock, [this] { return stop_ || !full_; });
+          if (stop_) return Status::invalidInput("stopped");  // never seen: the caller left
+          swapTables(&block, &ready_);
+          range_ = r;
+          full_ = true;
+          cv_.notify_all();
+          return Status();
+        },
+        block);
+    std::lock_guard<std::mutex> lock(mutex_);
+    status_ = s;
+    done_ = true;
+    cv_.notify_all();
+  }
+
+  static void swapTables(gear_sim::SignalTable* a, gear_sim::SignalTable* b) {
+    for (auto column : {&gear_sim::SignalTable::time, &gear_sim::SignalTable::dte,
+                        &gear_sim::SignalTable::dte_velocity, &gear_sim::SignalTable::stiffness,
+                        &gear_sim::SignalTable::torque, &gear_sim::SignalTable::mesh_state,
+                        &gear_sim::SignalTable::mesh_phase, &gear_sim::SignalTable::damping,
+                        &gear_sim::SignalTable::theta1, &gear_sim::SignalTable::theta2})
+      (a->*column).swap(b->*column);
+  }
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  gear_sim::SignalTable ready_;  // the block handed over (full_)
+  size_t range_ = 0;
+  bool full_ = false, done_ = false, stop_ = false;
+  Status status_;
+  std::thread thread_;  // last: started once the members above exist
+};
+
 }  // namespace
 
 Status streamSignalBag(const BagSignalInfo& info,
                        const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                        const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
-  gear_sim::SignalTable block;
-  return streamInto(info, ranges, sink, block);
+  BlockPipe pipe(info, ranges);
+  return pipe.drain(sink);
 }
 
 Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out) {
