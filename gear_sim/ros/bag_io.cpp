@@ -304,6 +304,17 @@ bool directMessages(const rosbag::Bag& bag, const std::string& topic, const BagS
   return true;
 }
 
+// The end of a reader thread's owner: sets *stop under `mutex`, wakes the waiters of `cv` and
+// joins `thread`.
+void stopAndJoin(std::mutex& mutex, std::condition_variable& cv, bool* stop, std::thread& thread) {
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    *stop = true;
+  }
+  cv.notify_all();
+  thread.join();
+}
+
 // Reads the messages of a SignalChunk topic on a thread of its own, so that what the caller does
 // with one chunk overlaps the read of the next (issue 18: `analyze` reads and computes at the
 // same time). The queue between them is bounded by samples, so memory stays at about
@@ -328,14 +339,7 @@ class ChunkReader {
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
   explicit ChunkReader(const BagSignalInfo& info) : info_(info), thread_([this] { run(); }) {}
-  ~ChunkReader() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
+  ~ChunkReader() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
 
@@ -523,6 +527,17 @@ Status chooseTopic(const std::vector<TopicType>& connections, const std::string&
   return {};
 }
 
+// The parameters of the last GearParams message (null: none could be instantiated) into
+// out->params, or the reason they are unusable into out->params_error.
+void setParams(const gear_damping::GearParams* last, BagSignalInfo* out) {
+  const Status s =
+      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
+  if (s.ok())
+    out->has_params = true;
+  else
+    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
+}
+
 // The last GearParams message of out->params_topic (if any) into out->params, or the reason
 // it is unusable into out->params_error.
 void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
@@ -530,12 +545,7 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
   rosbag::View pv(bag, rosbag::TopicQuery(out->params_topic));
   gear_damping::GearParams::ConstPtr last;
   for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
-  const Status s =
-      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
-  if (s.ok())
-    out->has_params = true;
-  else
-    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
+  setParams(last.get(), out);
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
@@ -835,14 +845,7 @@ class Prefetch {
  public:
   Prefetch(const DirectFile& file, std::vector<std::pair<std::uint64_t, std::uint32_t>> reads)
       : file_(file), reads_(std::move(reads)), thread_([this] { run(); }) {}
-  ~Prefetch() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
+  ~Prefetch() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   Prefetch(const Prefetch&) = delete;
   Prefetch& operator=(const Prefetch&) = delete;
 
@@ -973,12 +976,7 @@ bool plainParams(const DirectFile& file, const BagStructure& s,
       return false;
     }
   }
-  const Status st =
-      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
-  if (st.ok())
-    out->has_params = true;
-  else
-    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + st.message();
+  setParams(last ? &*last : nullptr, out);
   return true;
 }
 
@@ -1200,14 +1198,7 @@ class BlockPipe {
   BlockPipe(const BagSignalInfo& info,
             const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges)
       : thread_([this, &info, &ranges] { run(info, ranges); }) {}
-  ~BlockPipe() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
+  ~BlockPipe() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   BlockPipe(const BlockPipe&) = delete;
   BlockPipe& operator=(const BlockPipe&) = delete;
 
