@@ -18,6 +18,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <tuple>
 
@@ -303,6 +304,17 @@ bool directMessages(const rosbag::Bag& bag, const std::string& topic, const BagS
   return true;
 }
 
+// The end of a reader thread's owner: sets *stop under `mutex`, wakes the waiters of `cv` and
+// joins `thread`.
+void stopAndJoin(std::mutex& mutex, std::condition_variable& cv, bool* stop, std::thread& thread) {
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    *stop = true;
+  }
+  cv.notify_all();
+  thread.join();
+}
+
 // Reads the messages of a SignalChunk topic on a thread of its own, so that what the caller does
 // with one chunk overlaps the read of the next (issue 18: `analyze` reads and computes at the
 // same time). The queue between them is bounded by samples, so memory stays at about
@@ -327,14 +339,7 @@ class ChunkReader {
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
   explicit ChunkReader(const BagSignalInfo& info) : info_(info), thread_([this] { run(); }) {}
-  ~ChunkReader() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
+  ~ChunkReader() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
 
@@ -473,21 +478,27 @@ class ChunkReader {
   std::thread thread_;  // last: started once the members above exist
 };
 
+// A connection's topic and type (rosbag::ConnectionInfo's topic and datatype).
+struct TopicType {
+  const std::string& topic;
+  const std::string& type;
+};
+
 // The SignalChunk topic to read: `topic` when given (it must exist and have that type), else the
-// only one in the bag. Also notes the first GearParams topic.
-Status chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
-                   BagSignalInfo* out) {
-  rosbag::View all(bag);
+// only one in the bag. Also notes the first GearParams topic. `connections`: rosbag::View's
+// connections of the whole bag, in its order.
+Status chooseTopic(const std::vector<TopicType>& connections, const std::string& path,
+                   const std::string& topic, BagSignalInfo* out) {
   std::vector<std::string> chunk_topics, params_topics;
   std::string topic_type;
-  for (const rosbag::ConnectionInfo* c : all.getConnections()) {
-    if (c->datatype == kChunkType &&
-        std::find(chunk_topics.begin(), chunk_topics.end(), c->topic) == chunk_topics.end())
-      chunk_topics.push_back(c->topic);
-    if (c->datatype == kParamsType &&
-        std::find(params_topics.begin(), params_topics.end(), c->topic) == params_topics.end())
-      params_topics.push_back(c->topic);
-    if (c->topic == topic) topic_type = c->datatype;
+  for (const TopicType& c : connections) {
+    if (c.type == kChunkType &&
+        std::find(chunk_topics.begin(), chunk_topics.end(), c.topic) == chunk_topics.end())
+      chunk_topics.push_back(c.topic);
+    if (c.type == kParamsType &&
+        std::find(params_topics.begin(), params_topics.end(), c.topic) == params_topics.end())
+      params_topics.push_back(c.topic);
+    if (c.topic == topic) topic_type = c.type;
   }
   if (!params_topics.empty()) out->params_topic = params_topics.front();
   if (!topic.empty()) {
@@ -516,6 +527,17 @@ Status chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::s
   return {};
 }
 
+// The parameters of the last GearParams message (null: none could be instantiated) into
+// out->params, or the reason they are unusable into out->params_error.
+void setParams(const gear_damping::GearParams* last, BagSignalInfo* out) {
+  const Status s =
+      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
+  if (s.ok())
+    out->has_params = true;
+  else
+    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
+}
+
 // The last GearParams message of out->params_topic (if any) into out->params, or the reason
 // it is unusable into out->params_error.
 void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
@@ -523,12 +545,7 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
   rosbag::View pv(bag, rosbag::TopicQuery(out->params_topic));
   gear_damping::GearParams::ConstPtr last;
   for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
-  const Status s =
-      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
-  if (s.ok())
-    out->has_params = true;
-  else
-    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
+  setParams(last.get(), out);
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
@@ -822,17 +839,68 @@ namespace {
 // data's): false when one cannot be read as rosbag reads it (the file changed since its walk, a
 // record that does not fit or has a long header; the caller then scans through rosbag), else
 // true with the scan's outcome in *status.
+// Reads a list of byte ranges of a file in order on a thread of its own, one range ahead of the
+// caller, so that the scan's checks of one chunk overlap the read of the next (two buffers).
+class Prefetch {
+ public:
+  Prefetch(const DirectFile& file, std::vector<std::pair<std::uint64_t, std::uint32_t>> reads)
+      : file_(file), reads_(std::move(reads)), thread_([this] { run(); }) {}
+  ~Prefetch() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
+  Prefetch(const Prefetch&) = delete;
+  Prefetch& operator=(const Prefetch&) = delete;
+
+  /// The next range's bytes into *buf (swapped with the read-ahead buffer); false when they
+  /// could not all be read.
+  bool next(std::vector<std::uint8_t>* buf) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [this] { return full_; });
+    buf->swap(ahead_);
+    full_ = false;
+    cv_.notify_all();
+    return ok_;
+  }
+
+ private:
+  void run() {
+    std::vector<std::uint8_t> bytes;
+    for (const auto& [pos, len] : reads_) {
+      const bool ok = file_.read(pos, len, &bytes);
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [this] { return stop_ || !full_; });
+      if (stop_) return;
+      ahead_.swap(bytes);
+      ok_ = ok;
+      full_ = true;
+      cv_.notify_all();
+    }
+  }
+
+  const DirectFile& file_;
+  const std::vector<std::pair<std::uint64_t, std::uint32_t>> reads_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<std::uint8_t> ahead_;
+  bool full_ = false, ok_ = false, stop_ = false;
+  std::thread thread_;  // last: started once the members above exist
+};
+
 bool scanDirect(const std::string& path, const BagStructure& structure, BagSignalInfo* out,
                 Status* status) {
   const DirectFile file(path);
   if (!file.is(structure.stamp)) return false;
   ChunkScan scan(path, out, true);
+  // The chunk reads, in the order the messages need them.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> reads;
+  for (const BagSignalInfo::DirectMessage& d : out->direct)
+    if (reads.empty() || d.chunk_pos != reads.back().first)
+      reads.emplace_back(d.chunk_pos, d.chunk_len);
+  Prefetch prefetch(file, reads);
   std::vector<std::uint8_t> chunk;
   bool loaded = false;
   std::uint64_t at = 0;  // the loaded chunk's position
   for (BagSignalInfo::DirectMessage& d : out->direct) {
     if (!loaded || d.chunk_pos != at) {
-      if (!file.read(d.chunk_pos, d.chunk_len, &chunk)) return false;
+      if (!prefetch.next(&chunk)) return false;
       loaded = true;
       at = d.chunk_pos;
     }
@@ -844,6 +912,110 @@ bool scanDirect(const std::string& path, const BagStructure& structure, BagSigna
   }
   *status = scan.finish();
   return true;
+}
+}  // namespace
+
+namespace {
+// A connection's messages in rosbag::View's order: its index entries stably sorted by time.
+std::vector<BagStructure::IndexEntry> entriesOf(const BagStructure& s, std::uint32_t conn) {
+  std::vector<BagStructure::IndexEntry> out;
+  for (const BagStructure::IndexEntry& e : s.index_entries)
+    if (e.conn == conn) out.push_back(e);
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.sec, a.nsec) < std::tie(b.sec, b.nsec);
+  });
+  return out;
+}
+
+// The only connection of `topic` in the plain index, null when there are several.
+const BagStructure::IndexConnection* onlyConnection(const BagStructure& s,
+                                                    const std::string& topic) {
+  const BagStructure::IndexConnection* only = nullptr;
+  for (const BagStructure::IndexConnection& c : s.index_connections) {
+    if (c.topic != topic) continue;
+    if (only != nullptr) return nullptr;
+    only = &c;
+  }
+  return only;
+}
+
+// The uncompressed chunk record at `pos` whose header rosbag parses as the direct reading does,
+// null when there is none.
+const BagStructure::Chunk* plainChunk(const BagStructure& s, std::uint64_t pos) {
+  const auto c =
+      std::lower_bound(s.chunks.begin(), s.chunks.end(), pos,
+                       [](const BagStructure::Chunk& a, std::uint64_t p) { return a.start < p; });
+  if (c == s.chunks.end() || c->start != pos || !c->uncompressed ||
+      c->data_pos - c->start - 8 > kRosHeaderFieldLimit)
+    return nullptr;
+  return &*c;
+}
+
+// readBagParams from the plain index: every message of the params connection `c` instantiated
+// as rosbag does (null when its md5sum is not GearParams'), the last one kept. False when one
+// cannot be read that way (compressed, or its deserialisation throws: rosbag then reports it).
+bool plainParams(const DirectFile& file, const BagStructure& s,
+                 const BagStructure::IndexConnection& c, BagSignalInfo* out) {
+  const bool is_type = c.md5sum == ros::message_traits::MD5Sum<gear_damping::GearParams>::value();
+  std::optional<gear_damping::GearParams> last;
+  std::vector<std::uint8_t> chunk;
+  for (const BagStructure::IndexEntry& e : entriesOf(s, c.id)) {
+    last.reset();
+    if (!is_type) continue;
+    const BagStructure::Chunk* k = plainChunk(s, e.chunk_pos);
+    std::uint32_t data = 0, size = 0;
+    if (k == nullptr || !file.read(k->data_pos, k->data_len, &chunk) ||
+        !messageData(chunk.data(), k->data_len, e.offset, &data, &size))
+      return false;
+    try {
+      gear_damping::GearParams p;
+      ros::serialization::IStream in(chunk.data() + data, size);
+      ros::serialization::deserialize(in, p);
+      last = std::move(p);
+    } catch (const std::exception&) {
+      return false;
+    }
+  }
+  setParams(last ? &*last : nullptr, out);
+  return true;
+}
+
+// scanSignalBag from the bag's own index (BagStructure::plain_index) without a rosbag::Bag: the
+// first rosbag::Bag of a process loads its encryptor plugins by crawling the ROS packages (about
+// 0.1-0.2 s of CPU). Gives what the scan through rosbag gives (the same topic choice and errors,
+// parameters, messages in rosbag::View's order, read directly); nothing (and *info untouched)
+// when the index or the messages need rosbag's own reading.
+std::optional<Status> scanPlain(const std::string& path, const std::string& topic,
+                                const BagStructure& s, BagSignalInfo* info) {
+  if (!s.plain_index || !s.messages_indexed || s.encrypted || s.stamp[1] == 0) return std::nullopt;
+  BagSignalInfo out;
+  out.path = path;
+  std::vector<TopicType> connections;
+  for (const BagStructure::IndexConnection& c : s.index_connections)
+    connections.push_back({c.topic, c.type});
+  if (Status st = chooseTopic(connections, path, topic, &out); !st.ok()) return st;
+  const DirectFile file(path);
+  if (!file.is(s.stamp)) return std::nullopt;
+  if (!out.params_topic.empty()) {
+    const BagStructure::IndexConnection* params = onlyConnection(s, out.params_topic);
+    if (params == nullptr || !plainParams(file, s, *params, &out)) return std::nullopt;
+  }
+  const BagStructure::IndexConnection* signal = onlyConnection(s, out.topic);
+  if (signal == nullptr || signal->type != kChunkType ||
+      signal->md5sum != ros::message_traits::MD5Sum<gear_damping::SignalChunk>::value())
+    return std::nullopt;
+  out.messages_indexed = true;
+  for (const BagStructure::IndexEntry& e : entriesOf(s, signal->id)) {
+    const BagStructure::Chunk* c = plainChunk(s, e.chunk_pos);
+    if (c == nullptr) return std::nullopt;
+    out.direct.push_back({c->data_pos, c->data_len, e.offset, 0});
+  }
+  Status status;
+  if (!scanDirect(path, s, &out, &status)) return std::nullopt;
+  if (!status.ok()) return status;
+  std::copy(s.stamp, s.stamp + 5, out.stamp);
+  *info = std::move(out);
+  return Status();
 }
 }  // namespace
 
@@ -860,9 +1032,14 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   BagStructure structure;
   if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
+    if (std::optional<Status> s = scanPlain(path, topic, structure, info)) return *s;
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
-    if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
+    rosbag::View all(bag);
+    std::vector<TopicType> connections;
+    for (const rosbag::ConnectionInfo* c : all.getConnections())
+      connections.push_back({c->topic, c->datatype});
+    if (Status s = chooseTopic(connections, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
     out.messages_indexed = structure.messages_indexed;
     if (directMessages(bag, out.topic, structure, &out.direct)) {
@@ -888,9 +1065,13 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   return {};
 }
 
-Status streamSignalBag(const BagSignalInfo& info,
-                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+namespace {
+// streamSignalBag with the ranges' samples in `block` (the caller's storage: a record read whole
+// is read into its table, not copied out of the stream's).
+Status streamInto(const BagSignalInfo& info,
+                  const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                  const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
+                  gear_sim::SignalTable& block) {
   if (ranges.empty()) return {};
   for (size_t k = 0; k < ranges.size(); ++k)
     if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
@@ -901,7 +1082,6 @@ Status streamSignalBag(const BagSignalInfo& info,
           ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
     }
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  gear_sim::SignalTable block;
   size_t r = 0;  // current range
   // The range's channels are written where chunks cover them; the samples up to `filled` are
   // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
@@ -1009,12 +1189,89 @@ Status streamSignalBag(const BagSignalInfo& info,
   return {};
 }
 
+// Fills the ranges' blocks (streamInto) on a thread of its own while the caller's sink works on
+// the previous block: the plausibility copy of the chunks into a block overlaps the analysis of
+// the block before (issue 18: reading and computing overlapped). One block waits at most; the
+// blocks are handed over by swapping tables, so two are held.
+class BlockPipe {
+ public:
+  BlockPipe(const BagSignalInfo& info,
+            const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges)
+      : thread_([this, &info, &ranges] { run(info, ranges); }) {}
+  ~BlockPipe() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
+  BlockPipe(const BlockPipe&) = delete;
+  BlockPipe& operator=(const BlockPipe&) = delete;
+
+  /// Every block to `sink` in order, then the stream's outcome; a failed sink stops it.
+  Status drain(const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+    for (;;) {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [this] { return full_ || done_; });
+      if (!full_) return status_;  // done, every block handed over
+      lock.unlock();
+      // `ready_` is the caller's until full_ is cleared.
+      if (Status s = sink(ready_, range_); !s.ok()) return s;  // the destructor stops the thread
+      lock.lock();
+      full_ = false;
+      cv_.notify_all();
+    }
+  }
+
+ private:
+  void run(const BagSignalInfo& info,
+           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges) {
+    gear_sim::SignalTable block;
+    const Status s = streamInto(
+        info, ranges,
+        [&](const gear_sim::SignalTable&, size_t r) {
+          std::unique_lock<std::mutex> lock(mutex_);
+          cv_.wait(lock, [this] { return stop_ || !full_; });
+          if (stop_) return Status::invalidInput("stopped");  // never seen: the caller left
+          swapTables(&block, &ready_);
+          range_ = r;
+          full_ = true;
+          cv_.notify_all();
+          return Status();
+        },
+        block);
+    std::lock_guard<std::mutex> lock(mutex_);
+    status_ = s;
+    done_ = true;
+    cv_.notify_all();
+  }
+
+  static void swapTables(gear_sim::SignalTable* a, gear_sim::SignalTable* b) {
+    for (auto column : {&gear_sim::SignalTable::time, &gear_sim::SignalTable::dte,
+                        &gear_sim::SignalTable::dte_velocity, &gear_sim::SignalTable::stiffness,
+                        &gear_sim::SignalTable::torque, &gear_sim::SignalTable::mesh_state,
+                        &gear_sim::SignalTable::mesh_phase, &gear_sim::SignalTable::damping,
+                        &gear_sim::SignalTable::theta1, &gear_sim::SignalTable::theta2})
+      (a->*column).swap(b->*column);
+  }
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  gear_sim::SignalTable ready_;  // the block handed over (full_)
+  size_t range_ = 0;
+  bool full_ = false, done_ = false, stop_ = false;
+  Status status_;
+  std::thread thread_;  // last: started once the members above exist
+};
+
+}  // namespace
+
+Status streamSignalBag(const BagSignalInfo& info,
+                       const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+  BlockPipe pipe(info, ranges);
+  return pipe.drain(sink);
+}
+
 Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out) {
-  return streamSignalBag(info, {{0, static_cast<Eigen::Index>(info.samples)}},
-                         [&](const gear_sim::SignalTable& t, size_t) {
-                           *out = t;
-                           return Status();
-                         });
+  *out = gear_sim::SignalTable{};  // one range: the record, read into *out
+  return streamInto(
+      info, {{0, static_cast<Eigen::Index>(info.samples)}},
+      [](const gear_sim::SignalTable&, size_t) { return Status(); }, *out);
 }
 
 Status checkBagTimes(const gear_sim::SignalTable& t, double sample_rate) {
