@@ -1598,7 +1598,12 @@ class Refinement {
     *converged = false;
     if (!*finite) return 0;
     const bool secant = keep != nullptr && ns_ == 0;
-    if (secant) curvature_.setZero(m_, m_);  // S of another noise model does not carry over
+    // S of the white-noise round does not carry over to the prewhitened problem; from one
+    // prewhitened round to the next (AR models that differ by little) it does.
+    const bool carry = curvature_.rows() == m_ && curvature_of_ == set[0] && curvature_ar_;
+    if (secant && !(carry && nm.p > 0)) curvature_.setZero(m_, m_);
+    curvature_of_ = set[0];
+    curvature_ar_ = nm.p > 0;
     const double tol = secant ? kSecantTol : kConvergenceTol;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
@@ -1662,18 +1667,38 @@ class Refinement {
   }
 
   // The secant condition of a step s from normals_[i] to `next`: the gradient -rhs changes by
-  // (N + S) s with N averaged over the step's two ends, so S s = rhs - rhs' - N s; a symmetric
-  // rank-one update of S meets it. Skipped when the update is ill-defined.
+  // (N + S) s with N averaged over the step's two ends, so S s = t = rhs - rhs' - N s; a symmetric
+  // rank-one update of S meets it (skipped when ill-defined). With one nonlinear unknown (the
+  // known piecewise model: y0, v0, C) the condition determines S alone (secantOfC).
   void secantUpdate(size_t i, const Eigen::VectorXd& s, const Normal& next) {
     const Eigen::VectorXd y = normals_[i].rhs - next.rhs;
     const Eigen::VectorXd ns = 0.5 * (normals_[i].N * s + next.N * s);  // N along the step
-    const Eigen::VectorXd u = y - ns - curvature_ * s;
-    const double den = u.dot(s);
     // In the unknowns scaled by N's diagonal (their magnitudes differ by ten orders).
     const Eigen::VectorXd d = next.N.diagonal().cwiseSqrt();
+    if (m_ == 3 && local_roles_[2] == Role::Theta0) {
+      secantOfC(y - ns, s, d);
+      return;
+    }
+    const Eigen::VectorXd u = y - ns - curvature_ * s;
+    const double den = u.dot(s);
     const double scale = u.cwiseQuotient(d).norm() * s.cwiseProduct(d).norm();
     if (!(std::abs(den) > 1e-8 * scale)) return;
     curvature_ += u * u.transpose() / den;
+  }
+
+  // S from S s = t where only C (unknown 2) enters nonlinearly: the response is linear in y0
+  // and v0, so their second derivatives vanish and S = [0 0 w0; 0 0 w1; w0 w1 c], which the
+  // three equations give: w_k = t_k / s_2, c = (t_2 - w0 s0 - w1 s1) / s_2 (the secant method
+  // in C; the rank-one update needs a step per direction to get there). Kept unless the step
+  // moves C by nothing (d: N's diagonal root, the unknowns' scale).
+  void secantOfC(const Eigen::VectorXd& t, const Eigen::VectorXd& s, const Eigen::VectorXd& d) {
+    const double sc = std::abs(s[2] * d[2]);
+    if (!(sc > 1e-15 * s.cwiseProduct(d).norm())) return;
+    Eigen::MatrixXd S = Eigen::MatrixXd::Zero(3, 3);
+    S(0, 2) = S(2, 0) = t[0] / s[2];
+    S(1, 2) = S(2, 1) = t[1] / s[2];
+    S(2, 2) = (t[2] - S(2, 0) * s[0] - S(2, 1) * s[1]) / s[2];
+    if (S.allFinite()) curvature_ = S;
   }
 
   // AR model fitted to the pooled residual autocovariances of a set of segments.
@@ -2348,6 +2373,8 @@ class Refinement {
   mutable std::vector<Eigen::MatrixXd> nll_inv_scratch_;
   Locals dl_scratch_, x1_scratch_;
   Eigen::MatrixXd curvature_;  // gaussNewton: the secant estimate S of one segment
+  size_t curvature_of_ = static_cast<size_t>(-1);  // the segment it belongs to
+  bool curvature_ar_ = false;                      // estimated under an AR noise model
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
   mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
