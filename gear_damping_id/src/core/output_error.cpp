@@ -231,13 +231,12 @@ class SegmentSimulator {
     t->T_mid.resize(intervals);
     t->key.assign(intervals, SegmentTable::kSplit);
     t->K3.resize(t->smooth ? 3 * intervals : 0);
-    for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+    fillTorques(b, e, t);
     const std::vector<QuadratureBreak>& brk = fm_.breaks();
     auto bi = std::lower_bound(brk.begin(), brk.end(), b,
                                [](const QuadratureBreak& x, Index v) { return x.j < v; });
     for (Index j = b; j + 1 < e; ++j) {
       const Index i = j - b;
-      t->T_mid[i] = fm_.torque(j, 0.5, b, e);
       while (bi != brk.end() && bi->j < j) ++bi;
       if (bi != brk.end() && bi->j == j && bi->th < 1.0) continue;  // stepped in parts
       if (t->smooth) {
@@ -252,6 +251,28 @@ class SegmentSimulator {
       if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
       if (k < t->n_keys) t->key[i] = static_cast<unsigned char>(k);
     }
+  }
+
+  // The stage torques of [b, e) into t: T(j) and T(j + 1/2), fm_.torque's numbers; the interior
+  // midpoints (ForwardModel::cubic's centred stencil j-1..j+2) in one loop with cubic's weights
+  // and order of operations instead of a call per sample.
+  void fillTorques(Index b, Index e, SegmentTable* t) const {
+    const double* ch = fm_.signal().torque;
+    const Index n = e - b;
+    if (ch == nullptr || n < 4) {
+      for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+      for (Index j = b; j + 1 < e; ++j) t->T_mid[j - b] = fm_.torque(j, 0.5, b, e);
+      return;
+    }
+    std::copy(ch + b, ch + e, t->T.begin());  // cubic at u = 0: the sample
+    const auto& w = fm_.interiorMidpointWeights();
+    const double w0 = w[0], w1 = w[1], w2 = w[2], w3 = w[3];
+    double* mid = t->T_mid.data();
+    const double* c = ch + b;  // c[i] = sample b + i
+    mid[0] = fm_.torque(b, 0.5, b, e);
+    for (Index i = 1; i + 2 < n; ++i)
+      mid[i] = w0 * c[i - 1] + w1 * c[i] + w2 * c[i + 1] + w3 * c[i + 2];
+    for (Index i = n - 2; i + 1 < n; ++i) mid[i] = fm_.torque(b + i, 0.5, b, e);
   }
 
   // run() from the segment's table (same numbers): M the number of unknowns when fixed at
