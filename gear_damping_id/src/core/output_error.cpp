@@ -1619,12 +1619,7 @@ class Refinement {
     *converged = false;
     if (!*finite) return 0;
     const bool secant = keep != nullptr && ns_ == 0;
-    // S of the white-noise round does not carry over to the prewhitened problem; from one
-    // prewhitened round to the next (AR models that differ by little) it does.
-    const bool carry = curvature_.rows() == m_ && curvature_of_ == set[0] && curvature_ar_;
-    if (secant && !(carry && nm.p > 0)) curvature_.setZero(m_, m_);
-    curvature_of_ = set[0];
-    curvature_ar_ = nm.p > 0;
+    if (secant) startCurvature(set[0], nm);
     const double tol = secant ? kSecantTol : kConvergenceTol;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
@@ -1674,6 +1669,23 @@ class Refinement {
     return it;
   }
 
+  // S at the start of segment i's round under nm: within a segment S carries over, from one
+  // prewhitened round to the next as it is (their AR models differ by little), from the
+  // white-noise round to the first prewhitened one rescaled by N's diagonal (the prewhitening
+  // rescales the curvature about as it rescales J'J); zero for a new segment or round 0.
+  void startCurvature(size_t i, const NoiseModel& nm) {
+    const bool carry = curvature_.rows() == m_ && curvature_of_ == i && nm.p > 0;
+    const bool rescale = carry && !curvature_ar_;
+    if (rescale && curvature_d_.size() == m_) {
+      const Eigen::VectorXd r = normals_[i].N.diagonal().cwiseSqrt().cwiseQuotient(curvature_d_);
+      curvature_ = curvature_.cwiseProduct(r * r.transpose()).eval();
+    }
+    if (!carry || (rescale && curvature_d_.size() != m_) || !curvature_.allFinite())
+      curvature_.setZero(m_, m_);
+    curvature_of_ = i;
+    curvature_ar_ = nm.p > 0;
+  }
+
   // Segment i's step with the curvature estimate: (N + S) d = rhs into *d when S is set and
   // N + S is positive definite (else *d stays Gauss-Newton's and false).
   bool secantStep(size_t i, Eigen::VectorXd* d) const {
@@ -1696,6 +1708,7 @@ class Refinement {
     const Eigen::VectorXd ns = 0.5 * (normals_[i].N * s + next.N * s);  // N along the step
     // In the unknowns scaled by N's diagonal (their magnitudes differ by ten orders).
     const Eigen::VectorXd d = next.N.diagonal().cwiseSqrt();
+    curvature_d_ = d;
     if (m_ == 3 && local_roles_[2] == Role::Theta0) {
       secantOfC(y - ns, s, d);
       return;
@@ -2395,6 +2408,7 @@ class Refinement {
   Locals dl_scratch_, x1_scratch_;
   Eigen::MatrixXd curvature_;  // gaussNewton: the secant estimate S of one segment
   size_t curvature_of_ = static_cast<size_t>(-1);  // the segment it belongs to
+  Eigen::VectorXd curvature_d_;                    // N's diagonal root at its last update
   bool curvature_ar_ = false;                      // estimated under an AR noise model
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
