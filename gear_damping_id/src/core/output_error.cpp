@@ -231,13 +231,12 @@ class SegmentSimulator {
     t->T_mid.resize(intervals);
     t->key.assign(intervals, SegmentTable::kSplit);
     t->K3.resize(t->smooth ? 3 * intervals : 0);
-    for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+    fillTorques(b, e, t);
     const std::vector<QuadratureBreak>& brk = fm_.breaks();
     auto bi = std::lower_bound(brk.begin(), brk.end(), b,
                                [](const QuadratureBreak& x, Index v) { return x.j < v; });
     for (Index j = b; j + 1 < e; ++j) {
       const Index i = j - b;
-      t->T_mid[i] = fm_.torque(j, 0.5, b, e);
       while (bi != brk.end() && bi->j < j) ++bi;
       if (bi != brk.end() && bi->j == j && bi->th < 1.0) continue;  // stepped in parts
       if (t->smooth) {
@@ -252,6 +251,28 @@ class SegmentSimulator {
       if (k == t->n_keys && t->n_keys < kMaxMaps) t->key_K[k] = K, t->key_sv[k] = sv, ++t->n_keys;
       if (k < t->n_keys) t->key[i] = static_cast<unsigned char>(k);
     }
+  }
+
+  // The stage torques of [b, e) into t: T(j) and T(j + 1/2), fm_.torque's numbers; the interior
+  // midpoints (ForwardModel::cubic's centred stencil j-1..j+2) in one loop with cubic's weights
+  // and order of operations instead of a call per sample.
+  void fillTorques(Index b, Index e, SegmentTable* t) const {
+    const double* ch = fm_.signal().torque;
+    const Index n = e - b;
+    if (ch == nullptr || n < 4) {
+      for (Index j = b; j < e; ++j) t->T[j - b] = fm_.torque(j, 0.0, b, e);
+      for (Index j = b; j + 1 < e; ++j) t->T_mid[j - b] = fm_.torque(j, 0.5, b, e);
+      return;
+    }
+    std::copy(ch + b, ch + e, t->T.begin());  // cubic at u = 0: the sample
+    const auto& w = fm_.interiorMidpointWeights();
+    const double w0 = w[0], w1 = w[1], w2 = w[2], w3 = w[3];
+    double* mid = t->T_mid.data();
+    const double* c = ch + b;  // c[i] = sample b + i
+    mid[0] = fm_.torque(b, 0.5, b, e);
+    for (Index i = 1; i + 2 < n; ++i)
+      mid[i] = w0 * c[i - 1] + w1 * c[i] + w2 * c[i + 1] + w3 * c[i + 2];
+    for (Index i = n - 2; i + 1 < n; ++i) mid[i] = fm_.torque(b + i, 0.5, b, e);
   }
 
   // run() from the segment's table (same numbers): M the number of unknowns when fixed at
@@ -1598,7 +1619,7 @@ class Refinement {
     *converged = false;
     if (!*finite) return 0;
     const bool secant = keep != nullptr && ns_ == 0;
-    if (secant) curvature_.setZero(m_, m_);  // S of another noise model does not carry over
+    if (secant) startCurvature(set[0], nm);
     const double tol = secant ? kSecantTol : kConvergenceTol;
     int it = 0;
     for (; it < o_.max_iterations && !*converged; ++it) {
@@ -1648,6 +1669,23 @@ class Refinement {
     return it;
   }
 
+  // S at the start of segment i's round under nm: within a segment S carries over, from one
+  // prewhitened round to the next as it is (their AR models differ by little), from the
+  // white-noise round to the first prewhitened one rescaled by N's diagonal (the prewhitening
+  // rescales the curvature about as it rescales J'J); zero for a new segment or round 0.
+  void startCurvature(size_t i, const NoiseModel& nm) {
+    const bool carry = curvature_.rows() == m_ && curvature_of_ == i && nm.p > 0;
+    const bool rescale = carry && !curvature_ar_;
+    if (rescale && curvature_d_.size() == m_) {
+      const Eigen::VectorXd r = normals_[i].N.diagonal().cwiseSqrt().cwiseQuotient(curvature_d_);
+      curvature_ = curvature_.cwiseProduct(r * r.transpose()).eval();
+    }
+    if (!carry || (rescale && curvature_d_.size() != m_) || !curvature_.allFinite())
+      curvature_.setZero(m_, m_);
+    curvature_of_ = i;
+    curvature_ar_ = nm.p > 0;
+  }
+
   // Segment i's step with the curvature estimate: (N + S) d = rhs into *d when S is set and
   // N + S is positive definite (else *d stays Gauss-Newton's and false).
   bool secantStep(size_t i, Eigen::VectorXd* d) const {
@@ -1662,18 +1700,39 @@ class Refinement {
   }
 
   // The secant condition of a step s from normals_[i] to `next`: the gradient -rhs changes by
-  // (N + S) s with N averaged over the step's two ends, so S s = rhs - rhs' - N s; a symmetric
-  // rank-one update of S meets it. Skipped when the update is ill-defined.
+  // (N + S) s with N averaged over the step's two ends, so S s = t = rhs - rhs' - N s; a symmetric
+  // rank-one update of S meets it (skipped when ill-defined). With one nonlinear unknown (the
+  // known piecewise model: y0, v0, C) the condition determines S alone (secantOfC).
   void secantUpdate(size_t i, const Eigen::VectorXd& s, const Normal& next) {
     const Eigen::VectorXd y = normals_[i].rhs - next.rhs;
     const Eigen::VectorXd ns = 0.5 * (normals_[i].N * s + next.N * s);  // N along the step
-    const Eigen::VectorXd u = y - ns - curvature_ * s;
-    const double den = u.dot(s);
     // In the unknowns scaled by N's diagonal (their magnitudes differ by ten orders).
     const Eigen::VectorXd d = next.N.diagonal().cwiseSqrt();
+    curvature_d_ = d;
+    if (m_ == 3 && local_roles_[2] == Role::Theta0) {
+      secantOfC(y - ns, s, d);
+      return;
+    }
+    const Eigen::VectorXd u = y - ns - curvature_ * s;
+    const double den = u.dot(s);
     const double scale = u.cwiseQuotient(d).norm() * s.cwiseProduct(d).norm();
     if (!(std::abs(den) > 1e-8 * scale)) return;
     curvature_ += u * u.transpose() / den;
+  }
+
+  // S from S s = t where only C (unknown 2) enters nonlinearly: the response is linear in y0
+  // and v0, so their second derivatives vanish and S = [0 0 w0; 0 0 w1; w0 w1 c], which the
+  // three equations give: w_k = t_k / s_2, c = (t_2 - w0 s0 - w1 s1) / s_2 (the secant method
+  // in C; the rank-one update needs a step per direction to get there). Kept unless the step
+  // moves C by nothing (d: N's diagonal root, the unknowns' scale).
+  void secantOfC(const Eigen::VectorXd& t, const Eigen::VectorXd& s, const Eigen::VectorXd& d) {
+    const double sc = std::abs(s[2] * d[2]);
+    if (!(sc > 1e-15 * s.cwiseProduct(d).norm())) return;
+    Eigen::MatrixXd S = Eigen::MatrixXd::Zero(3, 3);
+    S(0, 2) = S(2, 0) = t[0] / s[2];
+    S(1, 2) = S(2, 1) = t[1] / s[2];
+    S(2, 2) = (t[2] - S(2, 0) * s[0] - S(2, 1) * s[1]) / s[2];
+    if (S.allFinite()) curvature_ = S;
   }
 
   // AR model fitted to the pooled residual autocovariances of a set of segments.
@@ -2348,6 +2407,9 @@ class Refinement {
   mutable std::vector<Eigen::MatrixXd> nll_inv_scratch_;
   Locals dl_scratch_, x1_scratch_;
   Eigen::MatrixXd curvature_;  // gaussNewton: the secant estimate S of one segment
+  size_t curvature_of_ = static_cast<size_t>(-1);  // the segment it belongs to
+  Eigen::VectorXd curvature_d_;                    // N's diagonal root at its last update
+  bool curvature_ar_ = false;                      // estimated under an AR noise model
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
   mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
