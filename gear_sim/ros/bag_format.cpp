@@ -158,9 +158,8 @@ class RecordSource {
   }
 
   // A connection record: its conn and topic fields, and the connection header in its data.
-  // Returns its topic and the connection header's type ("" when it has none); its md5sum field
-  // into *md5sum when given.
-  BagStructure::Connection checkConnection(const Record& r, std::string* md5sum = nullptr) {
+  // Returns its topic and the connection header's type ("" when it has none).
+  BagStructure::Connection checkConnection(const Record& r) {
     field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
     if (r.fields.find("topic") == r.fields.end())
       throw Corrupt{"connection record without its 'topic' field", r.start};
@@ -171,10 +170,6 @@ class RecordSource {
       throw Corrupt{"a connection header cut by the end of the file", r.data_pos, true};
     const Fields header = parseFields(b.data(), r.data_len, r.data_pos, "connection header");
     const auto type = header.find("type");
-    if (md5sum != nullptr) {
-      const auto md5 = header.find("md5sum");
-      *md5sum = md5 == header.end() ? std::string() : md5->second;
-    }
     return {r.fields.find("topic")->second, type == header.end() ? std::string() : type->second};
   }
 };
@@ -322,51 +317,6 @@ class BagWalker {
     return std::includes(known.begin(), known.end(), message_conns_.begin(), message_conns_.end());
   }
 
-  // rosbag's index in its plain shape (BagStructure::plain_index) into *out; false (and *out
-  // untouched) when the index has another shape.
-  bool plainIndex(BagStructure* out) const {
-    const auto first = std::lower_bound(starts_.begin(), starts_.end(), index_pos_);
-    const auto at = [&](std::uint64_t k) -> std::optional<std::uint64_t> {
-      const auto i = static_cast<std::uint64_t>(first - starts_.begin()) + k;
-      if (first == starts_.end() || i >= starts_.size()) return std::nullopt;
-      return starts_[i];
-    };
-    std::map<std::uint32_t, BagStructure::IndexConnection> conns;  // by id, as rosbag's map
-    for (std::uint64_t c = 0; c < conn_count_; ++c) {
-      const auto start = at(c);
-      const auto conn = start ? index_connection_at_.find(*start) : index_connection_at_.end();
-      if (conn == index_connection_at_.end() ||
-          !conns.emplace(conn->second.id, conn->second).second)
-        return false;
-    }
-    std::vector<BagStructure::IndexEntry> entries;
-    std::set<std::uint32_t> with_entries;
-    for (std::uint64_t k = 0; k < chunk_count_; ++k) {
-      const auto start = at(std::uint64_t{conn_count_} + k);
-      const auto info = start ? chunk_info_conns_.find(*start) : chunk_info_conns_.end();
-      if (info == chunk_info_conns_.end()) return false;
-      const std::uint64_t chunk_pos = info->second.first;  // a chunk record (checkReferences)
-      auto next = std::lower_bound(starts_.begin(), starts_.end(), chunk_pos);
-      for (size_t q = 0; q < info->second.second.size(); ++q) {
-        if (next == starts_.end() || ++next == starts_.end()) return false;
-        const auto index = index_at_.find(*next);
-        if (index == index_at_.end()) return false;
-        for (BagStructure::IndexEntry e : index->second) {
-          if (conns.count(e.conn) == 0 || e.nsec >= 1000000000u || (e.sec == 0 && e.nsec == 0))
-            return false;
-          e.chunk_pos = chunk_pos;
-          with_entries.insert(e.conn);
-          entries.push_back(e);
-        }
-      }
-    }
-    if (with_entries.size() != conns.size()) return false;
-    out->plain_index = true;
-    for (auto& [id, c] : conns) out->index_connections.push_back(std::move(c));
-    out->index_entries = std::move(entries);
-    return true;
-  }
-
   void walk() {
     checkVersion();
     for (std::uint64_t pos = kVersionLength; pos < file_size_;) {
@@ -403,7 +353,7 @@ class BagWalker {
         if (starts_.size() != 1) throw Corrupt{"a second bag header record", r.start};
         index_pos_ = field<std::uint64_t>(r.fields, "index_pos", r.start, "bag header");
         conn_count_ = field<std::uint32_t>(r.fields, "conn_count", r.start, "bag header");
-        chunk_count_ = field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
+        field<std::uint32_t>(r.fields, "chunk_count", r.start, "bag header");
         encrypted_ = r.fields.count("encryptor") > 0;
         break;
       case kChunk:
@@ -415,17 +365,11 @@ class BagWalker {
       case kChunkInfo:
         chunkInfo(r);
         break;
-      case kConnection: {
-        BagStructure::IndexConnection c;
-        const BagStructure::Connection tt = src_.checkConnection(r, &c.md5sum);
-        connections_.insert(tt);
-        c.id = field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
-        c.topic = tt.topic;
-        c.type = tt.type;
-        top_connections_[r.start] = c.id;
-        index_connection_at_[r.start] = std::move(c);
+      case kConnection:
+        connections_.insert(src_.checkConnection(r));
+        top_connections_[r.start] =
+            field<std::uint32_t>(r.fields, "conn", r.start, "connection record");
         break;
-      }
       case kMessageData:
         message_conns_.insert(
             field<std::uint32_t>(r.fields, "conn", r.start, "message data record"));
@@ -483,8 +427,6 @@ class BagWalker {
                     r.start};
     const auto& messages = chunk_messages_[*last_chunk_];
     const std::uint64_t block = 12 * 4096;
-    std::vector<BagStructure::IndexEntry>& entries = index_at_[r.start];
-    const std::uint32_t conn = field<std::uint32_t>(r.fields, "conn", r.start, "index data record");
     std::string b;
     for (std::uint64_t k = 0; k < r.data_len; k += block) {
       const std::uint64_t n = std::min<std::uint64_t>(block, r.data_len - k);
@@ -496,7 +438,6 @@ class BagWalker {
           throw Corrupt{"an index entry pointing at chunk offset " + std::to_string(offset) +
                             ", not a message of the chunk at byte " + std::to_string(*last_chunk_),
                         r.data_pos + k + e};
-        entries.push_back({conn, le32(b.data() + e), le32(b.data() + e + 4), 0, offset});
       }
     }
   }
@@ -515,18 +456,6 @@ class BagWalker {
                         std::to_string(r.data_len) + " bytes (8 each)",
                     r.start};
     chunk_refs_.emplace_back(r.start, chunk_pos);
-    // The connections it lists (rosbag reads one index data record after the chunk per
-    // distinct connection).
-    chunk_info_conns_[r.start].first = chunk_pos;
-    std::set<std::uint32_t>& conns = chunk_info_conns_[r.start].second;
-    std::string b;
-    const std::uint64_t block = 8 * 4096;
-    for (std::uint64_t k = 0; k < r.data_len; k += block) {
-      const std::uint64_t n = std::min<std::uint64_t>(block, r.data_len - k);
-      if (!src_.read(r.data_pos + k, n, &b))
-        throw Corrupt{"a chunk info cut by the end of the file", r.data_pos + k, true};
-      for (std::uint64_t e = 0; e < n; e += 8) conns.insert(le32(b.data() + e));
-    }
   }
 
   // index_pos at a record, every chunk info at a chunk.
@@ -549,12 +478,7 @@ class BagWalker {
   std::map<std::uint64_t, std::vector<std::uint32_t>> chunk_messages_;  // chunk start -> offsets
   std::vector<std::pair<std::uint64_t, std::uint64_t>> chunk_refs_;     // chunk info: (at, pos)
   std::optional<std::uint64_t> last_chunk_;
-  std::uint32_t conn_count_ = 0, chunk_count_ = 0;
-  // rosbag's index (plainIndex): top-level connection records, index data records' entries,
-  // chunk info records' connections, each by the record's start.
-  std::map<std::uint64_t, BagStructure::IndexConnection> index_connection_at_;
-  std::map<std::uint64_t, std::vector<BagStructure::IndexEntry>> index_at_;
-  std::map<std::uint64_t, std::pair<std::uint64_t, std::set<std::uint32_t>>> chunk_info_conns_;
+  std::uint32_t conn_count_ = 0;
   std::map<std::uint64_t, std::uint32_t> top_connections_;  // top-level connection: start -> conn
   std::set<std::uint32_t> message_conns_;                   // conn of every message data record
   std::vector<BagStructure::Chunk> chunks_;
@@ -570,7 +494,6 @@ void walk(int fd, std::uint64_t file_size, BagStructure* structure) {
   structure->chunks = walker.chunks();
   structure->encrypted = walker.encrypted();
   structure->connections = walker.connections();
-  walker.plainIndex(structure);
 }
 
 }  // namespace

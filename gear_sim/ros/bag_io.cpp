@@ -18,7 +18,6 @@
 #include <limits>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <thread>
 #include <tuple>
 
@@ -478,27 +477,21 @@ class ChunkReader {
   std::thread thread_;  // last: started once the members above exist
 };
 
-// A connection's topic and type (rosbag::ConnectionInfo's topic and datatype).
-struct TopicType {
-  const std::string& topic;
-  const std::string& type;
-};
-
 // The SignalChunk topic to read: `topic` when given (it must exist and have that type), else the
-// only one in the bag. Also notes the first GearParams topic. `connections`: rosbag::View's
-// connections of the whole bag, in its order.
-Status chooseTopic(const std::vector<TopicType>& connections, const std::string& path,
-                   const std::string& topic, BagSignalInfo* out) {
+// only one in the bag. Also notes the first GearParams topic.
+Status chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
+                   BagSignalInfo* out) {
+  rosbag::View all(bag);
   std::vector<std::string> chunk_topics, params_topics;
   std::string topic_type;
-  for (const TopicType& c : connections) {
-    if (c.type == kChunkType &&
-        std::find(chunk_topics.begin(), chunk_topics.end(), c.topic) == chunk_topics.end())
-      chunk_topics.push_back(c.topic);
-    if (c.type == kParamsType &&
-        std::find(params_topics.begin(), params_topics.end(), c.topic) == params_topics.end())
-      params_topics.push_back(c.topic);
-    if (c.topic == topic) topic_type = c.type;
+  for (const rosbag::ConnectionInfo* c : all.getConnections()) {
+    if (c->datatype == kChunkType &&
+        std::find(chunk_topics.begin(), chunk_topics.end(), c->topic) == chunk_topics.end())
+      chunk_topics.push_back(c->topic);
+    if (c->datatype == kParamsType &&
+        std::find(params_topics.begin(), params_topics.end(), c->topic) == params_topics.end())
+      params_topics.push_back(c->topic);
+    if (c->topic == topic) topic_type = c->datatype;
   }
   if (!params_topics.empty()) out->params_topic = params_topics.front();
   if (!topic.empty()) {
@@ -915,110 +908,6 @@ bool scanDirect(const std::string& path, const BagStructure& structure, BagSigna
 }
 }  // namespace
 
-namespace {
-// A connection's messages in rosbag::View's order: its index entries stably sorted by time.
-std::vector<BagStructure::IndexEntry> entriesOf(const BagStructure& s, std::uint32_t conn) {
-  std::vector<BagStructure::IndexEntry> out;
-  for (const BagStructure::IndexEntry& e : s.index_entries)
-    if (e.conn == conn) out.push_back(e);
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
-    return std::tie(a.sec, a.nsec) < std::tie(b.sec, b.nsec);
-  });
-  return out;
-}
-
-// The only connection of `topic` in the plain index, null when there are several.
-const BagStructure::IndexConnection* onlyConnection(const BagStructure& s,
-                                                    const std::string& topic) {
-  const BagStructure::IndexConnection* only = nullptr;
-  for (const BagStructure::IndexConnection& c : s.index_connections) {
-    if (c.topic != topic) continue;
-    if (only != nullptr) return nullptr;
-    only = &c;
-  }
-  return only;
-}
-
-// The uncompressed chunk record at `pos` whose header rosbag parses as the direct reading does,
-// null when there is none.
-const BagStructure::Chunk* plainChunk(const BagStructure& s, std::uint64_t pos) {
-  const auto c =
-      std::lower_bound(s.chunks.begin(), s.chunks.end(), pos,
-                       [](const BagStructure::Chunk& a, std::uint64_t p) { return a.start < p; });
-  if (c == s.chunks.end() || c->start != pos || !c->uncompressed ||
-      c->data_pos - c->start - 8 > kRosHeaderFieldLimit)
-    return nullptr;
-  return &*c;
-}
-
-// readBagParams from the plain index: every message of the params connection `c` instantiated
-// as rosbag does (null when its md5sum is not GearParams'), the last one kept. False when one
-// cannot be read that way (compressed, or its deserialisation throws: rosbag then reports it).
-bool plainParams(const DirectFile& file, const BagStructure& s,
-                 const BagStructure::IndexConnection& c, BagSignalInfo* out) {
-  const bool is_type = c.md5sum == ros::message_traits::MD5Sum<gear_damping::GearParams>::value();
-  std::optional<gear_damping::GearParams> last;
-  std::vector<std::uint8_t> chunk;
-  for (const BagStructure::IndexEntry& e : entriesOf(s, c.id)) {
-    last.reset();
-    if (!is_type) continue;
-    const BagStructure::Chunk* k = plainChunk(s, e.chunk_pos);
-    std::uint32_t data = 0, size = 0;
-    if (k == nullptr || !file.read(k->data_pos, k->data_len, &chunk) ||
-        !messageData(chunk.data(), k->data_len, e.offset, &data, &size))
-      return false;
-    try {
-      gear_damping::GearParams p;
-      ros::serialization::IStream in(chunk.data() + data, size);
-      ros::serialization::deserialize(in, p);
-      last = std::move(p);
-    } catch (const std::exception&) {
-      return false;
-    }
-  }
-  setParams(last ? &*last : nullptr, out);
-  return true;
-}
-
-// scanSignalBag from the bag's own index (BagStructure::plain_index) without a rosbag::Bag: the
-// first rosbag::Bag of a process loads its encryptor plugins by crawling the ROS packages (about
-// 0.1-0.2 s of CPU). Gives what the scan through rosbag gives (the same topic choice and errors,
-// parameters, messages in rosbag::View's order, read directly); nothing (and *info untouched)
-// when the index or the messages need rosbag's own reading.
-std::optional<Status> scanPlain(const std::string& path, const std::string& topic,
-                                const BagStructure& s, BagSignalInfo* info) {
-  if (!s.plain_index || !s.messages_indexed || s.encrypted || s.stamp[1] == 0) return std::nullopt;
-  BagSignalInfo out;
-  out.path = path;
-  std::vector<TopicType> connections;
-  for (const BagStructure::IndexConnection& c : s.index_connections)
-    connections.push_back({c.topic, c.type});
-  if (Status st = chooseTopic(connections, path, topic, &out); !st.ok()) return st;
-  const DirectFile file(path);
-  if (!file.is(s.stamp)) return std::nullopt;
-  if (!out.params_topic.empty()) {
-    const BagStructure::IndexConnection* params = onlyConnection(s, out.params_topic);
-    if (params == nullptr || !plainParams(file, s, *params, &out)) return std::nullopt;
-  }
-  const BagStructure::IndexConnection* signal = onlyConnection(s, out.topic);
-  if (signal == nullptr || signal->type != kChunkType ||
-      signal->md5sum != ros::message_traits::MD5Sum<gear_damping::SignalChunk>::value())
-    return std::nullopt;
-  out.messages_indexed = true;
-  for (const BagStructure::IndexEntry& e : entriesOf(s, signal->id)) {
-    const BagStructure::Chunk* c = plainChunk(s, e.chunk_pos);
-    if (c == nullptr) return std::nullopt;
-    out.direct.push_back({c->data_pos, c->data_len, e.offset, 0});
-  }
-  Status status;
-  if (!scanDirect(path, s, &out, &status)) return std::nullopt;
-  if (!status.ok()) return status;
-  std::copy(s.stamp, s.stamp + 5, out.stamp);
-  *info = std::move(out);
-  return Status();
-}
-}  // namespace
-
 Status checkMessageLayout(const rosbag::MessageInstance& m) {
   const std::string problem = layoutProblem(m);
   return problem.empty() ? Status() : Status::invalidInput(problem);
@@ -1032,14 +921,9 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   BagStructure structure;
   if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
-    if (std::optional<Status> s = scanPlain(path, topic, structure, info)) return *s;
     rosbag::Bag bag;
     bag.open(path, rosbag::bagmode::Read);
-    rosbag::View all(bag);
-    std::vector<TopicType> connections;
-    for (const rosbag::ConnectionInfo* c : all.getConnections())
-      connections.push_back({c->topic, c->datatype});
-    if (Status s = chooseTopic(connections, path, topic, &out); !s.ok()) return s;
+    if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
     readBagParams(bag, &out);
     out.messages_indexed = structure.messages_indexed;
     if (directMessages(bag, out.topic, structure, &out.direct)) {

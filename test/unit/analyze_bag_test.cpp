@@ -19,7 +19,6 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
-#include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "status_support.hpp"
@@ -255,77 +254,6 @@ TEST_F(AnalyzeBag, DirectReadingEqualsReadingThroughRosbag) {
   fs::resize_file(direct, fs::file_size(direct) / 2);
   EXPECT_FALSE(gear_test::ok(gear_sim_ros::readSignalBag(a, &ta), &e));
   EXPECT_NE(e.find("cannot read as a bag"), std::string::npos) << e;
-}
-
-// scanSignalBag reads an uncompressed bag's own index instead of opening it through rosbag
-// (BagStructure::plain_index): the messages in rosbag::View's order (by time stamp, ties in the
-// order written, whatever the file order), the last GearParams message by that order, the same
-// topic choice and errors. The lz4 copy of each bag is read through rosbag (compressed chunks).
-TEST_F(AnalyzeBag, ABagsOwnIndexGivesWhatRosbagGives) {
-  gear_sim::GearModel first = config_.gearModel(), second = first;
-  second.speed.pinion_rpm = 2 * first.speed.pinion_rpm;
-  const auto write = [&](const std::string& name, rosbag::compression::CompressionType type,
-                         const std::string& topic2) {
-    const fs::path p = dir() / name;
-    rosbag::Bag bag(p.string(), rosbag::bagmode::Write);
-    bag.setCompression(type);
-    bag.setChunkThreshold(3000);  // a few messages per chunk
-    // The parameters twice at one time stamp (rosbag keeps the order written), after the
-    // chunks in the file but stamped before them.
-    gear_damping::SignalChunk c;
-    const Eigen::Index n = 300, chunks = (table_.size() + n - 1) / n;
-    for (Eigen::Index k = chunks - 1; k >= 0; --k) {  // the file in reverse sample order
-      gear_sim_ros::toChunk(table_, k * n, std::min(n, table_.size() - k * n),
-                            config_.simulation.sample_rate, static_cast<std::uint64_t>(k * n), &c);
-      bag.write("/gear/signal", ros::Time(2.0 + 1e-3 * static_cast<double>(k)), c);
-      if (!topic2.empty() && k == 0) bag.write(topic2, ros::Time(5.0), c);
-    }
-    bag.write("/gear/params", ros::Time(1.0), gear_sim_ros::toMsg(first));
-    bag.write("/gear/params", ros::Time(1.0), gear_sim_ros::toMsg(second));
-    bag.close();
-    return p.string();
-  };
-  const auto bytes = [](const gear_sim::GearModel& m) {
-    const gear_damping::GearParams msg = gear_sim_ros::toMsg(m);
-    std::vector<std::uint8_t> b(ros::serialization::serializationLength(msg));
-    ros::serialization::OStream out(b.data(), static_cast<std::uint32_t>(b.size()));
-    ros::serialization::serialize(out, msg);
-    return b;
-  };
-  std::string e;
-  gear_sim_ros::BagSignalInfo a, b;
-  const std::string plain = write("index_plain.bag", rosbag::compression::Uncompressed, "");
-  gear_sim_ros::BagStructure structure;
-  ASSERT_TRUE(gear_test::ok(gear_sim_ros::checkBagStructure(plain, &structure), &e)) << e;
-  EXPECT_TRUE(structure.plain_index);
-  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(plain, "", &a), &e)) << e;
-  ASSERT_TRUE(gear_test::ok(
-      gear_sim_ros::scanSignalBag(write("index_lz4.bag", rosbag::compression::LZ4, ""), "", &b),
-      &e))
-      << e;
-  EXPECT_FALSE(a.direct.empty());
-  EXPECT_TRUE(b.direct.empty());
-  EXPECT_EQ(a.samples, table_.size());
-  EXPECT_EQ(a.gaps, 0);
-  EXPECT_EQ(std::tie(a.topic, a.params_topic, a.has_params, a.params_error, a.chunks, a.samples),
-            std::tie(b.topic, b.params_topic, b.has_params, b.params_error, b.chunks, b.samples));
-  ASSERT_TRUE(a.has_params);
-  EXPECT_EQ(bytes(a.params), bytes(second));
-  EXPECT_EQ(bytes(b.params), bytes(second));
-  gear_sim::SignalTable ta, tb;
-  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(a, &ta), &e)) << e;
-  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(b, &tb), &e)) << e;
-  EXPECT_EQ(ta.dte, tb.dte);
-  EXPECT_EQ(ta.dte, table_.dte);
-  // Two SignalChunk topics: the same error, naming them in rosbag's order.
-  const gear_sim::Status sa = gear_sim_ros::scanSignalBag(
-      write("index_two.bag", rosbag::compression::Uncompressed, "/a/signal"), "", &a);
-  const gear_sim::Status sb = gear_sim_ros::scanSignalBag(
-      write("index_two_lz4.bag", rosbag::compression::LZ4, "/a/signal"), "", &b);
-  ASSERT_FALSE(sa.ok());
-  EXPECT_EQ(sa.message().substr(sa.message().find(':')),
-            sb.message().substr(sb.message().find(':')));
-  EXPECT_NE(sa.message().find("'/gear/signal', '/a/signal'"), std::string::npos) << sa.message();
 }
 
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,

@@ -61,30 +61,6 @@ struct BagStructure {
   /// inside chunks, where rosbag repeats them per chunk): a superset of the connections rosbag
   /// reads (those at index_pos), with the same fields.
   std::set<Connection> connections;
-  /// rosbag's own index, as rosbag::Bag::open reads it (format 2.0: `conn_count` connection
-  /// records at index_pos, `chunk_count` chunk info records after them, and after each chunk the
-  /// index data records of the connections its chunk info lists), when it has the plain shape
-  /// that lets a reader order a topic's messages as rosbag::View does without opening the bag
-  /// through rosbag: every record rosbag reads there is where it looks and of the kind it
-  /// expects, connection ids are distinct, every index entry names one of them, every connection
-  /// has an entry, and every entry's time lies within [ros::TIME_MIN, ros::TIME_MAX] with
-  /// nanoseconds below 1e9. Otherwise `plain_index` is false and the vectors are empty.
-  bool plain_index = false;
-  struct IndexConnection {
-    std::uint32_t id = 0;
-    std::string topic, type, md5sum;  ///< the record's topic; the connection header's fields
-  };
-  /// The connections at index_pos, by ascending id (rosbag's connection map order).
-  std::vector<IndexConnection> index_connections;
-  struct IndexEntry {
-    std::uint32_t conn = 0, sec = 0, nsec = 0;
-    std::uint64_t chunk_pos = 0;  ///< the chunk record's first byte
-    std::uint32_t offset = 0;     ///< the message record's offset in the chunk's data
-  };
-  /// Every index entry in the order rosbag inserts them (chunk infos in order, then the index
-  /// records after each chunk, each in its own order): a connection's messages in rosbag::View
-  /// order are its entries stably sorted by time.
-  std::vector<IndexEntry> index_entries;
   /// The walked file's identity (device, inode, size, modification and status-change times in
   /// ns); all 0 when unknown (not a regular file).
   std::uint64_t stamp[5] = {0, 0, 0, 0, 0};
