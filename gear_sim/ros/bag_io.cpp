@@ -20,6 +20,7 @@
 #include <mutex>
 #include <thread>
 #include <tuple>
+#include <utility>
 
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -520,17 +521,6 @@ Status chooseTopic(const rosbag::Bag& bag, const std::string& path, const std::s
   return {};
 }
 
-// The parameters of the last GearParams message (null: none could be instantiated) into
-// out->params, or the reason they are unusable into out->params_error.
-void setParams(const gear_damping::GearParams* last, BagSignalInfo* out) {
-  const Status s =
-      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
-  if (s.ok())
-    out->has_params = true;
-  else
-    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
-}
-
 // The last GearParams message of out->params_topic (if any) into out->params, or the reason
 // it is unusable into out->params_error.
 void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
@@ -538,7 +528,12 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
   rosbag::View pv(bag, rosbag::TopicQuery(out->params_topic));
   gear_damping::GearParams::ConstPtr last;
   for (const rosbag::MessageInstance& m : pv) last = m.instantiate<gear_damping::GearParams>();
-  setParams(last.get(), out);
+  const Status s =
+      last ? fromMsg(*last, &out->params) : Status::invalidInput("no readable message");
+  if (s.ok())
+    out->has_params = true;
+  else
+    out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
@@ -828,10 +823,6 @@ std::string layoutProblem(const rosbag::MessageInstance& m) {
 }  // namespace
 
 namespace {
-// The scan of the messages in out->direct, read directly (their `offset` and `size` set to their
-// data's): false when one cannot be read as rosbag reads it (the file changed since its walk, a
-// record that does not fit or has a long header; the caller then scans through rosbag), else
-// true with the scan's outcome in *status.
 // Reads a list of byte ranges of a file in order on a thread of its own, one range ahead of the
 // caller, so that the scan's checks of one chunk overlap the read of the next (two buffers).
 class Prefetch {
@@ -877,6 +868,10 @@ class Prefetch {
   std::thread thread_;  // last: started once the members above exist
 };
 
+// The scan of the messages in out->direct, read directly (their `offset` and `size` set to their
+// data's): false when one cannot be read as rosbag reads it (the file changed since its walk, a
+// record that does not fit or has a long header; the caller then scans through rosbag), else
+// true with the scan's outcome in *status.
 bool scanDirect(const std::string& path, const BagStructure& structure, BagSignalInfo* out,
                 Status* status) {
   const DirectFile file(path);
@@ -1111,7 +1106,7 @@ class BlockPipe {
           std::unique_lock<std::mutex> lock(mutex_);
           cv_.wait(lock, [this] { return stop_ || !full_; });
           if (stop_) return Status::invalidInput("stopped");  // never seen: the caller left
-          swapTables(&block, &ready_);
+          std::swap(block, ready_);                           // every column's storage, no copy
           range_ = r;
           full_ = true;
           cv_.notify_all();
@@ -1122,15 +1117,6 @@ class BlockPipe {
     status_ = s;
     done_ = true;
     cv_.notify_all();
-  }
-
-  static void swapTables(gear_sim::SignalTable* a, gear_sim::SignalTable* b) {
-    for (auto column : {&gear_sim::SignalTable::time, &gear_sim::SignalTable::dte,
-                        &gear_sim::SignalTable::dte_velocity, &gear_sim::SignalTable::stiffness,
-                        &gear_sim::SignalTable::torque, &gear_sim::SignalTable::mesh_state,
-                        &gear_sim::SignalTable::mesh_phase, &gear_sim::SignalTable::damping,
-                        &gear_sim::SignalTable::theta1, &gear_sim::SignalTable::theta2})
-      (a->*column).swap(b->*column);
   }
 
   std::mutex mutex_;
