@@ -272,7 +272,7 @@ class SegmentSimulator {
     mid[0] = fm_.torque(b, 0.5, b, e);
     for (Index i = 1; i + 2 < n; ++i)
       mid[i] = w0 * c[i - 1] + w1 * c[i] + w2 * c[i + 1] + w3 * c[i + 2];
-    for (Index i = n - 2; i + 1 < n; ++i) mid[i] = fm_.torque(b + i, 0.5, b, e);
+    mid[n - 2] = fm_.torque(b + n - 2, 0.5, b, e);  // the last interval
   }
 
   // run() from the segment's table (same numbers): M the number of unknowns when fixed at
