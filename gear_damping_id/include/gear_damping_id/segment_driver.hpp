@@ -157,6 +157,9 @@ class SegmentDriver {
   SegmentOutput unusableSegment(const SignalView& v, Eigen::Index begin, Eigen::Index end) const;
   void recordPiecewise(const SegmentOutput& out, long unlocated, double dt,
                        bool keep_estimate = true);
+  void recordPiecewise(SegmentOutput&& out, long unlocated, double dt);  // moves into kept_
+  SegmentOutput addOne(const SignalView& v, Eigen::Index begin, Eigen::Index end,
+                       bool refine_allowed, bool consume);
   SegmentOutput addShared(const SignalView& v, Eigen::Index begin, Eigen::Index end);
   void addSharedParallel(const SignalView& v, const SampleRanges& ranges);
   IdentificationResult sharedResult(size_t last) const;

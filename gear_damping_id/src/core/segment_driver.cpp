@@ -156,6 +156,11 @@ SegmentDriver::SegmentOutput SegmentDriver::piecewiseSegment(IntegralMethod* m, 
   return out;
 }
 
+void SegmentDriver::recordPiecewise(SegmentOutput&& out, long unlocated, double dt) {
+  recordPiecewise(out, unlocated, dt, /*keep_estimate=*/false);
+  keep({std::move(out.estimate), std::move(out.result.windows)});
+}
+
 void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, double dt,
                                     bool keep_estimate) {
   const IdentificationResult& seg = out.result;
@@ -196,7 +201,12 @@ IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
                  ? std::sqrt(k_time_ / duration_)
                  : std::sqrt(gear_.mean_stiffness / gear_.equivalent_mass);
   const size_t n = std::min(last, kept_.size());
-  for (auto it = kept_.end() - static_cast<std::ptrdiff_t>(n); it != kept_.end(); ++it) {
+  const auto first = kept_.end() - static_cast<std::ptrdiff_t>(n);
+  size_t windows = 0;
+  for (auto it = first; it != kept_.end(); ++it) windows += it->windows.size();
+  r.segments.reserve(n);
+  r.windows.reserve(windows);
+  for (auto it = first; it != kept_.end(); ++it) {
     r.segments.push_back(it->estimate);
     r.windows.insert(r.windows.end(), it->windows.begin(), it->windows.end());
   }
@@ -308,6 +318,14 @@ IdentificationResult SegmentDriver::sharedResult(size_t last) const {
 
 SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Index begin,
                                                 Eigen::Index end, bool refine_allowed) {
+  return addOne(v, begin, end, refine_allowed, /*consume=*/false);
+}
+
+// add(); consume: the output is not wanted, so a piecewise segment's estimate and windows are
+// moved into the kept history instead of copied (the returned output then lacks them).
+SegmentDriver::SegmentOutput SegmentDriver::addOne(const SignalView& v, Eigen::Index begin,
+                                                   Eigen::Index end, bool refine_allowed,
+                                                   bool consume) {
   resolveWindow(v);
   if (ste_on_) return addSte(v, begin, end, refine_allowed);
   if (end - begin < 1 || !checkChannels(v, options_.formulation, options_.model).ok()) {
@@ -317,6 +335,10 @@ SegmentDriver::SegmentOutput SegmentDriver::add(const SignalView& v, Eigen::Inde
   }
   if (shared_) return addShared(v, begin, end);
   SegmentOutput out = piecewiseSegment(&method_, v, begin, end, refine_allowed);
+  if (consume) {
+    recordPiecewise(std::move(out), method_.unlocatedSwitches(), v.dt);
+    return {};
+  }
   recordPiecewise(out, method_.unlocatedSwitches(), v.dt);
   return out;
 }
@@ -333,7 +355,7 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
     // (Each output is ~1.5 kB: collected only when asked for, into storage reserved once.)
     if (outputs) outs.reserve(ranges.size());
     for (const auto& r : ranges) {
-      SegmentOutput out = add(v, r.first, r.second);
+      SegmentOutput out = addOne(v, r.first, r.second, /*refine_allowed=*/true, !outputs);
       if (outputs) outs.push_back(std::move(out));
     }
     return outs;
@@ -374,8 +396,10 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   for (size_t i = 0; i < ranges.size(); ++i) {
     if (ranges[i].second - ranges[i].first < 1)
       keep({outs[i].estimate, {}});
-    else
+    else if (outputs)
       recordPiecewise(outs[i], unlocated[i], v.dt);
+    else
+      recordPiecewise(std::move(outs[i]), unlocated[i], v.dt);
   }
   if (!outputs) outs.clear();
   return outs;
