@@ -242,3 +242,47 @@ TEST(HeldChanges, AgreesWithChannelIsHeldAndFindBreaks) {
   EXPECT_GT(held_cases, 100);
   EXPECT_GT(smooth_cases, 50);
 }
+
+// heldChangesAfter (the scan continued after the integral method's first read of a segment has
+// flagged its blocks of 16 intervals that change, changesIn16) gives heldChanges' result and list
+// for every split point `from` (lo plus a multiple of 16), with and without the pair check:
+// held channels at every switch density, adjacent switches (smooth) and switches on block edges.
+TEST(HeldChanges, ContinuedAfterFlaggedBlocksGivesTheOneScanResult) {
+  long splits = 0, flagged_blocks = 0;
+  for (unsigned seed = 1; seed <= 300; ++seed) {
+    std::mt19937 rng(seed);
+    const long n = std::uniform_int_distribution<long>(3, 300)(rng);
+    const double p_switch =
+        std::uniform_real_distribution<double>(0.0, seed % 4 == 0 ? 0.6 : 0.1)(rng);
+    std::vector<double> k(static_cast<size_t>(n));
+    double level = 2e8;
+    for (long i = 0; i < n; ++i) {
+      if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < p_switch)
+        level = level == 2e8 ? 4e8 : 2e8;
+      k[static_cast<size_t>(i)] = level;
+    }
+    const long lo = std::uniform_int_distribution<long>(0, n / 3)(rng);
+    const long hi = std::uniform_int_distribution<long>(std::min(n, lo + 2), n)(rng);
+    for (const bool pairs : {true, false}) {
+      std::vector<long> one;
+      const bool one_held = gear_damping_id::heldChanges(k.data(), lo, hi, pairs, &one);
+      std::vector<long> flagged;
+      for (long from = lo; from == lo || from + 16 <= hi - 1; from += 16) {
+        if (from > lo && gear_damping_id::changesIn16(k.data() + from - 16)) {
+          flagged.push_back(from - 16);
+          ++flagged_blocks;
+        }
+        std::vector<long> after;
+        const bool held =
+            gear_damping_id::heldChangesAfter(k.data(), lo, hi, pairs, flagged, from, &after);
+        ASSERT_EQ(held, one_held) << "seed " << seed << " from " << from;
+        if (held) {
+          EXPECT_EQ(after, one) << "seed " << seed << " from " << from;
+        }
+        ++splits;
+      }
+    }
+  }
+  EXPECT_GT(splits, 1000);
+  EXPECT_GT(flagged_blocks, 200);
+}

@@ -190,10 +190,21 @@ class IntegralMethod {
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
   // addSegment's named steps (integral_method.cpp): each returns ok when the segment may go on,
   // else NotIdentifiable saying why (the segment's reason).
+  // What the segment's first read of its samples (checkFiniteInputs) leaves for segmentMeans.
+  struct FirstTouch {
+    double sum[4] = {0, 0, 0, 0};  // dte, stiffness, torque, mesh_state (channels read)
+    double d3[4] = {0, 0, 0, 0};   // the DTE's third differences: segmentLevels' accumulators,
+    Eigen::Index d3_from = 0;      // over its groups of four before this sample of the segment
+    const double* held = nullptr;  // the channel searched for held changes (nullptr: none),
+    Eigen::Index held_from = 0;    // its blocks before this sample searched (held_blocks_)
+  };
   gear_sim::Status checkFiniteInputs(const SignalView& s, Eigen::Index begin, Eigen::Index end,
-                                     double channel_sum[4]) const;
+                                     FirstTouch* touch);
+  // The channel whose breaks the segment's quadrature splits at (nullptr: none): the stiffness
+  // (known) or the greybox square's mesh state.
+  const double* breakChannel(const SignalView& s) const;
   gear_sim::Status segmentMeans(const SignalView& s, Eigen::Index begin, Eigen::Index end,
-                                const double channel_sum[4], SegmentRecord* rec);
+                                const FirstTouch& touch, SegmentRecord* rec);
   double accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int windows,
                            SegmentRecord* rec);
   gear_sim::Status solveLocals(SegmentRecord* rec) const;
@@ -220,6 +231,7 @@ class IntegralMethod {
   Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)
   std::vector<QuadratureBreak> breaks_;   // current segment's breaks (forward_model.hpp)
   std::vector<Eigen::Index> changes_;     // current segment: intervals where a held value changes
+  std::vector<long> held_blocks_;         // current segment: FirstTouch's blocks with a change
   bool held_k_ = false;                   // current segment's known stiffness is held
   bool shape_ = false;                    // greybox fourier/table stiffness shape
   int n_basis_ = 0;                       // its unknowns

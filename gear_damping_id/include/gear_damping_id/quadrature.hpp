@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <cstring>
 #include <vector>
 
 namespace gear_damping_id {
@@ -54,6 +55,27 @@ struct QuadratureBreak {
 /// changing intervals (the channel is then smooth, not held, and *changes incomplete); else true.
 bool heldChanges(const double* channel, long lo, long hi, bool check_pairs,
                  std::vector<long>* changes);
+
+/// Whether the channel changes on any of the 16 intervals from k: k[q] != k[q + 1] for some q in
+/// [0, 16) (four compares of four lanes, or-ed: branch-free, vectorised by the caller's target).
+inline bool changesIn16(const double* k) {
+  typedef double V4 __attribute__((vector_size(32)));
+  typedef long M4 __attribute__((vector_size(32)));
+  M4 changed = {0, 0, 0, 0};
+  for (int q = 0; q < 16; q += 4) {
+    V4 a, b;
+    std::memcpy(&a, k + q, sizeof(V4));
+    std::memcpy(&b, k + q + 1, sizeof(V4));
+    changed |= a != b;
+  }
+  return (changed[0] | changed[1] | changed[2] | changed[3]) != 0;
+}
+
+/// heldChanges, the blocks of 16 intervals before `from` (from - lo a multiple of 16) searched
+/// already by the caller: `flagged` lists, ascending, the starts of those in which the value
+/// changes (IntegralMethod's first read of a segment does this search). The same result.
+bool heldChangesAfter(const double* channel, long lo, long hi, bool check_pairs,
+                      const std::vector<long>& flagged, long from, std::vector<long>* changes);
 
 /// One part [u0, u1] of a sample interval, integrated with `rule`; `right`: the part lies after
 /// the interval's break (a held channel takes the value of sample j+1 there).

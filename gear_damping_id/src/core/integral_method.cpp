@@ -44,22 +44,27 @@ namespace {
 // non-finite) reduced in a fixed order, the same for every channel count: the channels stream
 // from memory together (several independent miss streams at once) instead of one after another.
 typedef double SumV __attribute__((vector_size(32)));  // four lanes of the eight accumulators
+
+// Samples i .. i + 7 of every channel into its accumulators a[c] (lanes 0-3 and 4-7 of the eight,
+// per channel: explicit vectors keep them in registers for several channels at once).
 template <int NCH>
-GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index lo, Eigen::Index hi,
-                                           double* out) {
-  SumV a[NCH][2];  // lanes 0-3 and 4-7 of the eight accumulators, per channel (explicit vectors
-                   // keep them in registers for several channels at once)
-  for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
-  Eigen::Index i = lo;
-  for (; i + 8 <= hi; i += 8) {
-    for (int c = 0; c < NCH; ++c) {
-      SumV v0, v1;
-      std::memcpy(&v0, x[c] + i, sizeof v0);
-      std::memcpy(&v1, x[c] + i + 4, sizeof v1);
-      a[c][0] += v0;
-      a[c][1] += v1;
-    }
+GD_ALWAYS_INLINE inline void addEight(const double* const* x, Eigen::Index i, SumV (*a)[2]) {
+  for (int c = 0; c < NCH; ++c) {
+    SumV v0, v1;
+    std::memcpy(&v0, x[c] + i, sizeof v0);
+    std::memcpy(&v1, x[c] + i + 4, sizeof v1);
+    a[c][0] += v0;
+    a[c][1] += v1;
   }
+}
+
+// channelSums from sample i on, with the accumulators a over the samples before it: the rest in
+// steps of eight, the last ones into accumulator 0, then each channel's eight reduced in a fixed
+// order into out[c].
+template <int NCH>
+GD_ALWAYS_INLINE inline void finishSums(const double* const* x, Eigen::Index i, Eigen::Index hi,
+                                        SumV (*a)[2], double* out) {
+  for (; i + 8 <= hi; i += 8) addEight<NCH>(x, i, a);
   for (int c = 0; c < NCH; ++c) {
     double t[8];
     std::memcpy(t, &a[c][0], sizeof(SumV));
@@ -67,6 +72,14 @@ GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index 
     for (Eigen::Index j = i; j < hi; ++j) t[0] += x[c][j];
     out[c] = ((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7]));
   }
+}
+
+template <int NCH>
+GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index lo, Eigen::Index hi,
+                                           double* out) {
+  SumV a[NCH][2];
+  for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
+  finishSums<NCH>(x, lo, hi, a, out);
 }
 
 GD_AVX2_CLONES
@@ -80,6 +93,68 @@ void channelSums(const double* const* x, int nch, Eigen::Index lo, Eigen::Index 
       return channelSumsOf<3>(x, lo, hi, out);
     default:
       return channelSumsOf<4>(x, lo, hi, out);
+  }
+}
+
+// A segment's first read (IntegralMethod::checkFiniteInputs): channelSums of the nch channels x
+// and, in the same loop over blocks of 16 samples, what is computed from the samples next: the
+// DTE's (x[0]) third differences, squared and summed in segmentLevels' four accumulators and
+// order (d3: its accumulators over the groups of four before *end - lo), and the search of the
+// channel x[held] (held < 0: none) for blocks of 16 intervals where the value changes
+// (heldChangesAfter; the starts of those go to *flagged, and the samples of `phase` around them,
+// which the switch location reads next, are prefetched). *end: where the fused loop stopped
+// (lo plus a multiple of 16); the sums are complete, in channelSums' accumulators and order.
+// The loads of the sums bring the samples in from memory; the other work fills the time spent
+// waiting for them. AVX2 + FMA clone (segmentLevels' contraction of the third differences).
+template <int NCH>
+GD_ALWAYS_INLINE inline void firstTouchOf(const double* const* x, int held, const double* phase,
+                                          Eigen::Index lo, Eigen::Index hi, double* out, double* d3,
+                                          Eigen::Index* end, std::vector<long>* flagged) {
+  SumV a[NCH][2];
+  for (int c = 0; c < NCH; ++c) a[c][0] = a[c][1] = SumV{0.0, 0.0, 0.0, 0.0};
+  SumV dd = {0.0, 0.0, 0.0, 0.0};
+  const double* y = x[0];
+  const double* k = held >= 0 ? x[held] : nullptr;
+  Eigen::Index i = lo;
+  for (; i + 32 <= hi; i += 16) {
+    addEight<NCH>(x, i, a);
+    addEight<NCH>(x, i + 8, a);
+    for (int g = 0; g < 16; g += 4) {
+      SumV y0, y1, y2, y3;
+      std::memcpy(&y0, y + i + g, sizeof(SumV));
+      std::memcpy(&y1, y + i + g + 1, sizeof(SumV));
+      std::memcpy(&y2, y + i + g + 2, sizeof(SumV));
+      std::memcpy(&y3, y + i + g + 3, sizeof(SumV));
+      const SumV d = y3 - 3.0 * y2 + 3.0 * y1 - y0;
+      dd += d * d;
+    }
+    if (k != nullptr && changesIn16(k + i)) {
+      flagged->push_back(i);
+      if (phase != nullptr) {  // (a hint only: phase[i .. i + 16])
+        __builtin_prefetch(phase + i, 0, 3);
+        __builtin_prefetch(phase + i + 8, 0, 3);
+        __builtin_prefetch(phase + i + 16, 0, 3);
+      }
+    }
+  }
+  *end = i;
+  std::memcpy(d3, &dd, sizeof dd);
+  finishSums<NCH>(x, i, hi, a, out);
+}
+
+GD_FMA_CLONES
+void firstTouch(const double* const* x, int nch, int held, const double* phase, Eigen::Index lo,
+                Eigen::Index hi, double* out, double* d3, Eigen::Index* end,
+                std::vector<long>* flagged) {
+  switch (nch) {
+    case 1:
+      return firstTouchOf<1>(x, held, phase, lo, hi, out, d3, end, flagged);
+    case 2:
+      return firstTouchOf<2>(x, held, phase, lo, hi, out, d3, end, flagged);
+    case 3:
+      return firstTouchOf<3>(x, held, phase, lo, hi, out, d3, end, flagged);
+    default:
+      return firstTouchOf<4>(x, held, phase, lo, hi, out, d3, end, flagged);
   }
 }
 
@@ -333,27 +408,35 @@ namespace {
 // deviation from the RMS of the third differences (for white noise their variance is 20 sigma^2;
 // the smooth dynamics contribute (omega0 dt)^3 of the amplitude, negligible at the sampling rates
 // the method needs), and the standard deviation about the mean.
-// One pass for both sums, four independent accumulators each (a single add chain per sum is
-// latency-bound; the sums agree with the sequential ones to ~1e-16 relative). AVX2 + FMA clone.
+// Four independent accumulators per sum (a single add chain per sum is latency-bound; the sums
+// agree with the sequential ones to ~1e-16 relative). The third differences' accumulators start
+// from d3_in, their sums over the groups of four before sample `from` (a multiple of 4: the
+// segment's first read computes those, firstTouch). AVX2 + FMA clone.
 GD_FMA_CLONES
-void segmentLevels(const double* y, Eigen::Index n, double sum, double* noise, double* signal) {
+void segmentLevels(const double* y, Eigen::Index n, double sum, const double* d3_in,
+                   Eigen::Index from, double* noise, double* signal) {
   if (n < 4) return;
   // Lane k of the vectors is accumulator k (a GCC vector: one AVX register, or two SSE2 ones).
   typedef double V4 __attribute__((vector_size(32)));
   const double mean = sum / static_cast<double>(n);
-  V4 d3 = {0, 0, 0, 0}, var = {0, 0, 0, 0};
+  V4 d3, var = {0, 0, 0, 0};
+  std::memcpy(&d3, d3_in, sizeof d3);
   const Eigen::Index m = n - 3;  // third differences d_i, i in [0, m)
   Eigen::Index i = 0;
   for (; i + 4 <= m; i += 4) {
+    V4 y0;
+    std::memcpy(&y0, y + i, sizeof(V4));
+    const V4 c = y0 - mean;
+    var += c * c;
+  }
+  for (i = from; i + 4 <= m; i += 4) {
     V4 y0, y1, y2, y3;
     std::memcpy(&y0, y + i, sizeof(V4));
     std::memcpy(&y1, y + i + 1, sizeof(V4));
     std::memcpy(&y2, y + i + 2, sizeof(V4));
     std::memcpy(&y3, y + i + 3, sizeof(V4));
     const V4 d = y3 - 3.0 * y2 + 3.0 * y1 - y0;
-    const V4 c = y0 - mean;
     d3 += d * d;
-    var += c * c;
   }
   for (; i < m; ++i) {
     const double d = y[i + 3] - 3.0 * y[i + 2] + 3.0 * y[i + 1] - y[i];
@@ -1102,10 +1185,10 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
   // The quadrature stencils stay inside [begin, end).
   seg_lo_ = begin;
   seg_hi_ = end;
-  double channel_sum[4] = {0, 0, 0, 0};  // reused for the segment means
-  if (gear_sim::Status why = checkFiniteInputs(s, begin, end, channel_sum); !why.ok())
+  FirstTouch touch;  // the channel sums (reused for the segment means) and the fused work
+  if (gear_sim::Status why = checkFiniteInputs(s, begin, end, &touch); !why.ok())
     return fail(why.message());
-  if (gear_sim::Status why = segmentMeans(s, begin, end, channel_sum, &rec); !why.ok())
+  if (gear_sim::Status why = segmentMeans(s, begin, end, touch, &rec); !why.ok())
     return fail(why.message());
   // Windows: W near-equal spans. The damping column comes first among the locals or, for
   // shared damping, first among the shared columns; its raw norm serves the motion check.
@@ -1129,10 +1212,13 @@ SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index beg
 }
 
 // Finite inputs on the segment (a sum is finite only if every term is; the element-wise
-// search runs only when it is not). Leaves each needed channel's sum in channel_sum (dte,
-// stiffness, torque, mesh_state), and a present stiffness's sum even when it is not needed.
+// search runs only when it is not). Leaves each needed channel's sum in touch->sum (dte,
+// stiffness, torque, mesh_state), and a present stiffness's sum even when it is not needed;
+// with them, from the same loop (firstTouch), the start of segmentMeans' work on the DTE's third
+// differences and on the held-change search of its break channel.
 gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::Index begin,
-                                                   Eigen::Index end, double channel_sum[4]) const {
+                                                   Eigen::Index end, FirstTouch* touch) {
+  double* channel_sum = touch->sum;
   const Formulation f = options_.formulation;
   const double* channels[] = {s.dte, needsStiffness(f) ? s.stiffness : nullptr,
                               needsTorque(f, options_.model) ? s.torque : nullptr,
@@ -1147,7 +1233,20 @@ gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::I
     if (x != nullptr) present[np] = x, idx[np++] = c;
   }
   double sums[4] = {0, 0, 0, 0};
-  if (np > 0) channelSums(present, np, begin, end, sums);
+  const double* brk = breakChannel(s);
+  int held = -1;  // brk among the channels read
+  for (int p = 0; p < np; ++p) held = present[p] == brk ? p : held;
+  held_blocks_.clear();
+  touch->held = held >= 0 ? brk : nullptr;
+  touch->held_from = touch->d3_from = begin;
+  if (np > 0 && idx[0] == 0) {
+    firstTouch(present, np, held, s.mesh_phase, begin, end, sums, touch->d3, &touch->d3_from,
+               &held_blocks_);
+    touch->held_from = touch->d3_from;
+  } else if (np > 0) {
+    channelSums(present, np, begin, end, sums);
+  }
+  touch->d3_from -= begin;
   for (int p = 0; p < np; ++p) channel_sum[idx[p]] = sums[p];
   for (int c = 0; c < 4; ++c) {
     if (channels[c] == nullptr || std::isfinite(channel_sum[c])) continue;
@@ -1162,17 +1261,26 @@ gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::I
   return {};
 }
 
+const double* IntegralMethod::breakChannel(const SignalView& s) const {
+  const Formulation f = options_.formulation;
+  return f == Formulation::Known                  ? s.stiffness
+         : (f == Formulation::Greybox && !shape_) ? s.mesh_state
+                                                  : nullptr;
+}
+
 // Noise and signal levels, the segment means (time-weighted over the segment's intervals;
 // switches split when located), its breaks and, for a greybox shape, its basis values.
 gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index begin,
-                                              Eigen::Index end, const double channel_sum[4],
+                                              Eigen::Index end, const FirstTouch& touch,
                                               SegmentRecord* rec) {
+  const double* channel_sum = touch.sum;
   SegmentEstimate& est = rec->estimate;
   const long rows = static_cast<long>(end - begin);
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   // Model-free noise and signal levels for the quality flags (quality_flags.hpp).
-  segmentLevels(s.dte + begin, end - begin, channel_sum[0], &est.noise_std, &est.signal_std);
+  segmentLevels(s.dte + begin, end - begin, channel_sum[0], touch.d3, touch.d3_from, &est.noise_std,
+                &est.signal_std);
   if (use_torque) {
     rec->mean_torque = channel_sum[2] / static_cast<double>(rows);
     est.mean_torque = rec->mean_torque;
@@ -1183,14 +1291,15 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   // refinement's forward model.
   // One scan finds whether the stiffness is held and, if so, where it switches (what
   // channelIsHeld and findBreaks find); a smooth stiffness is searched for jumps and kinks.
-  const double* brk = f == Formulation::Known                  ? s.stiffness
-                      : (f == Formulation::Greybox && !shape_) ? s.mesh_state
-                                                               : nullptr;
+  const double* brk = breakChannel(s);
   held_k_ = false;
   breaks_.clear();
   changes_.clear();
   if (brk != nullptr) {
-    const bool held = heldChanges(brk, begin, end, f == Formulation::Known, &changes_);
+    const bool held = brk == touch.held
+                          ? heldChangesAfter(brk, begin, end, f == Formulation::Known, held_blocks_,
+                                             touch.held_from, &changes_)
+                          : heldChanges(brk, begin, end, f == Formulation::Known, &changes_);
     held_k_ = f == Formulation::Known && held;
     if (held) {
       for (const Eigen::Index j : changes_) {

@@ -10,42 +10,51 @@
 
 namespace gear_damping_id {
 
-// Blocks of 16 intervals without a change are passed branch-free (vectorised; AVX2 clone, chosen
-// at load time).
-GD_AVX2_CLONES
 bool heldChanges(const double* k, long lo, long hi, bool check_pairs, std::vector<long>* changes) {
+  return heldChangesAfter(k, lo, hi, check_pairs, {}, lo, changes);
+}
+
+namespace {
+
+// Intervals [j0, j1) one at a time: appends those where k changes; false at two adjacent ones
+// (with check_pairs). *prev: whether interval j0 - 1 changes, then j1 - 1.
+inline bool scanIntervals(const double* k, long j0, long j1, bool check_pairs, bool* prev,
+                          std::vector<long>* changes) {
+  for (long j = j0; j < j1; ++j) {
+    const bool c = k[j] != k[j + 1];
+    if (c && check_pairs && *prev) return false;
+    if (c) changes->push_back(j);
+    *prev = c;
+  }
+  return true;
+}
+
+}  // namespace
+
+// Blocks of 16 intervals without a change are passed branch-free (vectorised; AVX2 clone, chosen
+// at load time). The blocks before `from` were searched already: only those listed in `flagged`
+// hold a change, and they are scanned here one interval at a time, as the loop below would.
+GD_AVX2_CLONES
+bool heldChangesAfter(const double* k, long lo, long hi, bool check_pairs,
+                      const std::vector<long>& flagged, long from, std::vector<long>* changes) {
   const long last = hi - 1;  // intervals j < last
   bool prev = false;         // interval j - 1 changes
-  long j = lo;
+  long next = lo;            // the block after the last one scanned
+  for (const long b : flagged) {
+    if (b != next) prev = false;  // a block without a change in between
+    if (!scanIntervals(k, b, b + 16, check_pairs, &prev, changes)) return false;
+    next = b + 16;
+  }
+  if (from != next) prev = false;
+  long j = from;
   for (; j + 16 <= last; j += 16) {
-    // Four compares of four lanes (GCC vectors: -1 where the values differ), or-ed.
-    typedef double V4 __attribute__((vector_size(32)));
-    typedef long M4 __attribute__((vector_size(32)));
-    M4 changed = {0, 0, 0, 0};
-    for (int q = 0; q < 16; q += 4) {
-      V4 a, b;
-      std::memcpy(&a, k + j + q, sizeof(V4));
-      std::memcpy(&b, k + j + q + 1, sizeof(V4));
-      changed |= a != b;
-    }
-    if ((changed[0] | changed[1] | changed[2] | changed[3]) == 0) {
+    if (!changesIn16(k + j)) {
       prev = false;
       continue;
     }
-    for (int q = 0; q < 16; ++q) {
-      const bool c = k[j + q] != k[j + q + 1];
-      if (c && check_pairs && prev) return false;
-      if (c) changes->push_back(j + q);
-      prev = c;
-    }
+    if (!scanIntervals(k, j, j + 16, check_pairs, &prev, changes)) return false;
   }
-  for (; j < last; ++j) {
-    const bool c = k[j] != k[j + 1];
-    if (c && check_pairs && prev) return false;
-    if (c) changes->push_back(j);
-    prev = c;
-  }
-  return true;
+  return scanIntervals(k, j, last, check_pairs, &prev, changes);
 }
 
 namespace {
