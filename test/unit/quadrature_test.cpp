@@ -197,6 +197,26 @@ TEST(CubicRules, SampleAndHoldAcrossTheSwitchIsFirstOrderAndFarWorseThanTheSplit
   }
 }
 
+// A channel held at two levels with switches at a seed's density (up to 0.6 per interval every
+// fourth seed, so adjacent switches occur), n samples, and a sub-range [lo, hi) of it.
+std::vector<double> randomHeldChannel(unsigned seed, long* n_out, long* lo, long* hi) {
+  std::mt19937 rng(seed);
+  const long n = std::uniform_int_distribution<long>(3, 300)(rng);
+  const double p_switch =
+      std::uniform_real_distribution<double>(0.0, seed % 4 == 0 ? 0.6 : 0.1)(rng);
+  std::vector<double> k(static_cast<size_t>(n));
+  double level = 2e8;
+  for (long i = 0; i < n; ++i) {
+    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < p_switch)
+      level = level == 2e8 ? 4e8 : 2e8;
+    k[static_cast<size_t>(i)] = level;
+  }
+  *n_out = n;
+  *lo = std::uniform_int_distribution<long>(0, n / 3)(rng);
+  *hi = std::uniform_int_distribution<long>(std::min(n, *lo + 2), n)(rng);
+  return k;
+}
+
 }  // namespace
 
 // heldChanges (the integral method's one-pass scan) finds what channelIsHeld and findBreaks
@@ -206,19 +226,8 @@ TEST(CubicRules, SampleAndHoldAcrossTheSwitchIsFirstOrderAndFarWorseThanTheSplit
 TEST(HeldChanges, AgreesWithChannelIsHeldAndFindBreaks) {
   int held_cases = 0, smooth_cases = 0;
   for (unsigned seed = 1; seed <= 400; ++seed) {
-    std::mt19937 rng(seed);
-    const long n = std::uniform_int_distribution<long>(3, 300)(rng);
-    const double p_switch =
-        std::uniform_real_distribution<double>(0.0, seed % 4 == 0 ? 0.6 : 0.1)(rng);
-    std::vector<double> k(static_cast<size_t>(n));
-    double level = 2e8;
-    for (long i = 0; i < n; ++i) {
-      if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < p_switch)
-        level = level == 2e8 ? 4e8 : 2e8;
-      k[static_cast<size_t>(i)] = level;
-    }
-    const long lo = std::uniform_int_distribution<long>(0, n / 3)(rng);
-    const long hi = std::uniform_int_distribution<long>(std::min(n, lo + 2), n)(rng);
+    long n = 0, lo = 0, hi = 0;
+    const std::vector<double> k = randomHeldChannel(seed, &n, &lo, &hi);
     std::vector<long> changes;
     const bool held = gear_damping_id::heldChanges(k.data(), lo, hi, true, &changes);
     ASSERT_EQ(held, gear_damping_id::channelIsHeld(k.data(), lo, hi)) << "seed " << seed;
@@ -250,19 +259,8 @@ TEST(HeldChanges, AgreesWithChannelIsHeldAndFindBreaks) {
 TEST(HeldChanges, ContinuedAfterFlaggedBlocksGivesTheOneScanResult) {
   long splits = 0, flagged_blocks = 0;
   for (unsigned seed = 1; seed <= 300; ++seed) {
-    std::mt19937 rng(seed);
-    const long n = std::uniform_int_distribution<long>(3, 300)(rng);
-    const double p_switch =
-        std::uniform_real_distribution<double>(0.0, seed % 4 == 0 ? 0.6 : 0.1)(rng);
-    std::vector<double> k(static_cast<size_t>(n));
-    double level = 2e8;
-    for (long i = 0; i < n; ++i) {
-      if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < p_switch)
-        level = level == 2e8 ? 4e8 : 2e8;
-      k[static_cast<size_t>(i)] = level;
-    }
-    const long lo = std::uniform_int_distribution<long>(0, n / 3)(rng);
-    const long hi = std::uniform_int_distribution<long>(std::min(n, lo + 2), n)(rng);
+    long n = 0, lo = 0, hi = 0;
+    const std::vector<double> k = randomHeldChannel(seed, &n, &lo, &hi);
     for (const bool pairs : {true, false}) {
       std::vector<long> one;
       const bool one_held = gear_damping_id::heldChanges(k.data(), lo, hi, pairs, &one);
