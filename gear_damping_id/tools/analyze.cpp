@@ -122,9 +122,13 @@ class ResultBag {
  public:
   gear_sim::Status open(const std::string& path) {
     path_ = path;
+    const gear_sim::Result<std::string> partial = gear_sim::partialPath(path);
+    if (!partial.ok()) return partial.status();
+    tmp_ = *partial;
     try {
-      bag_ = std::make_unique<rosbag::Bag>(path + ".partial", rosbag::bagmode::Write);
+      bag_ = std::make_unique<rosbag::Bag>(tmp_, rosbag::bagmode::Write);
     } catch (const std::exception& e) {
+      std::remove(tmp_.c_str());
       return gear_sim::Status::ioError(path + ": cannot write (" + e.what() + ")");
     }
     return {};
@@ -146,7 +150,7 @@ class ResultBag {
       return gear_sim::Status::ioError(path_ + ": cannot write (" + e.what() + ")");
     }
     bag_.reset();
-    stage->add(path_ + ".partial", path_);
+    stage->add(tmp_, path_);
     return {};
   }
   ~ResultBag() {
@@ -155,12 +159,12 @@ class ResultBag {
         bag_->close();
       } catch (...) {
       }
-      std::remove((path_ + ".partial").c_str());
+      std::remove(tmp_.c_str());
     }
   }
 
  private:
-  std::string path_;
+  std::string path_, tmp_;  // the target and the temporary file written first
   std::unique_ptr<rosbag::Bag> bag_;
 };
 

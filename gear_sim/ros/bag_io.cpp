@@ -1184,7 +1184,9 @@ Status writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, d
 Status writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
                       const std::string& params_topic,
                       const std::function<void(rosbag::Bag&, const ros::Time&)>& fill) {
-  const std::string tmp = path + ".partial";
+  const gear_sim::Result<std::string> partial = gear_sim::partialPath(path);
+  if (!partial.ok()) return partial.status();
+  const std::string& tmp = *partial;
   try {
     rosbag::Bag bag(tmp, rosbag::bagmode::Write);
     const ros::Time base(1.0);

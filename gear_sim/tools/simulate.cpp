@@ -158,7 +158,9 @@ int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::Progr
 // (the bag writers do so themselves).
 template <class Write>
 gear_sim::Status writeCsvStaged(const std::string& output, Write&& write) {
-  const std::string tmp = output + ".partial";
+  const gear_sim::Result<std::string> partial = gear_sim::partialPath(output);
+  if (!partial.ok()) return partial.status();
+  const std::string& tmp = *partial;
   gear_sim::Status s = write(tmp);
   if (s.ok()) s = gear_sim::commitFile(tmp, output);
   if (!s.ok()) std::remove(tmp.c_str());

@@ -3,11 +3,14 @@
 // refusal: no crash, no runaway allocation, no silent truncation, a documented exit code and a
 // message naming the key, option or index. The tools' exit codes: simulate 0-3, convert 0-4,
 // analyze 0-5 (README "Exit codes").
+#include <fcntl.h>
 #include <gear_damping/SignalChunk.h>
 #include <geometry_msgs/WrenchStamped.h>
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
 #include <sensor_msgs/JointState.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdint>
@@ -785,6 +788,30 @@ TEST_F(Hostile, OutputsAreCommittedTogetherOrNotAtAll) {
   }  // destroyed without commit: an error path
   EXPECT_FALSE(fs::exists(path("b.txt")));
   EXPECT_FALSE(fs::exists(path("b.txt.partial")));
+}
+
+// Found by a hostile test: an output path naming a device or FIFO (`--output /dev/null`) was
+// written as path + ".partial" and renamed over it, which as root replaced the device node by a
+// regular file (and, as another user, failed: no .partial file can be made in /dev). A FIFO
+// stands in for the device here (mkfifo needs no privilege): it must stay a FIFO, receive the
+// bytes, and no temporary file may be left next to it.
+TEST_F(Hostile, AnOutputThatIsAFifoIsWrittenIntoNotReplaced) {
+  const std::string fifo = path("out.fifo");
+  std::remove(fifo.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const int rd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);  // a reader, so a writer may open
+  ASSERT_GE(rd, 0);
+  std::string e;
+  EXPECT_TRUE(gear_test::ok(gear_damping_id::writeFileAtomically(fifo, "written\n"), &e)) << e;
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced by a file";
+  char buf[64] = {0};
+  const ssize_t n = ::read(rd, buf, sizeof buf - 1);
+  ::close(rd);
+  EXPECT_EQ(std::string(buf, static_cast<size_t>(std::max<ssize_t>(n, 0))), "written\n");
+  EXPECT_FALSE(fs::exists(fifo + ".partial"));
+  std::remove(fifo.c_str());
 }
 
 // Found by fuzz_stream (UndefinedBehaviorSanitizer: "2e+296 is outside the range of

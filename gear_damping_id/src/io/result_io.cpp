@@ -392,12 +392,15 @@ gear_sim::Status OutputStage::commit() {
 
 namespace {
 
-// Writes `path` + ".partial" with `write(stream)` (false or a failed stream: IoError with `field`,
-// the partial file removed), then stages it in `stage` or, without one, renames it into place.
+// Writes the temporary file of `path` (gear_sim::partialPath: `path` + ".partial" for a regular
+// file) with `write(stream)` (false or a failed stream: IoError with `field`, the partial file
+// removed), then stages it in `stage` or, without one, commits it into place.
 template <class Write>
 gear_sim::Status writeThroughPartial(const std::string& path, OutputStage* stage,
                                      const std::string& field, Write write) {
-  const std::string tmp = path + ".partial";
+  const gear_sim::Result<std::string> partial = gear_sim::partialPath(path);
+  if (!partial.ok()) return gear_sim::Status::ioError(partial.status().message(), field);
+  const std::string& tmp = *partial;
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
     if (!f || !write(f) || !f.flush()) {

@@ -36,7 +36,15 @@ Status readSignalCsv(const std::string& path, SignalTable* out,
                      const std::vector<std::string>& required = {"time", "dte"},
                      bool allow_non_finite = false);
 
-/// Finishes an atomic write: renames the complete temporary file `tmp` over `path`. On failure
+/// The temporary file an atomic write of `path` goes through: `path` + ".partial", or, when
+/// `path` names an existing file that is neither a regular file nor a directory (a device such as
+/// /dev/null, a FIFO, a socket), a fresh file in the system's temporary directory (created
+/// empty; IoError when it cannot be).
+Result<std::string> partialPath(const std::string& path);
+
+/// Finishes an atomic write: renames the complete temporary file `tmp` over `path`; when `path`
+/// is a device, FIFO or socket (see partialPath), copies `tmp`'s bytes into it instead (a rename
+/// would replace the device node by a regular file, as root) and removes `tmp`. On failure
 /// removes `tmp` and returns IoError ("<path>: cannot write"): no partial file is left looking
 /// complete.
 Status commitFile(const std::string& tmp, const std::string& path);

@@ -1,8 +1,13 @@
 #include "gear_sim/signal_csv.hpp"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
@@ -84,7 +89,44 @@ Status writeSignalCsv(const std::string& path, const SignalTable& table) {
   return {};
 }
 
+namespace {
+
+// An existing file that is neither regular nor a directory: written in place, never renamed over.
+bool isSpecialFile(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode);
+}
+
+// Copies the bytes of `from` into `to` (opened for writing, not created), 64 KiB at a time.
+bool copyInto(const std::string& from, const std::string& to) {
+  std::unique_ptr<FILE, int (*)(FILE*)> in(std::fopen(from.c_str(), "rb"), &std::fclose);
+  std::unique_ptr<FILE, int (*)(FILE*)> out(std::fopen(to.c_str(), "wb"), &std::fclose);
+  if (!in || !out) return false;
+  std::vector<char> buf(size_t{1} << 16);
+  for (size_t n; (n = std::fread(buf.data(), 1, buf.size(), in.get())) > 0;) {
+    if (std::fwrite(buf.data(), 1, n, out.get()) != n) return false;
+  }
+  return !std::ferror(in.get()) && std::fflush(out.get()) == 0;
+}
+
+}  // namespace
+
+Result<std::string> partialPath(const std::string& path) {
+  if (!isSpecialFile(path)) return path + ".partial";
+  std::error_code ec;
+  std::string tmp = (std::filesystem::temp_directory_path(ec) / "gear_damping_XXXXXX").string();
+  const int fd = ec ? -1 : ::mkstemp(tmp.data());
+  if (fd < 0) return Status::ioError(path + ": cannot create a temporary file to write it");
+  ::close(fd);
+  return tmp;
+}
+
 Status commitFile(const std::string& tmp, const std::string& path) {
+  if (isSpecialFile(path)) {  // copy: a rename would replace the device or FIFO itself
+    const bool ok = copyInto(tmp, path);
+    std::remove(tmp.c_str());
+    return ok ? Status() : Status::ioError(path + ": cannot write");
+  }
   if (std::rename(tmp.c_str(), path.c_str()) == 0) return {};
   std::remove(tmp.c_str());
   return Status::ioError(path + ": cannot write");
