@@ -188,16 +188,18 @@ class IntegralMethod {
   int columnIndex(Column c) const;
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
-  // addSegment's named steps (integral_method.cpp): each returns ok when the segment may go on,
-  // else NotIdentifiable saying why (the segment's reason).
-  // What the segment's first read of its samples (checkFiniteInputs) leaves for segmentMeans.
+  // What the segment's first read of its samples (checkFiniteInputs) leaves for segmentMeans:
+  // the channel sums, and the fused loop's work on the samples before `end` (a sample of the
+  // record; the segment's begin when the loop did not run).
   struct FirstTouch {
     double sum[4] = {0, 0, 0, 0};  // dte, stiffness, torque, mesh_state (channels read)
-    double d3[4] = {0, 0, 0, 0};   // the DTE's third differences: segmentLevels' accumulators,
-    Eigen::Index d3_from = 0;      // over its groups of four before this sample of the segment
-    const double* held = nullptr;  // the channel searched for held changes (nullptr: none),
-    Eigen::Index held_from = 0;    // its blocks before this sample searched (held_blocks_)
+    double d3[4] = {0, 0, 0, 0};   // the DTE's third differences: segmentLevels' accumulators
+    const double* held = nullptr;  // the channel searched for held changes (nullptr: none;
+                                   // the blocks with a change: held_blocks_)
+    Eigen::Index end = 0;
   };
+  // addSegment's named steps (integral_method.cpp): each returns ok when the segment may go on,
+  // else NotIdentifiable saying why (the segment's reason).
   gear_sim::Status checkFiniteInputs(const SignalView& s, Eigen::Index begin, Eigen::Index end,
                                      FirstTouch* touch);
   // The channel whose breaks the segment's quadrature splits at (nullptr: none): the stiffness

@@ -1238,15 +1238,13 @@ gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::I
   for (int p = 0; p < np; ++p) held = present[p] == brk ? p : held;
   held_blocks_.clear();
   touch->held = held >= 0 ? brk : nullptr;
-  touch->held_from = touch->d3_from = begin;
+  touch->end = begin;
   if (np > 0 && idx[0] == 0) {
-    firstTouch(present, np, held, s.mesh_phase, begin, end, sums, touch->d3, &touch->d3_from,
+    firstTouch(present, np, held, s.mesh_phase, begin, end, sums, touch->d3, &touch->end,
                &held_blocks_);
-    touch->held_from = touch->d3_from;
   } else if (np > 0) {
     channelSums(present, np, begin, end, sums);
   }
-  touch->d3_from -= begin;
   for (int p = 0; p < np; ++p) channel_sum[idx[p]] = sums[p];
   for (int c = 0; c < 4; ++c) {
     if (channels[c] == nullptr || std::isfinite(channel_sum[c])) continue;
@@ -1279,8 +1277,8 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   // Model-free noise and signal levels for the quality flags (quality_flags.hpp).
-  segmentLevels(s.dte + begin, end - begin, channel_sum[0], touch.d3, touch.d3_from, &est.noise_std,
-                &est.signal_std);
+  segmentLevels(s.dte + begin, end - begin, channel_sum[0], touch.d3, touch.end - begin,
+                &est.noise_std, &est.signal_std);
   if (use_torque) {
     rec->mean_torque = channel_sum[2] / static_cast<double>(rows);
     est.mean_torque = rec->mean_torque;
@@ -1298,7 +1296,7 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   if (brk != nullptr) {
     const bool held = brk == touch.held
                           ? heldChangesAfter(brk, begin, end, f == Formulation::Known, held_blocks_,
-                                             touch.held_from, &changes_)
+                                             touch.end, &changes_)
                           : heldChanges(brk, begin, end, f == Formulation::Known, &changes_);
     held_k_ = f == Formulation::Known && held;
     if (held) {
