@@ -1184,24 +1184,22 @@ Status writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, d
 Status writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
                       const std::string& params_topic,
                       const std::function<void(rosbag::Bag&, const ros::Time&)>& fill) {
-  const gear_sim::Result<std::string> partial = gear_sim::partialPath(path);
-  if (!partial.ok()) return partial.status();
-  const std::string& tmp = *partial;
-  try {
-    rosbag::Bag bag(tmp, rosbag::bagmode::Write);
-    const ros::Time base(1.0);
-    if (params) {
-      auto p = toMsg(*params);
-      p.header.stamp = base;
-      bag.write(params_topic, base, p);
+  return gear_sim::writeAtomically(path, [&](const std::string& tmp) {
+    try {
+      rosbag::Bag bag(tmp, rosbag::bagmode::Write);
+      const ros::Time base(1.0);
+      if (params) {
+        auto p = toMsg(*params);
+        p.header.stamp = base;
+        bag.write(params_topic, base, p);
+      }
+      fill(bag, base);
+      bag.close();
+    } catch (const std::exception& e) {
+      return Status::ioError(path + ": cannot write (" + e.what() + ")");
     }
-    fill(bag, base);
-    bag.close();
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    return Status::ioError(path + ": cannot write (" + e.what() + ")");
-  }
-  return gear_sim::commitFile(tmp, path);
+    return Status();
+  });
 }
 
 }  // namespace gear_sim_ros

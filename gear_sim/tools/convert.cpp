@@ -112,15 +112,10 @@ int run(int argc, char** argv) {
     for (const auto& w : info.warnings) std::cerr << "convert: warning: " << w << "\n";
     if (const gear_sim::Status s = gear_sim_ros::readSignalBag(info, &table); !s.ok())
       return fail(kExitInput, s);
-    const gear_sim::Result<std::string> partial = gear_sim::partialPath(output);
-    if (!partial.ok()) return fail(kExitOutput, partial.status());
-    const std::string& tmp = *partial;
-    gear_sim::Status s = gear_sim::writeSignalCsv(tmp, table);
-    if (s.ok()) s = gear_sim::commitFile(tmp, output);
-    if (!s.ok()) {
-      std::remove(tmp.c_str());
+    if (const gear_sim::Status s = gear_sim::writeAtomically(
+            output, [&](const std::string& p) { return gear_sim::writeSignalCsv(p, table); });
+        !s.ok())
       return fail(kExitOutput, s);
-    }
   }
   std::cerr << "convert: " << table.size() << " samples " << input << " -> " << output << "\n";
   return 0;

@@ -154,19 +154,6 @@ int simulateCase(const Options& o, const gear_sim::SimConfig& c, gear_sim::Progr
   return kContinue;
 }
 
-// A CSV written next to the target and renamed on success: no partial file that looks complete
-// (the bag writers do so themselves).
-template <class Write>
-gear_sim::Status writeCsvStaged(const std::string& output, Write&& write) {
-  const gear_sim::Result<std::string> partial = gear_sim::partialPath(output);
-  if (!partial.ok()) return partial.status();
-  const std::string& tmp = *partial;
-  gear_sim::Status s = write(tmp);
-  if (s.ok()) s = gear_sim::commitFile(tmp, output);
-  if (!s.ok()) std::remove(tmp.c_str());
-  return s;
-}
-
 // The edge files (--edges), then the record: rig or signal, CSV or bag.
 int write(const Options& o, const gear_sim::SimConfig& c, const gear_sim::EncoderOptions& enc,
           const gear_sim::SignalTable& t) {
@@ -182,16 +169,18 @@ int write(const Options& o, const gear_sim::SimConfig& c, const gear_sim::Encode
       }
     }
   }
+  // A CSV is written atomically here (no partial file that looks complete); the bag writers do
+  // so themselves.
   const bool csv = endsWith(o.output, ".csv");
   gear_sim::Status s;
   if (o.rig) {
     const gear_sim::SignalTable r = gear_sim::rigRecord(c, enc, t);
-    s = csv ? writeCsvStaged(o.output,
-                             [&](const std::string& p) { return gear_sim::writeRigCsv(p, r); })
+    s = csv ? gear_sim::writeAtomically(
+                  o.output, [&](const std::string& p) { return gear_sim::writeRigCsv(p, r); })
             : gear_sim_ros::writeRigBag(o.output, r, &model, {});
   } else {
-    s = csv ? writeCsvStaged(o.output,
-                             [&](const std::string& p) { return gear_sim::writeSignalCsv(p, t); })
+    s = csv ? gear_sim::writeAtomically(
+                  o.output, [&](const std::string& p) { return gear_sim::writeSignalCsv(p, t); })
             : gear_sim_ros::writeSignalBag(o.output, t, c.simulation.sample_rate, &model,
                                            o.chunk_size);
   }

@@ -2,6 +2,7 @@
 // names), then one row per sample, SI units. Part of gear_sim_io; no ROS.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,12 @@ Result<std::string> partialPath(const std::string& path);
 /// removes `tmp` and returns IoError ("<path>: cannot write"): no partial file is left looking
 /// complete.
 Status commitFile(const std::string& tmp, const std::string& path);
+
+/// An atomic write of `path`: `write(tmp)` fills the temporary file partialPath(path) gives,
+/// commitFile puts it in place; on any failure (write's Status is returned as it is) the
+/// temporary file is removed and `path` is left as it was.
+Status writeAtomically(const std::string& path,
+                       const std::function<Status(const std::string& tmp)>& write);
 
 /// A load-torque file for the simulator's `load.profile: csv`: columns time and torque.
 inline Status readTorqueCsv(const std::string& path, SignalTable* out) {

@@ -132,6 +132,16 @@ Status commitFile(const std::string& tmp, const std::string& path) {
   return Status::ioError(path + ": cannot write");
 }
 
+Status writeAtomically(const std::string& path,
+                       const std::function<Status(const std::string& tmp)>& write) {
+  const Result<std::string> tmp = partialPath(path);
+  if (!tmp.ok()) return tmp.status();
+  Status s = write(*tmp);
+  if (s.ok()) s = commitFile(*tmp, path);  // (removes the file itself when it fails)
+  if (!s.ok()) std::remove(tmp->c_str());
+  return s;
+}
+
 Status readSignalCsv(const std::string& path, SignalTable* out,
                      const std::vector<std::string>& required, bool allow_non_finite) {
   // Every failure past opening is the file's content; `column` names the CSV column concerned.
