@@ -552,7 +552,8 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
   app.add_option("--max-condition", base.max_condition,
                  "largest condition number of an identifiable segment (default 1e6)");
   app.add_option("--time-tolerance", base.time_tolerance,
-                 "relative tolerance on the uniformity of the time column (default 1e-6)");
+                 "relative tolerance on the uniformity of the time column (default 1e-6; never "
+                 "finer than the time stamps' rounding, docs/limits.md)");
   app.add_option("--max-in-memory", max_in_memory,
                  "bags with more samples are analysed streaming, one segment at a time "
                  "(default 1e6); a rig bag (JointState), read whole, with more messages "

@@ -659,6 +659,11 @@ class ChunkScan {
                                   std::to_string(kMaxSampleIndex) +
                                   "): corrupt or wrapped-around first_index");
     }
+    // The time stamps a reader gives these indices must resolve the step (the same rule as a
+    // record read whole: gear_sim::checkTimeResolution).
+    const double last = static_cast<double>(c.first_index + (c.dte.size() - 1)) / c.sample_rate;
+    if (Status s = gear_sim::checkTimeResolution(last, 1.0 / c.sample_rate); !s.ok())
+      return Status::invalidInput(where + ": " + s.message(), "time");
     return {};
   }
 

@@ -11,6 +11,7 @@
 // theta1, theta2, torque; docs/rig.md) becomes a bag of sensor_msgs/JointState (/rig/joint_states)
 // and geometry_msgs/WrenchStamped (/rig/torque).
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -91,9 +92,13 @@ int run(int argc, char** argv) {
       return fail(kExitInput, s);
     const Eigen::Index n = table.size();
     const double dt = (table.time[n - 1] - table.time[0]) / static_cast<double>(n - 1);
+    const double t_abs_max = std::max(std::abs(table.time[0]), std::abs(table.time[n - 1]));
+    if (const gear_sim::Status s = gear_sim::checkTimeResolution(t_abs_max, dt); !s.ok())
+      return fail(kExitInput, input + ": " + s.message());
+    const double tol = gear_sim::stepTolerance(1e-6, dt, t_abs_max);
     for (Eigen::Index i = 1; i < n; ++i) {
       const double d = table.time[i] - table.time[i - 1];
-      if (std::abs(d - dt) > 1e-6 * dt)
+      if (std::abs(d - dt) > tol)
         return fail(kExitInput, input + ": time is not uniformly sampled at line " +
                                     std::to_string(i + 2) + " (step " + gear_sim::formatNumber(d) +
                                     " s, mean step " + gear_sim::formatNumber(dt) +

@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -131,6 +133,50 @@ TEST_F(AnalyzeBag, StreamingAgreesWithTheWholeRecordOnNoiseFreeData) {
                              &e));  // results, no signal
   EXPECT_NE(e.find("no topic of type"), std::string::npos) << e;
   EXPECT_TRUE(fs::is_regular_file(out));
+}
+
+// A bag whose sample indices start at 1e12 (t = 1e6 s at 1 MHz, as a rig's counter after eleven
+// days) is analysed the same read whole and streamed, with the estimates of the same samples from
+// index 0 (within the rounding of the stamps: the whole read's step comes from the span of
+// stamps resolved to ulp(1e6 s) = 1.2e-10 s, 3e-8 of the 4 ms span; measured 1.2e-8 in C);
+// indices whose times a double cannot resolve to 1/1000 of the step (1e15: t = 1e9 s)
+// are refused both ways with one message and exit code 2. (Found by a hostile test: the whole
+// read refused the first case, "not uniformly sampled", while the streamed read analysed it.)
+TEST_F(AnalyzeBag, AFarFirstIndexIsTreatedAlikeWholeAndStreamed) {
+  auto shifted = [&](const std::string& name, std::uint64_t offset) {
+    return writeBag(name, [offset](size_t, gear_damping::SignalChunk* c) {
+      c->first_index += offset;
+      return true;
+    });
+  };
+  const fs::path j0 = dir() / "origin.json";
+  ToolRun r =
+      analyze("--input " + intactBag().string() + " --refine never --output " + j0.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto ref = nlohmann::json::parse(readText(j0)).at("identification").at("segments");
+  const fs::path far = shifted("far.bag", 1000000000000ULL);
+  const double span = static_cast<double>(table_.size() - 1) / config_.simulation.sample_rate;
+  const double rel = 20.0 * gear_sim::timeResolution(1e6) / span;  // C moves ~dt's error
+  for (const std::string mode : {"", " --max-in-memory 1500"}) {
+    const fs::path j = dir() / "far.json";
+    r = analyze("--input " + far.string() + " --refine never --output " + j.string() + mode);
+    ASSERT_EQ(r.code, 0) << mode << ": " << r.err;
+    const auto segs = nlohmann::json::parse(readText(j)).at("identification").at("segments");
+    ASSERT_EQ(segs.size(), ref.size()) << mode;
+    for (size_t i = 0; i < segs.size(); ++i) {
+      const double a = ref[i].at("C").get<double>(), b = segs[i].at("C").get<double>();
+      EXPECT_NEAR(b, a, rel * a) << mode << " segment " << i;
+    }
+  }
+  const fs::path coarse = shifted("coarse.bag", 1000000000000000ULL);
+  for (const std::string mode : {"", " --max-in-memory 1500"}) {
+    const fs::path j = dir() / "coarse.json";
+    r = analyze("--input " + coarse.string() + " --refine never --output " + j.string() + mode);
+    EXPECT_EQ(r.code, 2) << mode << ": " << r.err;
+    EXPECT_NE(r.err.find("re-base the time"), std::string::npos) << mode << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << mode << ": " << r.err;
+    EXPECT_FALSE(fs::exists(j)) << mode;
+  }
 }
 
 // A bag changed between its scan and its read (here: another file with the stiffness channel

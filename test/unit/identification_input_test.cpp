@@ -457,6 +457,58 @@ TEST_F(IdentificationInput, TimeOriginDoesNotChangeTheEstimates) {
   }
 }
 
+// A record stamped far from time 0 (sample index 1e12 at 1 MHz: t = 1e6 s, where a double resolves
+// 1.2e-10 s, 1.2e-4 of a step) is accepted: its steps are checked to the stamps' rounding (3 ulps)
+// instead of the 1e-6 relative tolerance they cannot meet, and the estimates equal those of the
+// same samples stamped from 0. A real fault there is still found (a step 1 % off, a dropped
+// sample), and stamps too coarse to resolve a thousandth of the step (t = 1e10 s: ulp 1.9e-6 s) are
+// refused with a message that says to re-base the time.
+TEST_F(IdentificationInput, FarTimeOriginIsCheckedToTheStampsResolution) {
+  const double rate = config_->simulation.sample_rate;  // 1 MHz
+  auto stamped = [&](double first_index) {
+    SignalTable t = *clean_;
+    for (Eigen::Index i = 0; i < t.size(); ++i)
+      t.time[i] = (first_index + static_cast<double>(i)) / rate;  // as the bag reader stamps
+    return t;
+  };
+  const SignalTable far = stamped(1e12);
+  ASSERT_NEAR(far.time[1] - far.time[0], 1.0 / rate, 1e-3 / rate);  // the premise
+  EXPECT_TRUE(
+      gear_damping_id::checkSignalTable(far, Formulation::Known, DampingModel::Piecewise).ok());
+  const IdentificationResult a = identifyOrFail(*clean_, *config_, opts());
+  const IdentificationResult b = identifyOrFail(far, *config_, opts());
+  ASSERT_EQ(a.segments.size(), b.segments.size());
+  const double ulp = gear_sim::timeResolution(1e12 / rate);
+  // The step comes from the span of stamps rounded to ulp: off by up to 2 ulps / span (1.9e-8
+  // here), and C by about as much (far below the method's 5e-4 noise-free bar).
+  const double span = static_cast<double>(far.size() - 1) / rate;
+  const double rel = 20.0 * ulp / span;
+  for (size_t i = 0; i < a.segments.size(); ++i) {
+    ASSERT_TRUE(b.segments[i].identifiable) << b.segments[i].reason;
+    EXPECT_NEAR(b.segments[i].C, a.segments[i].C, rel * a.segments[i].C) << "segment " << i;
+    EXPECT_NEAR(b.segments[i].t_start, 1e12 / rate + a.segments[i].t_start, 4 * ulp)
+        << "segment " << i;
+  }
+  SignalTable jitter = far;
+  jitter.time[4321] += 0.01 / rate;
+  std::string e =
+      gear_damping_id::checkSignalTable(jitter, Formulation::Known, DampingModel::Piecewise)
+          .message();
+  EXPECT_NE(e.find("not uniformly sampled"), std::string::npos) << e;
+  EXPECT_NE(e.find("sample 4321"), std::string::npos) << e;
+  SignalTable gap = far;
+  for (Eigen::Index i = 5000; i < gap.size(); ++i) gap.time[i] += 1.0 / rate;  // one dropped
+  e = gear_damping_id::checkSignalTable(gap, Formulation::Known, DampingModel::Piecewise).message();
+  EXPECT_NE(e.find("sample 5000"), std::string::npos) << e;
+  const SignalTable coarse = stamped(1e16);  // t = 1e10 s
+  const gear_sim::Status s =
+      gear_damping_id::checkSignalTable(coarse, Formulation::Known, DampingModel::Piecewise);
+  EXPECT_EQ(s.field(), "time");
+  EXPECT_NE(s.message().find("re-base the time"), std::string::npos) << s.message();
+  IdentificationResult r;
+  EXPECT_FALSE(gear_damping_id::identify(coarse, gear(), opts(), &r).ok());
+}
+
 // A node feeds the IntegralMethod segment by segment as data arrives, each time with a view of
 // just that segment and the two samples of interpolation context on either side; the result is
 // the one identify() computes over the whole table. Per-segment estimates of the piecewise model

@@ -211,9 +211,10 @@ double recordSum(const double* x, Eigen::Index n) {
 }
 
 // checkSignalTable's checks of everything but the individual time steps; *ref receives the
-// reference step.
+// reference step and *tol the tolerance of a step against it (rel_tolerance of it, widened to
+// the stamps' rounding: gear_sim::stepTolerance).
 gear_sim::Status checkColumns(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
-                              double* ref) {
+                              double rel_tolerance, double* ref, double* tol) {
   std::ostringstream e;
   const Eigen::Index n = t.size();
   if (n < 2)
@@ -240,6 +241,8 @@ gear_sim::Status checkColumns(const gear_sim::SignalTable& t, Formulation f, Dam
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);
   if (!(dt > 0.0) || !std::isfinite(dt))
     return gear_sim::Status::invalidInput("time is not increasing", "time");
+  const double t_abs_max = std::max(std::abs(t.time[0]), std::abs(t.time[n - 1]));
+  if (gear_sim::Status s = gear_sim::checkTimeResolution(t_abs_max, dt); !s.ok()) return s;
   // Reference step: the median of the first three steps (a record whose very first step is the
   // odd one is then reported there, not at every later step).
   *ref = t.time[1] - t.time[0];
@@ -248,6 +251,7 @@ gear_sim::Status checkColumns(const gear_sim::SignalTable& t, Formulation f, Dam
     std::sort(d, d + 3);
     *ref = d[1];
   }
+  *tol = gear_sim::stepTolerance(rel_tolerance, *ref, t_abs_max);
   return {};
 }
 
@@ -278,26 +282,26 @@ double windowFromStiffness(double total, double count, const GearConstants& gear
 
 gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f, DampingModel m,
                                   double rel_tolerance, Eigen::Index first_line) {
-  double ref = 0.0;
-  if (gear_sim::Status s = checkColumns(t, f, m, &ref); !s.ok()) return s;
+  double ref = 0.0, tol = 0.0;
+  if (gear_sim::Status s = checkColumns(t, f, m, rel_tolerance, &ref, &tol); !s.ok()) return s;
   const Eigen::Index n = t.size();
   double unused = 0.0;
-  const Eigen::Index i =
-      stepsAndSum(t.time.data(), nullptr, 0, n, ref, rel_tolerance * ref, &unused);
+  const Eigen::Index i = stepsAndSum(t.time.data(), nullptr, 0, n, ref, tol, &unused);
   return i < n ? badStep(t, i, ref, rel_tolerance, first_line) : gear_sim::Status();
 }
 
 gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants& gear,
                              const IdentificationOptions& o, int threads, double* window_length) {
-  double ref = 0.0;
-  if (gear_sim::Status s = checkColumns(t, o.formulation, o.model, &ref); !s.ok()) return s;
+  double ref = 0.0, tol = 0.0;
+  if (gear_sim::Status s = checkColumns(t, o.formulation, o.model, o.time_tolerance, &ref, &tol);
+      !s.ok())
+    return s;
   const SignalView view = SignalView::of(t);
   const Eigen::Index n = t.size();
   const double* k = o.window_length > 0.0 ? nullptr : view.stiffness;
   const Eigen::Index blocks = (n + kRecordBlock - 1) / kRecordBlock;
   std::vector<double> sums(static_cast<size_t>(blocks), 0.0);
   std::vector<Eigen::Index> bad(static_cast<size_t>(blocks), n);
-  const double tol = o.time_tolerance * ref;
   // Contiguous runs of blocks per thread; each stops at its first bad step.
   auto run = [&](Eigen::Index b0, Eigen::Index b1) {
     for (Eigen::Index b = b0; b < b1; ++b) {

@@ -6,6 +6,8 @@
 #include <Eigen/Core>
 #include <string>
 
+#include "gear_sim/status.hpp"
+
 namespace gear_sim {
 
 /// Columns of the docs/method.md §6 CSV. `time` and `dte` are required; every other column is
@@ -30,5 +32,19 @@ struct SignalTable {
   Eigen::Index size() const { return time.size(); }
   static bool has(const Eigen::VectorXd& column) { return column.size() > 0; }
 };
+
+/// Time stamps are doubles: near |t| = t_abs_max they are resolved to one unit in the last place,
+/// ulp(t_abs_max) (1.2e-10 s near 1e6 s). A check of uniform steps cannot ask for more than that.
+double timeResolution(double t_abs_max);
+
+/// Ok while the time stamps (the largest |t| is t_abs_max) resolve the sampling step to 1/1000 or
+/// finer; otherwise invalid input ("time") naming both and asking for the time to be re-based
+/// (a bag's first_index, a CSV's time column, nearer to 0). Every reader applies this one rule,
+/// so a record is accepted or refused the same way whole, streamed or converted.
+Status checkTimeResolution(double t_abs_max, double step);
+
+/// The tolerance of one step against the reference step: rel_tolerance * step, widened to the
+/// rounding of the stamps (3 ulps of t_abs_max: the two stamps and the reference step).
+double stepTolerance(double rel_tolerance, double step, double t_abs_max);
 
 }  // namespace gear_sim
