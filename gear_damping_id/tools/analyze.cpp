@@ -29,6 +29,7 @@
 #include <gear_damping/ModeledResponse.h>
 #include <gear_damping/WaveletModes.h>
 #include <rosbag/bag.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -74,15 +75,66 @@ constexpr size_t kStreamGroup = 64;
 // Largest --scales (README "Limits"): each scale is one inverse FFT of the analysed samples.
 constexpr int kMaxScales = 2000;
 
+// Messages held instead of printed while a bag is read in one pass (Analysis::loadInOnePass):
+// printed once the pass succeeded, dropped when the bag is then analysed the usual way.
+std::vector<std::string>* held_messages = nullptr;
+
+void print(const std::string& line) {
+  if (held_messages != nullptr)
+    held_messages->push_back(line);
+  else
+    std::cerr << line;
+}
+
 int fail(int code, const std::string& message) {
-  std::cerr << "analyze: " << message << "\n";
+  print("analyze: " + message + "\n");
   return code;
 }
 // A failed step exits with its step's code (reading the input: kExitInput, writing an output:
 // kExitOutput), whatever the StatusCode; docs/limits.md "Exit codes".
 int fail(int code, const gear_sim::Status& s) { return fail(code, s.message()); }
 
-void warn(const std::string& message) { std::cerr << "analyze: warning: " << message << "\n"; }
+void warn(const std::string& message) { print("analyze: warning: " + message + "\n"); }
+
+// What is written to the stderr file descriptor while it lives (ROS's and rosbag's own messages
+// about a bag they open) is captured instead: release() gives it back. Inactive (everything
+// printed) when the descriptor cannot be redirected.
+class StderrCapture {
+ public:
+  StderrCapture() {
+    std::cerr.flush();
+    std::fflush(stderr);
+    file_ = std::tmpfile();
+    saved_ = file_ != nullptr ? ::dup(2) : -1;
+    if (saved_ >= 0 && ::dup2(::fileno(file_), 2) < 0) {
+      ::close(saved_);
+      saved_ = -1;
+    }
+  }
+  ~StderrCapture() { release(); }
+  StderrCapture(const StderrCapture&) = delete;
+  StderrCapture& operator=(const StderrCapture&) = delete;
+
+  std::string release() {
+    std::string text;
+    std::fflush(stderr);
+    if (saved_ >= 0) {
+      ::dup2(saved_, 2);
+      ::close(saved_);
+      saved_ = -1;
+      std::rewind(file_);
+      char buf[4096];
+      for (size_t n; (n = std::fread(buf, 1, sizeof buf, file_)) > 0;) text.append(buf, n);
+    }
+    if (file_ != nullptr) std::fclose(file_);
+    file_ = nullptr;
+    return text;
+  }
+
+ private:
+  std::FILE* file_ = nullptr;
+  int saved_ = -1;
+};
 
 bool endsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
@@ -242,6 +294,20 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
           {"whole_record", cal == n}};
 }
 
+// The default window of a streamed record: from the record's mean stiffness, as for a record read
+// whole.
+double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
+                      gd::SignalView whole) {
+  whole.n = info.stiffness_mean > 0.0 ? 1 : 0;
+  whole.stiffness = &info.stiffness_mean;
+  return gd::defaultWindowLength(whole, gear);
+}
+
+// The window's samples as the integral method counts them: all a segment's estimate depends on.
+Eigen::Index windowSamples(double window, double dt) {
+  return std::max<Eigen::Index>(4, static_cast<Eigen::Index>(std::llround(window / dt)));
+}
+
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
 // pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
 // their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
@@ -249,11 +315,16 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
 // modeled response is per segment (from its identified state); shared-unknown runs are not
 // refined and have no modeled response (both need the whole record), with a warning. With
 // --ste each driver calibrates the STE on the first segments and holds it (StreamSte).
+// `one_pass` (the same object as `info`, from previewSignalBag; null: scanned): the bag is
+// scanned in the same pass (scanStreamSignalBag) and the default window taken from its first
+// chunk; an error when the scan fails or the record's window has another count of samples (the
+// caller then analyses the bag the usual way).
 gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
                                   const gd::GearConstants& gear, int threads,
                                   std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                                   std::vector<double>* wavelet_dte, size_t wavelet_max,
-                                  const StreamSte& ste, gear_sim::ProgressBar* progress) {
+                                  const StreamSte& ste, gear_sim::ProgressBar* progress,
+                                  gear_sim_ros::BagSignalInfo* one_pass = nullptr) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
@@ -264,14 +335,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   double fbar = gd::kNaN;
   if (const gear_sim::Status st = streamedLegacyForcing(info, gear, *runs, ranges, &fbar); !st)
     return st;
-  // The default window from the record's mean stiffness, as for a record read whole.
-  double window = runs->front().options.window_length;
-  if (!(window > 0.0)) {
-    gd::SignalView mean_k = whole;
-    mean_k.n = info.stiffness_mean > 0.0 ? 1 : 0;
-    mean_k.stiffness = &info.stiffness_mean;
-    window = gd::defaultWindowLength(mean_k, gear);
-  }
+  const bool default_window = !(runs->front().options.window_length > 0.0);
+  double window =
+      default_window ? streamedWindow(info, gear, whole) : runs->front().options.window_length;
   std::vector<gd::SegmentDriver> drivers;
   std::vector<FitAccumulator> fits(runs->size());
   gd::DriverLimits limits;
@@ -323,18 +389,26 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     return true;
   };
   // (The sink never stops the feeder: every read range is fed.)
-  if (gear_sim::Status s =
-          gear_sim_ros::streamSignalBag(info, reads,
-                                        [&](const gear_sim::SignalTable& block, size_t r) {
-                                          feeder.push(block, r, sink);
-                                          return gear_sim::Status();
-                                        });
+  const auto feed = [&](const gear_sim::SignalTable& block, size_t r) {
+    feeder.push(block, r, sink);
+    return gear_sim::Status();
+  };
+  if (gear_sim::Status s = one_pass != nullptr
+                               ? gear_sim_ros::scanStreamSignalBag(one_pass, reads, feed)
+                               : gear_sim_ros::streamSignalBag(info, reads, feed);
       !s.ok())
     return s;
+  if (one_pass != nullptr && default_window) {  // `info` is the scan's now
+    const double record_window = streamedWindow(info, gear, whole);
+    if (windowSamples(record_window, whole.dt) != windowSamples(window, whole.dt))
+      return gear_sim::Status::invalidInput("the first chunk's window differs from the record's");
+    window = record_window;
+  }
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
     if (ste.options != nullptr) drivers[k].completeSteCalibration();
     run.result = drivers[k].finish();
+    if (one_pass != nullptr) run.result.window_length = window;
     if (ste.options != nullptr) {
       finishStreamedSte(drivers[k], ste, &run);
     } else if (!drivers[k].sharedModel()) {
@@ -393,8 +467,10 @@ bool parseRegion(const std::string& text, std::pair<double, double>* out) {
 class Analysis {
  public:
   static constexpr int kContinue = -1;
+  static constexpr int kAgain = -2;  // loadInOnePass: analyse the bag the usual way
   int parse(int argc, char** argv);
   int checkOptions();
+  int loadInOnePass();
   int load();
   int identify();
   int waveletStep();
@@ -419,6 +495,7 @@ class Analysis {
     s.spans = &ste_spans;
     return s;
   }
+  bool onePassOptions() const;
   int readRecord();
   int readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_topics);
   int readGearParameters();
@@ -458,6 +535,8 @@ class Analysis {
   gear_sim::SignalTable table;
   gear_sim_ros::BagSignalInfo bag_info;
   bool streaming = false;
+  bool one_pass = false;          // bag_info is previewSignalBag's until identify()'s pass
+  std::vector<std::string> held;  // messages held meanwhile (held_messages)
   gear_sim::GearModel model;
   std::string params_source;
   bool identification = true;
@@ -882,6 +961,44 @@ int Analysis::checkAnalysedRange() {
   return kContinue;
 }
 
+// Whether the options allow reading the bag in one pass: nothing is written or printed during the
+// pass but the progress line (no --bag-out, wavelet, --ste or legacy forcing's extra pass).
+bool Analysis::onePassOptions() const {
+  if (!is_bag || !bag_out.empty() || wavelet || !wavelet_input.empty() || !ste_spec.empty())
+    return false;
+  for (const auto& o : runs_options)
+    if (o.formulation == gd::Formulation::Legacy) return false;
+  return true;
+}
+
+// load() and identify() reading a streamed bag once (issue 18): the bag previewed
+// (previewSignalBag), then scanned while it is analysed; the messages held until the scan
+// succeeded. kAgain (nothing printed or written) when that is not possible or anything
+// differs: the caller analyses the bag the usual way (an error is then reported as before). Else
+// identify()'s outcome.
+int Analysis::loadInOnePass() {
+  if (!onePassOptions()) return kAgain;
+  StderrCapture capture;  // ROS's messages of the opening: once, whichever way the bag is read
+  const gear_sim_ros::RigBagTopics rig_topics;
+  if ((topic.empty() && gear_sim_ros::isRigBag(input, rig_topics)) ||
+      !gear_sim_ros::previewSignalBag(input, topic, &bag_info) ||
+      !(bag_info.samples > max_in_memory))
+    return kAgain;
+  held.push_back(capture.release());
+  streaming = true;
+  one_pass = true;
+  held_messages = &held;
+  for (int (Analysis::*step)() :
+       {&Analysis::readGearParameters, &Analysis::checkRecord, &Analysis::identify}) {
+    if (const int rc = (this->*step)(); rc != kContinue || !identification) {
+      if (held_messages == nullptr) return rc;  // the pass succeeded: identify()'s outcome
+      held_messages = nullptr;
+      return kAgain;
+    }
+  }
+  return kContinue;
+}
+
 int Analysis::load() {
   for (int (Analysis::*step)() :
        {&Analysis::readRecord, &Analysis::readGearParameters, &Analysis::checkRecord}) {
@@ -910,11 +1027,17 @@ int Analysis::identify() {
   }
   gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
-    if (const gear_sim::Status s = analyzeStreaming(bag_info, gear, threads, &runs, &bag,
-                                                    wavelet_on_record ? &wavelet_dte : nullptr,
-                                                    wavelet_n_record, streamSte(), &progress);
+    if (const gear_sim::Status s = analyzeStreaming(
+            bag_info, gear, threads, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
+            wavelet_n_record, streamSte(), &progress, one_pass ? &bag_info : nullptr);
         !s.ok())
       return fail(kExitInput, s.withContext(input));
+    if (one_pass) {  // the scan's warnings first, as a scan before the analysis prints them
+      held_messages = nullptr;
+      std::cerr << held.front();  // ROS's own messages, first as before
+      for (const auto& w : bag_info.warnings) warn(input + ": " + w);
+      for (size_t k = 1; k < held.size(); ++k) std::cerr << held[k];
+    }
   } else if (streaming && wavelet_on_record) {
     if (const gear_sim::Status s = gear_sim_ros::streamSignalBag(
             bag_info, {{first, first + static_cast<Eigen::Index>(wavelet_n_record)}},
@@ -1099,13 +1222,21 @@ int Analysis::write() {
 }
 
 int run(int argc, char** argv) {
-  Analysis a;
-  if (const int rc = a.parse(argc, argv); rc != Analysis::kContinue) return rc;
-  for (int (Analysis::*step)() : {&Analysis::checkOptions, &Analysis::load, &Analysis::identify,
-                                  &Analysis::waveletStep, &Analysis::write}) {
-    if (const int rc = (a.*step)(); rc != Analysis::kContinue) return rc;
+  auto a = std::make_unique<Analysis>();
+  if (const int rc = a->parse(argc, argv); rc != Analysis::kContinue) return rc;
+  if (const int rc = a->checkOptions(); rc != Analysis::kContinue) return rc;
+  int rc = a->loadInOnePass();
+  if (rc == Analysis::kAgain) {  // the usual way, from a fresh start (nothing was printed)
+    a = std::make_unique<Analysis>();
+    if (rc = a->parse(argc, argv); rc == Analysis::kContinue) rc = a->checkOptions();
+    if (rc == Analysis::kContinue) rc = a->load();
+    if (rc == Analysis::kContinue) rc = a->identify();
   }
-  return 0;
+  for (int (Analysis::*step)() : {&Analysis::waveletStep, &Analysis::write}) {
+    if (rc != Analysis::kContinue) return rc;
+    rc = (a.get()->*step)();
+  }
+  return rc == Analysis::kContinue ? 0 : rc;
 }
 
 int main(int argc, char** argv) {

@@ -360,13 +360,106 @@ TEST_F(AnalyzeBag, RejectsBadBagsWithAOneLineMessageAndExitCode) {
       {"no gear parameters", i + noparams.string(), 1, "--params"},
       {"shorter than a segment", i + shortrec.string(), 2, "shorter than one damping segment"},
   };
-  for (const auto& c : cases) {
-    const fs::path out = dir() / "never.json";
-    const ToolRun r = analyze(c.args + " --output " + out.string());
-    EXPECT_EQ(r.code, c.code) << c.name << ": " << r.err;
-    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << ": " << r.err;
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.name << ": " << r.err;
-    EXPECT_FALSE(fs::exists(out)) << c.name;
+  // In memory and streamed (read in one pass: the same message, nothing written).
+  for (const std::string mode : {"", " --max-in-memory 1500"}) {
+    for (const auto& c : cases) {
+      const fs::path out = dir() / "never.json";
+      const ToolRun r = analyze(c.args + mode + " --output " + out.string());
+      EXPECT_EQ(r.code, c.code) << c.name << mode << ": " << r.err;
+      EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << mode << ": " << r.err;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.name << mode << ": " << r.err;
+      EXPECT_FALSE(fs::exists(out)) << c.name << mode;
+    }
+  }
+}
+
+// The one-pass reading (previewSignalBag, then scanStreamSignalBag) gives what the scan and then
+// the stream give, bit for bit: the scan's counts, warnings and stiffness mean (the preview's
+// provisional mean is the first chunk's), and the streamed ranges; a scan error late in the
+// record fails the pass.
+TEST_F(AnalyzeBag, OnePassEqualsTheScanThenTheStream) {
+  const fs::path bag = writeBag("one_pass.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 3) return false;  // a gap
+    if (k == 0)
+      for (double& x : c->stiffness) x *= 2.0;  // the first chunk's mean is not the record's
+    if (k == 5) c->dte[7] = 2.0;                // out of range
+    if (k == 6) c->torque[0] = std::numeric_limits<double>::infinity();
+    return true;
+  });
+  std::string e;
+  gear_sim_ros::BagSignalInfo a, p;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &a), &e)) << e;
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(bag.string(), "", &p));
+  EXPECT_EQ(std::tie(p.samples, p.first_index, p.sample_rate, p.stiffness, p.torque, p.has_params),
+            std::tie(a.samples, a.first_index, a.sample_rate, a.stiffness, a.torque, a.has_params));
+  EXPECT_GT(p.stiffness_mean, a.stiffness_mean);
+  const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+      {0, 250}, {280, 950}, {1000, 1001}, {2500, 4000}};
+  std::vector<Eigen::VectorXd> ra, rp;
+  const auto keep = [](std::vector<Eigen::VectorXd>* out) {
+    return [out](const gear_sim::SignalTable& t, size_t) {
+      for (const Eigen::VectorXd* v : {&t.time, &t.dte, &t.stiffness, &t.torque, &t.mesh_state})
+        out->push_back(*v);
+      return gear_sim::Status();
+    };
+  };
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::streamSignalBag(a, ranges, keep(&ra)), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanStreamSignalBag(&p, ranges, keep(&rp)), &e)) << e;
+  ASSERT_EQ(ra.size(), rp.size());
+  for (size_t k = 0; k < ra.size(); ++k) {
+    ASSERT_EQ(ra[k].size(), rp[k].size()) << k;
+    EXPECT_EQ(std::memcmp(ra[k].data(), rp[k].data(), sizeof(double) * ra[k].size()), 0) << k;
+  }
+  EXPECT_EQ(p.warnings, a.warnings);
+  EXPECT_EQ(std::tie(p.chunks, p.samples, p.gaps, p.gap_samples, p.real_samples,
+                     p.non_finite_values, p.out_of_range_values, p.outlier_chunks),
+            std::tie(a.chunks, a.samples, a.gaps, a.gap_samples, a.real_samples,
+                     a.non_finite_values, a.out_of_range_values, a.outlier_chunks));
+  EXPECT_EQ(std::memcmp(&p.stiffness_mean, &a.stiffness_mean, sizeof(double)), 0);
+  EXPECT_EQ(a.gaps, 1);
+  EXPECT_EQ(a.out_of_range_values, 1);
+  // The next to last chunk repeats the indices before it: the scan fails after the preview.
+  const fs::path dup = writeBag("one_pass_dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 6) c->first_index -= 500;
+    return true;
+  });
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(dup.string(), "", &p));
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanStreamSignalBag(&p, {{0, 3000}}, keep(&rp)), &e));
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanSignalBag(dup.string(), "", &a), &e));
+}
+
+// `analyze` on a streamed bag reads it once (with --bag-out: scan, then stream): the same
+// outputs, also when the first chunk's stiffness gives another default window (the record is
+// then analysed again) and when the scan fails late (the scan's message and exit code).
+TEST_F(AnalyzeBag, OnePassGivesTheOutputsOfTheScanThenTheStream) {
+  const fs::path intact = intactBag();
+  const fs::path stiff = writeBag("stiff_first.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 0)
+      for (double& x : c->stiffness) x *= 4.0;
+    return true;
+  });
+  const fs::path dup = writeBag("late_dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 6) c->first_index -= 500;
+    return true;
+  });
+  for (const fs::path& bag : {intact, stiff, dup}) {
+    std::vector<ToolRun> runs;
+    std::vector<std::string> docs;
+    for (const std::string& extra :
+         {std::string(), std::string(" --bag-out ") + (dir() / "r.bag").string()}) {
+      const fs::path j = dir() / "one_pass.json";
+      fs::remove(j);
+      runs.push_back(analyze("--input " + bag.string() + " --refine never --max-in-memory 1500" +
+                             " --output " + j.string() + extra));
+      nlohmann::json doc = fs::exists(j) ? nlohmann::json::parse(readText(j)) : nlohmann::json();
+      if (doc.is_object()) doc.erase("metadata");
+      docs.push_back(doc.dump());
+    }
+    EXPECT_EQ(runs[0].code, runs[1].code) << bag;
+    EXPECT_EQ(runs[0].out, runs[1].out) << bag;
+    EXPECT_EQ(runs[0].err, runs[1].err) << bag;
+    EXPECT_EQ(docs[0], docs[1]) << bag;
+    EXPECT_EQ(runs[0].code, bag == dup ? 2 : 0) << bag << ": " << runs[0].err;
   }
 }
 

@@ -121,6 +121,24 @@ gear_sim::Status streamSignalBag(
     const BagSignalInfo& info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
     const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
 
+/// One pass instead of scanSignalBag's and streamSignalBag's (issue 18: `analyze` reads the bag
+/// once). previewSignalBag does what scanSignalBag does before its pass (the topic, the
+/// parameters) and reads the first and the last chunk message: sample_rate, first_index, the
+/// channels and `samples` (exact when the scan passes) and, provisionally, stiffness_mean (the
+/// first chunk's). False when the bag is not read that way (any bag whose chunks rosbag reads,
+/// or whose first or last message does not fit): the caller scans with scanSignalBag.
+bool previewSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info);
+
+/// streamSignalBag of `info` (from previewSignalBag; ranges from its numbers) with
+/// scanSignalBag's scan done in the same pass on the reading thread; then *info is what
+/// scanSignalBag gives. Any error (a scan error, a read error, a scan that cannot be done in the
+/// pass or that differs from the preview) says only that this pass failed, after the sink may
+/// have seen some blocks: the caller does it again with scanSignalBag and streamSignalBag, which
+/// give the error to report.
+gear_sim::Status scanStreamSignalBag(
+    BagSignalInfo* info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
+
 /// The whole record as one table (gaps as NaN).
 gear_sim::Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out);
 
