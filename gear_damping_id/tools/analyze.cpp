@@ -16,7 +16,8 @@
 // beside the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
 // Bags longer than --max-in-memory samples are analysed streaming, one segment at a time (with
-// --ste: the STE calibrated on the first segments and held, docs/ste.md).
+// --ste: the STE calibrated on the first segments and held, docs/ste.md), read once when the
+// options allow it (Analysis::loadInOnePass; the outputs are the same either way).
 // Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
 // (statistics, flags, worst segments) replaces the rows. A progress line is drawn on stderr when
 // it is a terminal and the job takes more than a second (--quiet: never).
@@ -988,13 +989,19 @@ int Analysis::loadInOnePass() {
   streaming = true;
   one_pass = true;
   held_messages = &held;
-  for (int (Analysis::*step)() :
-       {&Analysis::readGearParameters, &Analysis::checkRecord, &Analysis::identify}) {
-    if (const int rc = (this->*step)(); rc != kContinue || !identification) {
-      if (held_messages == nullptr) return rc;  // the pass succeeded: identify()'s outcome
-      held_messages = nullptr;
-      return kAgain;
+  try {
+    for (int (Analysis::*step)() :
+         {&Analysis::readGearParameters, &Analysis::checkRecord, &Analysis::identify}) {
+      if (const int rc = (this->*step)(); rc != kContinue || !identification) {
+        if (held_messages == nullptr) return rc;  // the pass succeeded: identify()'s outcome
+        held_messages = nullptr;
+        return kAgain;
+      }
     }
+  } catch (...) {  // (out of memory, say) the usual way meets it after the same messages
+    if (held_messages == nullptr) throw;
+    held_messages = nullptr;
+    return kAgain;
   }
   return kContinue;
 }

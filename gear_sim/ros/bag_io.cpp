@@ -581,6 +581,30 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
     out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
 }
 
+// The channel flags of `channels` (channelSet's bits) into *out.
+void setChannels(unsigned channels, BagSignalInfo* out) {
+  out->dte_velocity = channels & 1u;
+  out->stiffness = channels & 2u;
+  out->torque = channels & 4u;
+  out->mesh_state = channels & 8u;
+  out->mesh_phase = channels & 16u;
+  out->damping = channels & 32u;
+}
+
+// The finite values of `k` added to *sum in order (the sum's bits fix the default window) and
+// counted into *count; *sum is never -0, so adding +0 for a non-finite value leaves it as it is.
+void addFinite(const RawArray& k, double* sum, long long* count) {
+  double total = *sum;
+  long long n = 0;
+  for (size_t i = 0; i < k.size(); ++i) {
+    const bool fin = finite(k[i]);
+    total += fin ? k[i] : 0.0;
+    n += fin ? 1 : 0;
+  }
+  *sum = total;
+  *count += n;
+}
+
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
 // previous ones (rate, channels, increasing indices), gaps are counted, and the totals,
 // plausibility warnings and channel flags are filled in at the end.
@@ -635,16 +659,7 @@ class ChunkScan {
     next_ = c.first_index + c.dte.size();
     out_.real_samples += static_cast<std::int64_t>(c.dte.size());
     chunk_max_.push_back(countImplausible(c, &out_));
-    // In order (the sum's bits fix the default window); k_sum_ is never -0, so adding +0 for a
-    // non-finite value leaves it as it is.
-    long long count = 0;
-    for (size_t i = 0; i < c.stiffness.size(); ++i) {
-      const double k = c.stiffness[i];
-      const bool fin = finite(k);
-      k_sum_ += fin ? k : 0.0;
-      count += fin ? 1 : 0;
-    }
-    k_count_ += count;
+    addFinite(c.stiffness, &k_sum_, &k_count_);
     ++out_.chunks;
     return {};
   }
@@ -669,12 +684,7 @@ class ChunkScan {
     }
     addPlausibilityWarnings(chunk_max_, &out_);
     if (k_count_ > 0) out_.stiffness_mean = k_sum_ / static_cast<double>(k_count_);
-    out_.dte_velocity = channels_ & 1u;
-    out_.stiffness = channels_ & 2u;
-    out_.torque = channels_ & 4u;
-    out_.mesh_state = channels_ & 8u;
-    out_.mesh_phase = channels_ & 16u;
-    out_.damping = channels_ & 32u;
+    setChannels(channels_, &out_);
     return {};
   }
 
@@ -1294,20 +1304,10 @@ bool previewSignalBag(const std::string& path, const std::string& topic, BagSign
       bytes += out.direct[i].chunk_len;
   if (static_cast<double>(out.samples) > (1.0 + kMaxGapRatio) * static_cast<double>(bytes / 8))
     return false;
-  const unsigned channels = channelSet(first);
-  out.dte_velocity = channels & 1u;
-  out.stiffness = channels & 2u;
-  out.torque = channels & 4u;
-  out.mesh_state = channels & 8u;
-  out.mesh_phase = channels & 16u;
-  out.damping = channels & 32u;
+  setChannels(channelSet(first), &out);
   double k_sum = 0.0;  // the first chunk's mean stiffness, as ChunkScan sums it
   long long k_count = 0;
-  for (size_t i = 0; i < first.stiffness.size(); ++i) {
-    const double k = first.stiffness[i];
-    k_sum += finite(k) ? k : 0.0;
-    k_count += finite(k) ? 1 : 0;
-  }
+  addFinite(first.stiffness, &k_sum, &k_count);
   if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
   *info = std::move(out);
   return true;
