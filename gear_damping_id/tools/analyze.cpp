@@ -295,18 +295,13 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
           {"whole_record", cal == n}};
 }
 
-// The default window of a streamed record: from the record's mean stiffness, as for a record read
-// whole.
+// The default window of a streamed record: from the mean stiffness of its prefix (the scan's or
+// the preview's), as for a record read whole.
 double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
                       gd::SignalView whole) {
   whole.n = info.stiffness_mean > 0.0 ? 1 : 0;
   whole.stiffness = &info.stiffness_mean;
   return gd::defaultWindowLength(whole, gear);
-}
-
-// The window's samples as the integral method counts them: all a segment's estimate depends on.
-Eigen::Index windowSamples(double window, double dt) {
-  return std::max<Eigen::Index>(4, static_cast<Eigen::Index>(std::llround(window / dt)));
 }
 
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
@@ -317,9 +312,9 @@ Eigen::Index windowSamples(double window, double dt) {
 // refined and have no modeled response (both need the whole record), with a warning. With
 // --ste each driver calibrates the STE on the first segments and holds it (StreamSte).
 // `one_pass` (the same object as `info`, from previewSignalBag; null: scanned): the bag is
-// scanned in the same pass (scanStreamSignalBag) and the default window taken from its first
-// chunk; an error when the scan fails or the record's window has another count of samples (the
-// caller then analyses the bag the usual way).
+// scanned in the same pass (scanStreamSignalBag), the default window from the preview's prefix
+// (the scan's); an error when the scan fails or differs from the preview (the caller then
+// analyses the bag the usual way).
 gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
                                   const gd::GearConstants& gear, int threads,
                                   std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
@@ -336,9 +331,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   double fbar = gd::kNaN;
   if (const gear_sim::Status st = streamedLegacyForcing(info, gear, *runs, ranges, &fbar); !st)
     return st;
-  const bool default_window = !(runs->front().options.window_length > 0.0);
-  double window =
-      default_window ? streamedWindow(info, gear, whole) : runs->front().options.window_length;
+  const double window = runs->front().options.window_length > 0.0
+                            ? runs->front().options.window_length
+                            : streamedWindow(info, gear, whole);
   std::vector<gd::SegmentDriver> drivers;
   std::vector<FitAccumulator> fits(runs->size());
   gd::DriverLimits limits;
@@ -399,17 +394,10 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
                                : gear_sim_ros::streamSignalBag(info, reads, feed);
       !s.ok())
     return s;
-  if (one_pass != nullptr && default_window) {  // `info` is the scan's now
-    const double record_window = streamedWindow(info, gear, whole);
-    if (windowSamples(record_window, whole.dt) != windowSamples(window, whole.dt))
-      return gear_sim::Status::invalidInput("the first chunk's window differs from the record's");
-    window = record_window;
-  }
   for (size_t k = 0; k < runs->size(); ++k) {
     gd::AnalysisRun& run = (*runs)[k];
     if (ste.options != nullptr) drivers[k].completeSteCalibration();
     run.result = drivers[k].finish();
-    if (one_pass != nullptr) run.result.window_length = window;
     if (ste.options != nullptr) {
       finishStreamedSte(drivers[k], ste, &run);
     } else if (!drivers[k].sharedModel()) {

@@ -28,6 +28,7 @@
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/window_prefix.hpp"
 #include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
@@ -591,18 +592,12 @@ void setChannels(unsigned channels, BagSignalInfo* out) {
   out->damping = channels & 32u;
 }
 
-// The finite values of `k` added to *sum in order (the sum's bits fix the default window) and
-// counted into *count; *sum is never -0, so adding +0 for a non-finite value leaves it as it is.
-void addFinite(const RawArray& k, double* sum, long long* count) {
-  double total = *sum;
-  long long n = 0;
-  for (size_t i = 0; i < k.size(); ++i) {
-    const bool fin = finite(k[i]);
-    total += fin ? k[i] : 0.0;
-    n += fin ? 1 : 0;
-  }
-  *sum = total;
-  *count += n;
+// The stiffness of chunk `c`, whose first sample is the record's sample `position`, that lies in
+// the default window's prefix, added to *sum (in order: the sum's bits fix the window).
+void addPrefix(const RawChunk& c, std::uint64_t position, gear_sim::FiniteSum* sum) {
+  const auto prefix = static_cast<std::uint64_t>(gear_sim::kWindowPrefixSamples);
+  if (position < prefix)
+    sum->add(c.stiffness, 0, std::min<size_t>(c.stiffness.size(), prefix - position));
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
@@ -659,7 +654,7 @@ class ChunkScan {
     next_ = c.first_index + c.dte.size();
     out_.real_samples += static_cast<std::int64_t>(c.dte.size());
     chunk_max_.push_back(countImplausible(c, &out_));
-    addFinite(c.stiffness, &k_sum_, &k_count_);
+    addPrefix(c, c.first_index - out_.first_index, &k_prefix_);
     ++out_.chunks;
     return {};
   }
@@ -683,7 +678,7 @@ class ChunkScan {
           " samples, ends before this message");
     }
     addPlausibilityWarnings(chunk_max_, &out_);
-    if (k_count_ > 0) out_.stiffness_mean = k_sum_ / static_cast<double>(k_count_);
+    out_.stiffness_mean = k_prefix_.mean();
     setChannels(channels_, &out_);
     return {};
   }
@@ -762,8 +757,7 @@ class ChunkScan {
   std::vector<std::uint8_t> buffer_;  // the current message's serialized bytes
   std::uint64_t next_ = 0;            // global index after the previous chunk
   unsigned channels_ = 0;
-  double k_sum_ = 0.0;
-  long long k_count_ = 0;
+  gear_sim::FiniteSum k_prefix_;  // the default window's stiffness prefix
   std::uint64_t largest_gap_ = 0;
   std::string largest_gap_at_;
   std::vector<double> chunk_max_;  // max |dte| per chunk, for the outlier check
@@ -1257,6 +1251,34 @@ bool chunkFits(const RawChunk& c) {
          c.dte.size() <= kMaxSampleIndex - c.first_index;
 }
 
+// The mean stiffness of the default window's prefix as ChunkScan gives it, from the direct
+// messages from the first (`first`) on, their chunks read once each; false when a message does
+// not fit or does not follow the previous one (the scan refuses or reads such a bag its way).
+bool previewPrefix(const DirectFile& file, const std::vector<BagSignalInfo::DirectMessage>& direct,
+                   const RawChunk& first, double* mean) {
+  const auto prefix = static_cast<std::uint64_t>(gear_sim::kWindowPrefixSamples);
+  gear_sim::FiniteSum k;
+  std::vector<std::uint8_t> bytes;
+  std::uint64_t next = first.first_index;
+  for (size_t i = 0; i < direct.size() && next - first.first_index < prefix; ++i) {
+    const BagSignalInfo::DirectMessage& d = direct[i];
+    if ((i == 0 || d.chunk_pos != direct[i - 1].chunk_pos) &&
+        !file.read(d.chunk_pos, d.chunk_len, &bytes))
+      return false;
+    std::uint32_t offset = 0, size = 0;
+    RawChunk c;
+    if (!messageData(bytes.data(), d.chunk_len, d.offset, &offset, &size) ||
+        !chunkLayout(bytes.data() + offset, size, &c).empty() || !chunkFits(c) ||
+        c.sample_rate != first.sample_rate || channelSet(c) != channelSet(first) ||
+        c.first_index < next)
+      return false;
+    addPrefix(c, c.first_index - first.first_index, &k);
+    next = c.first_index + c.dte.size();
+  }
+  *mean = k.mean();
+  return true;
+}
+
 // What scanSignalBag knows of `info` before its pass (prepareScan's fields).
 BagSignalInfo scanStart(const BagSignalInfo& info) {
   BagSignalInfo out;
@@ -1304,11 +1326,8 @@ bool previewSignalBag(const std::string& path, const std::string& topic, BagSign
       bytes += out.direct[i].chunk_len;
   if (static_cast<double>(out.samples) > (1.0 + kMaxGapRatio) * static_cast<double>(bytes / 8))
     return false;
+  if (!previewPrefix(file, out.direct, first, &out.stiffness_mean)) return false;
   setChannels(channelSet(first), &out);
-  double k_sum = 0.0;  // the first chunk's mean stiffness, as ChunkScan sums it
-  long long k_count = 0;
-  addFinite(first.stiffness, &k_sum, &k_count);
-  if (k_count > 0) out.stiffness_mean = k_sum / static_cast<double>(k_count);
   *info = std::move(out);
   return true;
 }
@@ -1325,8 +1344,10 @@ Status scanStreamSignalBag(
   if (!pass.status.ok()) return pass.status;
   if (!s.ok()) return s;
   const BagSignalInfo& out = pass.out;
+  // (the stiffness means compared as bits: the default window depends on them)
   if (!pass.finished || out.samples != info->samples || out.sample_rate != info->sample_rate ||
-      out.first_index != info->first_index || channelSet(out) != channelSet(*info))
+      out.first_index != info->first_index || channelSet(out) != channelSet(*info) ||
+      std::memcmp(&out.stiffness_mean, &info->stiffness_mean, sizeof(double)) != 0)
     return Status::invalidInput(info->path + ": the scan differs from the preview");
   *info = std::move(pass.out);
   return {};
