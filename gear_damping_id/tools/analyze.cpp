@@ -41,6 +41,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "gear_damping_id/input_checks.hpp"
@@ -340,6 +341,27 @@ double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   return gd::defaultWindowLength(whole, gear);
 }
 
+// The modeled responses of a group's identified segments `outs` (each from its segment's state,
+// independent of the others) into (*resps)[j], (*have)[j] whether there is one: the first half of
+// the group on a thread of its own while this one does the second (the bag's reading threads
+// leave most of the second core free), the same responses as one after the other.
+void groupResponses(const gd::SignalView& view, const gd::GearConstants& gear,
+                    const std::vector<gd::SegmentDriver::SegmentOutput>& outs,
+                    std::vector<gd::ModeledResponse>* resps, std::vector<char>* have) {
+  const size_t n = outs.size();
+  if (resps->size() < n) resps->resize(n);
+  have->assign(n, 0);
+  const auto part = [&](size_t j0, size_t j1) {
+    for (size_t j = j0; j < j1; ++j)
+      (*have)[j] = outs[j].estimate.identifiable &&
+                   gd::modeledResponse(view, gear, outs[j].result, &(*resps)[j]).ok();
+  };
+  if (n < 8) return part(0, n);
+  std::thread helper(part, size_t{0}, n / 2);
+  part(n / 2, n);
+  helper.join();
+}
+
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
 // pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
 // their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
@@ -390,7 +412,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
   const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
-  gd::ModeledResponse resp;
+  // A group's responses, reused from group to group (their vectors keep their storage).
+  std::vector<gd::ModeledResponse> resps;
+  std::vector<char> have;
   const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
     if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
       for (const auto& r : segs) {  // the analysed samples, in order
@@ -402,16 +426,14 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     for (size_t k = 0; k < runs->size(); ++k) {
       const auto outs = drivers[k].addAll(view, segs);
       if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
-      for (size_t j = 0; j < outs.size(); ++j) {
-        // `resp` is reused: its vectors keep their storage from segment to segment.
-        if (!outs[j].estimate.identifiable ||
-            !gd::modeledResponse(view, gear, outs[j].result, &resp).ok())
-          continue;
-        fits[k].add(resp);
+      groupResponses(view, gear, outs, &resps, &have);
+      for (size_t j = 0; j < outs.size(); ++j) {  // in order: the fit's sums and the bag
+        if (!have[j]) continue;
+        fits[k].add(resps[j]);
         if (bag->active())  // the message only when a bag is written
           bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
                      gear_damping_ros::toMsg(
-                         resp, info.sample_rate,
+                         resps[j], info.sample_rate,
                          info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
       }
     }
