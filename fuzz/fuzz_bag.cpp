@@ -3,9 +3,12 @@
 // readSignalBag and a streamed read of every other segment-sized range. The input is written to
 // a temporary .bag file; the seeds are small bags from `simulate` (a signal bag and a rig bag),
 // so mutations hit headers, chunk records and SignalChunk / JointState / WrenchStamped payloads.
-// Beyond scanSignalBag's limits nothing may be allocated: a record it accepts spans at most
-// twice its real samples (kMaxGapRatio), which the input's size bounds.
+// The one-pass reading of `analyze` (previewSignalBag, scanStreamSignalBag) is checked against
+// scanSignalBag (the preview's default-window prefix mean too). Beyond scanSignalBag's limits
+// nothing may be allocated: a record it accepts spans at most twice its real samples
+// (kMaxGapRatio), which the input's size bounds.
 #include <cstdint>
+#include <cstring>
 #include <string>
 
 #include "../test/unit/support/status_support.hpp"
@@ -28,11 +31,37 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     }
     return 0;
   }
+  // The one-pass reading (previewSignalBag, then scanStreamSignalBag) allocates no more than the
+  // input's size bounds and accepts only what scanSignalBag accepts, with its numbers.
+  gear_sim_ros::BagSignalInfo one;
+  bool one_ok = false, previewed = false;
+  double preview_mean = 0.0;  // the default window's prefix, read before the pass
+  if (gear_sim_ros::previewSignalBag(path, "", &one)) {
+    previewed = true;
+    preview_mean = one.stiffness_mean;
+    if (one.samples < 0 || static_cast<std::uint64_t>(one.samples) > size / 4 + 1) std::abort();
+    std::vector<std::pair<Eigen::Index, Eigen::Index>> parts;
+    for (Eigen::Index b = 0; b + 41 <= one.samples; b += 82) parts.emplace_back(b, b + 41);
+    one_ok = gear_test::ok(
+        gear_sim_ros::scanStreamSignalBag(
+            &one, parts, [](const gear_sim::SignalTable&, size_t) { return gear_sim::Status(); }),
+        &error);
+  }
   gear_sim_ros::BagSignalInfo info;
   if (!gear_test::ok(gear_sim_ros::scanSignalBag(path, "", &info), &error)) {
+    if (one_ok) std::abort();
     gear_fuzz::checkMessage(error);  // rosbag's own texts are quoted too
     return 0;
   }
+  // A bag the scan accepts and the preview read has the scan's prefix mean in the preview: its
+  // one pass does not start again.
+  if (previewed && std::memcmp(&preview_mean, &info.stiffness_mean, sizeof(double)) != 0)
+    std::abort();
+  if (one_ok && (one.samples != info.samples || one.real_samples != info.real_samples ||
+                 one.chunks != info.chunks || one.gaps != info.gaps ||
+                 one.warnings != info.warnings || one.first_index != info.first_index ||
+                 std::memcmp(&one.stiffness_mean, &info.stiffness_mean, sizeof(double)) != 0))
+    std::abort();
   if (info.samples < 0 || static_cast<double>(info.gap_samples) >
                               gear_sim_ros::kMaxGapRatio * static_cast<double>(info.real_samples))
     std::abort();

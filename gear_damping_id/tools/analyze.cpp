@@ -16,7 +16,8 @@
 // beside the integral method's); without gear parameters (a `time,dte` record and no --params) the
 // wavelet validation runs alone.
 // Bags longer than --max-in-memory samples are analysed streaming, one segment at a time (with
-// --ste: the STE calibrated on the first segments and held, docs/ste.md).
+// --ste: the STE calibrated on the first segments and held, docs/ste.md), read once when the
+// options allow it (Analysis::loadInOnePass; the outputs are the same either way).
 // Each run's table ends with a count of clean and flagged segments; above 50 segments a summary
 // (statistics, flags, worst segments) replaces the rows. A progress line is drawn on stderr when
 // it is a terminal and the job takes more than a second (--quiet: never).
@@ -29,6 +30,7 @@
 #include <gear_damping/ModeledResponse.h>
 #include <gear_damping/WaveletModes.h>
 #include <rosbag/bag.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -39,6 +41,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "gear_damping_id/input_checks.hpp"
@@ -74,15 +77,66 @@ constexpr size_t kStreamGroup = 64;
 // Largest --scales (README "Limits"): each scale is one inverse FFT of the analysed samples.
 constexpr int kMaxScales = 2000;
 
+// Messages held instead of printed while a bag is read in one pass (Analysis::loadInOnePass):
+// printed once the pass succeeded, dropped when the bag is then analysed the usual way.
+std::vector<std::string>* held_messages = nullptr;
+
+void print(const std::string& line) {
+  if (held_messages != nullptr)
+    held_messages->push_back(line);
+  else
+    std::cerr << line;
+}
+
 int fail(int code, const std::string& message) {
-  std::cerr << "analyze: " << message << "\n";
+  print("analyze: " + message + "\n");
   return code;
 }
 // A failed step exits with its step's code (reading the input: kExitInput, writing an output:
 // kExitOutput), whatever the StatusCode; docs/limits.md "Exit codes".
 int fail(int code, const gear_sim::Status& s) { return fail(code, s.message()); }
 
-void warn(const std::string& message) { std::cerr << "analyze: warning: " << message << "\n"; }
+void warn(const std::string& message) { print("analyze: warning: " + message + "\n"); }
+
+// What is written to the stderr file descriptor while it lives (ROS's and rosbag's own messages
+// about a bag they open) is captured instead: release() gives it back. Inactive (everything
+// printed) when the descriptor cannot be redirected.
+class StderrCapture {
+ public:
+  StderrCapture() {
+    std::cerr.flush();
+    std::fflush(stderr);
+    file_ = std::tmpfile();
+    saved_ = file_ != nullptr ? ::dup(2) : -1;
+    if (saved_ >= 0 && ::dup2(::fileno(file_), 2) < 0) {
+      ::close(saved_);
+      saved_ = -1;
+    }
+  }
+  ~StderrCapture() { release(); }
+  StderrCapture(const StderrCapture&) = delete;
+  StderrCapture& operator=(const StderrCapture&) = delete;
+
+  std::string release() {
+    std::string text;
+    std::fflush(stderr);
+    if (saved_ >= 0) {
+      ::dup2(saved_, 2);
+      ::close(saved_);
+      saved_ = -1;
+      std::rewind(file_);
+      char buf[4096];
+      for (size_t n; (n = std::fread(buf, 1, sizeof buf, file_)) > 0;) text.append(buf, n);
+    }
+    if (file_ != nullptr) std::fclose(file_);
+    file_ = nullptr;
+    return text;
+  }
+
+ private:
+  std::FILE* file_ = nullptr;
+  int saved_ = -1;
+};
 
 bool endsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() &&
@@ -242,6 +296,72 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
           {"whole_record", cal == n}};
 }
 
+// checkSignalTable's check of the time steps on a streamed bag's record, whose sample i is at
+// (first_index + i) / rate as readSignalBag computes it (far from index 0 those times round to
+// uneven steps): the same error as for the record read whole. Skipped where rounding cannot reach
+// the tolerance (the steps' rounding is at most a few ulps of the last time).
+gear_sim::Status checkStreamedTime(const gear_sim_ros::BagSignalInfo& info, double rel_tolerance) {
+  const Eigen::Index n = static_cast<Eigen::Index>(info.samples);
+  const auto time = [&](Eigen::Index i) {
+    return static_cast<double>(info.first_index + static_cast<std::uint64_t>(i)) / info.sample_rate;
+  };
+  if (n < 2 || static_cast<double>(info.first_index + static_cast<std::uint64_t>(n)) <
+                   0.5 * rel_tolerance * std::ldexp(1.0, 48))
+    return {};
+  double ref = time(1) - time(0);  // checkSignalTable's reference step
+  if (n >= 4) {
+    double d[3] = {time(1) - time(0), time(2) - time(1), time(3) - time(2)};
+    std::sort(d, d + 3);
+    ref = d[1];
+  }
+  const double tol = rel_tolerance * ref;
+  Eigen::Index bad = n;
+  double previous = time(0);
+  for (Eigen::Index i = 1; i < n && bad == n; ++i) {
+    const double t = time(i);
+    if (!(std::abs(t - previous - ref) <= tol)) bad = i;
+    previous = t;
+  }
+  if (bad == n) return {};
+  // The record's first samples up to that step give checkSignalTable's message.
+  gear_sim::SignalTable head;
+  head.time.resize(std::max<Eigen::Index>(bad + 1, std::min<Eigen::Index>(n, 4)));
+  for (Eigen::Index i = 0; i < head.time.size(); ++i) head.time[i] = time(i);
+  head.dte = Eigen::VectorXd::Zero(head.time.size());
+  return gd::checkSignalTable(head, gd::Formulation::Paper, gd::DampingModel::Piecewise,
+                              rel_tolerance);
+}
+
+// The default window of a streamed record: from the mean stiffness of its prefix (the scan's or
+// the preview's), as for a record read whole.
+double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
+                      gd::SignalView whole) {
+  whole.n = info.stiffness_mean > 0.0 ? 1 : 0;
+  whole.stiffness = &info.stiffness_mean;
+  return gd::defaultWindowLength(whole, gear);
+}
+
+// The modeled responses of a group's identified segments `outs` (each from its segment's state,
+// independent of the others) into (*resps)[j], (*have)[j] whether there is one: the first half of
+// the group on a thread of its own while this one does the second (the bag's reading threads
+// leave most of the second core free), the same responses as one after the other.
+void groupResponses(const gd::SignalView& view, const gd::GearConstants& gear,
+                    const std::vector<gd::SegmentDriver::SegmentOutput>& outs,
+                    std::vector<gd::ModeledResponse>* resps, std::vector<char>* have) {
+  const size_t n = outs.size();
+  if (resps->size() < n) resps->resize(n);
+  have->assign(n, 0);
+  const auto part = [&](size_t j0, size_t j1) {
+    for (size_t j = j0; j < j1; ++j)
+      (*have)[j] = outs[j].estimate.identifiable &&
+                   gd::modeledResponse(view, gear, outs[j].result, &(*resps)[j]).ok();
+  };
+  if (n < 8) return part(0, n);
+  std::thread helper(part, size_t{0}, n / 2);
+  part(n / 2, n);
+  helper.join();
+}
+
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
 // pipeline of the whole-record identify(): the bag is read in groups of kStreamGroup segments with
 // their stencil context (SegmentFeeder), each run's driver takes them, so the segment results
@@ -249,11 +369,16 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
 // modeled response is per segment (from its identified state); shared-unknown runs are not
 // refined and have no modeled response (both need the whole record), with a warning. With
 // --ste each driver calibrates the STE on the first segments and holds it (StreamSte).
+// `one_pass` (the same object as `info`, from previewSignalBag; null: scanned): the bag is
+// scanned in the same pass (scanStreamSignalBag), the default window from the preview's prefix
+// (the scan's); an error when the scan fails or differs from the preview (the caller then
+// analyses the bag the usual way).
 gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
                                   const gd::GearConstants& gear, int threads,
                                   std::vector<gd::AnalysisRun>* runs, ResultBag* bag,
                                   std::vector<double>* wavelet_dte, size_t wavelet_max,
-                                  const StreamSte& ste, gear_sim::ProgressBar* progress) {
+                                  const StreamSte& ste, gear_sim::ProgressBar* progress,
+                                  gear_sim_ros::BagSignalInfo* one_pass = nullptr) {
   gd::SignalView whole;
   whole.dt = 1.0 / info.sample_rate;
   whole.t0 = static_cast<double>(info.first_index) * whole.dt;
@@ -264,14 +389,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   double fbar = gd::kNaN;
   if (const gear_sim::Status st = streamedLegacyForcing(info, gear, *runs, ranges, &fbar); !st)
     return st;
-  // The default window from the record's mean stiffness, as for a record read whole.
-  double window = runs->front().options.window_length;
-  if (!(window > 0.0)) {
-    gd::SignalView mean_k = whole;
-    mean_k.n = info.stiffness_mean > 0.0 ? 1 : 0;
-    mean_k.stiffness = &info.stiffness_mean;
-    window = gd::defaultWindowLength(mean_k, gear);
-  }
+  const double window = runs->front().options.window_length > 0.0
+                            ? runs->front().options.window_length
+                            : streamedWindow(info, gear, whole);
   std::vector<gd::SegmentDriver> drivers;
   std::vector<FitAccumulator> fits(runs->size());
   gd::DriverLimits limits;
@@ -292,7 +412,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
   const Ranges reads = feeder.readRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
-  gd::ModeledResponse resp;
+  // A group's responses, reused from group to group (their vectors keep their storage).
+  std::vector<gd::ModeledResponse> resps;
+  std::vector<char> have;
   const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
     if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
       for (const auto& r : segs) {  // the analysed samples, in order
@@ -304,16 +426,14 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     for (size_t k = 0; k < runs->size(); ++k) {
       const auto outs = drivers[k].addAll(view, segs);
       if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
-      for (size_t j = 0; j < outs.size(); ++j) {
-        // `resp` is reused: its vectors keep their storage from segment to segment.
-        if (!outs[j].estimate.identifiable ||
-            !gd::modeledResponse(view, gear, outs[j].result, &resp).ok())
-          continue;
-        fits[k].add(resp);
+      groupResponses(view, gear, outs, &resps, &have);
+      for (size_t j = 0; j < outs.size(); ++j) {  // in order: the fit's sums and the bag
+        if (!have[j]) continue;
+        fits[k].add(resps[j]);
         if (bag->active())  // the message only when a bag is written
           bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
                      gear_damping_ros::toMsg(
-                         resp, info.sample_rate,
+                         resps[j], info.sample_rate,
                          info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
       }
     }
@@ -323,12 +443,13 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     return true;
   };
   // (The sink never stops the feeder: every read range is fed.)
-  if (gear_sim::Status s =
-          gear_sim_ros::streamSignalBag(info, reads,
-                                        [&](const gear_sim::SignalTable& block, size_t r) {
-                                          feeder.push(block, r, sink);
-                                          return gear_sim::Status();
-                                        });
+  const auto feed = [&](const gear_sim::SignalTable& block, size_t r) {
+    feeder.push(block, r, sink);
+    return gear_sim::Status();
+  };
+  if (gear_sim::Status s = one_pass != nullptr
+                               ? gear_sim_ros::scanStreamSignalBag(one_pass, reads, feed)
+                               : gear_sim_ros::streamSignalBag(info, reads, feed);
       !s.ok())
     return s;
   for (size_t k = 0; k < runs->size(); ++k) {
@@ -393,8 +514,10 @@ bool parseRegion(const std::string& text, std::pair<double, double>* out) {
 class Analysis {
  public:
   static constexpr int kContinue = -1;
+  static constexpr int kAgain = -2;  // loadInOnePass: analyse the bag the usual way
   int parse(int argc, char** argv);
   int checkOptions();
+  int loadInOnePass();
   int load();
   int identify();
   int waveletStep();
@@ -419,6 +542,7 @@ class Analysis {
     s.spans = &ste_spans;
     return s;
   }
+  bool onePassOptions() const;
   int readRecord();
   int readRigRecord(bool rig_bag, const gear_sim_ros::RigBagTopics& rig_topics);
   int readGearParameters();
@@ -458,6 +582,8 @@ class Analysis {
   gear_sim::SignalTable table;
   gear_sim_ros::BagSignalInfo bag_info;
   bool streaming = false;
+  bool one_pass = false;          // bag_info is previewSignalBag's until identify()'s pass
+  std::vector<std::string> held;  // messages held meanwhile (held_messages)
   gear_sim::GearModel model;
   std::string params_source;
   bool identification = true;
@@ -836,15 +962,18 @@ int Analysis::checkRecord() {
           /*first_line=*/is_bag ? -1 : 2);
       if (!s.ok()) return fail(kExitInput, s.withContext(input));
     }
-  } else if (identification) {
+  } else {  // checkSignalTable's checks in its order, run by run
     gd::ChannelSet present;
     present.stiffness = bag_info.stiffness;
     present.torque = bag_info.torque;
     present.mesh_state = bag_info.mesh_state;
     present.mesh_phase = bag_info.mesh_phase;
-    for (const auto& o : runs_options)
-      if (const gear_sim::Status s = gd::checkChannels(present, o.formulation, o.model); !s.ok())
-        return fail(kExitInput, s.withContext(input));
+    for (const auto& o : runs_options) {
+      gear_sim::Status s =
+          identification ? gd::checkChannels(present, o.formulation, o.model) : gear_sim::Status();
+      if (s.ok()) s = checkStreamedTime(bag_info, o.time_tolerance);
+      if (!s.ok()) return fail(kExitInput, s.withContext(input));
+    }
   }
   if (const int rc = checkAnalysedRange(); rc != kContinue) return rc;
   if (identification) {
@@ -883,6 +1012,50 @@ int Analysis::checkAnalysedRange() {
   return kContinue;
 }
 
+// Whether the options allow reading the bag in one pass: nothing is written or printed during the
+// pass but the progress line (no --bag-out, wavelet, --ste or legacy forcing's extra pass).
+bool Analysis::onePassOptions() const {
+  if (!is_bag || !bag_out.empty() || wavelet || !wavelet_input.empty() || !ste_spec.empty())
+    return false;
+  for (const auto& o : runs_options)
+    if (o.formulation == gd::Formulation::Legacy) return false;
+  return true;
+}
+
+// load() and identify() reading a streamed bag once (issue 18): the bag previewed
+// (previewSignalBag), then scanned while it is analysed; the messages held until the scan
+// succeeded. kAgain (nothing printed or written) when that is not possible or anything
+// differs: the caller analyses the bag the usual way (an error is then reported as before). Else
+// identify()'s outcome.
+int Analysis::loadInOnePass() {
+  if (!onePassOptions()) return kAgain;
+  StderrCapture capture;  // ROS's messages of the opening: once, whichever way the bag is read
+  const gear_sim_ros::RigBagTopics rig_topics;
+  if ((topic.empty() && gear_sim_ros::isRigBag(input, rig_topics)) ||
+      !gear_sim_ros::previewSignalBag(input, topic, &bag_info) ||
+      !(bag_info.samples > max_in_memory))
+    return kAgain;
+  held.push_back(capture.release());
+  streaming = true;
+  one_pass = true;
+  held_messages = &held;
+  try {
+    for (int (Analysis::*step)() :
+         {&Analysis::readGearParameters, &Analysis::checkRecord, &Analysis::identify}) {
+      if (const int rc = (this->*step)(); rc != kContinue || !identification) {
+        if (held_messages == nullptr) return rc;  // the pass succeeded: identify()'s outcome
+        held_messages = nullptr;
+        return kAgain;
+      }
+    }
+  } catch (...) {  // (out of memory, say) the usual way meets it after the same messages
+    if (held_messages == nullptr) throw;
+    held_messages = nullptr;
+    return kAgain;
+  }
+  return kContinue;
+}
+
 int Analysis::load() {
   for (int (Analysis::*step)() :
        {&Analysis::readRecord, &Analysis::readGearParameters, &Analysis::checkRecord}) {
@@ -911,11 +1084,17 @@ int Analysis::identify() {
   }
   gear_sim::ProgressBar progress("analyze", 2.0 * static_cast<double>(runs.size()), !quiet);
   if (streaming && identification) {
-    if (const gear_sim::Status s = analyzeStreaming(bag_info, gear, threads, &runs, &bag,
-                                                    wavelet_on_record ? &wavelet_dte : nullptr,
-                                                    wavelet_n_record, streamSte(), &progress);
+    if (const gear_sim::Status s = analyzeStreaming(
+            bag_info, gear, threads, &runs, &bag, wavelet_on_record ? &wavelet_dte : nullptr,
+            wavelet_n_record, streamSte(), &progress, one_pass ? &bag_info : nullptr);
         !s.ok())
       return fail(kExitInput, s.withContext(input));
+    if (one_pass) {  // the scan's warnings first, as a scan before the analysis prints them
+      held_messages = nullptr;
+      std::cerr << held.front();  // ROS's own messages, first as before
+      for (const auto& w : bag_info.warnings) warn(input + ": " + w);
+      for (size_t k = 1; k < held.size(); ++k) std::cerr << held[k];
+    }
   } else if (streaming && wavelet_on_record) {
     if (const gear_sim::Status s = gear_sim_ros::streamSignalBag(
             bag_info, {{first, first + static_cast<Eigen::Index>(wavelet_n_record)}},
@@ -1100,13 +1279,21 @@ int Analysis::write() {
 }
 
 int run(int argc, char** argv) {
-  Analysis a;
-  if (const int rc = a.parse(argc, argv); rc != Analysis::kContinue) return rc;
-  for (int (Analysis::*step)() : {&Analysis::checkOptions, &Analysis::load, &Analysis::identify,
-                                  &Analysis::waveletStep, &Analysis::write}) {
-    if (const int rc = (a.*step)(); rc != Analysis::kContinue) return rc;
+  auto a = std::make_unique<Analysis>();
+  if (const int rc = a->parse(argc, argv); rc != Analysis::kContinue) return rc;
+  if (const int rc = a->checkOptions(); rc != Analysis::kContinue) return rc;
+  int rc = a->loadInOnePass();
+  if (rc == Analysis::kAgain) {  // the usual way, from a fresh start (nothing was printed)
+    a = std::make_unique<Analysis>();
+    if (rc = a->parse(argc, argv); rc == Analysis::kContinue) rc = a->checkOptions();
+    if (rc == Analysis::kContinue) rc = a->load();
+    if (rc == Analysis::kContinue) rc = a->identify();
   }
-  return 0;
+  for (int (Analysis::*step)() : {&Analysis::waveletStep, &Analysis::write}) {
+    if (rc != Analysis::kContinue) return rc;
+    rc = (a.get()->*step)();
+  }
+  return rc == Analysis::kContinue ? 0 : rc;
 }
 
 int main(int argc, char** argv) {

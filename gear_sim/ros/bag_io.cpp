@@ -28,6 +28,7 @@
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/window_prefix.hpp"
 #include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/conversions.hpp"
 
@@ -304,6 +305,17 @@ bool directMessages(const rosbag::Bag& bag, const std::string& topic, const BagS
   return true;
 }
 
+// The scan of scanSignalBag done by streamSignalBag's reader in the same pass
+// (scanStreamSignalBag); defined after ChunkScan.
+struct PassScan;
+// The message `d` of a chunk's data `chunk` (its record's offset in d.offset) scanned as
+// scanDirect scans it, its fields into *c; false when the scan failed or must be redone (status
+// in `pass`).
+bool scanMessage(PassScan* pass, const std::uint8_t* chunk, const BagSignalInfo::DirectMessage& d,
+                 size_t i, RawChunk* c);
+void finishPass(PassScan* pass);
+void failPass(PassScan* pass);
+
 // The end of a reader thread's owner: sets *stop under `mutex`, wakes the waiters of `cv` and
 // joins `thread`.
 void stopAndJoin(std::mutex& mutex, std::condition_variable& cv, bool* stop, std::thread& thread) {
@@ -338,7 +350,9 @@ class ChunkReader {
   };
   static constexpr size_t kQueueSamples = size_t{1} << 16;
 
-  explicit ChunkReader(const BagSignalInfo& info) : info_(info), thread_([this] { run(); }) {}
+  // `pass`: the scan done on the way (info.direct's record offsets, scanStreamSignalBag).
+  explicit ChunkReader(const BagSignalInfo& info, PassScan* pass = nullptr)
+      : info_(info), pass_(pass), thread_([this] { run(); }) {}
   ~ChunkReader() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   ChunkReader(const ChunkReader&) = delete;
   ChunkReader& operator=(const ChunkReader&) = delete;
@@ -441,6 +455,34 @@ class ChunkReader {
     return true;
   }
 
+  // runDirect with the scan: each message's record found in its chunk and scanned before it is
+  // queued; the reading stops at the first scan error.
+  void runScanned() {
+    const auto& direct = info_.direct;
+    const DirectFile file(info_.path);
+    const std::runtime_error stop("the scan of the bag stopped");  // the pass has the reason
+    if (!file.is(info_.stamp)) {
+      failPass(pass_);
+      throw stop;
+    }
+    for (size_t i = 0; i < direct.size() && room();) {
+      Chunk item = emptyItem();
+      const BagSignalInfo::DirectMessage& first = direct[i];
+      if (!file.read(first.chunk_pos, first.chunk_len, &item.bytes)) {
+        failPass(pass_);
+        throw stop;
+      }
+      for (; i < direct.size() && direct[i].chunk_pos == first.chunk_pos; ++i) {
+        Message m;
+        if (!scanMessage(pass_, item.bytes.data(), direct[i], i, &m.c)) throw stop;
+        m.valid = true;
+        item.messages.push_back(m);
+      }
+      if (!push(std::move(item))) return;
+    }
+    finishPass(pass_);
+  }
+
   void runView() {
     rosbag::Bag bag;
     bag.open(info_.path, rosbag::bagmode::Read);
@@ -456,7 +498,10 @@ class ChunkReader {
   void run() {
     std::string error;
     try {
-      if (!runDirect()) runView();
+      if (pass_ != nullptr)
+        runScanned();
+      else if (!runDirect())
+        runView();
     } catch (const std::exception& e) {
       error = openError(info_.path, e);
     }
@@ -467,6 +512,7 @@ class ChunkReader {
   }
 
   const BagSignalInfo& info_;
+  PassScan* const pass_;
   std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Chunk> queue_;
@@ -536,6 +582,24 @@ void readBagParams(const rosbag::Bag& bag, BagSignalInfo* out) {
     out->params_error = gear_sim::quoteForMessage(out->params_topic) + ": " + s.message();
 }
 
+// The channel flags of `channels` (channelSet's bits) into *out.
+void setChannels(unsigned channels, BagSignalInfo* out) {
+  out->dte_velocity = channels & 1u;
+  out->stiffness = channels & 2u;
+  out->torque = channels & 4u;
+  out->mesh_state = channels & 8u;
+  out->mesh_phase = channels & 16u;
+  out->damping = channels & 32u;
+}
+
+// The stiffness of chunk `c`, whose first sample is the record's sample `position`, that lies in
+// the default window's prefix, added to *sum (in order: the sum's bits fix the window).
+void addPrefix(const RawChunk& c, std::uint64_t position, gear_sim::FiniteSum* sum) {
+  const auto prefix = static_cast<std::uint64_t>(gear_sim::kWindowPrefixSamples);
+  if (position < prefix)
+    sum->add(c.stiffness, 0, std::min<size_t>(c.stiffness.size(), prefix - position));
+}
+
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
 // previous ones (rate, channels, increasing indices), gaps are counted, and the totals,
 // plausibility warnings and channel flags are filled in at the end.
@@ -567,8 +631,12 @@ class ChunkScan {
   // A SignalChunk's `n` serialized bytes read in place (as add(m) reads an indexed one).
   Status addInPlace(const std::uint8_t* bytes, std::uint32_t n) {
     RawChunk c;
-    if (Status s = layout(bytes, n, &c); !s.ok()) return s;
-    return add(c);
+    return addInPlace(bytes, n, &c);
+  }
+  // The same, its fields into *c.
+  Status addInPlace(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
+    if (Status s = layout(bytes, n, c); !s.ok()) return s;
+    return add(*c);
   }
 
   Status add(const RawChunk& c) {
@@ -586,16 +654,7 @@ class ChunkScan {
     next_ = c.first_index + c.dte.size();
     out_.real_samples += static_cast<std::int64_t>(c.dte.size());
     chunk_max_.push_back(countImplausible(c, &out_));
-    // In order (the sum's bits fix the default window); k_sum_ is never -0, so adding +0 for a
-    // non-finite value leaves it as it is.
-    long long count = 0;
-    for (size_t i = 0; i < c.stiffness.size(); ++i) {
-      const double k = c.stiffness[i];
-      const bool fin = finite(k);
-      k_sum_ += fin ? k : 0.0;
-      count += fin ? 1 : 0;
-    }
-    k_count_ += count;
+    addPrefix(c, c.first_index - out_.first_index, &k_prefix_);
     ++out_.chunks;
     return {};
   }
@@ -619,13 +678,8 @@ class ChunkScan {
           " samples, ends before this message");
     }
     addPlausibilityWarnings(chunk_max_, &out_);
-    if (k_count_ > 0) out_.stiffness_mean = k_sum_ / static_cast<double>(k_count_);
-    out_.dte_velocity = channels_ & 1u;
-    out_.stiffness = channels_ & 2u;
-    out_.torque = channels_ & 4u;
-    out_.mesh_state = channels_ & 8u;
-    out_.mesh_phase = channels_ & 16u;
-    out_.damping = channels_ & 32u;
+    out_.stiffness_mean = k_prefix_.mean();
+    setChannels(channels_, &out_);
     return {};
   }
 
@@ -708,12 +762,41 @@ class ChunkScan {
   std::vector<std::uint8_t> buffer_;  // the current message's serialized bytes
   std::uint64_t next_ = 0;            // global index after the previous chunk
   unsigned channels_ = 0;
-  double k_sum_ = 0.0;
-  long long k_count_ = 0;
+  gear_sim::FiniteSum k_prefix_;  // the default window's stiffness prefix
   std::uint64_t largest_gap_ = 0;
   std::string largest_gap_at_;
   std::vector<double> chunk_max_;  // max |dte| per chunk, for the outlier check
 };
+
+struct PassScan {
+  explicit PassScan(BagSignalInfo start) : out(std::move(start)), scan(out.path, &out, true) {}
+  BagSignalInfo out;  // what the scan fills in (its direct offsets become the data's)
+  ChunkScan scan;
+  Status status;
+  bool redo = false;      // not scanned as scanSignalBag scans
+  bool finished = false;  // every message scanned, finish() done
+};
+
+bool scanMessage(PassScan* pass, const std::uint8_t* chunk, const BagSignalInfo::DirectMessage& d,
+                 size_t i, RawChunk* c) {
+  BagSignalInfo::DirectMessage& at = pass->out.direct[i];
+  if (!messageData(chunk, d.chunk_len, d.offset, &at.offset, &at.size)) {
+    failPass(pass);
+    return false;
+  }
+  pass->status = pass->scan.addInPlace(chunk + at.offset, at.size, c);
+  return pass->status.ok();
+}
+
+void finishPass(PassScan* pass) {
+  pass->status = pass->scan.finish();
+  pass->finished = true;
+}
+
+void failPass(PassScan* pass) {
+  pass->redo = true;
+  pass->status = Status::invalidInput("the bag cannot be scanned in the same pass");
+}
 
 }  // namespace
 
@@ -913,20 +996,32 @@ Status checkMessageLayout(const rosbag::MessageInstance& m) {
   return problem.empty() ? Status() : Status::invalidInput(problem);
 }
 
+namespace {
+// scanSignalBag's steps before its pass over the chunks (the structure checked by the caller):
+// the bag opened, the topic chosen, the parameters read, the messages to read directly listed
+// (out->direct: their records' offsets; empty when rosbag reads them). rosbag's exceptions pass.
+Status prepareScan(rosbag::Bag& bag, const std::string& path, const std::string& topic,
+                   const BagStructure& structure, BagSignalInfo* out) {
+  out->path = path;
+  bag.open(path, rosbag::bagmode::Read);
+  if (Status s = chooseTopic(bag, path, topic, out); !s.ok()) return s;
+  readBagParams(bag, out);
+  out->messages_indexed = structure.messages_indexed;
+  directMessages(bag, out->topic, structure, &out->direct);
+  return {};
+}
+}  // namespace
+
 Status scanSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info) {
   BagSignalInfo out;
-  out.path = path;
   // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
   // length): every record is checked first.
   BagStructure structure;
   if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
     rosbag::Bag bag;
-    bag.open(path, rosbag::bagmode::Read);
-    if (Status s = chooseTopic(bag, path, topic, &out); !s.ok()) return s;
-    readBagParams(bag, &out);
-    out.messages_indexed = structure.messages_indexed;
-    if (directMessages(bag, out.topic, structure, &out.direct)) {
+    if (Status s = prepareScan(bag, path, topic, structure, &out); !s.ok()) return s;
+    if (!out.direct.empty()) {
       BagSignalInfo direct = out;
       Status status;
       if (scanDirect(path, structure, &direct, &status)) {
@@ -955,7 +1050,7 @@ namespace {
 Status streamInto(const BagSignalInfo& info,
                   const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                   const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
-                  gear_sim::SignalTable& block) {
+                  gear_sim::SignalTable& block, PassScan* pass = nullptr) {
   if (ranges.empty()) return {};
   for (size_t k = 0; k < ranges.size(); ++k)
     if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
@@ -1039,7 +1134,7 @@ Status streamInto(const BagSignalInfo& info,
   startRange();
   try {
     // Reads ahead on its own thread.
-    ChunkReader reader(info);
+    ChunkReader reader(info, pass);
     const unsigned channels = channelSet(info);
     // One message into the ranges. Validated by scanSignalBag; a chunk of a bag changed since is
     // not read out of bounds (outside the scanned indices, other channels or channels of other
@@ -1080,8 +1175,9 @@ Status streamInto(const BagSignalInfo& info,
 class BlockPipe {
  public:
   BlockPipe(const BagSignalInfo& info,
-            const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges)
-      : thread_([this, &info, &ranges] { run(info, ranges); }) {}
+            const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+            PassScan* pass = nullptr)
+      : thread_([this, &info, &ranges, pass] { run(info, ranges, pass); }) {}
   ~BlockPipe() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   BlockPipe(const BlockPipe&) = delete;
   BlockPipe& operator=(const BlockPipe&) = delete;
@@ -1103,7 +1199,7 @@ class BlockPipe {
 
  private:
   void run(const BagSignalInfo& info,
-           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges) {
+           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges, PassScan* pass) {
     gear_sim::SignalTable block;
     const Status s = streamInto(
         info, ranges,
@@ -1117,7 +1213,7 @@ class BlockPipe {
           cv_.notify_all();
           return Status();
         },
-        block);
+        block, pass);
     std::lock_guard<std::mutex> lock(mutex_);
     status_ = s;
     done_ = true;
@@ -1140,6 +1236,126 @@ Status streamSignalBag(const BagSignalInfo& info,
                        const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
   BlockPipe pipe(info, ranges);
   return pipe.drain(sink);
+}
+
+namespace {
+// The fields of the direct message `d` (its record's offset) into *c, its chunk's data read into
+// *bytes (which *c points into); false when it cannot be read or its layout does not fit.
+bool readDirectMessage(const DirectFile& file, const BagSignalInfo::DirectMessage& d,
+                       std::vector<std::uint8_t>* bytes, RawChunk* c) {
+  std::uint32_t offset = 0, size = 0;
+  return file.read(d.chunk_pos, d.chunk_len, bytes) &&
+         messageData(bytes->data(), d.chunk_len, d.offset, &offset, &size) &&
+         chunkLayout(bytes->data() + offset, size, c).empty();
+}
+
+// A chunk as ChunkScan's checks of one chunk would pass it.
+bool chunkFits(const RawChunk& c) {
+  return c.sample_rate > 0.0 && std::isfinite(c.sample_rate) && !c.dte.empty() &&
+         channelLengthError(c).empty() && c.first_index < kMaxSampleIndex &&
+         c.dte.size() <= kMaxSampleIndex - c.first_index;
+}
+
+// The mean stiffness of the default window's prefix as ChunkScan gives it, from the direct
+// messages from the first (`first`) on, their chunks read once each; false when a message does
+// not fit or does not follow the previous one (the scan refuses or reads such a bag its way).
+bool previewPrefix(const DirectFile& file, const std::vector<BagSignalInfo::DirectMessage>& direct,
+                   const RawChunk& first, double* mean) {
+  const auto prefix = static_cast<std::uint64_t>(gear_sim::kWindowPrefixSamples);
+  gear_sim::FiniteSum k;
+  std::vector<std::uint8_t> bytes;
+  std::uint64_t next = first.first_index;
+  for (size_t i = 0; i < direct.size() && next - first.first_index < prefix; ++i) {
+    const BagSignalInfo::DirectMessage& d = direct[i];
+    if ((i == 0 || d.chunk_pos != direct[i - 1].chunk_pos) &&
+        !file.read(d.chunk_pos, d.chunk_len, &bytes))
+      return false;
+    std::uint32_t offset = 0, size = 0;
+    RawChunk c;
+    if (!messageData(bytes.data(), d.chunk_len, d.offset, &offset, &size) ||
+        !chunkLayout(bytes.data() + offset, size, &c).empty() || !chunkFits(c) ||
+        c.sample_rate != first.sample_rate || channelSet(c) != channelSet(first) ||
+        c.first_index < next)
+      return false;
+    addPrefix(c, c.first_index - first.first_index, &k);
+    next = c.first_index + c.dte.size();
+  }
+  *mean = k.mean();
+  return true;
+}
+
+// What scanSignalBag knows of `info` before its pass (prepareScan's fields).
+BagSignalInfo scanStart(const BagSignalInfo& info) {
+  BagSignalInfo out;
+  out.path = info.path;
+  out.topic = info.topic;
+  out.params_topic = info.params_topic;
+  out.has_params = info.has_params;
+  out.params_error = info.params_error;
+  out.params = info.params;
+  out.messages_indexed = info.messages_indexed;
+  out.direct = info.direct;
+  std::copy(info.stamp, info.stamp + 5, out.stamp);
+  return out;
+}
+}  // namespace
+
+bool previewSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info) {
+  BagSignalInfo out;
+  BagStructure structure;
+  if (!checkBagStructure(path, &structure).ok()) return false;
+  try {
+    rosbag::Bag bag;
+    if (!prepareScan(bag, path, topic, structure, &out).ok() || out.direct.empty()) return false;
+  } catch (const std::exception&) {
+    return false;
+  }
+  std::copy(structure.stamp, structure.stamp + 5, out.stamp);
+  const DirectFile file(path);
+  std::vector<std::uint8_t> first_bytes, last_bytes;
+  RawChunk first, last;
+  if (!file.is(out.stamp) || !readDirectMessage(file, out.direct.front(), &first_bytes, &first) ||
+      !readDirectMessage(file, out.direct.back(), &last_bytes, &last) || !chunkFits(first) ||
+      !chunkFits(last) || last.sample_rate != first.sample_rate ||
+      channelSet(last) != channelSet(first) ||
+      (out.direct.size() > 1 && last.first_index < first.first_index + first.dte.size()))
+    return false;
+  out.sample_rate = first.sample_rate;
+  out.first_index = first.first_index;
+  out.samples = static_cast<std::int64_t>(last.first_index + last.dte.size() - first.first_index);
+  // The scan refuses gaps of more than kMaxGapRatio x the samples present, at most the chunks'
+  // bytes / 8: a longer span (a corrupt first_index) is left to it before anything is allocated.
+  std::uint64_t bytes = 0;
+  for (size_t i = 0; i < out.direct.size(); ++i)
+    if (i == 0 || out.direct[i].chunk_pos != out.direct[i - 1].chunk_pos)
+      bytes += out.direct[i].chunk_len;
+  if (static_cast<double>(out.samples) > (1.0 + kMaxGapRatio) * static_cast<double>(bytes / 8))
+    return false;
+  if (!previewPrefix(file, out.direct, first, &out.stiffness_mean)) return false;
+  setChannels(channelSet(first), &out);
+  *info = std::move(out);
+  return true;
+}
+
+Status scanStreamSignalBag(
+    BagSignalInfo* info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+    const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+  PassScan pass(scanStart(*info));
+  Status s;
+  {
+    BlockPipe pipe(*info, ranges, &pass);
+    s = pipe.drain(sink);
+  }  // the reader threads joined
+  if (!pass.status.ok()) return pass.status;
+  if (!s.ok()) return s;
+  const BagSignalInfo& out = pass.out;
+  // (the stiffness means compared as bits: the default window depends on them)
+  if (!pass.finished || out.samples != info->samples || out.sample_rate != info->sample_rate ||
+      out.first_index != info->first_index || channelSet(out) != channelSet(*info) ||
+      std::memcmp(&out.stiffness_mean, &info->stiffness_mean, sizeof(double)) != 0)
+    return Status::invalidInput(info->path + ": the scan differs from the preview");
+  *info = std::move(pass.out);
+  return {};
 }
 
 Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out) {

@@ -18,9 +18,11 @@
 #include <string>
 #include <tuple>
 
+#include "gear_damping_id/integral_method.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "gear_sim/window_prefix.hpp"
 #include "gear_sim_ros/bag_io.hpp"
 #include "gear_sim_ros/conversions.hpp"
 #include "status_support.hpp"
@@ -406,13 +408,253 @@ TEST_F(AnalyzeBag, RejectsBadBagsWithAOneLineMessageAndExitCode) {
       {"no gear parameters", i + noparams.string(), 1, "--params"},
       {"shorter than a segment", i + shortrec.string(), 2, "shorter than one damping segment"},
   };
-  for (const auto& c : cases) {
-    const fs::path out = dir() / "never.json";
-    const ToolRun r = analyze(c.args + " --output " + out.string());
-    EXPECT_EQ(r.code, c.code) << c.name << ": " << r.err;
-    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << ": " << r.err;
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.name << ": " << r.err;
-    EXPECT_FALSE(fs::exists(out)) << c.name;
+  // In memory and streamed (read in one pass: the same message, nothing written).
+  for (const std::string mode : {"", " --max-in-memory 1500"}) {
+    for (const auto& c : cases) {
+      const fs::path out = dir() / "never.json";
+      const ToolRun r = analyze(c.args + mode + " --output " + out.string());
+      EXPECT_EQ(r.code, c.code) << c.name << mode << ": " << r.err;
+      EXPECT_NE(r.err.find(c.message), std::string::npos) << c.name << mode << ": " << r.err;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.name << mode << ": " << r.err;
+      EXPECT_FALSE(fs::exists(out)) << c.name << mode;
+    }
+  }
+}
+
+// The one-pass reading (previewSignalBag, then scanStreamSignalBag) gives what the scan and then
+// the stream give, bit for bit: the scan's counts, warnings and stiffness mean (the preview's is
+// the record's prefix's, here all of it), and the streamed ranges; a scan error late in the
+// record fails the pass.
+TEST_F(AnalyzeBag, OnePassEqualsTheScanThenTheStream) {
+  const fs::path bag = writeBag("one_pass.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 3) return false;  // a gap
+    if (k == 0)
+      for (double& x : c->stiffness) x *= 2.0;  // the first chunk's mean is not the record's
+    if (k == 5) c->dte[7] = 2.0;                // out of range
+    if (k == 6) c->torque[0] = std::numeric_limits<double>::infinity();
+    return true;
+  });
+  std::string e;
+  gear_sim_ros::BagSignalInfo a, p;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &a), &e)) << e;
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(bag.string(), "", &p));
+  EXPECT_EQ(std::tie(p.samples, p.first_index, p.sample_rate, p.stiffness, p.torque, p.has_params),
+            std::tie(a.samples, a.first_index, a.sample_rate, a.stiffness, a.torque, a.has_params));
+  EXPECT_EQ(std::memcmp(&p.stiffness_mean, &a.stiffness_mean, sizeof(double)), 0);
+  const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+      {0, 250}, {280, 950}, {1000, 1001}, {2500, 4000}};
+  std::vector<Eigen::VectorXd> ra, rp;
+  const auto keep = [](std::vector<Eigen::VectorXd>* out) {
+    return [out](const gear_sim::SignalTable& t, size_t) {
+      for (const Eigen::VectorXd* v : {&t.time, &t.dte, &t.stiffness, &t.torque, &t.mesh_state})
+        out->push_back(*v);
+      return gear_sim::Status();
+    };
+  };
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::streamSignalBag(a, ranges, keep(&ra)), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanStreamSignalBag(&p, ranges, keep(&rp)), &e)) << e;
+  ASSERT_EQ(ra.size(), rp.size());
+  for (size_t k = 0; k < ra.size(); ++k) {
+    ASSERT_EQ(ra[k].size(), rp[k].size()) << k;
+    EXPECT_EQ(std::memcmp(ra[k].data(), rp[k].data(), sizeof(double) * ra[k].size()), 0) << k;
+  }
+  EXPECT_EQ(p.warnings, a.warnings);
+  EXPECT_EQ(std::tie(p.chunks, p.samples, p.gaps, p.gap_samples, p.real_samples,
+                     p.non_finite_values, p.out_of_range_values, p.outlier_chunks),
+            std::tie(a.chunks, a.samples, a.gaps, a.gap_samples, a.real_samples,
+                     a.non_finite_values, a.out_of_range_values, a.outlier_chunks));
+  EXPECT_EQ(std::memcmp(&p.stiffness_mean, &a.stiffness_mean, sizeof(double)), 0);
+  EXPECT_EQ(a.gaps, 1);
+  EXPECT_EQ(a.out_of_range_values, 1);
+  // The next to last chunk repeats the indices before it: the preview, which reads the default
+  // window's prefix (here the whole record), refuses the bag as the scan does (the pass failing
+  // after the preview: TheDefaultWindowIsThePrefixsOnEveryPath).
+  const fs::path dup = writeBag("one_pass_dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 6) c->first_index -= 500;
+    return true;
+  });
+  EXPECT_FALSE(gear_sim_ros::previewSignalBag(dup.string(), "", &p));
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanSignalBag(dup.string(), "", &a), &e));
+}
+
+// `analyze` on a streamed bag reads it once (with --bag-out: scan, then stream): the same
+// outputs, also when the first chunk's stiffness differs from the rest and when the scan fails
+// late (the record is then analysed again: the scan's message and exit code).
+TEST_F(AnalyzeBag, OnePassGivesTheOutputsOfTheScanThenTheStream) {
+  const fs::path intact = intactBag();
+  const fs::path stiff = writeBag("stiff_first.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 0)
+      for (double& x : c->stiffness) x *= 4.0;
+    return true;
+  });
+  const fs::path dup = writeBag("late_dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 6) c->first_index -= 500;
+    return true;
+  });
+  for (const fs::path& bag : {intact, stiff, dup}) {
+    std::vector<ToolRun> runs;
+    std::vector<std::string> docs;
+    for (const std::string& extra :
+         {std::string(), std::string(" --bag-out ") + (dir() / "r.bag").string()}) {
+      const fs::path j = dir() / "one_pass.json";
+      fs::remove(j);
+      runs.push_back(analyze("--input " + bag.string() + " --refine never --max-in-memory 1500" +
+                             " --output " + j.string() + extra));
+      nlohmann::json doc = fs::exists(j) ? nlohmann::json::parse(readText(j)) : nlohmann::json();
+      if (doc.is_object()) doc.erase("metadata");
+      docs.push_back(doc.dump());
+    }
+    EXPECT_EQ(runs[0].code, runs[1].code) << bag;
+    EXPECT_EQ(runs[0].out, runs[1].out) << bag;
+    EXPECT_EQ(runs[0].err, runs[1].err) << bag;
+    EXPECT_EQ(docs[0], docs[1]) << bag;
+    EXPECT_EQ(runs[0].code, bag == dup ? 2 : 0) << bag << ": " << runs[0].err;
+  }
+}
+
+// The default window is the prefix rule (the mean of the finite stiffness samples among the
+// record's first kWindowPrefixSamples) on a record longer than the prefix, read whole (the
+// defaultWindowLength of its table), scanned (scanSignalBag), previewed (previewSignalBag: the
+// one-pass read), and `analyze` gives the same window and estimates read whole, streamed, and
+// streamed in one pass. The stiffness after the prefix is doubled (the whole record's mean is
+// not the prefix's), NaN in places (skipped) and not a whole number (the sum's order shows in
+// its bits); chunks of 1000 samples with a gap in the prefix. A chunk after the prefix that
+// repeats indices fails the one pass after its preview: `analyze` then reports the scan's error.
+TEST_F(AnalyzeBag, TheDefaultWindowIsThePrefixsOnEveryPath) {
+  namespace gd = gear_damping_id;
+  constexpr Eigen::Index kPrefix = gear_sim::kWindowPrefixSamples;
+  gear_sim::SimConfig cfg = config_;
+  cfg.simulation.duration = 0.16;  // 160000 samples at 1 MHz
+  gear_sim::SignalTable t;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(cfg, &t), &e)) << e;
+  ASSERT_GT(t.size(), kPrefix + 20000);
+  for (Eigen::Index i = 0; i < t.size(); ++i) {
+    t.stiffness[i] *= 1.0 + 1e-7 * std::sin(0.37 * static_cast<double>(i));
+    if (i >= kPrefix) t.stiffness[i] *= 2.0;
+    if (i % 9973 == 5) t.stiffness[i] = std::numeric_limits<double>::quiet_NaN();
+  }
+  const Eigen::Index chunk = 1000, gap = 37;  // chunk 37 (samples 37000-37999) missing
+  for (Eigen::Index b = gap * chunk; b < (gap + 1) * chunk; ++b)
+    t.stiffness[b] = std::numeric_limits<double>::quiet_NaN();  // as a gap reads
+  const auto write = [&](const std::string& name, Eigen::Index repeat) {
+    const fs::path p = dir() / name;
+    rosbag::Bag w(p.string(), rosbag::bagmode::Write);
+    w.write("/gear/params", ros::Time(1.0), gear_sim_ros::toMsg(cfg.gearModel()));
+    gear_damping::SignalChunk c;
+    for (Eigen::Index b = 0, k = 0; b < t.size(); b += chunk, ++k) {
+      if (k == gap) continue;
+      gear_sim_ros::toChunk(t, b, std::min(chunk, t.size() - b), cfg.simulation.sample_rate,
+                            static_cast<std::uint64_t>(b), &c);
+      if (k == repeat) c.first_index -= 500;
+      w.write("/gear/signal", ros::Time(1.0) + ros::Duration(1e-4 * static_cast<double>(k + 1)), c);
+    }
+    return p;
+  };
+  const fs::path bag = write("long_prefix.bag", -1), late = write("long_late_dup.bag", 150);
+  // The rule, written out: the finite samples of the prefix summed in order.
+  double sum = 0.0, all = 0.0;
+  long long count = 0, count_all = 0;
+  for (Eigen::Index i = 0; i < t.size(); ++i) {
+    if (!std::isfinite(t.stiffness[i])) continue;
+    all += t.stiffness[i];
+    ++count_all;
+    if (i >= kPrefix) continue;
+    sum += t.stiffness[i];
+    ++count;
+  }
+  const double mean = sum / static_cast<double>(count);
+  const gd::GearConstants gear = gd::gearConstants(cfg.gearModel());
+  const double rule = 2.0 * 2.0 * M_PI / std::sqrt(mean / gear.equivalent_mass);
+  const double whole_mean = all / static_cast<double>(count_all);
+  EXPECT_GT(whole_mean, 1.1 * mean);  // the whole record's mean would give another window
+  EXPECT_EQ(gd::defaultWindowLength(gd::SignalView::of(t), gear), rule);
+  gear_sim::SignalTable read;
+  gear_sim_ros::BagSignalInfo scan, preview;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &scan), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(scan, &read), &e)) << e;
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(bag.string(), "", &preview));
+  EXPECT_EQ(scan.gaps, 1);
+  EXPECT_EQ(scan.stiffness_mean, mean);
+  EXPECT_EQ(preview.stiffness_mean, mean);
+  EXPECT_EQ(gd::defaultWindowLength(gd::SignalView::of(read), gear), rule);
+  // A record no longer than the prefix: the mean of all its finite samples, as before.
+  gear_sim::SignalTable head = t;
+  for (Eigen::VectorXd* v : {&head.time, &head.dte, &head.stiffness})
+    v->conservativeResize(kPrefix);
+  for (Eigen::VectorXd* v : {&head.dte_velocity, &head.torque, &head.mesh_state, &head.mesh_phase,
+                             &head.damping, &head.theta1, &head.theta2})
+    v->resize(0);
+  EXPECT_DOUBLE_EQ(gd::defaultWindowLength(gd::SignalView::of(head), gear), rule);
+  // `analyze`: whole, streamed in one pass, streamed scan then stream (--bag-out).
+  std::vector<nlohmann::json> docs;
+  for (const std::string& mode :
+       {std::string(), std::string(" --max-in-memory 20000"),
+        " --max-in-memory 20000 --bag-out " + (dir() / "prefix_out.bag").string()}) {
+    const fs::path j = dir() / "prefix.json";
+    fs::remove(j);
+    const ToolRun r = analyze("--input " + bag.string() + " --refine never --model piecewise" +
+                              " --model constant --output " + j.string() + mode);
+    ASSERT_EQ(r.code, 0) << mode << ": " << r.err;
+    docs.push_back(nlohmann::json::parse(readText(j)));
+  }
+  for (size_t m = 0; m < docs.size(); ++m) {
+    const auto& runs = docs[m].at("runs");
+    ASSERT_EQ(runs.size(), 2u);
+    for (size_t k = 0; k < runs.size(); ++k)
+      EXPECT_EQ(runs[k].at("window_length").get<double>(), rule) << m << k;
+    const auto& segs = docs[m].at("identification").at("segments");
+    const auto& ref = docs[0].at("identification").at("segments");
+    ASSERT_EQ(segs.size(), ref.size());
+    for (size_t i = 0; i < segs.size(); ++i) {
+      EXPECT_EQ(segs[i].at("C"), ref[i].at("C")) << m << " " << i;
+      EXPECT_EQ(segs[i].at("C_std"), ref[i].at("C_std")) << m << " " << i;
+    }
+  }
+  docs[1].erase("metadata");
+  docs[2].erase("metadata");
+  EXPECT_EQ(docs[1], docs[2]);
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(late.string(), "", &preview));
+  const auto none = [](const gear_sim::SignalTable&, size_t) { return gear_sim::Status(); };
+  EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanStreamSignalBag(&preview, {{0, 1000}}, none), &e));
+  std::vector<ToolRun> runs;
+  for (const std::string& mode :
+       {std::string(), " --bag-out " + (dir() / "prefix_out.bag").string()})
+    runs.push_back(analyze("--input " + late.string() + " --refine never --max-in-memory 20000" +
+                           " --output " + (dir() / "late.json").string() + mode));
+  EXPECT_EQ(runs[0].code, 2) << runs[0].err;
+  EXPECT_NE(runs[0].err.find("first_index"), std::string::npos) << runs[0].err;
+  EXPECT_EQ(runs[0].err, runs[1].err);
+  EXPECT_EQ(runs[0].out, runs[1].out);
+  EXPECT_FALSE(fs::exists(dir() / "late.json"));
+}
+
+// Far from index 0 the samples' times (first_index / rate) round to uneven steps: a record
+// starting at index 1e12 (1e6 s at 1 MHz) is refused alike read whole, streamed, and streamed
+// in one pass (the same one-line message and exit code; it was analysed when streamed).
+TEST_F(AnalyzeBag, FarIndicesAreRefusedAlikeWholeAndStreamed) {
+  const fs::path bag = writeBag("far_index.bag", [](size_t, gear_damping::SignalChunk* c) {
+    c->first_index += 1000000000000ull;
+    return true;
+  });
+  std::vector<ToolRun> runs;
+  for (const std::string& mode :
+       {std::string(), std::string(" --max-in-memory 1500"),
+        " --max-in-memory 1500 --bag-out " + (dir() / "far_out.bag").string()}) {
+    runs.push_back(analyze("--input " + bag.string() + " --refine never --output " +
+                           (dir() / "far.json").string() + mode));
+    EXPECT_EQ(runs.back().code, 2) << mode << ": " << runs.back().err;
+    EXPECT_NE(runs.back().err.find("time is not uniformly sampled at sample"), std::string::npos)
+        << mode << ": " << runs.back().err;
+    EXPECT_EQ(std::count(runs.back().err.begin(), runs.back().err.end(), '\n'), 1) << mode;
+    EXPECT_EQ(runs.back().err, runs.front().err) << mode;
+    EXPECT_FALSE(fs::exists(dir() / "far.json")) << mode;
+  }
+  // A looser tolerance accepts it on every path.
+  for (const std::string& mode : {std::string(), std::string(" --max-in-memory 1500")}) {
+    const ToolRun r = analyze("--input " + bag.string() + " --refine never --time-tolerance 1e-3" +
+                              " --output " + (dir() / "far.json").string() + mode);
+    EXPECT_EQ(r.code, 0) << mode << ": " << r.err;
   }
 }
 

@@ -109,7 +109,10 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
                                                                  const IdentificationOptions& o);
 
 /// Default integration window [s]: two natural periods 2 * 2 pi / sqrt(Kbar), Kbar the mean
-/// normalised stiffness (from the stiffness samples when present, else from the gear model).
+/// normalised stiffness: the mean of the finite stiffness samples among the record's first
+/// gear_sim::kWindowPrefixSamples (all of a record that short; summed as a bag's scan sums them
+/// beyond that, so a bag read whole, streamed or in one pass gets the same window), else the gear
+/// model's mean stiffness.
 double defaultWindowLength(const SignalView& signal, const GearConstants& gear);
 
 /// The streaming integral method. Feed the damping segments in time order with addSegment (the

@@ -14,6 +14,7 @@
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
+#include "gear_sim/window_prefix.hpp"
 
 // Hot loops compiled for AVX2 as well as the baseline, chosen at load time. GD_AVX2_CLONES:
 // without FMA contraction or reassociation both clones compute the same bits (each loop's
@@ -298,7 +299,9 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
     return s;
   const SignalView view = SignalView::of(t);
   const Eigen::Index n = t.size();
-  const double* k = o.window_length > 0.0 ? nullptr : view.stiffness;
+  // (a record longer than the window's prefix: defaultWindowLength sums the prefix afterwards)
+  const double* k =
+      o.window_length > 0.0 || n > gear_sim::kWindowPrefixSamples ? nullptr : view.stiffness;
   const Eigen::Index blocks = (n + kRecordBlock - 1) / kRecordBlock;
   std::vector<double> sums(static_cast<size_t>(blocks), 0.0);
   std::vector<Eigen::Index> bad(static_cast<size_t>(blocks), n);
@@ -391,6 +394,12 @@ std::vector<std::pair<Eigen::Index, Eigen::Index>> segmentRanges(const SignalVie
 
 double defaultWindowLength(const SignalView& s, const GearConstants& gear) {
   if (s.stiffness == nullptr || s.n <= 0) return windowFromStiffness(0.0, 0.0, gear);
+  if (s.n > gear_sim::kWindowPrefixSamples) {
+    // A long record: its prefix, summed in order as a bag's scan sums it (the same bits).
+    gear_sim::FiniteSum prefix;
+    prefix.add(s.stiffness, 0, static_cast<size_t>(gear_sim::kWindowPrefixSamples));
+    return windowFromStiffness(prefix.sum, static_cast<double>(prefix.count), gear);
+  }
   // Mean over the finite samples: one vectorised sum when all are finite (the usual case; in
   // checkRecord's block order), else an element-wise pass that skips the non-finite ones.
   double total = recordSum(s.stiffness, s.n), count = static_cast<double>(s.n);

@@ -76,7 +76,9 @@ struct BagSignalInfo {
   /// that maximum (the record's scale): likely corrupt payloads, counted and warned about.
   long outlier_chunks = 0;
   std::vector<std::string> warnings;  ///< one line per gap (the first few) and similar remarks
-  double stiffness_mean = 0.0;        ///< [N/m] mean of the finite stiffness samples (0: none)
+  /// [N/m] mean of the finite stiffness samples among the record's first
+  /// gear_sim::kWindowPrefixSamples (the default window's, defaultWindowLength; 0: none)
+  double stiffness_mean = 0.0;
   /// Optional channels present (every chunk must carry the same set).
   bool dte_velocity = false, stiffness = false, torque = false, mesh_state = false,
        mesh_phase = false, damping = false;
@@ -119,6 +121,25 @@ gear_sim::Status scanSignalBag(const std::string& path, const std::string& topic
 /// from the sink stops the stream and is returned as is.
 gear_sim::Status streamSignalBag(
     const BagSignalInfo& info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
+
+/// One pass instead of scanSignalBag's and streamSignalBag's (issue 18: `analyze` reads the bag
+/// once). previewSignalBag does what scanSignalBag does before its pass (the topic, the
+/// parameters), reads the first and the last chunk message: sample_rate, first_index, the
+/// channels and `samples` (exact when the scan passes), and the messages of the default window's
+/// prefix: stiffness_mean (the scan's bits when it passes). False when the bag is not read that
+/// way (any bag whose chunks rosbag reads, or whose first, last or prefix messages do not fit or
+/// follow each other): the caller scans with scanSignalBag.
+bool previewSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info);
+
+/// streamSignalBag of `info` (from previewSignalBag; ranges from its numbers) with
+/// scanSignalBag's scan done in the same pass on the reading thread; then *info is what
+/// scanSignalBag gives. Any error (a scan error, a read error, a scan that cannot be done in the
+/// pass or that differs from the preview: its span, rate, channels or stiffness_mean) says only
+/// that this pass failed, after the sink may have seen some blocks: the caller does it again with
+/// scanSignalBag and streamSignalBag, which give the error to report.
+gear_sim::Status scanStreamSignalBag(
+    BagSignalInfo* info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
     const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
 
 /// The whole record as one table (gaps as NaN).
