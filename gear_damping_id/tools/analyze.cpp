@@ -296,42 +296,6 @@ nlohmann::json steCalibrationJson(const gd::SegmentDriver::SteCalibration& span,
           {"whole_record", cal == n}};
 }
 
-// checkSignalTable's check of the time steps on a streamed bag's record, whose sample i is at
-// (first_index + i) / rate as readSignalBag computes it (far from index 0 those times round to
-// uneven steps): the same error as for the record read whole. Skipped where rounding cannot reach
-// the tolerance (the steps' rounding is at most a few ulps of the last time).
-gear_sim::Status checkStreamedTime(const gear_sim_ros::BagSignalInfo& info, double rel_tolerance) {
-  const Eigen::Index n = static_cast<Eigen::Index>(info.samples);
-  const auto time = [&](Eigen::Index i) {
-    return static_cast<double>(info.first_index + static_cast<std::uint64_t>(i)) / info.sample_rate;
-  };
-  if (n < 2 || static_cast<double>(info.first_index + static_cast<std::uint64_t>(n)) <
-                   0.5 * rel_tolerance * std::ldexp(1.0, 48))
-    return {};
-  double ref = time(1) - time(0);  // checkSignalTable's reference step
-  if (n >= 4) {
-    double d[3] = {time(1) - time(0), time(2) - time(1), time(3) - time(2)};
-    std::sort(d, d + 3);
-    ref = d[1];
-  }
-  const double tol = rel_tolerance * ref;
-  Eigen::Index bad = n;
-  double previous = time(0);
-  for (Eigen::Index i = 1; i < n && bad == n; ++i) {
-    const double t = time(i);
-    if (!(std::abs(t - previous - ref) <= tol)) bad = i;
-    previous = t;
-  }
-  if (bad == n) return {};
-  // The record's first samples up to that step give checkSignalTable's message.
-  gear_sim::SignalTable head;
-  head.time.resize(std::max<Eigen::Index>(bad + 1, std::min<Eigen::Index>(n, 4)));
-  for (Eigen::Index i = 0; i < head.time.size(); ++i) head.time[i] = time(i);
-  head.dte = Eigen::VectorXd::Zero(head.time.size());
-  return gd::checkSignalTable(head, gd::Formulation::Paper, gd::DampingModel::Piecewise,
-                              rel_tolerance);
-}
-
 // The default window of a streamed record: from the mean stiffness of its prefix (the scan's or
 // the preview's), as for a record read whole.
 double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearConstants& gear,
@@ -962,18 +926,15 @@ int Analysis::checkRecord() {
           /*first_line=*/is_bag ? -1 : 2);
       if (!s.ok()) return fail(kExitInput, s.withContext(input));
     }
-  } else {  // checkSignalTable's checks in its order, run by run
+  } else if (identification) {
     gd::ChannelSet present;
     present.stiffness = bag_info.stiffness;
     present.torque = bag_info.torque;
     present.mesh_state = bag_info.mesh_state;
     present.mesh_phase = bag_info.mesh_phase;
-    for (const auto& o : runs_options) {
-      gear_sim::Status s =
-          identification ? gd::checkChannels(present, o.formulation, o.model) : gear_sim::Status();
-      if (s.ok()) s = checkStreamedTime(bag_info, o.time_tolerance);
-      if (!s.ok()) return fail(kExitInput, s.withContext(input));
-    }
+    for (const auto& o : runs_options)
+      if (const gear_sim::Status s = gd::checkChannels(present, o.formulation, o.model); !s.ok())
+        return fail(kExitInput, s.withContext(input));
   }
   if (const int rc = checkAnalysedRange(); rc != kContinue) return rc;
   if (identification) {

@@ -629,33 +629,4 @@ TEST_F(AnalyzeBag, TheDefaultWindowIsThePrefixsOnEveryPath) {
   EXPECT_FALSE(fs::exists(dir() / "late.json"));
 }
 
-// Far from index 0 the samples' times (first_index / rate) round to uneven steps: a record
-// starting at index 1e12 (1e6 s at 1 MHz) is refused alike read whole, streamed, and streamed
-// in one pass (the same one-line message and exit code; it was analysed when streamed).
-TEST_F(AnalyzeBag, FarIndicesAreRefusedAlikeWholeAndStreamed) {
-  const fs::path bag = writeBag("far_index.bag", [](size_t, gear_damping::SignalChunk* c) {
-    c->first_index += 1000000000000ull;
-    return true;
-  });
-  std::vector<ToolRun> runs;
-  for (const std::string& mode :
-       {std::string(), std::string(" --max-in-memory 1500"),
-        " --max-in-memory 1500 --bag-out " + (dir() / "far_out.bag").string()}) {
-    runs.push_back(analyze("--input " + bag.string() + " --refine never --output " +
-                           (dir() / "far.json").string() + mode));
-    EXPECT_EQ(runs.back().code, 2) << mode << ": " << runs.back().err;
-    EXPECT_NE(runs.back().err.find("time is not uniformly sampled at sample"), std::string::npos)
-        << mode << ": " << runs.back().err;
-    EXPECT_EQ(std::count(runs.back().err.begin(), runs.back().err.end(), '\n'), 1) << mode;
-    EXPECT_EQ(runs.back().err, runs.front().err) << mode;
-    EXPECT_FALSE(fs::exists(dir() / "far.json")) << mode;
-  }
-  // A looser tolerance accepts it on every path.
-  for (const std::string& mode : {std::string(), std::string(" --max-in-memory 1500")}) {
-    const ToolRun r = analyze("--input " + bag.string() + " --refine never --time-tolerance 1e-3" +
-                              " --output " + (dir() / "far.json").string() + mode);
-    EXPECT_EQ(r.code, 0) << mode << ": " << r.err;
-  }
-}
-
 }  // namespace
