@@ -468,7 +468,7 @@ TEST_F(AnalyzeBag, OnePassEqualsTheScanThenTheStream) {
   EXPECT_EQ(a.out_of_range_values, 1);
   // The next to last chunk repeats the indices before it: the preview, which reads the default
   // window's prefix (here the whole record), refuses the bag as the scan does (the pass failing
-  // after the preview: TheDefaultWindowIsThePrefixsOnEveryPath).
+  // after the preview: TheDefaultWindowIsThePrefixRuleOnEveryPath).
   const fs::path dup = writeBag("one_pass_dup.bag", [](size_t k, gear_damping::SignalChunk* c) {
     if (k == 6) c->first_index -= 500;
     return true;
@@ -520,7 +520,7 @@ TEST_F(AnalyzeBag, OnePassGivesTheOutputsOfTheScanThenTheStream) {
 // not the prefix's), NaN in places (skipped) and not a whole number (the sum's order shows in
 // its bits); chunks of 1000 samples with a gap in the prefix. A chunk after the prefix that
 // repeats indices fails the one pass after its preview: `analyze` then reports the scan's error.
-TEST_F(AnalyzeBag, TheDefaultWindowIsThePrefixsOnEveryPath) {
+TEST_F(AnalyzeBag, TheDefaultWindowIsThePrefixRuleOnEveryPath) {
   namespace gd = gear_damping_id;
   constexpr Eigen::Index kPrefix = gear_sim::kWindowPrefixSamples;
   gear_sim::SimConfig cfg = config_;
