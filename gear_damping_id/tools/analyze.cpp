@@ -1052,6 +1052,7 @@ int Analysis::identify() {
       return fail(kExitInput, s.withContext(input));
     if (one_pass) {  // the scan's warnings first, as a scan before the analysis prints them
       held_messages = nullptr;
+      progress.finish();          // (a terminal's progress line erased first, not written over)
       std::cerr << held.front();  // ROS's own messages, first as before
       for (const auto& w : bag_info.warnings) warn(input + ": " + w);
       for (size_t k = 1; k < held.size(); ++k) std::cerr << held[k];

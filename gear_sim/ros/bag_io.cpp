@@ -592,12 +592,26 @@ void setChannels(unsigned channels, BagSignalInfo* out) {
   out->damping = channels & 32u;
 }
 
+// A channel's values as the record read whole holds them: a finite value outside the channel's
+// plausible range reads as NaN (the block filling's rule).
+struct PlausibleValues {
+  const RawArray& a;
+  PlausibleRange range;
+  double operator[](size_t i) const {
+    const double x = a[i];
+    return inRange(range, x) || !finite(x) ? x : std::numeric_limits<double>::quiet_NaN();
+  }
+};
+
 // The stiffness of chunk `c`, whose first sample is the record's sample `position`, that lies in
-// the default window's prefix, added to *sum (in order: the sum's bits fix the window).
+// the default window's prefix, added to *sum (in order: the sum's bits fix the window). An
+// implausible value is missing there, as in the record read whole (a stiffness of 1e14 among
+// the prefix had given the streamed read another window than the whole one).
 void addPrefix(const RawChunk& c, std::uint64_t position, gear_sim::FiniteSum* sum) {
   const auto prefix = static_cast<std::uint64_t>(gear_sim::kWindowPrefixSamples);
   if (position < prefix)
-    sum->add(c.stiffness, 0, std::min<size_t>(c.stiffness.size(), prefix - position));
+    sum->add(PlausibleValues{c.stiffness, kPlausibleRanges[2]}, 0,
+             std::min<size_t>(c.stiffness.size(), prefix - position));
 }
 
 // The pass over the chunks of one topic: each chunk is checked on its own and against the
