@@ -406,7 +406,9 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
 }
 
 IdentificationResult SegmentDriver::result(size_t last) const {
-  return shared_ ? sharedResult(last) : piecewiseResult(last);
+  IdentificationResult r = shared_ ? sharedResult(last) : piecewiseResult(last);
+  flagIntegralStandardErrors(options_, &r);
+  return r;
 }
 
 IdentificationResult SegmentDriver::finish(const SignalView* record,
@@ -418,18 +420,22 @@ IdentificationResult SegmentDriver::finish(const SignalView* record,
   }
   IdentificationResult r = result();
   if (!shared_ || !wantsRefinement(options_, r)) return r;
+  auto integral = [&]() {  // the integral estimates reported: their run warnings again
+    flagIntegralStandardErrors(options_, &r);
+    return r;
+  };
   if (!options_.refinable()) {
     r.warnings.push_back(
         {quality_code::kRefineSkipped,
          "output-error refinement skipped: not available for the greybox stiffness shape " +
              toString(options_.stiffness_shape) + " (integral-method estimates reported)"});
-    return r;
+    return integral();
   }
   if (record == nullptr || ranges == nullptr) {
     r.warnings.push_back({quality_code::kRefineSkipped,
                           "output-error refinement skipped: a record analysed streaming is "
                           "refined per segment only for the piecewise model"});
-    return r;
+    return integral();
   }
   IdentificationResult refined = r;
   if (const gear_sim::Status refine =
@@ -443,6 +449,7 @@ IdentificationResult SegmentDriver::finish(const SignalView* record,
                                           "): integral-method estimates reported"});
   }
   applyQualityFlags(options_, &r);
+  flagIntegralStandardErrors(options_, &r);
   return r;
 }
 
