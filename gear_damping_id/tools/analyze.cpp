@@ -308,17 +308,19 @@ double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
 // The modeled responses of a group's identified segments `outs` (each from its segment's state,
 // independent of the others) into (*resps)[j], (*have)[j] whether there is one: the first half of
 // the group on a thread of its own while this one does the second (the bag's reading threads
-// leave most of the second core free), the same responses as one after the other.
+// leave most of the second core free), the same responses as one after the other. Each
+// response's own NRMSE and fit only with `fit_metrics` (the record's fit is FitAccumulator's).
 void groupResponses(const gd::SignalView& view, const gd::GearConstants& gear,
                     const std::vector<gd::SegmentDriver::SegmentOutput>& outs,
-                    std::vector<gd::ModeledResponse>* resps, std::vector<char>* have) {
+                    std::vector<gd::ModeledResponse>* resps, std::vector<char>* have,
+                    bool fit_metrics) {
   const size_t n = outs.size();
   if (resps->size() < n) resps->resize(n);
   have->assign(n, 0);
   const auto part = [&](size_t j0, size_t j1) {
     for (size_t j = j0; j < j1; ++j)
       (*have)[j] = outs[j].estimate.identifiable &&
-                   gd::modeledResponse(view, gear, outs[j].result, &(*resps)[j]).ok();
+                   gd::modeledResponse(view, gear, outs[j].result, &(*resps)[j], fit_metrics).ok();
   };
   if (n < 8) return part(0, n);
   std::thread helper(part, size_t{0}, n / 2);
@@ -390,7 +392,8 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     for (size_t k = 0; k < runs->size(); ++k) {
       const auto outs = drivers[k].addAll(view, segs);
       if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
-      groupResponses(view, gear, outs, &resps, &have);
+      // (each response's own fit only for the bag's messages, which carry it)
+      groupResponses(view, gear, outs, &resps, &have, bag->active());
       for (size_t j = 0; j < outs.size(); ++j) {  // in order: the fit's sums and the bag
         if (!have[j]) continue;
         fits[k].add(resps[j]);

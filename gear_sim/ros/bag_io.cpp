@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <future>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -26,6 +27,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "gear_sim/async.hpp"
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/window_prefix.hpp"
@@ -134,8 +136,6 @@ std::array<const RawArray*, 6> rangedChannels(const RawChunk& c) {
 }
 
 bool inRange(const PlausibleRange& r, double x) { return x >= r.low && x <= r.high; }
-
-bool plausibleMeshState(double x) { return x == 0.0 || x == 1.0; }
 
 // Whether x is finite, written so that loops over arrays vectorise: x - x is 0 for finite x and
 // NaN for NaN and +-Inf.
@@ -653,10 +653,16 @@ class ChunkScan {
     return add(*c);
   }
 
+  using Where = std::function<std::string()>;
+
   Status add(const RawChunk& c) {
-    const std::string where = path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
-                              std::to_string(out_.chunks + 1) + " (first_index " +
-                              std::to_string(c.first_index) + ")";
+    // The chunk's name for a message, made only when a message needs it (not for each of a long
+    // record's 10^4 chunks)
+    const Where where = [&] {
+      return path_ + ": " + gear_sim::quoteForMessage(out_.topic) + " message " +
+             std::to_string(out_.chunks + 1) + " (first_index " + std::to_string(c.first_index) +
+             ")";
+    };
     if (Status st = checkChunk(c, where); !st.ok()) return st;
     if (out_.chunks == 0) {
       out_.sample_rate = c.sample_rate;
@@ -709,21 +715,21 @@ class ChunkScan {
   }
 
   // One chunk on its own: a positive rate, dte samples, channels as long as dte, indices < 2^53.
-  static Status checkChunk(const RawChunk& c, const std::string& where) {
+  static Status checkChunk(const RawChunk& c, const Where& where) {
     if (!(c.sample_rate > 0.0) || !std::isfinite(c.sample_rate)) {
-      return Status::invalidInput(where + ": sample_rate " + formatNumber(c.sample_rate) +
+      return Status::invalidInput(where() + ": sample_rate " + formatNumber(c.sample_rate) +
                                   " is not a positive number");
     }
     if (c.dte.empty()) {
-      return Status::invalidInput(where + ": no dte samples");
+      return Status::invalidInput(where() + ": no dte samples");
     }
     if (const std::string bad = channelLengthError(c); !bad.empty())
-      return Status::invalidInput(where + ": channel " + bad + " has " +
+      return Status::invalidInput(where() + ": channel " + bad + " has " +
                                       "a length other than dte's (" + std::to_string(c.dte.size()) +
                                       ")",
                                   bad);
     if (c.first_index >= kMaxSampleIndex || c.dte.size() > kMaxSampleIndex - c.first_index) {
-      return Status::invalidInput(where + ": sample indices beyond 2^53 (" +
+      return Status::invalidInput(where() + ": sample indices beyond 2^53 (" +
                                   std::to_string(kMaxSampleIndex) +
                                   "): corrupt or wrapped-around first_index");
     }
@@ -731,25 +737,25 @@ class ChunkScan {
     // record read whole: gear_sim::checkTimeResolution).
     const double last = static_cast<double>(c.first_index + (c.dte.size() - 1)) / c.sample_rate;
     if (Status s = gear_sim::checkTimeResolution(last, 1.0 / c.sample_rate); !s.ok())
-      return Status::invalidInput(where + ": " + s.message(), "time");
+      return Status::invalidInput(where() + ": " + s.message(), "time");
     return {};
   }
 
   // A later chunk against the first ones: same rate and channels, indices increasing; a gap
   // is counted and (the first kMaxGapWarnings) warned about.
-  Status checkSequence(const RawChunk& c, const std::string& where) {
+  Status checkSequence(const RawChunk& c, const Where& where) {
     if (c.sample_rate != out_.sample_rate) {
-      return Status::invalidInput(where + ": sample_rate changed from " +
+      return Status::invalidInput(where() + ": sample_rate changed from " +
                                   formatNumber(out_.sample_rate) + " to " +
                                   formatNumber(c.sample_rate) + " Hz");
     }
     if (channelSet(c) != channels_) {
-      return Status::invalidInput(where +
+      return Status::invalidInput(where() +
                                   ": carries a different set of channels than the first chunk");
     }
     if (c.first_index < next_) {
       return Status::invalidInput(
-          where + ": sample indices not increasing (the previous chunk ended at " +
+          where() + ": sample indices not increasing (the previous chunk ended at " +
           std::to_string(next_ - 1) + "): a duplicated or out-of-order chunk");
     }
     if (c.first_index > next_) {
@@ -757,7 +763,7 @@ class ChunkScan {
       ++out_.gaps;
       if (missing > largest_gap_) {
         largest_gap_ = missing;
-        largest_gap_at_ = where;
+        largest_gap_at_ = where();
       }
       out_.gap_samples += static_cast<std::int64_t>(missing);
       if (out_.gaps <= kMaxGapWarnings)
@@ -1011,6 +1017,14 @@ Status checkMessageLayout(const rosbag::MessageInstance& m) {
 }
 
 namespace {
+// A rosbag::Bag constructed on a thread of its own (gear_sim::startAsync): its constructor's
+// encryptor plugin loader (pluginlib) crawls the ROS package paths (~7,300 stat and ~590
+// getdents calls, ~30 ms), which needs nothing from the file, so it runs while the caller checks
+// the file's structure (checkBagStructure), which must pass before rosbag opens the file.
+std::future<std::unique_ptr<rosbag::Bag>> constructBag() {
+  return gear_sim::startAsync([] { return std::make_unique<rosbag::Bag>(); });
+}
+
 // scanSignalBag's steps before its pass over the chunks (the structure checked by the caller):
 // the bag opened, the topic chosen, the parameters read, the messages to read directly listed
 // (out->direct: their records' offsets; empty when rosbag reads them). rosbag's exceptions pass.
@@ -1030,10 +1044,12 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
   BagSignalInfo out;
   // rosbag trusts the lengths in the file (ROS's header parser reads beyond a corrupt field
   // length): every record is checked first.
+  std::future<std::unique_ptr<rosbag::Bag>> pending = constructBag();
   BagStructure structure;
   if (Status s = checkBagStructure(path, &structure); !s.ok()) return s;
   try {
-    rosbag::Bag bag;
+    const std::unique_ptr<rosbag::Bag> owned = pending.get();
+    rosbag::Bag& bag = *owned;
     if (Status s = prepareScan(bag, path, topic, structure, &out); !s.ok()) return s;
     if (!out.direct.empty()) {
       BagSignalInfo direct = out;
@@ -1059,6 +1075,13 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
 }
 
 namespace {
+// n mesh_state bytes as doubles: 0 and 1 kept, any other byte NaN (counted by the scan);
+// branch-free, so the loop vectorises.
+void meshStates(const std::uint8_t* from, Eigen::Index n, double* out) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (Eigen::Index q = 0; q < n; ++q) out[q] = from[q] <= 1 ? static_cast<double>(from[q]) : nan;
+}
+
 // streamSignalBag with the ranges' samples in `block` (the caller's storage: a record read whole
 // is read into its table, not copied out of the stream's).
 Status streamInto(const BagSignalInfo& info,
@@ -1131,10 +1154,7 @@ Status streamInto(const BagSignalInfo& info,
     channel(c.stiffness, 2, block.stiffness);
     channel(c.torque, 3, block.torque);
     if (block.mesh_state.size() > 0)
-      for (Eigen::Index q = 0; q < n; ++q) {
-        const double x = c.mesh_state.p[j0 + static_cast<size_t>(q)];
-        block.mesh_state[i0 + q] = plausibleMeshState(x) ? x : nan;
-      }
+      meshStates(c.mesh_state.p + j0, n, block.mesh_state.data() + i0);
     channel(c.mesh_phase, 4, block.mesh_phase);
     channel(c.damping, 5, block.damping);
     filled = std::max(filled, i0 + n);
@@ -1316,11 +1336,12 @@ BagSignalInfo scanStart(const BagSignalInfo& info) {
 
 bool previewSignalBag(const std::string& path, const std::string& topic, BagSignalInfo* info) {
   BagSignalInfo out;
+  std::future<std::unique_ptr<rosbag::Bag>> pending = constructBag();
   BagStructure structure;
   if (!checkBagStructure(path, &structure).ok()) return false;
   try {
-    rosbag::Bag bag;
-    if (!prepareScan(bag, path, topic, structure, &out).ok() || out.direct.empty()) return false;
+    if (!prepareScan(*pending.get(), path, topic, structure, &out).ok() || out.direct.empty())
+      return false;
   } catch (const std::exception&) {
     return false;
   }

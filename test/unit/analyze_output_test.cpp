@@ -4,6 +4,7 @@
 // document's shape (analysisJson) and its streamed writer (writeJsonAtomically).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -237,6 +238,39 @@ TEST(AnalysisJson, SegmentsWrittenFromTheRunsGiveTheBytesOfTheDocument) {
   const gear_sim::Status bad =
       gd::writeAnalysisJsonAtomically((b / "not_a_dir.json").string(), doc, runs);
   EXPECT_EQ(bad.code(), gear_sim::StatusCode::IoError);
+}
+
+// A long record's segments are written in batches, every second one formatted on a thread of
+// its own (AnalysisJsonWriter::segments): for segment counts around the batch edges (256) and
+// many batches, with values of every magnitude, NaN, curves and warnings spread over the
+// batches, the bytes are still those of dump(2).
+TEST(AnalysisJson, SegmentsFormattedInBatchesOnTwoThreadsGiveTheBytesOfTheDocument) {
+  namespace gd = gear_damping_id;
+  gear_test::ScratchDir dir("analysis_json_batches");
+  const fs::path a = dir.path() / "tree.json", b = dir.path() / "batched.json";
+  const nlohmann::json input = {{"file", "x"}};
+  for (const int n : {255, 256, 257, 511, 512, 513, 2049}) {
+    std::vector<gd::AnalysisRun> runs{
+        fakeRun(gd::Formulation::Greybox, gd::DampingModel::Piecewise, n),
+        fakeRun(gd::Formulation::Known, gd::DampingModel::Piecewise, n / 3)};
+    std::vector<gd::SegmentEstimate>& s = runs[0].result.segments;
+    for (int i = 0; i < n; ++i) {
+      gd::SegmentEstimate& e = s[static_cast<size_t>(i)];
+      e.C = std::ldexp(1.0 + i / 7.0, (i % 40) - 20);
+      e.C_std = i % 97 == 0 ? kNaNForTest() : 1.0 / (i + 3.0);
+      e.xi = -e.C * 1e-5;
+      e.samples = 1000 + i;
+      e.identifiable = i % 101 != 0;
+      if (!e.identifiable) e.reason = "reason " + std::to_string(i);
+      if (i % 255 == 0) e.stiffness_curve = {1.0 * i, kNaNForTest()};
+      if (i % 256 == 1) e.warnings = {{"code", "text " + std::to_string(i)}};
+    }
+    ASSERT_TRUE(gd::writeJsonAtomically(a.string(), gd::analysisJson(runs, input)).ok());
+    ASSERT_TRUE(
+        gd::writeAnalysisJsonAtomically(b.string(), gd::analysisJson(runs, input, false), runs)
+            .ok());
+    EXPECT_EQ(gear_test::readText(b), gear_test::readText(a)) << n << " segments";
+  }
 }
 
 }  // namespace

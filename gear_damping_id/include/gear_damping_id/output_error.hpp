@@ -135,9 +135,12 @@ struct ModeledResponse {
 };
 
 /// Computes the modeled response of `result` over the range of its segments. NotIdentifiable if
-/// no segment is identifiable or the simulation produced a non-finite value.
+/// no segment is identifiable or the simulation produced a non-finite value. With `fit_metrics`
+/// false, out->nrmse and out->fit_percent are left NaN (for a caller that sums its own fit over
+/// many responses, as `analyze` does for a record analysed streaming).
 gear_sim::Status modeledResponse(const SignalView& signal, const GearConstants& gear,
-                                 const IdentificationResult& result, ModeledResponse* out);
+                                 const IdentificationResult& result, ModeledResponse* out,
+                                 bool fit_metrics = true);
 
 /// NRMSE and fit % of `modeled` against `observed` (equal lengths) over the samples where both
 /// are finite; NaN when none are or observed is constant there.

@@ -2878,7 +2878,8 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
 }  // namespace
 
 gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
-                                 const IdentificationResult& r, ModeledResponse* out) {
+                                 const IdentificationResult& r, ModeledResponse* out,
+                                 bool fit_metrics) {
   if (r.segments.empty()) {
     return gear_sim::Status::notIdentifiable("modeled response: no segments");
   }
@@ -2946,7 +2947,8 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
     return gear_sim::Status::notIdentifiable(
         "modeled response: the re-simulation diverged (non-finite values)");
   }
-  fitMetrics(out->observed, out->modeled, &out->nrmse, &out->fit_percent);
+  out->nrmse = out->fit_percent = kNaN;
+  if (fit_metrics) fitMetrics(out->observed, out->modeled, &out->nrmse, &out->fit_percent);
   return {};
 }
 

@@ -1,5 +1,7 @@
 #include "gear_damping_id/result_io.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -12,6 +14,7 @@
 #include <type_traits>
 
 #include "gear_damping_id/quality_flags.hpp"
+#include "gear_sim/async.hpp"
 #include "gear_sim/signal_csv.hpp"
 
 namespace gear_damping_id {
@@ -469,16 +472,98 @@ gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, O
 
 namespace {
 
+// Text as nlohmann's serializer writes it (dump(..., true, false, 2): pretty, indent 2 with ' '),
+// into any of its output adapters: the pieces AnalysisJsonWriter and the segment objects share.
+class JsonText {
+ public:
+  explicit JsonText(nlohmann::detail::output_adapter_t<char> out) : out_(out), s_(out, ' ') {}
+
+  // The elements [a, b) of a `segments` array of n at indentation `at`, each with its
+  // separator: segmentJson's bytes, written straight from the estimates (no tree is built).
+  void segmentElements(const std::vector<SegmentEstimate>& segs, size_t a, size_t b, Formulation f,
+                       unsigned at) {
+    for (size_t i = a; i < b; ++i) {
+      indent(at);
+      segment(segs[i], f, at);
+      separator(i + 1 < segs.size());
+    }
+  }
+
+ protected:
+  // After an element: ",\n" when another follows, else "\n".
+  void separator(bool more) { out_->write_characters(more ? ",\n" : "\n", more ? 2 : 1); }
+  void indent(unsigned n) {
+    static const std::string spaces(64, ' ');
+    out_->write_characters(spaces.data(), n);
+  }
+  // Any value as the serializer writes it at indentation `at`.
+  void scalar(const json& v, unsigned at) { s_.dump(v, true, false, 2, at); }
+  // A double as the serializer writes it (its dump_float: null when not finite, else
+  // nlohmann::detail::to_chars into a 64-character buffer), without building a json value.
+  void number(double v) {
+    if (!std::isfinite(v)) return out_->write_characters("null", 4);
+    std::array<char, 64> text;
+    const char* end = nlohmann::detail::to_chars(text.data(), text.data() + text.size(), v);
+    out_->write_characters(text.data(), static_cast<size_t>(end - text.data()));
+  }
+
+  nlohmann::detail::output_adapter_t<char> out_;
+  nlohmann::detail::serializer<json> s_;
+
+ private:
+  // One field of a segment object: separator, indentation, key.
+  void field(const char* key, unsigned at, bool* first) {
+    out_->write_characters(*first ? "\n" : ",\n", *first ? 1 : 2);
+    *first = false;
+    indent(at);
+    out_->write_character('"');
+    out_->write_characters(key, std::strlen(key));
+    out_->write_characters("\": ", 3);
+  }
+  void curve(const SegmentCurve& c, unsigned at) {
+    out_->write_characters("[\n", 2);
+    for (size_t i = 0; i < c.n; ++i) {
+      indent(at + 2);
+      number(c.at(i));
+      separator(i + 1 < c.n);
+    }
+    indent(at);
+    out_->write_character(']');
+  }
+  // segmentJson(s, f) at indentation `at`: its keys in the order of a std::map (bytewise).
+  void segment(const SegmentEstimate& s, Formulation f, unsigned at);
+};
+
+void JsonText::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
+  const unsigned in = at + 2;
+  bool first = true;
+  out_->write_character('{');
+  segmentFields(s, f, [&](const char* key, const auto& v) {
+    using V = std::decay_t<decltype(v)>;
+    field(key, in, &first);
+    if constexpr (std::is_same_v<V, double>) {
+      number(v);
+    } else if constexpr (std::is_same_v<V, SegmentCurve>) {
+      curve(v, in);
+    } else {
+      scalar(json(v), in);
+    }
+  });
+  out_->write_character('\n');
+  indent(at);
+  out_->write_character('}');
+}
+
 // The document as serializer::dump(doc, true, false, 2) writes it (nlohmann's pretty printer:
 // objects with their keys sorted, "{}" / "[]" when empty, indent 2), except that a null
 // "segments" of runs[k] or of identification (analysisJson(..., false)) is written straight
 // from runs[k] / runs[0] with the bytes segmentJson's array would have: the 2e4 segment
 // objects of a 1e7-sample record are never built as a tree. Scalars go through nlohmann's
-// serializer, so every number is formatted by it.
-class AnalysisJsonWriter {
+// serializer, so every number is formatted by it (or by its to_chars, the same bytes).
+class AnalysisJsonWriter : JsonText {
  public:
   AnalysisJsonWriter(std::shared_ptr<BufferedJsonOutput> out, const std::vector<AnalysisRun>& runs)
-      : out_(out), s_(out, ' '), runs_(runs) {}
+      : JsonText(out), runs_(runs) {}
 
   void document(const json& doc) {
     if (!doc.is_object() || doc.empty()) return scalar(doc, 0);
@@ -508,24 +593,10 @@ class AnalysisJsonWriter {
   }
 
  private:
-  // After an element: ",\n" when another follows, else "\n".
-  void separator(bool more) { out_->write_characters(more ? ",\n" : "\n", more ? 2 : 1); }
-  void indent(unsigned n) {
-    static const std::string spaces(64, ' ');
-    out_->write_characters(spaces.data(), n);
-  }
   void keyText(const std::string& key, unsigned at) {
     indent(at);
     s_.dump(json(key), true, false, 2, at);
     out_->write_characters(": ", 2);
-  }
-  // Any value as the serializer writes it at indentation `at`.
-  void scalar(const json& v, unsigned at) { s_.dump(v, true, false, 2, at); }
-  void number(double v) {
-    if (std::isfinite(v))
-      s_.dump(json(v), true, false, 2, 0);
-    else
-      out_->write_characters("null", 4);
   }
 
   // A run object at indentation `at`, its null "segments" from `r`.
@@ -547,66 +618,36 @@ class AnalysisJsonWriter {
     out_->write_character('}');
   }
 
+  // The segment objects in batches of kBatch, every second batch formatted on a thread of its
+  // own into a string written after this thread's batch (the order and bytes of one thread; the
+  // text held is two batches, ~0.3 MB, whatever the record's length).
   void segments(const AnalysisRun& r, unsigned at) {
+    constexpr size_t kBatch = 256;
     const auto& segs = r.result.segments;
+    const Formulation f = r.result.formulation;
     if (segs.empty()) return out_->write_characters("[]", 2);
     out_->write_characters("[\n", 2);
-    for (size_t i = 0; i < segs.size(); ++i) {
-      indent(at + 2);
-      segment(segs[i], r.result.formulation, at + 2);
-      separator(i + 1 < segs.size());
+    for (size_t a = 0; a < segs.size(); a += 2 * kBatch) {
+      const size_t b = std::min(a + kBatch, segs.size()), c = std::min(b + kBatch, segs.size());
+      std::string later;
+      std::future<void> other;
+      if (c > b)
+        other = gear_sim::startAsync([&] {
+          JsonText(std::make_shared<nlohmann::detail::output_string_adapter<char>>(later))
+              .segmentElements(segs, b, c, f, at + 2);
+        });
+      segmentElements(segs, a, b, f, at + 2);
+      if (other.valid()) {
+        other.get();
+        out_->write_characters(later.data(), later.size());
+      }
     }
     indent(at);
     out_->write_character(']');
   }
 
-  // One field of a segment object: separator, indentation, key.
-  void field(const char* key, unsigned at, bool* first) {
-    out_->write_characters(*first ? "\n" : ",\n", *first ? 1 : 2);
-    *first = false;
-    indent(at);
-    out_->write_character('"');
-    out_->write_characters(key, std::strlen(key));
-    out_->write_characters("\": ", 3);
-  }
-  void curve(const SegmentCurve& c, unsigned at) {
-    out_->write_characters("[\n", 2);
-    for (size_t i = 0; i < c.n; ++i) {
-      indent(at + 2);
-      number(c.at(i));
-      separator(i + 1 < c.n);
-    }
-    indent(at);
-    out_->write_character(']');
-  }
-
-  // segmentJson(s, f) at indentation `at`: its keys in the order of a std::map (bytewise).
-  void segment(const SegmentEstimate& s, Formulation f, unsigned at);
-
-  std::shared_ptr<BufferedJsonOutput> out_;
-  nlohmann::detail::serializer<json> s_;
   const std::vector<AnalysisRun>& runs_;
 };
-
-void AnalysisJsonWriter::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
-  const unsigned in = at + 2;
-  bool first = true;
-  out_->write_character('{');
-  segmentFields(s, f, [&](const char* key, const auto& v) {
-    using V = std::decay_t<decltype(v)>;
-    field(key, in, &first);
-    if constexpr (std::is_same_v<V, double>) {
-      number(v);
-    } else if constexpr (std::is_same_v<V, SegmentCurve>) {
-      curve(v, in);
-    } else {
-      scalar(json(v), in);
-    }
-  });
-  out_->write_character('\n');
-  indent(at);
-  out_->write_character('}');
-}
 
 }  // namespace
 
