@@ -376,7 +376,9 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   // Reads of kStreamGroup segments whatever --threads is: the views (and so every time stamp)
   // are the same for any number of threads, so the output is too.
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, kStreamGroup);
-  const Ranges reads = feeder.readRanges();
+  // Each block holds its group's samples with their left context (overlapping the previous
+  // block's end), so the feeder hands on views of the blocks themselves (pushHeld, no copy).
+  const Ranges reads = feeder.heldRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
   // A group's responses, reused from group to group (their vectors keep their storage).
   std::vector<gd::ModeledResponse> resps;
@@ -411,7 +413,7 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   };
   // (The sink never stops the feeder: every read range is fed.)
   const auto feed = [&](const gear_sim::SignalTable& block, size_t r) {
-    feeder.push(block, r, sink);
+    feeder.pushHeld(block, r, sink);
     return gear_sim::Status();
   };
   if (gear_sim::Status s = one_pass != nullptr

@@ -1082,59 +1082,92 @@ void meshStates(const std::uint8_t* from, Eigen::Index n, double* out) {
   for (Eigen::Index q = 0; q < n; ++q) out[q] = from[q] <= 1 ? static_cast<double>(from[q]) : nan;
 }
 
-// streamSignalBag with the ranges' samples in `block` (the caller's storage: a record read whole
-// is read into its table, not copied out of the stream's).
-Status streamInto(const BagSignalInfo& info,
-                  const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                  const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
-                  gear_sim::SignalTable& block, PassScan* pass = nullptr) {
-  if (ranges.empty()) return {};
-  for (size_t k = 0; k < ranges.size(); ++k)
-    if (ranges[k].first < (k ? ranges[k - 1].second : 0) || ranges[k].second < ranges[k].first ||
-        ranges[k].second > info.samples) {
-      return Status::invalidInput(
-          info.path + ": sample range " + std::to_string(k) + " [" +
-          std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
-          ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
+// The blocks of streamSignalBag's ranges, filled from the chunks in order: the current range
+// r's channels are written where chunks cover them; the samples up to `filled` are written,
+// those of a gap are set to NaN when the next chunk or the range's end shows it. A range that
+// begins before the previous one ends starts with the overlap copied from that block.
+class RangeBlocks {
+ public:
+  using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
+  using Sink = std::function<Status(const gear_sim::SignalTable&, size_t)>;
+  RangeBlocks(const BagSignalInfo& info, const Ranges& ranges, const Sink& sink,
+              gear_sim::SignalTable& block)
+      : info_(info), ranges_(ranges), sink_(sink), block_(block) {
+    start();
+  }
+  // Emits every range that ends at or before sample `upto` (gap samples NaN).
+  Status flushUpTo(Eigen::Index upto) {
+    while (r_ < ranges_.size() && ranges_[r_].second <= upto)
+      if (Status s = emit(); !s.ok()) return s;
+    return {};
+  }
+  // Chunk c (its first sample b, global) into the ranges it covers, each emitted when complete.
+  Status take(const RawChunk& c, Eigen::Index b) {
+    const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());
+    if (Status s = flushUpTo(b); !s.ok()) return s;
+    while (r_ < ranges_.size() && ranges_[r_].first < e) {
+      const Eigen::Index lo = std::max(b, ranges_[r_].first), hi = std::min(e, ranges_[r_].second);
+      copy(c, b, lo, hi);
+      if (hi < ranges_[r_].second) break;  // the range continues in the next chunk
+      if (Status s = emit(); !s.ok()) return s;
     }
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  size_t r = 0;  // current range
-  // The range's channels are written where chunks cover them; the samples up to `filled` are
-  // written, those of a gap are set to NaN when the next chunk or the range's end shows it.
-  Eigen::Index filled = 0;
-  auto startRange = [&]() {
-    const Eigen::Index n = ranges[r].second - ranges[r].first;
+    return {};
+  }
+
+ private:
+  std::array<Eigen::VectorXd*, 7> channels() {
+    return {&block_.dte,        &block_.dte_velocity, &block_.stiffness, &block_.torque,
+            &block_.mesh_state, &block_.mesh_phase,   &block_.damping};
+  }
+  // Range r_'s block sized, its time column set, its overlap with the previous range (carry_)
+  // written.
+  void start() {
+    const Eigen::Index n = ranges_[r_].second - ranges_[r_].first;
     auto make = [&](bool present, Eigen::VectorXd& v) { v.resize(present ? n : 0); };
-    block.time.resize(n);
+    block_.time.resize(n);
     for (Eigen::Index i = 0; i < n; ++i)
-      block.time[i] =
-          static_cast<double>(info.first_index + static_cast<std::uint64_t>(ranges[r].first + i)) /
-          info.sample_rate;
-    make(true, block.dte);
-    make(info.dte_velocity, block.dte_velocity);
-    make(info.stiffness, block.stiffness);
-    make(info.torque, block.torque);
-    make(info.mesh_state, block.mesh_state);
-    make(info.mesh_phase, block.mesh_phase);
-    make(info.damping, block.damping);
-    filled = 0;
-  };
-  auto gapUpTo = [&](Eigen::Index to) {  // NaN over [filled, to) of every channel present
-    if (to <= filled) return;
-    for (Eigen::VectorXd* v : {&block.dte, &block.dte_velocity, &block.stiffness, &block.torque,
-                               &block.mesh_state, &block.mesh_phase, &block.damping})
-      if (v->size() > 0) v->segment(filled, to - filled).setConstant(nan);
-    filled = to;
-  };
-  auto emit = [&]() {  // the current range to the sink, the next one started
-    gapUpTo(ranges[r].second - ranges[r].first);
-    if (Status s = sink(block, r); !s.ok()) return s;
-    if (++r < ranges.size()) startRange();
-    return Status();
-  };
+      block_.time[i] = static_cast<double>(info_.first_index +
+                                           static_cast<std::uint64_t>(ranges_[r_].first + i)) /
+                       info_.sample_rate;
+    make(true, block_.dte);
+    make(info_.dte_velocity, block_.dte_velocity);
+    make(info_.stiffness, block_.stiffness);
+    make(info_.torque, block_.torque);
+    make(info_.mesh_state, block_.mesh_state);
+    make(info_.mesh_phase, block_.mesh_phase);
+    make(info_.damping, block_.damping);
+    filled_ = std::min<Eigen::Index>(carried_, n);
+    const auto to = channels();
+    for (size_t k = 0; k < to.size(); ++k)
+      if (to[k]->size() > 0) to[k]->head(filled_) = carry_[k].head(filled_);
+  }
+  void gapUpTo(Eigen::Index to) {  // NaN over [filled_, to) of every channel present
+    if (to <= filled_) return;
+    for (Eigen::VectorXd* v : channels())
+      if (v->size() > 0) v->segment(filled_, to - filled_).setConstant(kNaN);
+    filled_ = to;
+  }
+  // The current range to the sink, the next one started (and emitted too when its overlap with
+  // the previous one completes it).
+  Status emit() {
+    for (;;) {
+      const Eigen::Index n = ranges_[r_].second - ranges_[r_].first;
+      gapUpTo(n);
+      const bool next = r_ + 1 < ranges_.size();
+      carried_ = next ? std::max<Eigen::Index>(ranges_[r_].second - ranges_[r_ + 1].first, 0) : 0;
+      const auto from = channels();
+      for (size_t k = 0; carried_ > 0 && k < from.size(); ++k)
+        carry_[k] = from[k]->size() > 0 ? from[k]->tail(carried_).eval() : Eigen::VectorXd();
+      if (Status s = sink_(block_, r_); !s.ok()) return s;
+      ++r_;
+      if (!next) return {};
+      start();
+      if (carried_ == 0 || filled_ < ranges_[r_].second - ranges_[r_].first) return {};
+    }
+  }
   // Samples [lo, hi) (global, from chunk sample b) of chunk c into the current range.
-  auto copy = [&](const RawChunk& c, Eigen::Index b, Eigen::Index lo, Eigen::Index hi) {
-    const Eigen::Index i0 = lo - ranges[r].first, n = hi - lo;
+  void copy(const RawChunk& c, Eigen::Index b, Eigen::Index lo, Eigen::Index hi) {
+    const Eigen::Index i0 = lo - ranges_[r_].first, n = hi - lo;
     const size_t j0 = static_cast<size_t>(lo - b);
     gapUpTo(i0);
     auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
@@ -1146,26 +1179,49 @@ Status streamInto(const BagSignalInfo& info,
       for (Eigen::Index q = 0; q < n; ++q) {
         const double x = from[j0 + static_cast<size_t>(q)];
         const bool keep = ((x >= range.low) & (x <= range.high)) | !finite(x);  // no branches
-        out[q] = keep ? x : nan;
+        out[q] = keep ? x : kNaN;
       }
     };
-    channel(c.dte, 0, block.dte);
-    channel(c.dte_velocity, 1, block.dte_velocity);
-    channel(c.stiffness, 2, block.stiffness);
-    channel(c.torque, 3, block.torque);
-    if (block.mesh_state.size() > 0)
-      meshStates(c.mesh_state.p + j0, n, block.mesh_state.data() + i0);
-    channel(c.mesh_phase, 4, block.mesh_phase);
-    channel(c.damping, 5, block.damping);
-    filled = std::max(filled, i0 + n);
-  };
-  // Emits every range that ends at or before sample `upto` (gap samples NaN).
-  auto flushUpTo = [&](Eigen::Index upto) {
-    while (r < ranges.size() && ranges[r].second <= upto)
-      if (Status s = emit(); !s.ok()) return s;
-    return Status();
-  };
-  startRange();
+    channel(c.dte, 0, block_.dte);
+    channel(c.dte_velocity, 1, block_.dte_velocity);
+    channel(c.stiffness, 2, block_.stiffness);
+    channel(c.torque, 3, block_.torque);
+    if (block_.mesh_state.size() > 0)
+      meshStates(c.mesh_state.p + j0, n, block_.mesh_state.data() + i0);
+    channel(c.mesh_phase, 4, block_.mesh_phase);
+    channel(c.damping, 5, block_.damping);
+    filled_ = std::max(filled_, i0 + n);
+  }
+
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  const BagSignalInfo& info_;
+  const Ranges& ranges_;
+  const Sink& sink_;
+  gear_sim::SignalTable& block_;
+  size_t r_ = 0;
+  Eigen::Index filled_ = 0;
+  Eigen::Index carried_ = 0;              // samples of carry_ (the overlap)
+  std::array<Eigen::VectorXd, 7> carry_;  // the previous block's last carried_ samples
+};
+
+// streamSignalBag with the ranges' samples in `block` (the caller's storage: a record read whole
+// is read into its table, not copied out of the stream's).
+Status streamInto(const BagSignalInfo& info,
+                  const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                  const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
+                  gear_sim::SignalTable& block, PassScan* pass = nullptr) {
+  if (ranges.empty()) return {};
+  for (size_t k = 0; k < ranges.size(); ++k)
+    if (ranges[k].second < ranges[k].first || ranges[k].second > info.samples ||
+        (k > 0 &&
+         (ranges[k].first < ranges[k - 1].first || ranges[k].second < ranges[k - 1].second)) ||
+        ranges[k].first < 0) {
+      return Status::invalidInput(
+          info.path + ": sample range " + std::to_string(k) + " [" +
+          std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
+          ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
+    }
+  RangeBlocks blocks(info, ranges, sink, block);
   try {
     // Reads ahead on its own thread.
     ChunkReader reader(info, pass);
@@ -1179,23 +1235,14 @@ Status streamInto(const BagSignalInfo& info,
           c.first_index - info.first_index > static_cast<std::uint64_t>(info.samples) ||
           channelSet(c) != channels || !channelLengthError(c).empty())
         return Status();
-      const Eigen::Index b = static_cast<Eigen::Index>(c.first_index - info.first_index);
-      const Eigen::Index e = b + static_cast<Eigen::Index>(c.dte.size());
-      if (Status s = flushUpTo(b); !s.ok()) return s;
-      while (r < ranges.size() && ranges[r].first < e) {
-        const Eigen::Index lo = std::max(b, ranges[r].first), hi = std::min(e, ranges[r].second);
-        copy(c, b, lo, hi);
-        if (hi < ranges[r].second) break;  // the range continues in the next chunk
-        if (Status s = emit(); !s.ok()) return s;
-      }
-      return Status();
+      return blocks.take(c, static_cast<Eigen::Index>(c.first_index - info.first_index));
     };
     ChunkReader::Chunk item;
     while (reader.next(&item))
       for (const ChunkReader::Message& m : item.messages)
         if (Status s = take(m); !s.ok()) return s;
     if (!reader.error().empty()) return Status::invalidInput(reader.error());
-    if (Status s = flushUpTo(std::numeric_limits<Eigen::Index>::max()); !s.ok()) return s;
+    if (Status s = blocks.flushUpTo(std::numeric_limits<Eigen::Index>::max()); !s.ok()) return s;
   } catch (const std::exception& e) {
     return Status::invalidInput(openError(info.path, e));
   }

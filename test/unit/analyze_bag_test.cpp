@@ -336,6 +336,62 @@ TEST_F(AnalyzeBag, DirectReadingEqualsReadingThroughRosbag) {
   EXPECT_NE(e.find("cannot read as a bag"), std::string::npos) << e;
 }
 
+// Ranges that overlap (each beginning before the previous one ends, as analyze's streamed
+// groups with their left context): every block holds its range's samples as the record read
+// whole has them, the overlap in both blocks, across a gap (a dropped chunk: NaN) and a value
+// read as NaN, an overlap whose chunk is already behind the stream, a range inside the previous
+// one's end and an empty one; ranges whose begins or ends go backwards are refused.
+TEST_F(AnalyzeBag, OverlappingRangesHoldTheOverlapInBothBlocks) {
+  const fs::path bag = writeBag("overlap.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 1) c->torque[95] = 1e12;  // outside the plausible range: read as NaN
+    return k != 3;                     // samples 1500-1999 missing
+  });
+  gear_sim_ros::BagSignalInfo info;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &info), &e)) << e;
+  gear_sim::SignalTable whole;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &whole), &e)) << e;
+  ASSERT_TRUE(std::isnan(whole.torque[595]));
+  ASSERT_TRUE(std::isnan(whole.dte[1700]));
+  // (samples 2990-2999 of the range from 2990 come from the previous block only: its chunk is
+  // behind the stream when that range starts)
+  const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+      {0, 600},     {590, 1200},  {1190, 1200}, {1195, 1700},
+      {1690, 2600}, {2600, 3010}, {2990, 4000}, {4000, 4000}};
+  const auto same = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {  // bit for bit
+    return x.size() == y.size() &&
+           std::memcmp(x.data(), y.data(), sizeof(double) * static_cast<size_t>(x.size())) == 0;
+  };
+  std::vector<size_t> seen;
+  auto check = [&](const gear_sim::SignalTable& t, size_t r) {
+    seen.push_back(r);
+    const Eigen::Index a = ranges[r].first, n = ranges[r].second - a;
+    for (const auto& [x, y] : {std::pair{&t.time, &whole.time},
+                               {&t.dte, &whole.dte},
+                               {&t.stiffness, &whole.stiffness},
+                               {&t.torque, &whole.torque},
+                               {&t.mesh_state, &whole.mesh_state},
+                               {&t.mesh_phase, &whole.mesh_phase}}) {
+      EXPECT_EQ(x->size(), n) << r;
+      if (x->size() == n) {
+        EXPECT_TRUE(same(*x, y->segment(a, n).eval())) << r;
+      }
+    }
+    return gear_sim::Status();
+  };
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::streamSignalBag(info, ranges, check), &e)) << e;
+  EXPECT_EQ(seen, (std::vector<size_t>{0, 1, 2, 3, 4, 5, 6, 7}));
+  for (const auto& bad : {std::vector<std::pair<Eigen::Index, Eigen::Index>>{{100, 600}, {50, 700}},
+                          {{0, 600}, {100, 500}},
+                          {{-1, 600}}}) {
+    EXPECT_FALSE(gear_test::ok(
+        gear_sim_ros::streamSignalBag(
+            info, bad, [](const gear_sim::SignalTable&, size_t) { return gear_sim::Status(); }),
+        &e));
+    EXPECT_NE(e.find("is not ascending"), std::string::npos) << e;
+  }
+}
+
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,
 // for the record read whole and streamed, for segment-local and shared unknowns.
 TEST_F(AnalyzeBag, ThreadsGiveTheSameResultsAsOneThreadWholeAndStreamed) {

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
 
@@ -107,8 +108,8 @@ gd::IdentificationResult batch(const gd::IdentificationOptions& o, int threads =
 }
 
 // The record read in blocks of `group` segments plus context, as analyze streams a bag.
-gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t group,
-                                  int threads = 1) {
+gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t group, int threads = 1,
+                                  bool held = false) {
   const gear_sim::SignalTable& t = record().table;
   const gd::SignalView whole = gd::SignalView::of(t);
   const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
@@ -119,7 +120,8 @@ gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t gro
   if (o.formulation == gd::Formulation::Legacy)
     driver.setLegacyForcing(gd::legacyForcing(whole, ranges, record().gear));
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, group);
-  const gd::SampleRanges reads = feeder.readRanges();
+  // held: the blocks hold the feeder's held ranges (with the left context) and are used in place
+  const gd::SampleRanges reads = held ? feeder.heldRanges() : feeder.readRanges();
   for (size_t k = 0; k < reads.size(); ++k) {
     const Eigen::Index a = reads[k].first, n = reads[k].second - a;
     gear_sim::SignalTable block;  // only this block in memory, as from the bag
@@ -129,11 +131,11 @@ gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t gro
     block.torque = t.torque.segment(a, n);
     block.mesh_state = t.mesh_state.segment(a, n);
     block.mesh_phase = t.mesh_phase.segment(a, n);
-    EXPECT_TRUE(
-        feeder.push(block, k, [&](const gd::SignalView& v, const gd::SampleRanges& segs, size_t) {
-          driver.addAll(v, segs);
-          return true;
-        }));
+    const auto sink = [&](const gd::SignalView& v, const gd::SampleRanges& segs, size_t) {
+      driver.addAll(v, segs);
+      return true;
+    };
+    EXPECT_TRUE(held ? feeder.pushHeld(block, k, sink) : feeder.push(block, k, sink));
   }
   return driver.finish();
 }
@@ -313,6 +315,41 @@ TEST(SegmentFeeder, ReadRangesAreContiguousAndCoverEverySegmentWithItsContext) {
   ASSERT_EQ(reads.size(), 2u);
   EXPECT_EQ(reads[0], std::make_pair(Eigen::Index{0}, Eigen::Index{302}));
   EXPECT_EQ(reads[1], std::make_pair(Eigen::Index{302}, Eigen::Index{452}));
+}
+
+// The held ranges are the reads with the samples kept before them (the group's left context):
+// here the second group's segment [300, 450) needs samples from 298 on.
+TEST(SegmentFeeder, HeldRangesAreTheReadsWithTheirLeftContext) {
+  const gd::SampleRanges segs = {{0, 100}, {100, 200}, {200, 300}, {300, 450}};
+  gd::SegmentFeeder feeder(segs, 460, 0.0, 1e-6, 3);
+  const gd::SampleRanges held = feeder.heldRanges();
+  ASSERT_EQ(held.size(), 2u);
+  EXPECT_EQ(held[0], std::make_pair(Eigen::Index{0}, Eigen::Index{302}));
+  EXPECT_EQ(held[1], std::make_pair(Eigen::Index{298}, Eigen::Index{452}));
+}
+
+// Blocks of the held ranges used in place (pushHeld, as analyze streams a bag) give the results
+// of blocks copied into the feeder's buffer (push), bit for bit, for groups of 1, 2 and 7
+// segments, one and two threads, segment-local formulations and models.
+TEST(SegmentFeeder, BlocksUsedInPlaceGiveTheResultsOfTheCopiedBlocks) {
+  const auto sameBits = [](double x, double y) { return std::memcmp(&x, &y, sizeof x) == 0; };
+  for (const auto f : {gd::Formulation::Known, gd::Formulation::Greybox}) {
+    for (const auto m : {gd::DampingModel::Piecewise, gd::DampingModel::LoadLaw}) {
+      const gd::IdentificationOptions o = optionsFor(f, m);
+      for (const size_t group : {size_t{1}, size_t{2}, size_t{7}}) {
+        for (const int threads : {1, 2}) {
+          const gd::IdentificationResult a = streamed(o, group, threads, false);
+          const gd::IdentificationResult b = streamed(o, group, threads, true);
+          ASSERT_EQ(a.segments.size(), b.segments.size());
+          for (size_t i = 0; i < a.segments.size(); ++i) {
+            EXPECT_TRUE(sameBits(a.segments[i].C, b.segments[i].C)) << group << " " << i;
+            EXPECT_TRUE(sameBits(a.segments[i].C_std, b.segments[i].C_std)) << group << " " << i;
+            EXPECT_TRUE(sameBits(a.segments[i].t_start, b.segments[i].t_start)) << i;
+          }
+        }
+      }
+    }
+  }
 }
 
 }  // namespace

@@ -235,6 +235,14 @@ class SegmentFeeder {
   /// Takes the block of read range `index` (its columns; `time` is ignored). Returns false when
   /// the sink did.
   bool push(const gear_sim::SignalTable& block, size_t index, const Sink& sink);
+  /// The sample ranges push() holds for each group: each read range with the samples before it
+  /// that the group needs (its left stencil context, kept from the previous read). Ascending, a
+  /// range beginning before the previous one ends.
+  SampleRanges heldRanges() const;
+  /// push() of a block that holds heldRanges()[index] (its columns; `time` is ignored): the
+  /// sink's view is on the block's columns, not on a copy; the same view otherwise (origin,
+  /// length, ranges), so the same results.
+  bool pushHeld(const gear_sim::SignalTable& block, size_t index, const Sink& sink);
 
  private:
   SampleRanges ranges_;
@@ -245,6 +253,13 @@ class SegmentFeeder {
   Eigen::Index buffer_first_ = 0;                  // record sample of buffer column 0
   std::vector<std::vector<double>> buffer_;        // dte, stiffness, torque, state, phase
   std::vector<bool> present_;
+  SampleRanges reads_, held_;  // readRanges(), heldRanges()
+  SampleRanges makeReadRanges() const;
+  SampleRanges makeHeldRanges() const;
+  // The sink's view of `n` samples from record sample `first` at columns `cols` (null: absent),
+  // with the local ranges of group `index`.
+  bool sinkView(Eigen::Index first, Eigen::Index n, const double* const cols[5], size_t index,
+                const Sink& sink) const;
 };
 
 }  // namespace gear_damping_id

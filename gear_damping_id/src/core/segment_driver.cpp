@@ -503,9 +503,14 @@ SegmentFeeder::SegmentFeeder(SampleRanges ranges, Eigen::Index record_samples, d
       present_(5, false) {
   for (size_t a = 0; a < ranges_.size(); a += group_)
     groups_.emplace_back(a, std::min(a + group_, ranges_.size()));
+  reads_ = makeReadRanges();
+  held_ = makeHeldRanges();
 }
 
-SampleRanges SegmentFeeder::readRanges() const {
+SampleRanges SegmentFeeder::readRanges() const { return reads_; }
+SampleRanges SegmentFeeder::heldRanges() const { return held_; }
+
+SampleRanges SegmentFeeder::makeReadRanges() const {
   SampleRanges out;
   Eigen::Index at = 0;
   for (const auto& [a, b] : groups_) {
@@ -520,7 +525,7 @@ SampleRanges SegmentFeeder::readRanges() const {
 }
 
 bool SegmentFeeder::push(const gear_sim::SignalTable& block, size_t index, const Sink& sink) {
-  const SampleRanges reads = readRanges();
+  const SampleRanges& reads = reads_;
   const auto [a, b] = groups_[index];
   const Eigen::Index lo = std::max<Eigen::Index>(ranges_[a].first - kStencilContext, 0);
   // Keep what the group needs before this block (its left context and any overlap).
@@ -540,18 +545,49 @@ bool SegmentFeeder::push(const gear_sim::SignalTable& block, size_t index, const
     buf.insert(buf.end(), cols[c]->data(), cols[c]->data() + cols[c]->size());
   }
   buffer_first_ = reads[index].second - static_cast<Eigen::Index>(buffer_[0].size());
-  SignalView v;
-  v.dt = dt_;
-  v.t0 = t0_ + static_cast<double>(buffer_first_) * dt_;
-  v.n = static_cast<Eigen::Index>(buffer_[0].size());
   const double* ptr[5];
   for (int c = 0; c < 5; ++c)
     ptr[c] = present_[static_cast<size_t>(c)] ? buffer_[static_cast<size_t>(c)].data() : nullptr;
-  v.dte = ptr[0], v.stiffness = ptr[1], v.torque = ptr[2], v.mesh_state = ptr[3];
-  v.mesh_phase = ptr[4];
+  return sinkView(buffer_first_, static_cast<Eigen::Index>(buffer_[0].size()), ptr, index, sink);
+}
+
+SampleRanges SegmentFeeder::makeHeldRanges() const {
+  // push()'s buffer, by its extent only: what it drops before a group, then the read appended.
+  const SampleRanges& reads = reads_;
+  SampleRanges out;
+  Eigen::Index first = 0, size = 0;
+  for (size_t i = 0; i < groups_.size(); ++i) {
+    const Eigen::Index lo =
+        std::max<Eigen::Index>(ranges_[groups_[i].first].first - kStencilContext, 0);
+    size -= std::min(std::max<Eigen::Index>(lo - first, 0), size);
+    size += reads[i].second - reads[i].first;
+    first = reads[i].second - size;
+    out.emplace_back(first, reads[i].second);
+  }
+  return out;
+}
+
+bool SegmentFeeder::pushHeld(const gear_sim::SignalTable& block, size_t index, const Sink& sink) {
+  const Eigen::Index first = held_[index].first;
+  const Eigen::VectorXd* cols[5] = {&block.dte, &block.stiffness, &block.torque, &block.mesh_state,
+                                    &block.mesh_phase};
+  const double* ptr[5];
+  for (int c = 0; c < 5; ++c) ptr[c] = cols[c]->size() > 0 ? cols[c]->data() : nullptr;
+  return sinkView(first, block.dte.size(), ptr, index, sink);
+}
+
+bool SegmentFeeder::sinkView(Eigen::Index first, Eigen::Index n, const double* const cols[5],
+                             size_t index, const Sink& sink) const {
+  const auto [a, b] = groups_[index];
+  SignalView v;
+  v.dt = dt_;
+  v.t0 = t0_ + static_cast<double>(first) * dt_;
+  v.n = n;
+  v.dte = cols[0], v.stiffness = cols[1], v.torque = cols[2], v.mesh_state = cols[3];
+  v.mesh_phase = cols[4];
   SampleRanges local;
   for (size_t i = a; i < b; ++i)
-    local.emplace_back(ranges_[i].first - buffer_first_, ranges_[i].second - buffer_first_);
+    local.emplace_back(ranges_[i].first - first, ranges_[i].second - first);
   return sink(v, local, a);
 }
 

@@ -115,10 +115,11 @@ gear_sim::Status scanSignalBag(const std::string& path, const std::string& topic
                                BagSignalInfo* info);
 
 /// Streams the record scanned into `info` as SignalTable blocks, one per range [begin, end) of
-/// sample numbers counted from info.first_index (ascending, non-overlapping, within
-/// [0, info.samples)): sink(table, range_index) gets the samples of each range (gaps as NaN,
-/// time = global index / sample_rate). Samples outside the ranges are skipped. A failed Status
-/// from the sink stops the stream and is returned as is.
+/// sample numbers counted from info.first_index (within [0, info.samples), begins and ends
+/// ascending; a range may begin before the previous one ends, its block then holds the overlap
+/// too): sink(table, range_index) gets the samples of each range (gaps as NaN, time = global
+/// index / sample_rate). Samples outside the ranges are skipped. A failed Status from the sink
+/// stops the stream and is returned as is.
 gear_sim::Status streamSignalBag(
     const BagSignalInfo& info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
     const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
