@@ -1075,11 +1075,47 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
 }
 
 namespace {
-// n mesh_state bytes as doubles: 0 and 1 kept, any other byte NaN (counted by the scan);
-// branch-free, so the loop vectorises.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+// The block copies with AVX2 where the machine has it (GCC target_clones, run-time dispatch):
+// selects and copies only, so both clones write the same bits.
+#define GEAR_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define GEAR_AVX2_CLONES
+#endif
+
+// n mesh_state bytes as doubles: 0 and 1 kept, any other byte NaN (counted by the scan); a
+// table lookup, no branch.
 void meshStates(const std::uint8_t* from, Eigen::Index n, double* out) {
+  static const std::array<double, 256> value = [] {
+    std::array<double, 256> v;
+    v.fill(std::numeric_limits<double>::quiet_NaN());
+    v[0] = 0.0;
+    v[1] = 1.0;
+    return v;
+  }();
+  for (Eigen::Index q = 0; q < n; ++q) out[q] = value[from[q]];
+}
+
+// n float64 values from `from` (little-endian bytes) to `out`, a finite value outside `range`
+// as NaN (counted by the scan); branch-free, so the loop vectorises.
+GEAR_AVX2_CLONES void plausibleCopy(const std::uint8_t* from, Eigen::Index n, PlausibleRange range,
+                                    double* out) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  for (Eigen::Index q = 0; q < n; ++q) out[q] = from[q] <= 1 ? static_cast<double>(from[q]) : nan;
+  for (Eigen::Index q = 0; q < n; ++q) {
+    double x;
+    std::memcpy(&x, from + 8 * q, 8);
+    const bool keep = ((x >= range.low) & (x <= range.high)) | !finite(x);  // no branches
+    out[q] = keep ? x : nan;
+  }
+}
+
+// The time stamps of samples first .. first + n - 1 (n < 2^31): index / sample_rate, the
+// indices exact as doubles (below 2^53) and the division correctly rounded, so the same bits as
+// one sample at a time; the int offsets let the loop vectorise.
+void sampleTimes(std::uint64_t first, Eigen::Index n, double sample_rate, double* out) {
+  const double base = static_cast<double>(first);
+  const int m = static_cast<int>(n);
+  for (int i = 0; i < m; ++i) out[i] = (base + static_cast<double>(i)) / sample_rate;
 }
 
 // The blocks of streamSignalBag's ranges, filled from the chunks in order: the current range
@@ -1125,10 +1161,14 @@ class RangeBlocks {
     const Eigen::Index n = ranges_[r_].second - ranges_[r_].first;
     auto make = [&](bool present, Eigen::VectorXd& v) { v.resize(present ? n : 0); };
     block_.time.resize(n);
-    for (Eigen::Index i = 0; i < n; ++i)
-      block_.time[i] = static_cast<double>(info_.first_index +
-                                           static_cast<std::uint64_t>(ranges_[r_].first + i)) /
-                       info_.sample_rate;
+    const std::uint64_t first = info_.first_index + static_cast<std::uint64_t>(ranges_[r_].first);
+    if (n < std::numeric_limits<int>::max()) {
+      sampleTimes(first, n, info_.sample_rate, block_.time.data());
+    } else {
+      for (Eigen::Index i = 0; i < n; ++i)
+        block_.time[i] =
+            static_cast<double>(first + static_cast<std::uint64_t>(i)) / info_.sample_rate;
+    }
     make(true, block_.dte);
     make(info_.dte_velocity, block_.dte_velocity);
     make(info_.stiffness, block_.stiffness);
@@ -1171,16 +1211,7 @@ class RangeBlocks {
     const size_t j0 = static_cast<size_t>(lo - b);
     gapUpTo(i0);
     auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
-      if (to.size() == 0) return;
-      const PlausibleRange range = kPlausibleRanges[k];
-      double* out = to.data() + i0;
-      // A finite value outside channel k's plausible range reads as NaN (counted by
-      // scanSignalBag); branch-free, so the loop vectorises.
-      for (Eigen::Index q = 0; q < n; ++q) {
-        const double x = from[j0 + static_cast<size_t>(q)];
-        const bool keep = ((x >= range.low) & (x <= range.high)) | !finite(x);  // no branches
-        out[q] = keep ? x : kNaN;
-      }
+      if (to.size() > 0) plausibleCopy(from.p + 8 * j0, n, kPlausibleRanges[k], to.data() + i0);
     };
     channel(c.dte, 0, block_.dte);
     channel(c.dte_velocity, 1, block_.dte_velocity);
