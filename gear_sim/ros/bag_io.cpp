@@ -26,6 +26,9 @@
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "gear_sim/async.hpp"
 #include "gear_sim/message_text.hpp"
@@ -144,8 +147,58 @@ inline bool finite(double x) { return x - x == 0.0; }
 // The values of `a` that are not finite (*non_finite) and those outside `range` (*outside, the
 // non-finite ones included: they fail every range check). Two lanes at a time with SSE2 (the
 // compiler keeps a double or integer count in order, one value at a time).
+#if defined(__GNUC__) && defined(__x86_64__)
+#define GEAR_AVX2_PATHS 1
+// Whether the machine has AVX2 (the scan's counts and maximum then run four lanes at a time:
+// the same counts and the same maximum, which depend on no order).
+bool haveAvx2() {
+  static const bool yes = __builtin_cpu_supports("avx2");
+  return yes;
+}
+
+// countOutside's counts, four lanes at a time (the compiler vectorises the plain loop for AVX2).
+__attribute__((target("avx2"))) void countOutsideAvx2(const RawArray& a,
+                                                      const PlausibleRange& range,
+                                                      std::int64_t* non_finite,
+                                                      std::int64_t* outside) {
+  std::int64_t nf = 0, out = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    double x;
+    std::memcpy(&x, a.p + 8 * i, 8);
+    nf += x - x == 0.0 ? 0 : 1;
+    out += ((x >= range.low) & (x <= range.high)) ? 0 : 1;
+  }
+  *non_finite = nf;
+  *outside = out;
+}
+
+// The largest finite |x| of `a` (0 when none), four lanes at a time.
+__attribute__((target("avx2"))) double maxFiniteAbsAvx2(const RawArray& a) {
+  const __m256d sign = _mm256_set1_pd(-0.0), zero = _mm256_setzero_pd();
+  __m256d m = zero;
+  size_t i = 0;
+  for (; i + 4 <= a.size(); i += 4) {
+    const __m256d v =
+        _mm256_andnot_pd(sign, _mm256_loadu_pd(reinterpret_cast<const double*>(a.p + 8 * i)));
+    const __m256d fin = _mm256_cmp_pd(_mm256_sub_pd(v, v), zero, _CMP_EQ_OQ);
+    m = _mm256_max_pd(m, _mm256_and_pd(v, fin));  // a non-finite value counts as 0
+  }
+  double lanes[4];
+  _mm256_storeu_pd(lanes, m);
+  double best = std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3]));
+  for (; i < a.size(); ++i) {
+    const double v = std::abs(a[i]);
+    best = finite(v) && v > best ? v : best;
+  }
+  return best;
+}
+#endif
+
 void countOutside(const RawArray& a, const PlausibleRange& range, std::int64_t* non_finite,
                   std::int64_t* outside) {
+#ifdef GEAR_AVX2_PATHS
+  if (haveAvx2()) return countOutsideAvx2(a, range, non_finite, outside);
+#endif
   size_t i = 0;
   std::int64_t nf = 0, out = 0;
 #ifdef __SSE2__
@@ -191,6 +244,9 @@ double countImplausible(const RawChunk& c, BagSignalInfo* info) {
   std::int64_t bad_states = 0;  // a byte: finite, plausible when 0 or 1
   for (size_t i = 0; i < c.mesh_state.size(); ++i) bad_states += c.mesh_state.p[i] > 1 ? 1 : 0;
   info->bad_mesh_states += bad_states;
+#ifdef GEAR_AVX2_PATHS
+  if (haveAvx2()) return maxFiniteAbsAvx2(c.dte);
+#endif
   double m = 0.0;
   for (size_t i = 0; i < c.dte.size(); ++i) {
     const double a = std::abs(c.dte[i]);

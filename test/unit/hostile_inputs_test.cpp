@@ -464,10 +464,10 @@ TEST_F(Hostile, ImplausibleChunkValuesAreCountedReportedAndReadAsNan) {
   EXPECT_TRUE(has(r.err, "2 values outside their channel's plausible range")) << r.err;
 }
 
-// The plausibility pass over every ranged channel (two values at a time, then a scalar tail)
-// and the branch-free copy: values at and just beyond each channel's range, -0, the smallest
-// negative subnormal, +-Inf and NaN, in chunks of 1, 2 and 3 samples (every lane position and
-// tail length), and a mesh_state byte of 2 and of 255. The counts are the element-wise
+// The plausibility pass over every ranged channel (two or four values at a time, then a scalar
+// tail) and the branch-free copy: values at and just beyond each channel's range, -0, the
+// smallest negative subnormal, +-Inf and NaN, in chunks of 1 to 9 samples (every lane position
+// and tail length), and a mesh_state byte of 2 and of 255. The counts are the element-wise
 // classification's; the whole read and a streamed read (ranges splitting chunks) give the same
 // values: finite values outside the range as NaN, the others as written.
 TEST_F(Hostile, EdgeValuesInEveryChannelAreClassifiedAtAnyChunkSize) {
@@ -497,6 +497,12 @@ TEST_F(Hostile, EdgeValuesInEveryChannelAreClassifiedAtAnyChunkSize) {
         ++outside;
     }
   }
+  // Finite DTE values far beyond the rest (outside their range, and outlier chunks) at other lane
+  // positions.
+  for (const Eigen::Index i : {58, 83, 97}) {
+    t.dte[i] = 1e300;
+    ++outside;
+  }
   gear_sim::SignalTable expected = t;
   for (size_t k = 0; k < 6; ++k) {
     const gear_sim_ros::PlausibleRange& r = gear_sim_ros::kPlausibleRanges[k];
@@ -520,7 +526,7 @@ TEST_F(Hostile, EdgeValuesInEveryChannelAreClassifiedAtAnyChunkSize) {
     }
     return true;
   };
-  for (const Eigen::Index chunk : {1, 2, 3}) {
+  for (const Eigen::Index chunk : {1, 2, 3, 4, 5, 6, 7, 8, 9}) {
     SCOPED_TRACE("chunks of " + std::to_string(chunk));
     const std::string p = path("edges_" + std::to_string(chunk) + ".bag");
     {
@@ -547,6 +553,23 @@ TEST_F(Hostile, EdgeValuesInEveryChannelAreClassifiedAtAnyChunkSize) {
     EXPECT_EQ(info.non_finite_values, non_finite);
     EXPECT_EQ(info.out_of_range_values, outside);
     EXPECT_EQ(info.bad_mesh_states, 2);
+    {  // the outlier chunks by their definition: largest finite |dte| over 1e6 x the median's
+      std::vector<double> maxima;
+      for (Eigen::Index b = 0; b < n; b += chunk) {
+        double m = 0.0;
+        for (Eigen::Index i = b; i < std::min(b + chunk, n); ++i)
+          if (std::isfinite(t.dte[i])) m = std::max(m, std::abs(t.dte[i]));
+        maxima.push_back(m);
+      }
+      std::vector<double> sorted = maxima;
+      std::sort(sorted.begin(), sorted.end());
+      const double median = sorted[sorted.size() / 2];
+      const auto outliers = std::count_if(maxima.begin(), maxima.end(), [&](double m) {
+        return median > 0.0 && m > gear_sim_ros::kOutlierChunkFactor * median;
+      });
+      EXPECT_EQ(info.outlier_chunks, outliers);
+      EXPECT_GT(outliers, 0);
+    }
     gear_sim::SignalTable whole;
     ASSERT_TRUE(gear_test::ok(gear_sim_ros::readSignalBag(info, &whole), &e)) << e;
     ASSERT_EQ(whole.size(), n);
