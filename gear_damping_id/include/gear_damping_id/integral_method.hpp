@@ -188,7 +188,7 @@ class IntegralMethod {
   };
 
   void buildColumns();
-  int columnIndex(Column c) const;
+  int columnIndex(Column c) const { return column_index_[static_cast<size_t>(c)]; }
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
   // What the segment's first read of its samples (checkFiniteInputs) leaves for segmentMeans:
@@ -230,7 +230,8 @@ class IntegralMethod {
   double window_length_ = 0.0;
   CubicRules rules_;
   int n_local_ = 0, n_shared_ = 0;
-  std::vector<Column> columns_;  // locals first, then shared
+  std::vector<Column> columns_;        // locals first, then shared
+  std::array<int, 6> column_index_{};  // per Column: its first index in columns_, or -1
   std::vector<SegmentRecord> segments_;
   Eigen::MatrixXd rows_;                  // one window's rows (scratch, reused)
   Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)

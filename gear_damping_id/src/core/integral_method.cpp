@@ -166,24 +166,48 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   return sum;
 }
 
+// A share of the default window's prefix sum (defaultWindowLength: the finite values of
+// k[lo, hi), one by one in order, into *sum) done by stepsAndSum between its step checks: the
+// sum is a chain of dependent additions, bound by their latency, which the step checks'
+// independent work and memory reads hide.
+struct PrefixShare {
+  const double* k = nullptr;
+  Eigen::Index lo = 0, hi = 0;
+  gear_sim::FiniteSum* sum = nullptr;
+  // The values of the part'th of `parts` near-equal parts of [lo, hi), in order.
+  GD_ALWAYS_INLINE void add(Eigen::Index part, Eigen::Index parts) const {
+    const Eigen::Index n = hi - lo;
+    sum->add(k, static_cast<size_t>(lo + n * part / parts),
+             static_cast<size_t>(lo + n * (part + 1) / parts));
+  }
+};
+
 // checkRecord's work on one block [lo, hi) of the record: the first step i in [max(lo, 1), hi)
 // not within tol of ref (hi when there is none) and, when that is hi and k is given, *sum = the
 // block's sum of k (blockSum's accumulators and order, so its bits). In chunks of 512 samples,
 // the steps of a chunk checked (blocks of 64 branch-free, vectorised; then one by one from the
 // block that failed), then its stiffness summed: both columns stream from memory together
-// instead of one pass each.
+// instead of one pass each. share (may be nullptr): its values added in order, an eighth of
+// them after each block of 64 steps of the chunk (the rest after the chunk).
 GD_AVX2_CLONES
 Eigen::Index stepsAndSum(const double* tt, const double* k, Eigen::Index lo, Eigen::Index hi,
-                         double ref, double tol, double* sum) {
+                         double ref, double tol, double* sum, const PrefixShare* share) {
   constexpr Eigen::Index kChunk = 512;
   double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  const Eigen::Index chunks = (hi - lo + kChunk - 1) / kChunk;
   for (Eigen::Index c0 = lo; c0 < hi; c0 += kChunk) {
     const Eigen::Index c1 = std::min(hi, c0 + kChunk);
+    const Eigen::Index chunk = (c0 - lo) / kChunk;
     Eigen::Index i = std::max<Eigen::Index>(c0, 1);
+    int part = 0;
     for (; i + 64 <= c1; i += 64) {
       long good = 0;  // an integer count vectorises (a bool reduction does not)
       for (int j = 0; j < 64; ++j) good += std::abs(tt[i + j] - tt[i + j - 1] - ref) <= tol;
       if (good != 64) break;
+      if (share != nullptr) share->add(chunk * 8 + part++, chunks * 8);
+    }
+    if (share != nullptr) {
+      for (; part < 8; ++part) share->add(chunk * 8 + part, chunks * 8);
     }
     for (; i < c1; ++i) {
       if (!(std::abs(tt[i] - tt[i - 1] - ref) <= tol)) return i;
@@ -287,7 +311,7 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f,
   if (gear_sim::Status s = checkColumns(t, f, m, rel_tolerance, &ref, &tol); !s.ok()) return s;
   const Eigen::Index n = t.size();
   double unused = 0.0;
-  const Eigen::Index i = stepsAndSum(t.time.data(), nullptr, 0, n, ref, tol, &unused);
+  const Eigen::Index i = stepsAndSum(t.time.data(), nullptr, 0, n, ref, tol, &unused, nullptr);
   return i < n ? badStep(t, i, ref, rel_tolerance, first_line) : gear_sim::Status();
 }
 
@@ -299,18 +323,28 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
     return s;
   const SignalView view = SignalView::of(t);
   const Eigen::Index n = t.size();
-  // (a record longer than the window's prefix: defaultWindowLength sums the prefix afterwards)
+  // (a record longer than the window's prefix: its prefix is summed apart, share_prefix below)
   const double* k =
       o.window_length > 0.0 || n > gear_sim::kWindowPrefixSamples ? nullptr : view.stiffness;
   const Eigen::Index blocks = (n + kRecordBlock - 1) / kRecordBlock;
   std::vector<double> sums(static_cast<size_t>(blocks), 0.0);
   std::vector<Eigen::Index> bad(static_cast<size_t>(blocks), n);
+  // A longer record's default window: its prefix summed by the calling thread during its steps
+  // (defaultWindowLength's sum, the same additions in the same order).
+  gear_sim::FiniteSum prefix;
+  const bool share_prefix = !(o.window_length > 0.0) && k == nullptr && view.stiffness != nullptr;
   // Contiguous runs of blocks per thread; each stops at its first bad step.
-  auto run = [&](Eigen::Index b0, Eigen::Index b1) {
+  auto run = [&](Eigen::Index b0, Eigen::Index b1, bool with_prefix) {
     for (Eigen::Index b = b0; b < b1; ++b) {
       const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
       double sum = 0.0;
-      const Eigen::Index i = stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum);
+      PrefixShare share;
+      if (with_prefix) {  // the (b - b0)'th of b1 - b0 near-equal parts of the prefix
+        const Eigen::Index p = gear_sim::kWindowPrefixSamples;
+        share = {view.stiffness, p * (b - b0) / (b1 - b0), p * (b - b0 + 1) / (b1 - b0), &prefix};
+      }
+      const Eigen::Index i =
+          stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum, with_prefix ? &share : nullptr);
       if (i < hi) {
         bad[static_cast<size_t>(b)] = i;
         return;
@@ -321,14 +355,16 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
   const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
   std::vector<std::thread> pool;
   for (Eigen::Index p = 1; p < parts; ++p)
-    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts);
-  run(0, blocks / parts);
+    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts, false);
+  run(0, blocks / parts, share_prefix);
   for (auto& th : pool) th.join();
   for (const Eigen::Index i : bad) {
     if (i < n) return badStep(t, i, ref, o.time_tolerance, -1);
   }
   if (o.window_length > 0.0) {
     *window_length = o.window_length;
+  } else if (share_prefix) {
+    *window_length = windowFromStiffness(prefix.sum, static_cast<double>(prefix.count), gear);
   } else if (k == nullptr) {
     *window_length = defaultWindowLength(view, gear);
   } else {
@@ -572,6 +608,9 @@ void IntegralMethod::buildColumns() {
   n_shared_ = static_cast<int>(shared.size());
   columns_ = local;
   columns_.insert(columns_.end(), shared.begin(), shared.end());
+  column_index_.fill(-1);
+  for (size_t i = columns_.size(); i-- > 0;)
+    column_index_[static_cast<size_t>(columns_[i])] = static_cast<int>(i);
   assert(columns_.size() <= static_cast<size_t>(kMaxColumns));
 }
 
@@ -597,13 +636,6 @@ void IntegralMethod::append(IntegralMethod&& later) {
 void IntegralMethod::reset() {
   segments_.clear();
   unlocated_switches_ = 0;
-}
-
-int IntegralMethod::columnIndex(Column c) const {
-  for (size_t i = 0; i < columns_.size(); ++i) {
-    if (columns_[i] == c) return static_cast<int>(i);
-  }
-  return -1;
 }
 
 namespace {
