@@ -185,6 +185,15 @@ class IntegralMethod {
     // (empty without local unknowns): its inverse and the locals without shared unknowns.
     Eigen::MatrixXd local_inverse;
     Eigen::VectorXd local_solution;
+    // Exchanges the heap buffers (gram, window records, local solve) with o's: reset() keeps
+    // its last record's for the next addSegment, which overwrites every value it reads (the
+    // local solve's only when solveLocals succeeds, the only case in which it is read).
+    void swapBuffers(SegmentRecord* o) {
+      gram.swap(o->gram);
+      window_records.swap(o->window_records);
+      local_inverse.swap(o->local_inverse);
+      local_solution.swap(o->local_solution);
+    }
   };
 
   void buildColumns();
@@ -233,8 +242,9 @@ class IntegralMethod {
   std::vector<Column> columns_;        // locals first, then shared
   std::array<int, 6> column_index_{};  // per Column: its first index in columns_, or -1
   std::vector<SegmentRecord> segments_;
-  Eigen::MatrixXd rows_;                  // one window's rows (scratch, reused)
-  Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)
+  SegmentRecord spare_;   // reset()'s last record's buffers (swapBuffers), for addSegment
+  Eigen::MatrixXd rows_;  // one window's rows (scratch, reused)
+  Eigen::MatrixXd inc_;   // one window's per-interval increments (scratch)
   std::vector<QuadratureBreak> breaks_;   // current segment's breaks (forward_model.hpp)
   std::vector<Eigen::Index> changes_;     // current segment: intervals where a held value changes
   std::vector<long> held_blocks_;         // current segment: FirstTouch's blocks with a change

@@ -634,6 +634,7 @@ void IntegralMethod::append(IntegralMethod&& later) {
 }
 
 void IntegralMethod::reset() {
+  if (!segments_.empty()) spare_.swapBuffers(&segments_.back());  // for the next addSegment
   segments_.clear();
   unlocated_switches_ = 0;
 }
@@ -1206,13 +1207,15 @@ void gramOf(int nc, const Eigen::MatrixXd& rows, Eigen::Index L, int rc, double*
 SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index begin,
                                            Eigen::Index end, bool estimate) {
   SegmentRecord rec;
+  rec.swapBuffers(&spare_);  // (a reset's buffers: no allocation for a segment after one)
+  rec.window_records.clear();
   SegmentEstimate& est = rec.estimate;
   est.t_start = s.time(begin);
   est.t_end = s.time(end - 1) + s.dt;
   const long rows = static_cast<long>(end - begin);
   est.samples = rows;
   const int q = static_cast<int>(columns_.size());
-  rec.gram = Eigen::MatrixXd::Zero(q + 1, q + 1);
+  rec.gram.setZero(q + 1, q + 1);
   auto fail = [&](const std::string& why) {
     est.identifiable = false;
     est.reason = why;
@@ -1491,8 +1494,12 @@ IdentificationResult IntegralMethod::finish() const { return finishRange(0, segm
 // block (for the back-substitution).
 struct IntegralMethod::SharedSolution {
   struct Local {
-    Eigen::MatrixXd Gll_inv;
+    // The inverse of the local block: the segment record's (addSegment's solve; not copied)
+    // when `record` is set, else `own`.
+    const Eigen::MatrixXd* record = nullptr;
+    Eigen::MatrixXd own;
     bool ok = false;
+    const Eigen::MatrixXd& Gll_inv() const { return record != nullptr ? *record : own; }
   };
   std::vector<Local> locals;  // per segment of the range
   Eigen::VectorXd g;          // shared unknowns
@@ -1523,22 +1530,23 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
     if (!rec.estimate.identifiable) continue;
     const Eigen::MatrixXd& G = rec.gram;
     SharedSolution::Local& L = sh.locals[i - s_begin];
-    Eigen::VectorXd xl;
+    Eigen::VectorXd own_xl;
+    const Eigen::VectorXd* xl = &own_xl;
     double cond = 0.0;
     if (nl > 0 && rec.local_inverse.rows() == nl) {
       // addSegment's solve (the same call, which passed the stricter max_condition).
-      L.Gll_inv = rec.local_inverse;
-      xl = rec.local_solution;
-    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl,
-                                  &L.Gll_inv, &cond)) {
+      L.record = &rec.local_inverse;
+      xl = &rec.local_solution;
+    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &own_xl,
+                                  &L.own, &cond)) {
       continue;
     }
     L.ok = true;
     if (ns == 0) continue;  // (the shared problem's sums below are of zero size)
     const Eigen::MatrixXd Gsl = G.block(nl, 0, ns, nl);
-    A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv * Gsl.transpose();
-    rhs += G.block(nl, q, ns, 1) - Gsl * xl;
-    rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
+    A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv() * Gsl.transpose();
+    rhs += G.block(nl, q, ns, 1) - Gsl * *xl;
+    rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(*xl), kRssFloor * G(q, q));
     sh.dof += rec.rows - 2L * rec.windows - nl;
   }
   sh.g = Eigen::VectorXd::Zero(ns);
@@ -1581,20 +1589,20 @@ std::vector<IntegralMethod::SegmentParams> IntegralMethod::segmentParams(size_t 
     if (ns == 0) {
       // Local unknowns only: the general expressions below with their zero-size terms dropped
       // (the same values, without the temporaries).
-      p.theta.noalias() = L.Gll_inv * G.block(0, q, nl, 1);
+      p.theta.noalias() = L.Gll_inv() * G.block(0, q, nl, 1);
       // The residual sum from the Gram matrix cancels to rounding when the fit is near exact:
       // floor it at the rounding level instead of reporting a zero standard error.
       const double rss = std::max(G(q, q) - G.row(q).head(nl).dot(p.theta), kRssFloor * G(q, q));
-      p.cov = (rss / static_cast<double>(rec.rows - 2L * rec.windows - nl)) * L.Gll_inv;
+      p.cov = (rss / static_cast<double>(rec.rows - 2L * rec.windows - nl)) * L.Gll_inv();
     } else {
       const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
-      const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * sh.g);
+      const Eigen::VectorXd xl = L.Gll_inv() * (G.block(0, q, nl, 1) - Gls * sh.g);
       p.theta.head(nl) = xl;
       p.theta.tail(ns) = sh.g;
       const double sigma2 = sh.sigma2;
-      const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
+      const Eigen::MatrixXd B = L.Gll_inv() * Gls;  // locals' dependence on the shared unknowns
       p.cov = Eigen::MatrixXd::Zero(q, q);
-      p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * sh.Ainv * B.transpose());
+      p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv() + B * sh.Ainv * B.transpose());
       p.cov.block(0, nl, nl, ns) = -sigma2 * B * sh.Ainv;
       p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
       p.cov.bottomRightCorner(ns, ns) = sigma2 * sh.Ainv;
