@@ -1402,57 +1402,21 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   return {};
 }
 
-namespace {
-
-// Asks the memory system for samples [lo, hi) of every channel the segment pass reads (one
-// prefetch per 64-byte line): issued for the next segment while this one computes, so its first
-// pass finds the samples in cache instead of waiting for memory. Only a hint: no result depends
-// on it.
-void prefetchSamples(const double* const* channels, int nch, Eigen::Index lo, Eigen::Index hi) {
-  for (int c = 0; c < nch; ++c) {
-    const char* p = reinterpret_cast<const char*>(channels[c] + lo);
-    const char* const e = reinterpret_cast<const char*>(channels[c] + hi);
-    for (; p + 192 < e; p += 256) {  // four lines per step
-      __builtin_prefetch(p, 0, 3);
-      __builtin_prefetch(p + 64, 0, 3);
-      __builtin_prefetch(p + 128, 0, 3);
-      __builtin_prefetch(p + 192, 0, 3);
-    }
-    for (; p < e; p += 64) __builtin_prefetch(p, 0, 3);
-  }
-}
-
-}  // namespace
-
 // The rows of each of the W windows, projected and added to the segment's Gram matrix; the
 // window records for the modeled response. Returns the damping column's raw squared norm.
-// While window w computes, the samples of the record's next segment-length span (the next
-// segment, in a batch or a node's time order) are prefetched, a W-th of them per window.
 double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int W,
                                          SegmentRecord* rec) {
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   const int nc = static_cast<int>(columns_.size()) + 1;
   const int rc = std::max(columnIndex(Column::DampC), 0);
-  const double* ahead[5];
-  int n_ahead = 0;
-  for (const double* c :
-       {s.dte, s.stiffness, use_torque ? s.torque : nullptr,
-        needsMeshState(f) ? s.mesh_state : nullptr, shape_ ? s.mesh_phase : nullptr}) {
-    if (c != nullptr) ahead[n_ahead++] = c;
-  }
-  const Eigen::Index next_lo = begin + rows, next_hi = std::min<Eigen::Index>(s.n, next_lo + rows);
   double raw_c = 0.0;
   rec->window_records.reserve(W);
   for (int w = 0; w < W; ++w) {
     const Eigen::Index w0 = begin + (rows * w) / W, w1 = begin + (rows * (w + 1)) / W;
     const Eigen::Index L = w1 - w0;
-    if (next_hi > next_lo) {
-      const Eigen::Index span = next_hi - next_lo;
-      prefetchSamples(ahead, n_ahead, next_lo + (span * w) / W, next_lo + (span * (w + 1)) / W);
-    }
     windowRows(s, w0, w1, legacy_fbar_);
-    WindowRecord wr;
+    WindowRecord& wr = rec->window_records.emplace_back();  // (in place: ~600 bytes)
     wr.t_start = s.time(w0);
     wr.t_end = s.time(w1 - 1);
     wr.rows = L;
@@ -1463,7 +1427,6 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
     double* slope = wr.slope.data();
     gramOf(nc, rows_, L, rc, mean, slope, &raw, &rec->gram);
     raw_c += raw;
-    rec->window_records.push_back(std::move(wr));
   }
   return raw_c;
 }
