@@ -185,10 +185,19 @@ class IntegralMethod {
     // (empty without local unknowns): its inverse and the locals without shared unknowns.
     Eigen::MatrixXd local_inverse;
     Eigen::VectorXd local_solution;
+    // Exchanges the heap buffers (gram, window records, local solve) with o's: reset() keeps
+    // its last record's for the next addSegment, which overwrites every value it reads (the
+    // local solve's only when solveLocals succeeds, the only case in which it is read).
+    void swapBuffers(SegmentRecord* o) {
+      gram.swap(o->gram);
+      window_records.swap(o->window_records);
+      local_inverse.swap(o->local_inverse);
+      local_solution.swap(o->local_solution);
+    }
   };
 
   void buildColumns();
-  int columnIndex(Column c) const;
+  int columnIndex(Column c) const { return column_index_[static_cast<size_t>(c)]; }
   void windowRows(const SignalView& s, Eigen::Index w0, Eigen::Index w1, double fbar);
   IdentificationResult finishRange(size_t s_begin, size_t s_end) const;
   // What the segment's first read of its samples (checkFiniteInputs) leaves for segmentMeans:
@@ -230,10 +239,12 @@ class IntegralMethod {
   double window_length_ = 0.0;
   CubicRules rules_;
   int n_local_ = 0, n_shared_ = 0;
-  std::vector<Column> columns_;  // locals first, then shared
+  std::vector<Column> columns_;        // locals first, then shared
+  std::array<int, 6> column_index_{};  // per Column: its first index in columns_, or -1
   std::vector<SegmentRecord> segments_;
-  Eigen::MatrixXd rows_;                  // one window's rows (scratch, reused)
-  Eigen::MatrixXd inc_;                   // one window's per-interval increments (scratch)
+  SegmentRecord spare_;   // reset()'s last record's buffers (swapBuffers), for addSegment
+  Eigen::MatrixXd rows_;  // one window's rows (scratch, reused)
+  Eigen::MatrixXd inc_;   // one window's per-interval increments (scratch)
   std::vector<QuadratureBreak> breaks_;   // current segment's breaks (forward_model.hpp)
   std::vector<Eigen::Index> changes_;     // current segment: intervals where a held value changes
   std::vector<long> held_blocks_;         // current segment: FirstTouch's blocks with a change

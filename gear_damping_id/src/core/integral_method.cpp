@@ -166,24 +166,48 @@ double blockSum(const double* x, Eigen::Index lo, Eigen::Index hi) {
   return sum;
 }
 
+// A share of the default window's prefix sum (defaultWindowLength: the finite values of
+// k[lo, hi), one by one in order, into *sum) done by stepsAndSum between its step checks: the
+// sum is a chain of dependent additions, bound by their latency, which the step checks'
+// independent work and memory reads hide.
+struct PrefixShare {
+  const double* k = nullptr;
+  Eigen::Index lo = 0, hi = 0;
+  gear_sim::FiniteSum* sum = nullptr;
+  // The values of the part'th of `parts` near-equal parts of [lo, hi), in order.
+  GD_ALWAYS_INLINE void add(Eigen::Index part, Eigen::Index parts) const {
+    const Eigen::Index n = hi - lo;
+    sum->add(k, static_cast<size_t>(lo + n * part / parts),
+             static_cast<size_t>(lo + n * (part + 1) / parts));
+  }
+};
+
 // checkRecord's work on one block [lo, hi) of the record: the first step i in [max(lo, 1), hi)
 // not within tol of ref (hi when there is none) and, when that is hi and k is given, *sum = the
 // block's sum of k (blockSum's accumulators and order, so its bits). In chunks of 512 samples,
 // the steps of a chunk checked (blocks of 64 branch-free, vectorised; then one by one from the
 // block that failed), then its stiffness summed: both columns stream from memory together
-// instead of one pass each.
+// instead of one pass each. share (may be nullptr): its values added in order, an eighth of
+// them after each block of 64 steps of the chunk (the rest after the chunk).
 GD_AVX2_CLONES
 Eigen::Index stepsAndSum(const double* tt, const double* k, Eigen::Index lo, Eigen::Index hi,
-                         double ref, double tol, double* sum) {
+                         double ref, double tol, double* sum, const PrefixShare* share) {
   constexpr Eigen::Index kChunk = 512;
   double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  const Eigen::Index chunks = (hi - lo + kChunk - 1) / kChunk;
   for (Eigen::Index c0 = lo; c0 < hi; c0 += kChunk) {
     const Eigen::Index c1 = std::min(hi, c0 + kChunk);
+    const Eigen::Index chunk = (c0 - lo) / kChunk;
     Eigen::Index i = std::max<Eigen::Index>(c0, 1);
+    int part = 0;
     for (; i + 64 <= c1; i += 64) {
       long good = 0;  // an integer count vectorises (a bool reduction does not)
       for (int j = 0; j < 64; ++j) good += std::abs(tt[i + j] - tt[i + j - 1] - ref) <= tol;
       if (good != 64) break;
+      if (share != nullptr) share->add(chunk * 8 + part++, chunks * 8);
+    }
+    if (share != nullptr) {
+      for (; part < 8; ++part) share->add(chunk * 8 + part, chunks * 8);
     }
     for (; i < c1; ++i) {
       if (!(std::abs(tt[i] - tt[i - 1] - ref) <= tol)) return i;
@@ -287,7 +311,7 @@ gear_sim::Status checkSignalTable(const gear_sim::SignalTable& t, Formulation f,
   if (gear_sim::Status s = checkColumns(t, f, m, rel_tolerance, &ref, &tol); !s.ok()) return s;
   const Eigen::Index n = t.size();
   double unused = 0.0;
-  const Eigen::Index i = stepsAndSum(t.time.data(), nullptr, 0, n, ref, tol, &unused);
+  const Eigen::Index i = stepsAndSum(t.time.data(), nullptr, 0, n, ref, tol, &unused, nullptr);
   return i < n ? badStep(t, i, ref, rel_tolerance, first_line) : gear_sim::Status();
 }
 
@@ -299,18 +323,28 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
     return s;
   const SignalView view = SignalView::of(t);
   const Eigen::Index n = t.size();
-  // (a record longer than the window's prefix: defaultWindowLength sums the prefix afterwards)
+  // (a record longer than the window's prefix: its prefix is summed apart, share_prefix below)
   const double* k =
       o.window_length > 0.0 || n > gear_sim::kWindowPrefixSamples ? nullptr : view.stiffness;
   const Eigen::Index blocks = (n + kRecordBlock - 1) / kRecordBlock;
   std::vector<double> sums(static_cast<size_t>(blocks), 0.0);
   std::vector<Eigen::Index> bad(static_cast<size_t>(blocks), n);
+  // A longer record's default window: its prefix summed by the calling thread during its steps
+  // (defaultWindowLength's sum, the same additions in the same order).
+  gear_sim::FiniteSum prefix;
+  const bool share_prefix = !(o.window_length > 0.0) && k == nullptr && view.stiffness != nullptr;
   // Contiguous runs of blocks per thread; each stops at its first bad step.
-  auto run = [&](Eigen::Index b0, Eigen::Index b1) {
+  auto run = [&](Eigen::Index b0, Eigen::Index b1, bool with_prefix) {
     for (Eigen::Index b = b0; b < b1; ++b) {
       const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
       double sum = 0.0;
-      const Eigen::Index i = stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum);
+      PrefixShare share;
+      if (with_prefix) {  // the (b - b0)'th of b1 - b0 near-equal parts of the prefix
+        const Eigen::Index p = gear_sim::kWindowPrefixSamples;
+        share = {view.stiffness, p * (b - b0) / (b1 - b0), p * (b - b0 + 1) / (b1 - b0), &prefix};
+      }
+      const Eigen::Index i =
+          stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum, with_prefix ? &share : nullptr);
       if (i < hi) {
         bad[static_cast<size_t>(b)] = i;
         return;
@@ -321,14 +355,16 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
   const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
   std::vector<std::thread> pool;
   for (Eigen::Index p = 1; p < parts; ++p)
-    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts);
-  run(0, blocks / parts);
+    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts, false);
+  run(0, blocks / parts, share_prefix);
   for (auto& th : pool) th.join();
   for (const Eigen::Index i : bad) {
     if (i < n) return badStep(t, i, ref, o.time_tolerance, -1);
   }
   if (o.window_length > 0.0) {
     *window_length = o.window_length;
+  } else if (share_prefix) {
+    *window_length = windowFromStiffness(prefix.sum, static_cast<double>(prefix.count), gear);
   } else if (k == nullptr) {
     *window_length = defaultWindowLength(view, gear);
   } else {
@@ -572,6 +608,9 @@ void IntegralMethod::buildColumns() {
   n_shared_ = static_cast<int>(shared.size());
   columns_ = local;
   columns_.insert(columns_.end(), shared.begin(), shared.end());
+  column_index_.fill(-1);
+  for (size_t i = columns_.size(); i-- > 0;)
+    column_index_[static_cast<size_t>(columns_[i])] = static_cast<int>(i);
   assert(columns_.size() <= static_cast<size_t>(kMaxColumns));
 }
 
@@ -595,15 +634,9 @@ void IntegralMethod::append(IntegralMethod&& later) {
 }
 
 void IntegralMethod::reset() {
+  if (!segments_.empty()) spare_.swapBuffers(&segments_.back());  // for the next addSegment
   segments_.clear();
   unlocated_switches_ = 0;
-}
-
-int IntegralMethod::columnIndex(Column c) const {
-  for (size_t i = 0; i < columns_.size(); ++i) {
-    if (columns_[i] == c) return static_cast<int>(i);
-  }
-  return -1;
 }
 
 namespace {
@@ -1174,13 +1207,15 @@ void gramOf(int nc, const Eigen::MatrixXd& rows, Eigen::Index L, int rc, double*
 SegmentEstimate IntegralMethod::addSegment(const SignalView& s, Eigen::Index begin,
                                            Eigen::Index end, bool estimate) {
   SegmentRecord rec;
+  rec.swapBuffers(&spare_);  // (a reset's buffers: no allocation for a segment after one)
+  rec.window_records.clear();
   SegmentEstimate& est = rec.estimate;
   est.t_start = s.time(begin);
   est.t_end = s.time(end - 1) + s.dt;
   const long rows = static_cast<long>(end - begin);
   est.samples = rows;
   const int q = static_cast<int>(columns_.size());
-  rec.gram = Eigen::MatrixXd::Zero(q + 1, q + 1);
+  rec.gram.setZero(q + 1, q + 1);
   auto fail = [&](const std::string& why) {
     est.identifiable = false;
     est.reason = why;
@@ -1367,57 +1402,21 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
   return {};
 }
 
-namespace {
-
-// Asks the memory system for samples [lo, hi) of every channel the segment pass reads (one
-// prefetch per 64-byte line): issued for the next segment while this one computes, so its first
-// pass finds the samples in cache instead of waiting for memory. Only a hint: no result depends
-// on it.
-void prefetchSamples(const double* const* channels, int nch, Eigen::Index lo, Eigen::Index hi) {
-  for (int c = 0; c < nch; ++c) {
-    const char* p = reinterpret_cast<const char*>(channels[c] + lo);
-    const char* const e = reinterpret_cast<const char*>(channels[c] + hi);
-    for (; p + 192 < e; p += 256) {  // four lines per step
-      __builtin_prefetch(p, 0, 3);
-      __builtin_prefetch(p + 64, 0, 3);
-      __builtin_prefetch(p + 128, 0, 3);
-      __builtin_prefetch(p + 192, 0, 3);
-    }
-    for (; p < e; p += 64) __builtin_prefetch(p, 0, 3);
-  }
-}
-
-}  // namespace
-
 // The rows of each of the W windows, projected and added to the segment's Gram matrix; the
 // window records for the modeled response. Returns the damping column's raw squared norm.
-// While window w computes, the samples of the record's next segment-length span (the next
-// segment, in a batch or a node's time order) are prefetched, a W-th of them per window.
 double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin, long rows, int W,
                                          SegmentRecord* rec) {
   const Formulation f = options_.formulation;
   const bool use_torque = needsTorque(f, options_.model);
   const int nc = static_cast<int>(columns_.size()) + 1;
   const int rc = std::max(columnIndex(Column::DampC), 0);
-  const double* ahead[5];
-  int n_ahead = 0;
-  for (const double* c :
-       {s.dte, s.stiffness, use_torque ? s.torque : nullptr,
-        needsMeshState(f) ? s.mesh_state : nullptr, shape_ ? s.mesh_phase : nullptr}) {
-    if (c != nullptr) ahead[n_ahead++] = c;
-  }
-  const Eigen::Index next_lo = begin + rows, next_hi = std::min<Eigen::Index>(s.n, next_lo + rows);
   double raw_c = 0.0;
   rec->window_records.reserve(W);
   for (int w = 0; w < W; ++w) {
     const Eigen::Index w0 = begin + (rows * w) / W, w1 = begin + (rows * (w + 1)) / W;
     const Eigen::Index L = w1 - w0;
-    if (next_hi > next_lo) {
-      const Eigen::Index span = next_hi - next_lo;
-      prefetchSamples(ahead, n_ahead, next_lo + (span * w) / W, next_lo + (span * (w + 1)) / W);
-    }
     windowRows(s, w0, w1, legacy_fbar_);
-    WindowRecord wr;
+    WindowRecord& wr = rec->window_records.emplace_back();  // (in place: ~600 bytes)
     wr.t_start = s.time(w0);
     wr.t_end = s.time(w1 - 1);
     wr.rows = L;
@@ -1428,7 +1427,6 @@ double IntegralMethod::accumulateWindows(const SignalView& s, Eigen::Index begin
     double* slope = wr.slope.data();
     gramOf(nc, rows_, L, rc, mean, slope, &raw, &rec->gram);
     raw_c += raw;
-    rec->window_records.push_back(std::move(wr));
   }
   return raw_c;
 }
@@ -1459,8 +1457,12 @@ IdentificationResult IntegralMethod::finish() const { return finishRange(0, segm
 // block (for the back-substitution).
 struct IntegralMethod::SharedSolution {
   struct Local {
-    Eigen::MatrixXd Gll_inv;
+    // The inverse of the local block: the segment record's (addSegment's solve; not copied)
+    // when `record` is set, else `own`.
+    const Eigen::MatrixXd* record = nullptr;
+    Eigen::MatrixXd own;
     bool ok = false;
+    const Eigen::MatrixXd& Gll_inv() const { return record != nullptr ? *record : own; }
   };
   std::vector<Local> locals;  // per segment of the range
   Eigen::VectorXd g;          // shared unknowns
@@ -1491,22 +1493,23 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
     if (!rec.estimate.identifiable) continue;
     const Eigen::MatrixXd& G = rec.gram;
     SharedSolution::Local& L = sh.locals[i - s_begin];
-    Eigen::VectorXd xl;
+    Eigen::VectorXd own_xl;
+    const Eigen::VectorXd* xl = &own_xl;
     double cond = 0.0;
     if (nl > 0 && rec.local_inverse.rows() == nl) {
       // addSegment's solve (the same call, which passed the stricter max_condition).
-      L.Gll_inv = rec.local_inverse;
-      xl = rec.local_solution;
-    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &xl,
-                                  &L.Gll_inv, &cond)) {
+      L.record = &rec.local_inverse;
+      xl = &rec.local_solution;
+    } else if (!solveEquilibrated(G.topLeftCorner(nl, nl), G.block(0, q, nl, 1), 1e300, &own_xl,
+                                  &L.own, &cond)) {
       continue;
     }
     L.ok = true;
     if (ns == 0) continue;  // (the shared problem's sums below are of zero size)
     const Eigen::MatrixXd Gsl = G.block(nl, 0, ns, nl);
-    A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv * Gsl.transpose();
-    rhs += G.block(nl, q, ns, 1) - Gsl * xl;
-    rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(xl), kRssFloor * G(q, q));
+    A += G.block(nl, nl, ns, ns) - Gsl * L.Gll_inv() * Gsl.transpose();
+    rhs += G.block(nl, q, ns, 1) - Gsl * *xl;
+    rss_total += std::max(G(q, q) - G.row(q).head(nl).dot(*xl), kRssFloor * G(q, q));
     sh.dof += rec.rows - 2L * rec.windows - nl;
   }
   sh.g = Eigen::VectorXd::Zero(ns);
@@ -1549,20 +1552,20 @@ std::vector<IntegralMethod::SegmentParams> IntegralMethod::segmentParams(size_t 
     if (ns == 0) {
       // Local unknowns only: the general expressions below with their zero-size terms dropped
       // (the same values, without the temporaries).
-      p.theta.noalias() = L.Gll_inv * G.block(0, q, nl, 1);
+      p.theta.noalias() = L.Gll_inv() * G.block(0, q, nl, 1);
       // The residual sum from the Gram matrix cancels to rounding when the fit is near exact:
       // floor it at the rounding level instead of reporting a zero standard error.
       const double rss = std::max(G(q, q) - G.row(q).head(nl).dot(p.theta), kRssFloor * G(q, q));
-      p.cov = (rss / static_cast<double>(rec.rows - 2L * rec.windows - nl)) * L.Gll_inv;
+      p.cov = (rss / static_cast<double>(rec.rows - 2L * rec.windows - nl)) * L.Gll_inv();
     } else {
       const Eigen::MatrixXd Gls = G.block(0, nl, nl, ns);
-      const Eigen::VectorXd xl = L.Gll_inv * (G.block(0, q, nl, 1) - Gls * sh.g);
+      const Eigen::VectorXd xl = L.Gll_inv() * (G.block(0, q, nl, 1) - Gls * sh.g);
       p.theta.head(nl) = xl;
       p.theta.tail(ns) = sh.g;
       const double sigma2 = sh.sigma2;
-      const Eigen::MatrixXd B = L.Gll_inv * Gls;  // locals' dependence on the shared unknowns
+      const Eigen::MatrixXd B = L.Gll_inv() * Gls;  // locals' dependence on the shared unknowns
       p.cov = Eigen::MatrixXd::Zero(q, q);
-      p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv + B * sh.Ainv * B.transpose());
+      p.cov.topLeftCorner(nl, nl) = sigma2 * (L.Gll_inv() + B * sh.Ainv * B.transpose());
       p.cov.block(0, nl, nl, ns) = -sigma2 * B * sh.Ainv;
       p.cov.block(nl, 0, ns, nl) = p.cov.block(0, nl, nl, ns).transpose();
       p.cov.bottomRightCorner(ns, ns) = sigma2 * sh.Ainv;
