@@ -308,24 +308,15 @@ TEST(SegmentDriver, AStreamedSharedRunThatWantsRefinementSaysItWasSkipped) {
   EXPECT_TRUE(b.constant->refined);
 }
 
-TEST(SegmentFeeder, ReadRangesAreContiguousAndCoverEverySegmentWithItsContext) {
+// The read ranges are contiguous and cover every segment with its context; the held ranges are
+// the reads with the samples kept before them (the group's left context): here the second
+// group's segment [300, 450) needs samples from 298 on.
+TEST(SegmentFeeder, ReadAndHeldRangesCoverEverySegmentWithItsContext) {
   const gd::SampleRanges segs = {{0, 100}, {100, 200}, {200, 300}, {300, 450}};
   gd::SegmentFeeder feeder(segs, 460, 0.0, 1e-6, 3);
-  const gd::SampleRanges reads = feeder.readRanges();
-  ASSERT_EQ(reads.size(), 2u);
-  EXPECT_EQ(reads[0], std::make_pair(Eigen::Index{0}, Eigen::Index{302}));
-  EXPECT_EQ(reads[1], std::make_pair(Eigen::Index{302}, Eigen::Index{452}));
-}
-
-// The held ranges are the reads with the samples kept before them (the group's left context):
-// here the second group's segment [300, 450) needs samples from 298 on.
-TEST(SegmentFeeder, HeldRangesAreTheReadsWithTheirLeftContext) {
-  const gd::SampleRanges segs = {{0, 100}, {100, 200}, {200, 300}, {300, 450}};
-  gd::SegmentFeeder feeder(segs, 460, 0.0, 1e-6, 3);
-  const gd::SampleRanges held = feeder.heldRanges();
-  ASSERT_EQ(held.size(), 2u);
-  EXPECT_EQ(held[0], std::make_pair(Eigen::Index{0}, Eigen::Index{302}));
-  EXPECT_EQ(held[1], std::make_pair(Eigen::Index{298}, Eigen::Index{452}));
+  using R = std::pair<Eigen::Index, Eigen::Index>;
+  EXPECT_EQ(feeder.readRanges(), (gd::SampleRanges{R{0, 302}, R{302, 452}}));
+  EXPECT_EQ(feeder.heldRanges(), (gd::SampleRanges{R{0, 302}, R{298, 452}}));
 }
 
 // Blocks of the held ranges used in place (pushHeld, as analyze streams a bag) give the results
