@@ -188,38 +188,64 @@ class ResultBag {
     return {};
   }
   bool active() const { return bag_ != nullptr; }
+  // A failed write (a full disk, a file size limit) is kept as the bag's error, reported by
+  // close(); nothing more is written.
   template <class M>
   void write(const std::string& topic, double t, M msg) {
-    if (!bag_) return;
+    if (!bag_ || !error_.empty()) return;
     const ros::Time stamp = ros::Time(1.0) + ros::Duration(std::max(0.0, t));
     msg.header.stamp = stamp;
-    bag_->write(topic, stamp, msg);
+    try {
+      bag_->write(topic, stamp, msg);
+    } catch (const std::exception& e) {
+      error_ = e.what();
+    }
   }
   // Closes the bag and stages it (renamed by stage->commit() with the other outputs).
   gear_sim::Status close(gd::OutputStage* stage) {
     if (!bag_) return {};
-    try {
-      bag_->close();
-    } catch (const std::exception& e) {
-      return gear_sim::Status::ioError(path_ + ": cannot write (" + e.what() + ")");
+    if (error_.empty()) {
+      try {
+        bag_->close();
+      } catch (const std::exception& e) {
+        error_ = e.what();
+      }
+    }
+    if (!error_.empty()) {
+      discard();
+      return gear_sim::Status::ioError(path_ + ": cannot write (" + error_ + ")");
     }
     bag_.reset();
     stage->add(tmp_, path_);
     return {};
   }
-  ~ResultBag() {
-    if (bag_) {  // not closed: an error path; leave nothing that looks complete
+  ~ResultBag() { discard(); }  // not closed: an error path; leave nothing that looks complete
+
+ private:
+  // Closes and removes the partial file. rosbag's destructor closes an open bag again and throws
+  // out of itself (std::terminate) when that fails, as it does on a full disk: after a failed
+  // close the partial file is truncated (its space freed) and closed again; a bag that still
+  // cannot close is let go without its destructor (its memory and descriptor stay the process's
+  // until it exits, which an error path does next).
+  void discard() noexcept {
+    if (!bag_) return;
+    try {
+      bag_->close();
+    } catch (...) {
+      (void)::truncate(tmp_.c_str(), 0);
       try {
         bag_->close();
       } catch (...) {
+        (void)bag_.release();
       }
-      std::remove(tmp_.c_str());
     }
+    bag_.reset();
+    std::remove(tmp_.c_str());
   }
 
- private:
   std::string path_, tmp_;  // the target and the temporary file written first
   std::unique_ptr<rosbag::Bag> bag_;
+  std::string error_;  // the first write or close error
 };
 
 std::string topicOf(const gd::AnalysisRun& run, bool primary, const char* leaf) {

@@ -392,6 +392,30 @@ TEST_F(AnalyzeBag, OverlappingRangesHoldTheOverlapInBothBlocks) {
   }
 }
 
+// A result bag that cannot be written (a full disk; here a file size limit of 4 to 48 KiB with
+// SIGXFSZ ignored, so writes fail with EFBIG) is an I/O error with its message and exit code 3,
+// whole and streamed, leaving no output behind: before, a failed write threw out of the stream
+// and rosbag's destructor retried the failed close and threw out of itself (std::terminate,
+// exit 134, at every limit from 8 KiB here).
+TEST_F(AnalyzeBag, AResultBagThatCannotBeWrittenIsAnIoErrorNotACrash) {
+  const fs::path bag = intactBag(), out = dir() / "full_out.bag", json = dir() / "full.json";
+  for (const int kib : {4, 8, 16, 48}) {
+    for (const std::string streamed : {"", " --max-in-memory 1000"}) {
+      const std::string limit = "trap '' XFSZ; ulimit -f " + std::to_string(kib) + "; exec ";
+      const ToolRun r = gear_test::runShell(
+          "bash -c \"" + limit + std::string(GEAR_TOOL_DIR) + "/analyze --input " + bag.string() +
+              " --output " + json.string() + " --bag-out " + out.string() + streamed + "\"",
+          dir(), "full_out");
+      SCOPED_TRACE(std::to_string(kib) + " KiB" + streamed);
+      EXPECT_EQ(r.code, 3) << r.err;
+      EXPECT_NE(r.err.find(": cannot write"), std::string::npos) << r.err;
+      EXPECT_FALSE(fs::exists(out));
+      EXPECT_FALSE(fs::exists(out.string() + ".partial"));
+      EXPECT_FALSE(fs::exists(json));
+    }
+  }
+}
+
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,
 // for the record read whole and streamed, for segment-local and shared unknowns.
 TEST_F(AnalyzeBag, ThreadsGiveTheSameResultsAsOneThreadWholeAndStreamed) {
