@@ -30,7 +30,6 @@
 #include <gear_damping/ModeledResponse.h>
 #include <gear_damping/WaveletModes.h>
 #include <rosbag/bag.h>
-#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -222,24 +221,11 @@ class ResultBag {
   ~ResultBag() { discard(); }  // not closed: an error path; leave nothing that looks complete
 
  private:
-  // Closes and removes the partial file. rosbag's destructor closes an open bag again and throws
-  // out of itself (std::terminate) when that fails, as it does on a full disk: after a failed
-  // close the partial file is truncated (its space freed) and closed again; a bag that still
-  // cannot close is let go without its destructor (its memory and descriptor stay the process's
-  // until it exits, which an error path does next).
+  // Closes (gear_sim_ros::discardBag: nothing throws, even on a full disk) and removes the
+  // partial file.
   void discard() noexcept {
     if (!bag_) return;
-    try {
-      bag_->close();
-    } catch (...) {
-      (void)::truncate(tmp_.c_str(), 0);
-      try {
-        bag_->close();
-      } catch (...) {
-        (void)bag_.release();
-      }
-    }
-    bag_.reset();
+    gear_sim_ros::discardBag(std::move(bag_), tmp_);
     std::remove(tmp_.c_str());
   }
 

@@ -1571,21 +1571,37 @@ Status writeSignalBag(const std::string& path, const gear_sim::SignalTable& t, d
   });
 }
 
+void discardBag(std::unique_ptr<rosbag::Bag> bag, const std::string& path) noexcept {
+  if (!bag) return;
+  try {
+    bag->close();
+  } catch (...) {
+    (void)::truncate(path.c_str(), 0);
+    try {
+      bag->close();
+    } catch (...) {
+      (void)bag.release();
+    }
+  }
+}
+
 Status writeBagStaged(const std::string& path, const gear_sim::GearModel* params,
                       const std::string& params_topic,
                       const std::function<void(rosbag::Bag&, const ros::Time&)>& fill) {
   return gear_sim::writeAtomically(path, [&](const std::string& tmp) {
+    std::unique_ptr<rosbag::Bag> bag;
     try {
-      rosbag::Bag bag(tmp, rosbag::bagmode::Write);
+      bag = std::make_unique<rosbag::Bag>(tmp, rosbag::bagmode::Write);
       const ros::Time base(1.0);
       if (params) {
         auto p = toMsg(*params);
         p.header.stamp = base;
-        bag.write(params_topic, base, p);
+        bag->write(params_topic, base, p);
       }
-      fill(bag, base);
-      bag.close();
+      fill(*bag, base);
+      bag->close();
     } catch (const std::exception& e) {
+      discardBag(std::move(bag), tmp);  // (a full disk: no throwing destructor)
       return Status::ioError(path + ": cannot write (" + e.what() + ")");
     }
     return Status();

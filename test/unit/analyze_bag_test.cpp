@@ -392,28 +392,58 @@ TEST_F(AnalyzeBag, OverlappingRangesHoldTheOverlapInBothBlocks) {
   }
 }
 
-// A result bag that cannot be written (a full disk; here a file size limit of 4 to 48 KiB with
-// SIGXFSZ ignored, so writes fail with EFBIG) is an I/O error with its message and exit code 3,
-// whole and streamed, leaving no output behind: before, a failed write threw out of the stream
-// and rosbag's destructor retried the failed close and threw out of itself (std::terminate,
-// exit 134, at every limit from 8 KiB here).
-TEST_F(AnalyzeBag, AResultBagThatCannotBeWrittenIsAnIoErrorNotACrash) {
+// A bag that cannot be written (a full disk; here a file size limit of 4 to 48 KiB with SIGXFSZ
+// ignored, so writes fail with EFBIG) is an I/O error with its message and documented exit code,
+// leaving no output behind: analyze's result bag (code 3, whole and streamed) and simulate's
+// record (code 2). Before, a failed write threw out of the stream and rosbag's destructor retried
+// the failed close and threw out of itself (std::terminate, exit 134, at 8 KiB and above).
+TEST_F(AnalyzeBag, ABagThatCannotBeWrittenIsAnIoErrorNotACrash) {
   const fs::path bag = intactBag(), out = dir() / "full_out.bag", json = dir() / "full.json";
+  const auto limited = [&](int kib, const std::string& tool, const std::string& args) {
+    SCOPED_TRACE(tool + " at " + std::to_string(kib) + " KiB" + args);
+    const ToolRun r =
+        gear_test::runShell("bash -c \"trap '' XFSZ; ulimit -f " + std::to_string(kib) + "; exec " +
+                                std::string(GEAR_TOOL_DIR) + "/" + tool + args + "\"",
+                            dir(), "full_out");
+    EXPECT_EQ(r.code, tool == "analyze" ? 3 : 2) << r.err;
+    EXPECT_NE(r.err.find(": cannot write"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+    EXPECT_FALSE(fs::exists(out.string() + ".partial"));
+    EXPECT_FALSE(fs::exists(json));
+  };
   for (const int kib : {4, 8, 16, 48}) {
-    for (const std::string streamed : {"", " --max-in-memory 1000"}) {
-      const std::string limit = "trap '' XFSZ; ulimit -f " + std::to_string(kib) + "; exec ";
-      const ToolRun r = gear_test::runShell(
-          "bash -c \"" + limit + std::string(GEAR_TOOL_DIR) + "/analyze --input " + bag.string() +
-              " --output " + json.string() + " --bag-out " + out.string() + streamed + "\"",
-          dir(), "full_out");
-      SCOPED_TRACE(std::to_string(kib) + " KiB" + streamed);
-      EXPECT_EQ(r.code, 3) << r.err;
-      EXPECT_NE(r.err.find(": cannot write"), std::string::npos) << r.err;
-      EXPECT_FALSE(fs::exists(out));
-      EXPECT_FALSE(fs::exists(out.string() + ".partial"));
-      EXPECT_FALSE(fs::exists(json));
-    }
+    for (const std::string streamed : {"", " --max-in-memory 1000"})
+      limited(kib, "analyze",
+              " --input " + bag.string() + " --output " + json.string() + " --bag-out " +
+                  out.string() + streamed);
+    limited(kib, "simulate",
+            " --config " + std::string(kParams) + " --duration 0.1 -q --output " + out.string());
   }
+}
+
+// A streamed record whose last group of 64 segments reads no new sample (65 segments of 2
+// samples: the 65th lies in the 64th's right context): its block holds the group's samples as
+// the record read whole does, so every segment reads as it does whole (before, the empty read
+// gave a view without channels: "missing channel dte", a shifted t_start, and with --wavelet a
+// null read and a segmentation fault; found by the session's hostile tester).
+TEST_F(AnalyzeBag, AnEmptyLastReadGivesTheSegmentsOfTheWholeRecord) {
+  const fs::path bag = dir() / "s130.bag", jw = dir() / "s130_whole.json",
+                 js = dir() / "s130_streamed.json";
+  ToolRun r = gear_test::runTool(
+      "simulate", "--config " + kParams + " --duration 0.00013 -q --output " + bag.string(), dir());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string args = "--input " + bag.string() + " --segment 0.000002 --refine never";
+  r = analyze(args + " --output " + jw.string());
+  const int code = r.code;
+  EXPECT_TRUE(code == 0 || code == 4) << r.err;
+  r = analyze(args + " --max-in-memory 1 --output " + js.string());
+  EXPECT_EQ(r.code, code) << r.err;
+  const auto w = nlohmann::json::parse(readText(jw)), s = nlohmann::json::parse(readText(js));
+  const auto& ws = w.at("identification").at("segments");
+  ASSERT_EQ(ws.size(), 65u);
+  EXPECT_EQ(s.at("identification").at("segments"), ws);
+  r = analyze(args + " --max-in-memory 1 --wavelet --output " + js.string());
+  EXPECT_TRUE(r.code == 0 || r.code == 4) << r.code << ": " << r.err;
 }
 
 // --threads N identifies segments in parallel (the segment driver): the same JSON as one thread,

@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -154,6 +155,14 @@ constexpr double kMaxBagTime = 4294967294.0;
 /// times outside [0, kMaxBagTime] s or sample indices beyond kMaxSampleIndex. Checked by
 /// writeSignalBag too.
 gear_sim::Status checkBagTimes(const gear_sim::SignalTable& table, double sample_rate);
+
+/// Closes a bag being written to file `path` after a failed write or close, so that nothing
+/// throws (rosbag's destructor closes an open bag again and throws out of itself, std::terminate,
+/// when that fails, as on a full disk): a failed close truncates the file (freeing its space)
+/// and closes again; a bag that still cannot close is let go without its destructor (its memory
+/// and descriptor stay the process's, which then ends on its error path). The caller removes the
+/// file.
+void discardBag(std::unique_ptr<rosbag::Bag> bag, const std::string& path) noexcept;
 
 /// Writes a bag staged: into PATH.partial, first the gear parameters on `params_topic` (when
 /// `params` is not null) stamped at the base time 1 s, then what `fill` writes (given the bag and
