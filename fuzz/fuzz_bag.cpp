@@ -1,6 +1,7 @@
 // libFuzzer target: the bag readers. A rig bag (JointState + WrenchStamped, `analyze --input`
 // takes it) goes through isRigBag and readRigBag; anything else through scanSignalBag, then
-// readSignalBag and a streamed read of every other segment-sized range. The input is written to
+// readSignalBag and streamed reads (every other segment-sized range, then overlapping ranges:
+// each block equal to the whole read's samples). The input is written to
 // a temporary .bag file; the seeds are small bags from `simulate` (a signal bag and a rig bag),
 // so mutations hit headers, chunk records and SignalChunk / JointState / WrenchStamped payloads.
 // The one-pass reading of `analyze` (previewSignalBag, scanStreamSignalBag) is checked against
@@ -10,6 +11,8 @@
 #include <cstdint>
 #include <cstring>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "../test/unit/support/status_support.hpp"
 #include "fuzz_support.hpp"
@@ -66,18 +69,35 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
                               gear_sim_ros::kMaxGapRatio * static_cast<double>(info.real_samples))
     std::abort();
   gear_sim::SignalTable t;
-  if (gear_test::ok(gear_sim_ros::readSignalBag(info, &t), &error) && t.size() != info.samples)
-    std::abort();
-  std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges;
-  const Eigen::Index step = 37;
-  for (Eigen::Index b = 0; b + step <= info.samples; b += 2 * step)
-    ranges.emplace_back(b, b + step);
-  gear_test::ok(gear_sim_ros::streamSignalBag(info, ranges,
-                                              [](const gear_sim::SignalTable& block, size_t) {
-                                                return block.size() > 0
-                                                           ? gear_sim::Status()
-                                                           : gear_sim::Status::internal("empty");
-                                              }),
-                &error);
+  const bool whole = gear_test::ok(gear_sim_ros::readSignalBag(info, &t), &error);
+  if (whole && t.size() != info.samples) std::abort();
+  // Streamed reads: every other range of 37 samples, then ranges that overlap (each beginning 8
+  // samples before the previous one ends, as analyze's groups with their left context). Each
+  // block holds the whole read's samples bit for bit (gaps and implausible values as the same
+  // NaN), the overlap in both blocks.
+  const auto same = [](const Eigen::VectorXd& block, const Eigen::VectorXd& all, Eigen::Index a) {
+    if (block.size() == 0) return all.size() == 0;
+    return a + block.size() <= all.size() &&
+           std::memcmp(block.data(), all.data() + a,
+                       sizeof(double) * static_cast<size_t>(block.size())) == 0;
+  };
+  for (const Eigen::Index stride : {Eigen::Index{74}, Eigen::Index{29}}) {
+    std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges;
+    for (Eigen::Index b = 0; b + 37 <= info.samples; b += stride) ranges.emplace_back(b, b + 37);
+    gear_test::ok(gear_sim_ros::streamSignalBag(
+                      info, ranges,
+                      [&](const gear_sim::SignalTable& block, size_t r) {
+                        if (block.size() == 0) return gear_sim::Status::internal("empty");
+                        const Eigen::Index a = ranges[r].first;
+                        if (whole && !(same(block.time, t.time, a) && same(block.dte, t.dte, a) &&
+                                       same(block.stiffness, t.stiffness, a) &&
+                                       same(block.torque, t.torque, a) &&
+                                       same(block.mesh_state, t.mesh_state, a) &&
+                                       same(block.mesh_phase, t.mesh_phase, a)))
+                          std::abort();
+                        return gear_sim::Status();
+                      }),
+                  &error);
+  }
   return 0;
 }
