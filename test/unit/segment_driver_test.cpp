@@ -6,10 +6,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "gear_damping_id/live_identification.hpp"
 #include "gear_damping_id/quality_flags.hpp"
@@ -107,9 +110,23 @@ gd::IdentificationResult batch(const gd::IdentificationOptions& o, int threads =
   return driver.finish(&whole, &ranges);
 }
 
-// The record read in blocks of `group` segments plus context, as analyze streams a bag.
-gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t group, int threads = 1,
-                                  bool held = false) {
+// Samples [a, a + n) of every column of `t`, as a block streamed from a bag.
+gear_sim::SignalTable blockOf(const gear_sim::SignalTable& t, Eigen::Index a, Eigen::Index n) {
+  gear_sim::SignalTable block;
+  block.time = t.time.segment(a, n);
+  block.dte = t.dte.segment(a, n);
+  block.stiffness = t.stiffness.segment(a, n);
+  block.torque = t.torque.segment(a, n);
+  block.mesh_state = t.mesh_state.segment(a, n);
+  block.mesh_phase = t.mesh_phase.segment(a, n);
+  return block;
+}
+
+// The record read in blocks of `group` segments plus context, as analyze streams a bag: each
+// block holds the feeder's held range (the group's read with its left context) and is used in
+// place (pushHeld).
+gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t group,
+                                  int threads = 1) {
   const gear_sim::SignalTable& t = record().table;
   const gd::SignalView whole = gd::SignalView::of(t);
   const gd::SampleRanges ranges = gd::segmentRanges(whole, o);
@@ -120,22 +137,15 @@ gd::IdentificationResult streamed(const gd::IdentificationOptions& o, size_t gro
   if (o.formulation == gd::Formulation::Legacy)
     driver.setLegacyForcing(gd::legacyForcing(whole, ranges, record().gear));
   gd::SegmentFeeder feeder(ranges, whole.n, whole.t0, whole.dt, group);
-  // held: the blocks hold the feeder's held ranges (with the left context) and are used in place
-  const gd::SampleRanges reads = held ? feeder.heldRanges() : feeder.readRanges();
-  for (size_t k = 0; k < reads.size(); ++k) {
-    const Eigen::Index a = reads[k].first, n = reads[k].second - a;
-    gear_sim::SignalTable block;  // only this block in memory, as from the bag
-    block.time = t.time.segment(a, n);
-    block.dte = t.dte.segment(a, n);
-    block.stiffness = t.stiffness.segment(a, n);
-    block.torque = t.torque.segment(a, n);
-    block.mesh_state = t.mesh_state.segment(a, n);
-    block.mesh_phase = t.mesh_phase.segment(a, n);
+  const gd::SampleRanges held = feeder.heldRanges();
+  for (size_t k = 0; k < held.size(); ++k) {
+    const Eigen::Index a = held[k].first, n = held[k].second - a;
+    const gear_sim::SignalTable block = blockOf(t, a, n);  // only this block in memory
     const auto sink = [&](const gd::SignalView& v, const gd::SampleRanges& segs, size_t) {
       driver.addAll(v, segs);
       return true;
     };
-    EXPECT_TRUE(held ? feeder.pushHeld(block, k, sink) : feeder.push(block, k, sink));
+    EXPECT_TRUE(feeder.pushHeld(block, k, sink));
   }
   return driver.finish();
 }
@@ -320,27 +330,97 @@ TEST(SegmentFeeder, ReadAndHeldRangesCoverEverySegmentWithItsContext) {
 }
 
 // Blocks of the held ranges used in place (pushHeld, as analyze streams a bag) give the results
-// of blocks copied into the feeder's buffer (push), bit for bit, for groups of 1, 2 and 7
-// segments, one and two threads, segment-local formulations and models.
-TEST(SegmentFeeder, BlocksUsedInPlaceGiveTheResultsOfTheCopiedBlocks) {
+// of the whole record read at once, bit for bit, for groups of 1, 2 and 7 segments, one and two
+// threads, segment-local formulations and models. Only the segment's start time is computed
+// otherwise: the block's origin t0 + first dt plus (i - first) dt, against t0 + i dt whole, which
+// may round differently in the last bits (measured: at most 8.7e-19 s; expectSameEstimate's
+// 1e-12 s).
+TEST(SegmentFeeder, BlocksUsedInPlaceGiveTheWholeRecordsEstimatesBitForBit) {
   const auto sameBits = [](double x, double y) { return std::memcmp(&x, &y, sizeof x) == 0; };
   for (const auto f : {gd::Formulation::Known, gd::Formulation::Greybox}) {
     for (const auto m : {gd::DampingModel::Piecewise, gd::DampingModel::LoadLaw}) {
       const gd::IdentificationOptions o = optionsFor(f, m);
-      for (const size_t group : {size_t{1}, size_t{2}, size_t{7}}) {
-        for (const int threads : {1, 2}) {
-          const gd::IdentificationResult a = streamed(o, group, threads, false);
-          const gd::IdentificationResult b = streamed(o, group, threads, true);
-          ASSERT_EQ(a.segments.size(), b.segments.size());
-          for (size_t i = 0; i < a.segments.size(); ++i) {
-            EXPECT_TRUE(sameBits(a.segments[i].C, b.segments[i].C)) << group << " " << i;
-            EXPECT_TRUE(sameBits(a.segments[i].C_std, b.segments[i].C_std)) << group << " " << i;
-            EXPECT_TRUE(sameBits(a.segments[i].t_start, b.segments[i].t_start)) << i;
+      for (const int threads : {1, 2}) {
+        const gd::IdentificationResult whole = batch(o, threads);
+        for (const size_t group : {size_t{1}, size_t{2}, size_t{7}}) {
+          const gd::IdentificationResult b = streamed(o, group, threads);
+          ASSERT_EQ(whole.segments.size(), b.segments.size());
+          for (size_t i = 0; i < b.segments.size(); ++i) {
+            const gd::SegmentEstimate &a = whole.segments[i], &s = b.segments[i];
+            EXPECT_TRUE(sameBits(a.C, s.C)) << group << " " << i;
+            EXPECT_TRUE(sameBits(a.C_std, s.C_std)) << group << " " << i;
+            EXPECT_NEAR(a.t_start, s.t_start, 1e-12) << group << " " << i;
           }
         }
       }
     }
   }
+}
+
+// The sink's view of the segments of `segs` from `first` on (`local`, in view samples): each one
+// has every channel of `whole` (record sample i at t0 + i dt), its samples and its stencil
+// context where the record has them, at the record's times. Counts each segment in *seen.
+void expectSegmentsOfTheWholeRecord(const gd::SignalView& v, const gd::SampleRanges& local,
+                                    size_t first, const gd::SampleRanges& segs,
+                                    const gear_sim::SignalTable& whole, double t0,
+                                    std::vector<int>* seen) {
+  using R = std::pair<Eigen::Index, Eigen::Index>;
+  const double* got[5] = {v.dte, v.stiffness, v.torque, v.mesh_state, v.mesh_phase};
+  const Eigen::VectorXd* want[5] = {&whole.dte, &whole.stiffness, &whole.torque, &whole.mesh_state,
+                                    &whole.mesh_phase};
+  const double dt = whole.time(1) - whole.time(0);
+  const Eigen::Index origin = std::llround((v.t0 - t0) / dt);  // record sample of view sample 0
+  EXPECT_EQ(v.t0, t0 + static_cast<double>(origin) * v.dt);
+  for (size_t j = 0; j < local.size(); ++j) {
+    const R& seg = segs[first + j];
+    EXPECT_EQ(local[j], R(seg.first - origin, seg.second - origin)) << first + j;
+    ++(*seen)[first + j];
+    const Eigen::Index lo = std::max<Eigen::Index>(seg.first - gd::kStencilContext, 0);
+    const Eigen::Index hi = std::min(seg.second + gd::kStencilContext, whole.size());
+    ASSERT_GE(lo - origin, 0) << first + j;
+    ASSERT_LE(hi - origin, v.n) << first + j;
+    for (int c = 0; c < 5; ++c) {
+      ASSERT_NE(got[c], nullptr) << "channel " << c << ", segment " << first + j;
+      for (Eigen::Index i = lo; i < hi; ++i)
+        EXPECT_EQ(got[c][i - origin], (*want[c])(i)) << "channel " << c << ", sample " << i;
+    }
+  }
+}
+
+// A group that reads no new sample (65 segments of 2 samples in groups of 64: the first read
+// ends at the record's end, with the last segment's right context) still gets its segment with
+// the samples before it: the block of its held range, used in place, gives the sink the
+// segments of the whole record (every channel, the same samples at the same times, context
+// included). push() of the read ranges, now removed, handed that group a view without channels.
+TEST(SegmentFeeder, AGroupThatReadsNoNewSampleGetsTheSegmentsOfTheWholeRecord) {
+  constexpr Eigen::Index kSegments = 65, kLength = 2, kSamples = kSegments * kLength;
+  constexpr double t0 = 0.25, dt = 1e-6;
+  gd::SampleRanges segs;
+  for (Eigen::Index i = 0; i < kSegments; ++i) segs.emplace_back(i * kLength, (i + 1) * kLength);
+  gear_sim::SignalTable whole;  // every sample of every channel distinct
+  const Eigen::VectorXd count = Eigen::VectorXd::LinSpaced(kSamples, 0.0, kSamples - 1.0);
+  whole.time = t0 + dt * count.array();
+  whole.dte = count.array() + 1000.0;
+  whole.stiffness = count.array() + 2000.0;
+  whole.torque = count.array() + 3000.0;
+  whole.mesh_state = count.array() + 4000.0;
+  whole.mesh_phase = count.array() + 5000.0;
+  gd::SegmentFeeder feeder(segs, kSamples, t0, dt, 64);
+  using R = std::pair<Eigen::Index, Eigen::Index>;
+  ASSERT_EQ(feeder.readRanges(), (gd::SampleRanges{R{0, kSamples}, R{kSamples, kSamples}}));
+  const gd::SampleRanges held = feeder.heldRanges();
+  ASSERT_EQ(held, (gd::SampleRanges{R{0, kSamples}, R{kSamples - 4, kSamples}}));
+  std::vector<int> seen(kSegments, 0);
+  const auto sink = [&](const gd::SignalView& v, const gd::SampleRanges& local, size_t first) {
+    EXPECT_EQ(v.dt, dt);
+    expectSegmentsOfTheWholeRecord(v, local, first, segs, whole, t0, &seen);
+    return true;
+  };
+  for (size_t k = 0; k < held.size(); ++k) {
+    const Eigen::Index a = held[k].first, n = held[k].second - a;
+    EXPECT_TRUE(feeder.pushHeld(blockOf(whole, a, n), k, sink));
+  }
+  EXPECT_EQ(seen, std::vector<int>(kSegments, 1));
 }
 
 }  // namespace
