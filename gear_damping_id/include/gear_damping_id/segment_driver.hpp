@@ -10,7 +10,7 @@
 // formulation x damping model):
 // - A segment is samples [begin, end) of a view; up to kStencilContext samples on either side,
 //   when the view holds them, serve the quadrature stencils only. Callers give the same
-//   neighbours the record has (StreamAssembler keeps them, SegmentFeeder below too).
+//   neighbours the record has (StreamAssembler keeps them; SegmentFeeder's blocks hold them).
 // - piecewise model (known, greybox, paper): each segment is its own problem: identified, then,
 //   when options.refine asks for it (Auto: on the segment's own relative standard error),
 //   refined by output error, on its own. The record's omega0 (for xi) is the duration-weighted
@@ -219,29 +219,29 @@ class SegmentDriver {
 /// record that sums its blocks in order gets the same number); NaN without a torque channel.
 double legacyForcing(const SignalView& view, const SampleRanges& ranges, const GearConstants& gear);
 
-/// Assembles the contiguous sample blocks of a long record, read in order, into the damping
-/// segments `ranges` (record sample numbers, ascending) with kStencilContext samples of context,
-/// and hands them to `sink` in groups of up to `group` segments (for parallel workers); memory is
-/// bounded by a group plus a block. Views are on the record's time axis: sample i at t0 + i dt.
+/// Streams the damping segments `ranges` (record sample numbers, ascending) of a long record to
+/// `sink` in groups of up to `group` segments (for parallel workers). The record is read in order
+/// as one block a group (heldRanges()), holding the group's segments with kStencilContext samples
+/// of context; the sink's view is on the block itself, so memory is bounded by one group's block.
+/// Views are on the record's time axis: sample i at t0 + i dt.
 class SegmentFeeder {
  public:
   using Sink =
       std::function<bool(const SignalView& view, const SampleRanges& ranges, size_t first_range)>;
   SegmentFeeder(SampleRanges ranges, Eigen::Index record_samples, double t0, double dt,
                 size_t group);
-  /// The sample ranges to read (contiguous, non-overlapping, in order), each one group of
-  /// segments with its context: feed their blocks to push() in this order.
+  /// The new samples each group reads (contiguous, non-overlapping, in order): its segments with
+  /// their context, from where the previous group's read ended. Empty for a group whose samples
+  /// were all read before (e.g. a last segment of at most kStencilContext samples).
   SampleRanges readRanges() const;
-  /// Takes the block of read range `index` (its columns; `time` is ignored). Returns false when
-  /// the sink did.
-  bool push(const gear_sim::SignalTable& block, size_t index, const Sink& sink);
-  /// The sample ranges push() holds for each group: each read range with the samples before it
-  /// that the group needs (its left stencil context, kept from the previous read). Ascending, a
-  /// range beginning before the previous one ends.
+  /// The sample range each group's block must hold: its read range with the samples before it
+  /// that the group needs (its left stencil context, already read for the previous group), so
+  /// every segment of the group with its context. Ascending; a range may begin before the
+  /// previous one ends.
   SampleRanges heldRanges() const;
-  /// push() of a block that holds heldRanges()[index] (its columns; `time` is ignored): the
-  /// sink's view is on the block's columns, not on a copy; the same view otherwise (origin,
-  /// length, ranges), so the same results.
+  /// Takes the block that holds heldRanges()[index] (its columns; `time` is ignored; an empty
+  /// column is an absent channel): the sink's view is on the block's columns, not on a copy.
+  /// Returns false when the sink did.
   bool pushHeld(const gear_sim::SignalTable& block, size_t index, const Sink& sink);
 
  private:
@@ -250,16 +250,9 @@ class SegmentFeeder {
   double t0_, dt_;
   size_t group_;
   std::vector<std::pair<size_t, size_t>> groups_;  // [first, last) segment of each read range
-  Eigen::Index buffer_first_ = 0;                  // record sample of buffer column 0
-  std::vector<std::vector<double>> buffer_;        // dte, stiffness, torque, state, phase
-  std::vector<bool> present_;
-  SampleRanges reads_, held_;  // readRanges(), heldRanges()
+  SampleRanges reads_, held_;                      // readRanges(), heldRanges()
   SampleRanges makeReadRanges() const;
   SampleRanges makeHeldRanges() const;
-  // The sink's view of `n` samples from record sample `first` at columns `cols` (null: absent),
-  // with the local ranges of group `index`.
-  bool sinkView(Eigen::Index first, Eigen::Index n, const double* const cols[5], size_t index,
-                const Sink& sink) const;
 };
 
 }  // namespace gear_damping_id

@@ -498,9 +498,7 @@ SegmentFeeder::SegmentFeeder(SampleRanges ranges, Eigen::Index record_samples, d
       samples_(record_samples),
       t0_(t0),
       dt_(dt),
-      group_(std::max<size_t>(group, 1)),
-      buffer_(5),
-      present_(5, false) {
+      group_(std::max<size_t>(group, 1)) {
   for (size_t a = 0; a < ranges_.size(); a += group_)
     groups_.emplace_back(a, std::min(a + group_, ranges_.size()));
   reads_ = makeReadRanges();
@@ -524,35 +522,8 @@ SampleRanges SegmentFeeder::makeReadRanges() const {
   return out;
 }
 
-bool SegmentFeeder::push(const gear_sim::SignalTable& block, size_t index, const Sink& sink) {
-  const SampleRanges& reads = reads_;
-  const auto [a, b] = groups_[index];
-  const Eigen::Index lo = std::max<Eigen::Index>(ranges_[a].first - kStencilContext, 0);
-  // Keep what the group needs before this block (its left context and any overlap).
-  const Eigen::Index drop = std::max<Eigen::Index>(lo - buffer_first_, 0);
-  const Eigen::VectorXd* cols[5] = {&block.dte, &block.stiffness, &block.torque, &block.mesh_state,
-                                    &block.mesh_phase};
-  for (int c = 0; c < 5; ++c) {
-    auto& buf = buffer_[static_cast<size_t>(c)];
-    buf.erase(buf.begin(),
-              buf.begin() + std::min<Eigen::Index>(drop, static_cast<Eigen::Index>(buf.size())));
-    if (cols[c]->size() == 0) {
-      buf.clear();
-      present_[static_cast<size_t>(c)] = false;
-      continue;
-    }
-    present_[static_cast<size_t>(c)] = true;
-    buf.insert(buf.end(), cols[c]->data(), cols[c]->data() + cols[c]->size());
-  }
-  buffer_first_ = reads[index].second - static_cast<Eigen::Index>(buffer_[0].size());
-  const double* ptr[5];
-  for (int c = 0; c < 5; ++c)
-    ptr[c] = present_[static_cast<size_t>(c)] ? buffer_[static_cast<size_t>(c)].data() : nullptr;
-  return sinkView(buffer_first_, static_cast<Eigen::Index>(buffer_[0].size()), ptr, index, sink);
-}
-
 SampleRanges SegmentFeeder::makeHeldRanges() const {
-  // push()'s buffer, by its extent only: what it drops before a group, then the read appended.
+  // The samples held before a group: drop those before its left context, then append its read.
   const SampleRanges& reads = reads_;
   SampleRanges out;
   Eigen::Index first = 0, size = 0;
@@ -569,22 +540,15 @@ SampleRanges SegmentFeeder::makeHeldRanges() const {
 
 bool SegmentFeeder::pushHeld(const gear_sim::SignalTable& block, size_t index, const Sink& sink) {
   const Eigen::Index first = held_[index].first;
-  const Eigen::VectorXd* cols[5] = {&block.dte, &block.stiffness, &block.torque, &block.mesh_state,
-                                    &block.mesh_phase};
-  const double* ptr[5];
-  for (int c = 0; c < 5; ++c) ptr[c] = cols[c]->size() > 0 ? cols[c]->data() : nullptr;
-  return sinkView(first, block.dte.size(), ptr, index, sink);
-}
-
-bool SegmentFeeder::sinkView(Eigen::Index first, Eigen::Index n, const double* const cols[5],
-                             size_t index, const Sink& sink) const {
   const auto [a, b] = groups_[index];
+  const auto column = [](const Eigen::VectorXd& x) { return x.size() > 0 ? x.data() : nullptr; };
   SignalView v;
   v.dt = dt_;
   v.t0 = t0_ + static_cast<double>(first) * dt_;
-  v.n = n;
-  v.dte = cols[0], v.stiffness = cols[1], v.torque = cols[2], v.mesh_state = cols[3];
-  v.mesh_phase = cols[4];
+  v.n = block.dte.size();
+  v.dte = column(block.dte), v.stiffness = column(block.stiffness);
+  v.torque = column(block.torque), v.mesh_state = column(block.mesh_state);
+  v.mesh_phase = column(block.mesh_phase);
   SampleRanges local;
   for (size_t i = a; i < b; ++i)
     local.emplace_back(ranges_[i].first - first, ranges_[i].second - first);
