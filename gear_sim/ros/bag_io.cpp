@@ -33,6 +33,7 @@
 #include "gear_sim/async.hpp"
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/simd_clones.hpp"
 #include "gear_sim/window_prefix.hpp"
 #include "gear_sim_ros/bag_format.hpp"
 #include "gear_sim_ros/conversions.hpp"
@@ -1130,14 +1131,6 @@ Status scanSignalBag(const std::string& path, const std::string& topic, BagSigna
 }
 
 namespace {
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-// The block copies with AVX2 where the machine has it (GCC target_clones, run-time dispatch):
-// selects and copies only, so both clones write the same bits.
-#define GEAR_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define GEAR_AVX2_CLONES
-#endif
-
 // n mesh_state bytes as doubles: 0 and 1 kept, any other byte NaN (counted by the scan); a
 // table lookup, no branch.
 void meshStates(const std::uint8_t* from, Eigen::Index n, double* out) {
@@ -1152,7 +1145,8 @@ void meshStates(const std::uint8_t* from, Eigen::Index n, double* out) {
 }
 
 // n float64 values from `from` (little-endian bytes) to `out`, a finite value outside `range`
-// as NaN (counted by the scan); branch-free, so the loop vectorises.
+// as NaN (counted by the scan); branch-free, so the loop vectorises, with an AVX2 clone where
+// the machine has it (selects and copies only, so both clones write the same bits).
 GEAR_AVX2_CLONES void plausibleCopy(const std::uint8_t* from, Eigen::Index n, PlausibleRange range,
                                     double* out) {
   const double nan = std::numeric_limits<double>::quiet_NaN();

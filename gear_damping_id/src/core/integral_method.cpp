@@ -14,21 +14,20 @@
 #include "gear_damping_id/output_error.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/models.hpp"
+#include "gear_sim/simd_clones.hpp"
 #include "gear_sim/window_prefix.hpp"
 
-// Hot loops compiled for AVX2 as well as the baseline, chosen at load time. GD_AVX2_CLONES:
-// without FMA contraction or reassociation both clones compute the same bits (each loop's
-// accumulators are independent lanes, summed in the same order by either). GD_FMA_CLONES (the
-// row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted multiply-adds) or the
-// baseline; the two clones agree to rounding, not in every bit (docs/method.md §5, numeric
-// contract), and on one machine every run takes the same clone, so any thread count gives the
-// same bits.
+// Hot loops compiled for AVX2 as well as the baseline, chosen at load time. GEAR_AVX2_CLONES
+// (gear_sim/simd_clones.hpp): without FMA contraction or reassociation both clones compute the
+// same bits (each loop's accumulators are independent lanes, summed in the same order by either).
+// GD_FMA_CLONES (the row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted
+// multiply-adds) or the baseline; the two clones agree to rounding, not in every bit
+// (docs/method.md §5, numeric contract), and on one machine every run takes the same clone, so
+// any thread count gives the same bits.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #define GD_FMA_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #define GD_ALWAYS_INLINE __attribute__((always_inline))
 #else
-#define GD_AVX2_CLONES
 #define GD_FMA_CLONES
 #define GD_ALWAYS_INLINE
 #endif
@@ -83,7 +82,7 @@ GD_ALWAYS_INLINE inline void channelSumsOf(const double* const* x, Eigen::Index 
   finishSums<NCH>(x, lo, hi, a, out);
 }
 
-GD_AVX2_CLONES
+GEAR_AVX2_CLONES
 void channelSums(const double* const* x, int nch, Eigen::Index lo, Eigen::Index hi, double* out) {
   switch (nch) {
     case 1:
@@ -189,7 +188,7 @@ struct PrefixShare {
 // block that failed), then its stiffness summed: both columns stream from memory together
 // instead of one pass each. share (may be nullptr): its values added in order, an eighth of
 // them after each block of 64 steps of the chunk (the rest after the chunk).
-GD_AVX2_CLONES
+GEAR_AVX2_CLONES
 Eigen::Index stepsAndSum(const double* tt, const double* k, Eigen::Index lo, Eigen::Index hi,
                          double ref, double tol, double* sum, const PrefixShare* share) {
   constexpr Eigen::Index kChunk = 512;

@@ -2,11 +2,7 @@
 
 #include <cstring>
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define GD_AVX2_CLONES
-#endif
+#include "gear_sim/simd_clones.hpp"
 
 namespace gear_damping_id {
 
@@ -34,7 +30,7 @@ inline bool scanIntervals(const double* k, long j0, long j1, bool check_pairs, b
 // Blocks of 16 intervals without a change are passed branch-free (vectorised; AVX2 clone, chosen
 // at load time). The blocks before `from` were searched already: only those listed in `flagged`
 // hold a change, and they are scanned here one interval at a time, as the loop below would.
-GD_AVX2_CLONES
+GEAR_AVX2_CLONES
 bool heldChangesAfter(const double* k, long lo, long hi, bool check_pairs,
                       const std::vector<long>& flagged, long from, std::vector<long>* changes) {
   const long last = hi - 1;  // intervals j < last
