@@ -781,6 +781,48 @@ TEST(WaveletAnalyzer, ReusedAcrossCallsGivesBitIdenticalResults) {
   expectIdentical(fresh, reused, "after an error");
 }
 
+// The per-mode path on several threads (WaveletOptions::threads: the modes' fits on threads of
+// their own, and in a reused analyzer the fit rows' transform loaded while the spectra are
+// computed) gives exactly the one-thread result: records of the same length and modes in a row
+// (the loaded transform used), then other fit rows (omega0 30: reconfigured after the spectra),
+// another length (not loaded ahead), more threads than modes, and one mode.
+TEST(WaveletAnalyzer, PerModePathOnSeveralThreadsGivesTheOneThreadResult) {
+  WaveletOptions one;
+  one.full_scalogram = false;
+  WaveletOptions explicit_modes = one;
+  explicit_modes.mode_frequencies = {300.0, 1731.0, 7375.0};
+  explicit_modes.fit_omega0 = 30.0;
+  const std::vector<std::pair<std::vector<double>, const WaveletOptions*>> cases = {
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 11), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 12), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 13), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 14), &explicit_modes},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 15), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN / 2, 30.0, 16), &one},
+      {freeDecay({{5000.0, 0.02, 1.0, 0.0}}, kPaperFs, kPaperN / 2, 30.0, 17), &one},
+  };
+  std::string error;
+  for (const int threads : {2, 3}) {
+    WaveletAnalyzer analyzer;
+    WaveletResult reused;
+    for (size_t c = 0; c < cases.size(); ++c) {
+      const std::vector<double>& y = cases[c].first;
+      WaveletOptions opt = *cases[c].second;
+      WaveletResult serial, fresh;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, opt, &serial), &error)) << error;
+      opt.threads = threads;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, opt, &fresh), &error)) << error;
+      ASSERT_TRUE(gear_test::ok(
+          analyzer.analyze(y.data(), static_cast<long>(y.size()), kPaperFs, opt, &reused), &error))
+          << error;
+      EXPECT_FALSE(serial.modes.empty());
+      const std::string what = std::to_string(threads) + " threads, case " + std::to_string(c);
+      expectIdentical(serial, fresh, what);
+      expectIdentical(serial, reused, what + ", reused");
+    }
+  }
+}
+
 TEST(AnalyzeWavelet, AcceptsEigenVectorsAndStdVectorsAlike) {
   const std::vector<double> y = freeDecay({{5000.0, 0.02, 1.0, 0.0}}, 100000.0, 4000);
   const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(y.data(), long(y.size()));
