@@ -608,6 +608,7 @@ struct Analysis {
   BinnedPower& power;        // per-mode path: the Parseval sums of the wide rows (see above)
   std::vector<std::unique_ptr<RowScratch>>& rows;  // one per fitting thread (at least one)
   bool own_loaded = false;  // `own` holds this record's spectrum already (loadOwnAhead)
+  double ahead_hf = kNaN;   // and the noise row's level from it (highFrequencyLevel)
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -623,6 +624,17 @@ const std::complex<double>* decimatedRow(const Analysis& a, const MorletCwt& fit
                                          double omega, long D, RowScratch* rs) {
   const double coef = omega * a.fs / (f * static_cast<double>(fit.paddedSize()));  // s*w_k
   return rs->decimated.row(fit.spectrum(), fit.paddedSize(), coef, omega, D);
+}
+
+// Per-mode path: whether cwt is configured for these signals with the FFT length these fit rows
+// need. Its rows are not used there (the decimated rows take any frequency from the spectrum,
+// within the padding), so its plan and a spectrum already loaded serve rows of other
+// frequencies, as a configuration for them would (same length, same spectrum): a reused
+// analyzer re-plans only when the length changes, not for each record's peak frequencies.
+bool sameLength(const MorletCwt& cwt, const Analysis& a, const std::vector<double>& f,
+                const std::vector<double>& w) {
+  return cwt.configured() && cwt.size() == a.n && cwt.sampleRate() == a.fs &&
+         cwt.paddedSize() == MorletCwt::paddedLength(a.n, a.fs, f, w);
 }
 
 // Whether cwt is configured for exactly these signals and rows (then configure is skipped:
@@ -896,15 +908,14 @@ constexpr long kNoiseRowStep = 4;
 // Noise estimate from the wavelet row at 0.45*fs (far above the modes for omega0 >= 3: a mode at
 // <= 0.3*fs leaks < exp(-4.5) into it): the median of its modulus outside its COI is the Rayleigh
 // median sqrt(ln 2) * sqrt(gain) * sigma_n for white noise. Skipped when a mode lies within 3
-// wavelet bandwidths of that row. Lowers res.noise_std when smaller.
-void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>& seeds,
-                        RowScratch* rs) {
+// wavelet bandwidths of that row (highFrequencyNoise). This is the row's level from fit's
+// spectrum (NaN when the record is too short for it or the row cannot be computed).
+double highFrequencyLevel(const Analysis& an, MorletCwt* fit, RowScratch* rs) {
+  const Analysis* a = &an;
   const double w0 = a->opt.omega0, f_hf = 0.45 * a->fs;
-  bool clear = true;
-  for (const ModeSeed& m : seeds) clear = clear && m.f_spec < f_hf * (1.0 - 3.0 / w0);
   const double edge = a->opt.coi_factor * morletConeOfInfluence(f_hf, w0) * a->fs;
   const long lo = static_cast<long>(std::ceil(edge)), hi = a->n - 1 - lo;
-  if (!clear || hi - lo < kMinRegionSamples) return;
+  if (hi - lo < kMinRegionSamples) return kNaN;
   // Per-mode path: the row's points m*D (D = kNoiseRowStep, or the largest divisor of the
   // padded length below it) in [lo, hi]; s*fs is ~2 samples at omega0 = 6, so points 4 samples
   // apart are nearly independent and the median keeps ~1/4 of the values it had over every
@@ -915,16 +926,24 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
                                              fit->paddedSize(), kNoiseRowStep);
   const std::complex<double>* w =
       a->opt.full_scalogram ? fit->rowAt(f_hf, w0) : decimatedRow(*a, *fit, f_hf, w0, D, rs);
-  if (!w) return;
+  if (!w) return kNaN;
   const long points = (a->n + D - 1) / D, m0 = gridCeil(lo, D), m1 = gridFloor(hi, D);
-  if (m1 < m0) return;
+  if (m1 < m0) return kNaN;
   std::vector<double>* env = &rs->env;
   growScratch(env, points);
   modulusOf(reinterpret_cast<const double*>(w), points, env->data());
   const double med = medianOfNonNegative(env->data() + m0, m1 - m0 + 1, 1);
   const double gain = gainOf(*a, *fit, f_hf, w0);
-  const double hf = med / std::sqrt(std::log(2.0) * gain);
-  if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
+  return med / std::sqrt(std::log(2.0) * gain);
+}
+
+// Lowers res.noise_std to the noise row's level hf (highFrequencyLevel) when that is smaller
+// and no mode lies within 3 wavelet bandwidths of the row.
+void highFrequencyNoise(Analysis* a, const std::vector<ModeSeed>& seeds, double hf) {
+  const double w0 = a->opt.omega0, f_hf = 0.45 * a->fs;
+  bool clear = true;
+  for (const ModeSeed& m : seeds) clear = clear && m.f_spec < f_hf * (1.0 - 3.0 / w0);
+  if (clear && hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
 }
 
 // Fit of one mode's row at omega0 (two passes: the second shifts the region's start by
@@ -1166,15 +1185,19 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   bool held = true;
   for (size_t i = 0; i < seeds.size(); ++i) held = held && a->scal.fitsPadding(fit_f[i], fit_w[i]);
   MorletCwt* fit = &a->scal;
+  bool ahead = false;  // own and the noise row's level loaded with the spectra (loadOwnAhead)
   if (!held || !a->opt.full_scalogram) {
     Status s;
-    const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w);
+    const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w) ||
+                      (!a->opt.full_scalogram && sameLength(a->own, *a, fit_f, fit_w));
     if (!same) s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
     if (s.ok() && !(same && a->own_loaded)) s = a->own.setSignal(a->y);
     if (!s.ok()) return s;
     fit = &a->own;
+    ahead = same && a->own_loaded;
   }
-  highFrequencyNoise(a, fit, seeds, a->rows.front().get());
+  const double hf = ahead ? a->ahead_hf : highFrequencyLevel(*a, fit, a->rows.front().get());
+  highFrequencyNoise(a, seeds, hf);
   const std::vector<double> orders = resolvedOrders(a);
   std::vector<RowFit> fits(seeds.size());
   std::vector<double> omegas(seeds.size(), kNaN);
@@ -1331,15 +1354,20 @@ void clearKeepingCapacity(WaveletResult* r) {
 // Per-mode path with threads > 1: the fit rows' transform of the previous record (an analyzer
 // reused on records of the same length and rate, whose modes ask for the same fit rows) is loaded
 // with this record on a thread of its own while the spectra are computed; fitModes uses it when
-// the modes' configuration is the same, and otherwise configures and loads it after them. An
-// invalid future when not started; get() says whether the record was loaded.
-std::future<bool> loadOwnAhead(const Analysis& a) {
-  MorletCwt& own = a.own;
-  if (a.opt.full_scalogram || a.opt.threads < 2 || !own.configured() || own.size() != a.n ||
-      own.sampleRate() != a.fs)
+// the modes' configuration is the same, and otherwise configures and loads it after them. The
+// same thread then computes the noise row's level (highFrequencyLevel, the first RowScratch's,
+// which nothing else uses before the fits) into a.ahead_hf. An invalid future when not started;
+// get() says whether the record was loaded.
+std::future<bool> loadOwnAhead(Analysis* a) {
+  MorletCwt& own = a->own;
+  if (a->opt.full_scalogram || a->opt.threads < 2 || !own.configured() || own.size() != a->n ||
+      own.sampleRate() != a->fs)
     return {};
-  const double* y = a.y;
-  return gear_sim::startAsync([&own, y] { return own.setSignal(y).ok(); });
+  return gear_sim::startAsync([a] {
+    if (!a->own.setSignal(a->y).ok()) return false;
+    a->ahead_hf = highFrequencyLevel(*a, &a->own, a->rows.front().get());
+    return true;
+  });
 }
 }  // namespace
 
@@ -1359,7 +1387,7 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.psd, w.power, w.rows};
   if (Status s = checkInput(a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
-  std::future<bool> own = loadOwnAhead(a);
+  std::future<bool> own = loadOwnAhead(&a);
   const Status spectra = spectraAndNoise(&a);
   a.own_loaded = own.valid() && own.get();
   if (!spectra.ok()) return stop(spectra);
