@@ -606,6 +606,14 @@ Status MorletCwt::setSignal(const double* y) {
   return {};
 }
 
+Status MorletCwt::setCheckedSignal(const double* y, double mean) {
+  has_signal_ = false;
+  if (!configured()) return Status::internal("MorletCwt: not configured");
+  if (!y) return Status::internal("MorletCwt: null signal");
+  loadChecked(y, mean);
+  return {};
+}
+
 Status MorletCwt::checkedMean(const double* y, long n, double* mean) {
   if (!y) return Status::internal("MorletCwt: null signal");
   double sum = 0.0;

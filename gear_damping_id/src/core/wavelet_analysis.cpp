@@ -607,6 +607,7 @@ struct Analysis {
   std::vector<double>& psd;  // scratch: |Y_k|^2 for the noise median (keeps its size)
   BinnedPower& power;        // per-mode path: the Parseval sums of the wide rows (see above)
   std::vector<std::unique_ptr<RowScratch>>& rows;  // one per fitting thread (at least one)
+  double mean = 0.0;                               // of the samples (checkInput)
   bool own_loaded = false;  // `own` holds this record's spectrum already (loadOwnAhead)
   double ahead_hf = kNaN;   // and the noise row's level from it (highFrequencyLevel)
 };
@@ -648,7 +649,10 @@ bool sameConfiguration(const MorletCwt& cwt, long n, double fs, const std::vecto
   return std::all_of(have.begin(), have.end(), [&](double x) { return x == w[0]; });
 }
 
-Status checkInput(const Analysis& a) {
+// The input's sizes, rate and samples; a->mean is the samples' mean (summed in index order, as
+// MorletCwt::setSignal sums them: both transforms load the record with it, setCheckedSignal).
+Status checkInput(Analysis* an) {
+  const Analysis& a = *an;
   if (!a.y) return Status::internal("analyzeWavelet: null signal");
   if (a.n < kMinSamples) {
     return Status::invalidArgument("analyzeWavelet: n = " + std::to_string(a.n) +
@@ -660,12 +664,15 @@ Status checkInput(const Analysis& a) {
     return Status::invalidArgument(
         "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0", "sample_rate");
   }
+  double sum = 0.0;
   for (long j = 0; j < a.n; ++j) {
     if (!std::isfinite(a.y[j])) {
       return Status::invalidInput("analyzeWavelet: sample " + std::to_string(j) +
                                   " is not finite (" + num(a.y[j]) + ")");
     }
+    sum += a.y[j];
   }
+  an->mean = sum / static_cast<double>(a.n);
   return {};
 }
 
@@ -730,7 +737,7 @@ Status spectraAndNoise(Analysis* a) {
         !s.ok())
       return s;
   }
-  if (Status s = a->scal.setSignal(a->y); !s.ok()) return s;
+  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
@@ -1191,7 +1198,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
     const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w) ||
                       (!a->opt.full_scalogram && sameLength(a->own, *a, fit_f, fit_w));
     if (!same) s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
-    if (s.ok() && !(same && a->own_loaded)) s = a->own.setSignal(a->y);
+    if (s.ok() && !(same && a->own_loaded)) s = a->own.setCheckedSignal(a->y, a->mean);
     if (!s.ok()) return s;
     fit = &a->own;
     ahead = same && a->own_loaded;
@@ -1364,7 +1371,7 @@ std::future<bool> loadOwnAhead(Analysis* a) {
       own.sampleRate() != a->fs)
     return {};
   return gear_sim::startAsync([a] {
-    if (!a->own.setSignal(a->y).ok()) return false;
+    if (!a->own.setCheckedSignal(a->y, a->mean).ok()) return false;
     a->ahead_hf = highFrequencyLevel(*a, &a->own, a->rows.front().get());
     return true;
   });
@@ -1385,7 +1392,7 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   Workspace& w = *ws_;
   if (w.rows.empty()) w.rows.push_back(std::make_unique<RowScratch>());
   Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.psd, w.power, w.rows};
-  if (Status s = checkInput(a); !s.ok()) return stop(s);
+  if (Status s = checkInput(&a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
   std::future<bool> own = loadOwnAhead(&a);
   const Status spectra = spectraAndNoise(&a);
