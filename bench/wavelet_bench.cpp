@@ -188,20 +188,24 @@ void BM_ScalogramSingle(benchmark::State& state) {
 }
 
 // Per-mode damping without a scalogram (full_scalogram = false: only the rows the fits need)
-// on 1e6 samples of three decaying modes, default options otherwise; analyze(y, n, o, &r) is
-// one analysis. With warm_up, one untimed call first (like BM_Cwt's).
+// on 1e6 samples of three decaying modes, default options otherwise, on state.range(1) threads
+// (WaveletOptions::threads; wall time, and the process's CPU time per analysis in
+// process_cpu_ms); analyze(y, n, o, &r) is one analysis. With warm_up, one untimed call first
+// (like BM_Cwt's).
 template <typename Analyze>
 void modeDamping(benchmark::State& state, Analyze analyze, bool warm_up) {
   const long n = state.range(0);
   const std::vector<double> y = signalOf(n);
   gear_damping_id::WaveletOptions o;
   o.full_scalogram = false;
+  o.threads = static_cast<int>(state.range(1));
   gear_damping_id::WaveletResult r;
   std::string error;
   if (warm_up && !gear_test::ok(analyze(y.data(), n, o, &r), &error)) {
     state.SkipWithError(error.c_str());
     return;
   }
+  const double cpu0 = processCpuSeconds();
   for (auto _ : state) {
     if (!gear_test::ok(analyze(y.data(), n, o, &r), &error)) {
       state.SkipWithError(error.c_str());
@@ -210,6 +214,9 @@ void modeDamping(benchmark::State& state, Analyze analyze, bool warm_up) {
     benchmark::DoNotOptimize(r.modes.data());
   }
   state.counters["modes"] = static_cast<double>(r.modes.size());
+  state.counters["threads"] = static_cast<double>(o.threads);
+  state.counters["process_cpu_ms"] =
+      1e3 * (processCpuSeconds() - cpu0) / static_cast<double>(state.iterations());
 }
 
 // A fresh analyzeWavelet per call: FFTW planning and fresh buffers every time.
@@ -247,8 +254,12 @@ void scalogramCases(benchmark::internal::Benchmark* b) {
 }
 BENCHMARK(BM_Scalogram)->Apply(scalogramCases);
 BENCHMARK(BM_ScalogramSingle)->Apply(scalogramCases);
-BENCHMARK(BM_ModeDamping)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ModeDampingReused)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ModeDamping)->Args({1000000, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ModeDampingReused)
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_FftBound)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

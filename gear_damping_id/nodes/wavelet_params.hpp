@@ -43,7 +43,8 @@ inline bool readWaveletParameters(ParamReader& p, WaveletNodeOptions* o) {
       !p.getDouble("floor_factor", &w.floor_factor) || !p.getDouble("min_r2", &w.min_r2) ||
       !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
       !p.get("order_frequencies", &w.order_frequencies, "Hz") ||
-      !p.get("mode_frequencies", &w.mode_frequencies, "Hz") || !readIntakeParams(p, &o->intake)) {
+      !p.get("mode_frequencies", &w.mode_frequencies, "Hz") || !p.get("threads", &w.threads) ||
+      !readIntakeParams(p, &o->intake)) {
     return false;
   }
   p.allow("diagnostic_period");

@@ -91,6 +91,7 @@ TEST(ShippedConfig, WaveletFileIsReadByTheNodesReaderWithoutUnknownKeys) {
   EXPECT_EQ(o.stream.segment_length, o.window);
   EXPECT_EQ(o.wavelet.n_scales, root["n_scales"].as<int>());
   EXPECT_EQ(o.wavelet.peak_omega0, root["peak_omega0"].as<double>());
+  EXPECT_EQ(o.wavelet.threads, root["threads"].as<int>());
 }
 
 // The same readers refuse a typo and a wrong type in a copy of a shipped file: the test above
@@ -113,6 +114,12 @@ TEST(ShippedConfig, NodeReadersRefuseATypoAndAWrongTypeInAShippedFile) {
   nodes::ParamReader p3(std::make_shared<gear_test::YamlParams>(invalid));
   nodes::WaveletNodeOptions o3;
   EXPECT_FALSE(nodes::readWaveletParameters(p3, &o3));
+
+  YAML::Node no_threads = YAML::LoadFile(configPath("wavelet.yaml"));
+  no_threads["threads"] = 0;
+  nodes::ParamReader p4(std::make_shared<gear_test::YamlParams>(no_threads));
+  nodes::WaveletNodeOptions o4;
+  EXPECT_FALSE(nodes::readWaveletParameters(p4, &o4));
 }
 
 // The STE parameters of damping_id_node (~ste, ~ste_damping, ~ste_calibration_segments) on the

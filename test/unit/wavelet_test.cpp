@@ -274,6 +274,28 @@ TEST(MorletCwt, PureSinusoidReadsItsAmplitudeAndFrequencyOnTheRidge) {
   std::printf("[ measured ] sinusoid ridge frequency: max relative error %.2e\n", worst_f);
 }
 
+// MorletCwt::paddedLength is the FFT length configure() chooses (the per-mode path reuses a
+// transform of that length for rows of other frequencies): rows of one and of several omega0s,
+// lengths that are and are not fast, the widest row first or last.
+TEST(MorletCwt, PaddedLengthIsTheLengthConfigureChooses) {
+  const double fs = 50000.0;
+  const std::vector<std::pair<std::vector<double>, std::vector<double>>> rows = {
+      {{1000.0}, {6.0}},
+      {{300.0, 1731.0, 7375.0}, {30.0}},
+      {{7375.0, 1731.0, 300.0}, {6.0, 12.0, 30.0}},
+      {{40.0, 20000.0}, {3.0, 6.0}},
+  };
+  for (const long n : {64L, 1000L, 12000L, 100003L}) {
+    for (const auto& [f, w] : rows) {
+      MorletCwt cwt;
+      ASSERT_TRUE(cwt.configure(n, fs, f, w, FftPlanning::Estimate).ok());
+      EXPECT_EQ(MorletCwt::paddedLength(n, fs, f, w), cwt.paddedSize())
+          << "n " << n << ", lowest row " << *std::min_element(f.begin(), f.end()) << " Hz";
+      EXPECT_GE(cwt.paddedSize(), n);
+    }
+  }
+}
+
 TEST(MorletCwt, ReusesItsPlansAndBuffersAcrossRowsAndSignals) {
   const double fs = 1000.0;
   const long n = 1500;
@@ -779,6 +801,63 @@ TEST(WaveletAnalyzer, ReusedAcrossCallsGivesBitIdenticalResults) {
   ASSERT_TRUE(gear_test::ok(
       analyzer.analyze(cases[0].first.data(), kPaperN, kPaperFs, per_mode, &reused), &error));
   expectIdentical(fresh, reused, "after an error");
+}
+
+// The per-mode path on several threads (WaveletOptions::threads: the modes' fits on threads of
+// their own, and in a reused analyzer the fit rows' transform loaded while the spectra are
+// computed) gives exactly the one-thread result: records of the same length and modes in a row
+// (the loaded transform used), then other fit rows (omega0 30: reconfigured after the spectra),
+// another length (not loaded ahead), more threads than modes, and one mode. Two of the records
+// carry noise coloured towards low frequencies (an MA(1) filter, weak at 0.45 fs), so that the
+// noise row's level, computed beside the spectra in a reused analyzer, sets noise_std.
+TEST(WaveletAnalyzer, PerModePathOnSeveralThreadsGivesTheOneThreadResult) {
+  const auto coloured = [](unsigned seed) {
+    std::vector<double> y = freeDecay(kPaperModes, kPaperFs, kPaperN);
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> e(0.0, 0.01), white(0.0, 0.001);
+    double previous = e(rng);
+    for (double& v : y) {
+      const double now = e(rng);
+      v += now + previous + white(rng);
+      previous = now;
+    }
+    return y;
+  };
+  WaveletOptions one;
+  one.full_scalogram = false;
+  WaveletOptions explicit_modes = one;
+  explicit_modes.mode_frequencies = {300.0, 1731.0, 7375.0};
+  explicit_modes.fit_omega0 = 30.0;
+  const std::vector<std::pair<std::vector<double>, const WaveletOptions*>> cases = {
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 11), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 12), &one},
+      {coloured(13), &one},
+      {coloured(14), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 14), &explicit_modes},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 15), &one},
+      {freeDecay(kPaperModes, kPaperFs, kPaperN / 2, 30.0, 16), &one},
+      {freeDecay({{5000.0, 0.02, 1.0, 0.0}}, kPaperFs, kPaperN / 2, 30.0, 17), &one},
+  };
+  std::string error;
+  for (const int threads : {2, 3}) {
+    WaveletAnalyzer analyzer;
+    WaveletResult reused;
+    for (size_t c = 0; c < cases.size(); ++c) {
+      const std::vector<double>& y = cases[c].first;
+      WaveletOptions opt = *cases[c].second;
+      WaveletResult serial, fresh;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, opt, &serial), &error)) << error;
+      opt.threads = threads;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, opt, &fresh), &error)) << error;
+      ASSERT_TRUE(gear_test::ok(
+          analyzer.analyze(y.data(), static_cast<long>(y.size()), kPaperFs, opt, &reused), &error))
+          << error;
+      EXPECT_FALSE(serial.modes.empty());
+      const std::string what = std::to_string(threads) + " threads, case " + std::to_string(c);
+      expectIdentical(serial, fresh, what);
+      expectIdentical(serial, reused, what + ", reused");
+    }
+  }
 }
 
 TEST(AnalyzeWavelet, AcceptsEigenVectorsAndStdVectorsAlike) {

@@ -121,9 +121,19 @@ class MorletCwt {
     return configure(n, sample_rate, frequencies_hz, std::vector<double>{omega0}, planning);
   }
 
+  /// The FFT length configure() chooses for these rows: the fast length >= n + 8 scales of the
+  /// widest row (sizes are not checked: -1 when the padding is beyond any FFT). Two
+  /// configurations of one n and rate with the same length give the same spectrum for a signal.
+  static long paddedLength(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                           const std::vector<double>& omega0s);
+
   /// Loads a signal of size() samples: removes its mean and computes its FFT. InvalidInput naming
   /// the first non-finite sample's index if y has a NaN/Inf; Internal if not configured.
   gear_sim::Status setSignal(const double* y);
+  /// setSignal for a caller that has checked every sample finite and summed them in index
+  /// order (mean = that sum / size(), as setSignal computes it): the same spectrum without a
+  /// second pass over the samples. Internal if not configured.
+  gear_sim::Status setCheckedSignal(const double* y, double mean);
 
   /// Coefficients W of row i (0 <= i < rows()) for the current signal: returns a pointer to
   /// size() complex values (time order, sample j at t = j/fs), owned by the object and valid

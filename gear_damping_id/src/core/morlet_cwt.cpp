@@ -497,6 +497,25 @@ Status MorletCwt::configure(long n, double sample_rate, const std::vector<double
   return configureOn(nullptr, n, sample_rate, frequencies_hz, omega0s, planning);
 }
 
+namespace {
+// n + 8 scales of the widest row [samples], before rounding up to a fast FFT length.
+double paddedExtent(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                    const std::vector<double>& omega0s) {
+  double s_max = 0.0;  // [samples]
+  for (size_t i = 0; i < frequencies_hz.size(); ++i) {
+    const double w = omega0s.size() == 1 ? omega0s[0] : omega0s[i];
+    s_max = std::max(s_max, morletScale(frequencies_hz[i], w) * sample_rate);
+  }
+  return static_cast<double>(n) + std::ceil(kPadScales * s_max);
+}
+}  // namespace
+
+long MorletCwt::paddedLength(long n, double sample_rate, const std::vector<double>& frequencies_hz,
+                             const std::vector<double>& omega0s) {
+  const double padded = paddedExtent(n, sample_rate, frequencies_hz, omega0s);
+  return padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+}
+
 Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
                               const std::vector<double>& frequencies_hz,
                               const std::vector<double>& omega0s, FftPlanning planning,
@@ -522,7 +541,6 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
     }
   }
   const double nyquist = 0.5 * sample_rate;
-  double s_max = 0.0;  // [samples]
   for (size_t i = 0; i < frequencies_hz.size(); ++i) {
     const double f = frequencies_hz[i];
     if (!(f > 0.0 && f < nyquist)) {
@@ -531,10 +549,8 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
               " Hz must be in (0, sample_rate/2 = " + num(nyquist) + " Hz)",
           "frequencies");
     }
-    const double w = omega0s.size() == 1 ? omega0s[0] : omega0s[i];
-    s_max = std::max(s_max, morletScale(f, w) * sample_rate);
   }
-  const double padded = static_cast<double>(n) + std::ceil(kPadScales * s_max);
+  const double padded = paddedExtent(n, sample_rate, frequencies_hz, omega0s);
   long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
   if (n_fft > 0 && fft_length > static_cast<long>(padded)) n_fft = fft_length;
   if (n_fft < 0 || n_fft > (1L << 40)) {
@@ -586,6 +602,14 @@ Status MorletCwt::setSignal(const double* y) {
   if (!configured()) return Status::internal("MorletCwt: not configured");
   double mean = 0.0;
   if (Status st = checkedMean(y, n_, &mean); !st.ok()) return st;
+  loadChecked(y, mean);
+  return {};
+}
+
+Status MorletCwt::setCheckedSignal(const double* y, double mean) {
+  has_signal_ = false;
+  if (!configured()) return Status::internal("MorletCwt: not configured");
+  if (!y) return Status::internal("MorletCwt: null signal");
   loadChecked(y, mean);
   return {};
 }

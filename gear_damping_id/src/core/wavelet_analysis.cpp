@@ -4,14 +4,17 @@
 #include "gear_damping_id/wavelet_analysis.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <complex>
 #include <cstdint>
 #include <cstring>
+#include <future>
 #include <memory>
 #include <type_traits>
 
 #include "decimated_row.hpp"
+#include "gear_sim/async.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -581,6 +584,15 @@ class BinnedPower {
 // ------------------------------------------------------------------------------------------
 // The steps of analyzeWavelet.
 
+// What one thread's row fits write: the decimated rows (their plans and buffers), |W| of a row,
+// the fits' scratch and the ln|W|/arg W cache. The per-mode path gives each of its fitting
+// threads one (WaveletOptions::threads); the first also serves the noise row.
+struct RowScratch {
+  wavelet_detail::DecimatedRows decimated;
+  std::vector<double> env, work;
+  PointCache points;
+};
+
 // Everything the steps share: the input, the options, the result being filled.
 struct Analysis {
   const double* y;
@@ -589,15 +601,15 @@ struct Analysis {
   const WaveletOptions& opt;
   WaveletResult& res;
   std::vector<double> grid;
-  MorletCwt& scal;            // the scalogram's grid; its spectrum serves the peak spectrum too
-  MorletCwt& own;             // the fit rows' own transform (per-mode path, or when scal's
-                              // padding does not hold them)
-  std::vector<double>& env;   // scratch: |W| of a row
-  std::vector<double>& work;  // scratch: fits, medians
-  std::vector<double>& psd;   // scratch: |Y_k|^2 for the noise median (keeps its size)
-  BinnedPower& power;         // per-mode path: the Parseval sums of the wide rows (see above)
-  wavelet_detail::DecimatedRows& decimated;  // per-mode path: the rows on their grids
-  PointCache& points;                        // scratch: the fits' ln|W| and arg W
+  MorletCwt& scal;           // the scalogram's grid; its spectrum serves the peak spectrum too
+  MorletCwt& own;            // the fit rows' own transform (per-mode path, or when scal's
+                             // padding does not hold them)
+  std::vector<double>& psd;  // scratch: |Y_k|^2 for the noise median (keeps its size)
+  BinnedPower& power;        // per-mode path: the Parseval sums of the wide rows (see above)
+  std::vector<std::unique_ptr<RowScratch>>& rows;  // one per fitting thread (at least one)
+  double mean = 0.0;                               // of the samples (checkInput)
+  bool own_loaded = false;  // `own` holds this record's spectrum already (loadOwnAhead)
+  double ahead_hf = kNaN;   // and the noise row's level from it (highFrequencyLevel)
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -609,10 +621,21 @@ double gainOf(const Analysis& a, const MorletCwt& fit, double f, double omega) {
 }
 
 // Per-mode path: row (f, omega) of fit's spectrum at every D-th sample (see fitModes).
-const std::complex<double>* decimatedRow(Analysis* a, const MorletCwt& fit, double f, double omega,
-                                         long D) {
-  const double coef = omega * a->fs / (f * static_cast<double>(fit.paddedSize()));  // s*w_k
-  return a->decimated.row(fit.spectrum(), fit.paddedSize(), coef, omega, D);
+const std::complex<double>* decimatedRow(const Analysis& a, const MorletCwt& fit, double f,
+                                         double omega, long D, RowScratch* rs) {
+  const double coef = omega * a.fs / (f * static_cast<double>(fit.paddedSize()));  // s*w_k
+  return rs->decimated.row(fit.spectrum(), fit.paddedSize(), coef, omega, D);
+}
+
+// Per-mode path: whether cwt is configured for these signals with the FFT length these fit rows
+// need. Its rows are not used there (the decimated rows take any frequency from the spectrum,
+// within the padding), so its plan and a spectrum already loaded serve rows of other
+// frequencies, as a configuration for them would (same length, same spectrum): a reused
+// analyzer re-plans only when the length changes, not for each record's peak frequencies.
+bool sameLength(const MorletCwt& cwt, const Analysis& a, const std::vector<double>& f,
+                const std::vector<double>& w) {
+  return cwt.configured() && cwt.size() == a.n && cwt.sampleRate() == a.fs &&
+         cwt.paddedSize() == MorletCwt::paddedLength(a.n, a.fs, f, w);
 }
 
 // Whether cwt is configured for exactly these signals and rows (then configure is skipped:
@@ -626,7 +649,10 @@ bool sameConfiguration(const MorletCwt& cwt, long n, double fs, const std::vecto
   return std::all_of(have.begin(), have.end(), [&](double x) { return x == w[0]; });
 }
 
-Status checkInput(const Analysis& a) {
+// The input's sizes, rate and samples; a->mean is the samples' mean (summed in index order, as
+// MorletCwt::setSignal sums them: both transforms load the record with it, setCheckedSignal).
+Status checkInput(Analysis* an) {
+  const Analysis& a = *an;
   if (!a.y) return Status::internal("analyzeWavelet: null signal");
   if (a.n < kMinSamples) {
     return Status::invalidArgument("analyzeWavelet: n = " + std::to_string(a.n) +
@@ -638,12 +664,15 @@ Status checkInput(const Analysis& a) {
     return Status::invalidArgument(
         "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0", "sample_rate");
   }
+  double sum = 0.0;
   for (long j = 0; j < a.n; ++j) {
     if (!std::isfinite(a.y[j])) {
       return Status::invalidInput("analyzeWavelet: sample " + std::to_string(j) +
                                   " is not finite (" + num(a.y[j]) + ")");
     }
+    sum += a.y[j];
   }
+  an->mean = sum / static_cast<double>(a.n);
   return {};
 }
 
@@ -708,7 +737,7 @@ Status spectraAndNoise(Analysis* a) {
         !s.ok())
       return s;
   }
-  if (Status s = a->scal.setSignal(a->y); !s.ok()) return s;
+  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
@@ -886,15 +915,14 @@ constexpr long kNoiseRowStep = 4;
 // Noise estimate from the wavelet row at 0.45*fs (far above the modes for omega0 >= 3: a mode at
 // <= 0.3*fs leaks < exp(-4.5) into it): the median of its modulus outside its COI is the Rayleigh
 // median sqrt(ln 2) * sqrt(gain) * sigma_n for white noise. Skipped when a mode lies within 3
-// wavelet bandwidths of that row. Lowers res.noise_std when smaller.
-void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>& seeds,
-                        std::vector<double>* env) {
+// wavelet bandwidths of that row (highFrequencyNoise). This is the row's level from fit's
+// spectrum (NaN when the record is too short for it or the row cannot be computed).
+double highFrequencyLevel(const Analysis& an, MorletCwt* fit, RowScratch* rs) {
+  const Analysis* a = &an;
   const double w0 = a->opt.omega0, f_hf = 0.45 * a->fs;
-  bool clear = true;
-  for (const ModeSeed& m : seeds) clear = clear && m.f_spec < f_hf * (1.0 - 3.0 / w0);
   const double edge = a->opt.coi_factor * morletConeOfInfluence(f_hf, w0) * a->fs;
   const long lo = static_cast<long>(std::ceil(edge)), hi = a->n - 1 - lo;
-  if (!clear || hi - lo < kMinRegionSamples) return;
+  if (hi - lo < kMinRegionSamples) return kNaN;
   // Per-mode path: the row's points m*D (D = kNoiseRowStep, or the largest divisor of the
   // padded length below it) in [lo, hi]; s*fs is ~2 samples at omega0 = 6, so points 4 samples
   // apart are nearly independent and the median keeps ~1/4 of the values it had over every
@@ -904,22 +932,32 @@ void highFrequencyNoise(Analysis* a, MorletCwt* fit, const std::vector<ModeSeed>
                                        : wavelet_detail::DecimatedRows::divisorAtMost(
                                              fit->paddedSize(), kNoiseRowStep);
   const std::complex<double>* w =
-      a->opt.full_scalogram ? fit->rowAt(f_hf, w0) : decimatedRow(a, *fit, f_hf, w0, D);
-  if (!w) return;
+      a->opt.full_scalogram ? fit->rowAt(f_hf, w0) : decimatedRow(*a, *fit, f_hf, w0, D, rs);
+  if (!w) return kNaN;
   const long points = (a->n + D - 1) / D, m0 = gridCeil(lo, D), m1 = gridFloor(hi, D);
-  if (m1 < m0) return;
+  if (m1 < m0) return kNaN;
+  std::vector<double>* env = &rs->env;
   growScratch(env, points);
   modulusOf(reinterpret_cast<const double*>(w), points, env->data());
   const double med = medianOfNonNegative(env->data() + m0, m1 - m0 + 1, 1);
   const double gain = gainOf(*a, *fit, f_hf, w0);
-  const double hf = med / std::sqrt(std::log(2.0) * gain);
-  if (hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
+  return med / std::sqrt(std::log(2.0) * gain);
+}
+
+// Lowers res.noise_std to the noise row's level hf (highFrequencyLevel) when that is smaller
+// and no mode lies within 3 wavelet bandwidths of the row.
+void highFrequencyNoise(Analysis* a, const std::vector<ModeSeed>& seeds, double hf) {
+  const double w0 = a->opt.omega0, f_hf = 0.45 * a->fs;
+  bool clear = true;
+  for (const ModeSeed& m : seeds) clear = clear && m.f_spec < f_hf * (1.0 - 3.0 / w0);
+  if (clear && hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
 }
 
 // Fit of one mode's row at omega0 (two passes: the second shifts the region's start by
-// sigma*s^2 once sigma is known).
-RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, double sigma_guess,
-             std::vector<double>* env, std::vector<double>* work) {
+// sigma*s^2 once sigma is known). Writes only *rs (and, on the full path, fit's row buffers):
+// the per-mode path fits modes on several threads, each with its own RowScratch.
+RowFit fitAt(const Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega,
+             double sigma_guess, RowScratch* rs) {
   const double f = seed.f_spec;
   RowEnvelope row;
   row.s = morletScale(f, omega);
@@ -933,7 +971,7 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
     row.D = wavelet_detail::DecimatedRows::divisorAtMost(
         fit->paddedSize(), static_cast<long>(row.s * a->fs / kFitSamplesPerScale));
     row.points = (a->n + row.D - 1) / row.D;
-    if (fit->fitsPadding(f, omega)) row.w = decimatedRow(a, *fit, f, omega, row.D);
+    if (fit->fitsPadding(f, omega)) row.w = decimatedRow(*a, *fit, f, omega, row.D, rs);
   }
   if (!row.w) {
     RowFit r;
@@ -945,10 +983,10 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
   row.omega0 = omega;
   row.coi = std::sqrt(2.0) * row.s;
   const double gain = gainOf(*a, *fit, f, omega), sn = a->res.noise_std;
-  const PreparedRow p = prepareRow(row, gain, sn, a->opt, env, &a->points);
-  RowFit r = fitRow(p, *env, sigma_guess, seed.region, a->opt, work);
+  const PreparedRow p = prepareRow(row, gain, sn, a->opt, &rs->env, &rs->points);
+  RowFit r = fitRow(p, rs->env, sigma_guess, seed.region, a->opt, &rs->work);
   if (r.ok && !seed.region && r.sigma > 0.0) {
-    RowFit r2 = fitRow(p, *env, r.sigma, nullptr, a->opt, work);
+    RowFit r2 = fitRow(p, rs->env, r.sigma, nullptr, a->opt, &rs->work);
     if (r2.ok) r = r2;
   }
   return r;
@@ -956,19 +994,19 @@ RowFit fitAt(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, do
 
 // The fit of mode i with the automatic omega0 rules (fall back to omega0 when the separating
 // omega0 fails; lower it for time resolution when xi*omega0 > kMaxXiOmega0).
-RowFit fitMode(Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega, double need_sep,
-               double* omega_used, std::vector<double>* env, std::vector<double>* work) {
+RowFit fitMode(const Analysis* a, MorletCwt* fit, const ModeSeed& seed, double omega,
+               double need_sep, double* omega_used, RowScratch* rs) {
   const bool auto_w = a->opt.fit_omega0 == 0.0;
   const double w0 = a->opt.omega0;
-  RowFit r = fitAt(a, fit, seed, omega, kNaN, env, work);
+  RowFit r = fitAt(a, fit, seed, omega, kNaN, rs);
   if (!r.ok && auto_w && omega > w0) {
     omega = w0;
-    r = fitAt(a, fit, seed, omega, kNaN, env, work);
+    r = fitAt(a, fit, seed, omega, kNaN, rs);
   }
   if (r.ok && auto_w && r.xi > 0.0 && r.xi * omega > kMaxXiOmega0) {
     const double lower = std::max(need_sep, kMaxXiOmega0 / r.xi);
     if (lower < omega) {
-      RowFit r2 = fitAt(a, fit, seed, lower, r.sigma, env, work);
+      RowFit r2 = fitAt(a, fit, seed, lower, r.sigma, rs);
       if (r2.ok) {
         r = r2;
         omega = lower;
@@ -1110,6 +1148,30 @@ void overlapWarnings(std::vector<WaveletMode>* modes) {
   }
 }
 
+// The fits of every mode (fitMode) into (*fits)[i], (*omegas)[i]: one after the other on the
+// full path (its rows share fit's buffers); on the per-mode path on min(threads, modes) threads,
+// each with its own RowScratch, taking the next mode as it becomes free. Each mode's fit reads
+// only the analysis and fit's spectrum, so the results are those of one thread.
+void fitAllModes(const Analysis& a, MorletCwt* fit, const std::vector<ModeSeed>& seeds,
+                 const std::vector<double>& fit_w, const std::vector<double>& need,
+                 std::vector<RowFit>* fits, std::vector<double>* omegas) {
+  const size_t workers =
+      a.opt.full_scalogram
+          ? 1
+          : std::min(seeds.size(), static_cast<size_t>(std::max(1, a.opt.threads)));
+  while (a.rows.size() < workers) a.rows.push_back(std::make_unique<RowScratch>());
+  std::atomic<size_t> next{0};
+  auto work = [&](size_t t) {
+    for (size_t i = next++; i < seeds.size(); i = next++)
+      (*fits)[i] = fitMode(&a, fit, seeds[i], fit_w[i], need[i], &(*omegas)[i], a.rows[t].get());
+  };
+  std::vector<std::future<void>> helpers;
+  for (size_t t = 1; t < workers; ++t)
+    helpers.push_back(gear_sim::startAsync([&work, t] { work(t); }));
+  work(0);
+  for (auto& h : helpers) h.get();
+}
+
 // Per mode: the row at its omega0, the envelope fit and the trust checks.
 Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   const std::vector<double> need = separationOmega0(seeds, a->opt.max_fit_omega0);
@@ -1126,24 +1188,31 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   // On the per-mode path each fit row is computed on its grid of every D-th sample
   // (kFitSamplesPerScale), exact at those samples: one inverse FFT of length N/D of the row's
   // band folded modulo N/D (DecimatedRows) instead of the full or pruned inverse FFT.
+  // The per-mode path's own transform may already hold the record (loadOwnAhead).
   bool held = true;
   for (size_t i = 0; i < seeds.size(); ++i) held = held && a->scal.fitsPadding(fit_f[i], fit_w[i]);
   MorletCwt* fit = &a->scal;
+  bool ahead = false;  // own and the noise row's level loaded with the spectra (loadOwnAhead)
   if (!held || !a->opt.full_scalogram) {
     Status s;
-    if (!sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w))
-      s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
-    if (s.ok()) s = a->own.setSignal(a->y);
+    const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w) ||
+                      (!a->opt.full_scalogram && sameLength(a->own, *a, fit_f, fit_w));
+    if (!same) s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
+    if (s.ok() && !(same && a->own_loaded)) s = a->own.setCheckedSignal(a->y, a->mean);
     if (!s.ok()) return s;
     fit = &a->own;
+    ahead = same && a->own_loaded;
   }
-  std::vector<double>& env = a->env;
-  std::vector<double>& work = a->work;
-  highFrequencyNoise(a, fit, seeds, &env);
+  const double hf = ahead ? a->ahead_hf : highFrequencyLevel(*a, fit, a->rows.front().get());
+  highFrequencyNoise(a, seeds, hf);
   const std::vector<double> orders = resolvedOrders(a);
+  std::vector<RowFit> fits(seeds.size());
+  std::vector<double> omegas(seeds.size(), kNaN);
+  fitAllModes(*a, fit, seeds, fit_w, need, &fits, &omegas);
   for (size_t i = 0; i < seeds.size(); ++i) {
     WaveletMode m;
-    const RowFit r = fitMode(a, fit, seeds[i], fit_w[i], need[i], &m.omega0, &env, &work);
+    const RowFit& r = fits[i];
+    m.omega0 = omegas[i];
     m.spectrum_frequency_hz = seeds[i].f_spec;
     m.frequency_hz = r.ok ? r.fd : seeds[i].f_spec;
     m.peak_amplitude = r.peak;
@@ -1259,10 +1328,9 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
 // the scratch vectors, so a repeated analysis neither re-plans nor faults in fresh pages.
 struct WaveletAnalyzer::Workspace {
   MorletCwt scal, own;
-  std::vector<double> env, work, psd;
+  std::vector<double> psd;
   BinnedPower power;
-  wavelet_detail::DecimatedRows decimated;
-  PointCache points;
+  std::vector<std::unique_ptr<RowScratch>> rows;
 };
 
 WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
@@ -1289,6 +1357,25 @@ void clearKeepingCapacity(WaveletResult* r) {
   r->warnings.clear();
   r->status = Status{};
 }
+
+// Per-mode path with threads > 1: the fit rows' transform of the previous record (an analyzer
+// reused on records of the same length and rate, whose modes ask for the same fit rows) is loaded
+// with this record on a thread of its own while the spectra are computed; fitModes uses it when
+// the modes' configuration is the same, and otherwise configures and loads it after them. The
+// same thread then computes the noise row's level (highFrequencyLevel, the first RowScratch's,
+// which nothing else uses before the fits) into a.ahead_hf. An invalid future when not started;
+// get() says whether the record was loaded.
+std::future<bool> loadOwnAhead(Analysis* a) {
+  MorletCwt& own = a->own;
+  if (a->opt.full_scalogram || a->opt.threads < 2 || !own.configured() || own.size() != a->n ||
+      own.sampleRate() != a->fs)
+    return {};
+  return gear_sim::startAsync([a] {
+    if (!a->own.setCheckedSignal(a->y, a->mean).ok()) return false;
+    a->ahead_hf = highFrequencyLevel(*a, &a->own, a->rows.front().get());
+    return true;
+  });
+}
 }  // namespace
 
 Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
@@ -1303,11 +1390,14 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   };
   if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
-  Analysis a{y,     n,     sample_rate, options, *result, {},          w.scal,
-             w.own, w.env, w.work,      w.psd,   w.power, w.decimated, w.points};
-  if (Status s = checkInput(a); !s.ok()) return stop(s);
+  if (w.rows.empty()) w.rows.push_back(std::make_unique<RowScratch>());
+  Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.psd, w.power, w.rows};
+  if (Status s = checkInput(&a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
-  if (Status s = spectraAndNoise(&a); !s.ok()) return stop(s);
+  std::future<bool> own = loadOwnAhead(&a);
+  const Status spectra = spectraAndNoise(&a);
+  a.own_loaded = own.valid() && own.get();
+  if (!spectra.ok()) return stop(spectra);
   if (options.full_scalogram)
     if (Status s = fullScalogram(&a); !s.ok()) return s;
   peakSpectrum(&a);
