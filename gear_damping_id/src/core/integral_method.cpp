@@ -20,15 +20,13 @@
 // Hot loops compiled for AVX2 as well as the baseline, chosen at load time. GEAR_AVX2_CLONES
 // (gear_sim/simd_clones.hpp): without FMA contraction or reassociation both clones compute the
 // same bits (each loop's accumulators are independent lanes, summed in the same order by either).
-// GD_FMA_CLONES (the row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted
+// GEAR_FMA_CLONES (the row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted
 // multiply-adds) or the baseline; the two clones agree to rounding, not in every bit
 // (docs/method.md §5, numeric contract), and on one machine every run takes the same clone, so
 // any thread count gives the same bits.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_FMA_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #define GD_ALWAYS_INLINE __attribute__((always_inline))
 #else
-#define GD_FMA_CLONES
 #define GD_ALWAYS_INLINE
 #endif
 
@@ -142,7 +140,7 @@ GD_ALWAYS_INLINE inline void firstTouchOf(const double* const* x, int held, cons
   finishSums<NCH>(x, i, hi, a, out);
 }
 
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void firstTouch(const double* const* x, int nch, int held, const double* phase, Eigen::Index lo,
                 Eigen::Index hi, double* out, double* d3, Eigen::Index* end,
                 std::vector<long>* flagged) {
@@ -460,7 +458,7 @@ namespace {
 // agree with the sequential ones to ~1e-16 relative). The third differences' accumulators start
 // from d3_in, their sums over the groups of four before sample `from` (a multiple of 4: the
 // segment's first read computes those, firstTouch). AVX2 + FMA clone.
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void segmentLevels(const double* y, Eigen::Index n, double sum, const double* d3_in,
                    Eigen::Index from, double* noise, double* signal) {
   if (n < 4) return;
@@ -652,7 +650,7 @@ struct Taps4 {
 // area increments of y (ay) and the area/moment increments of K y - F (ag, mg), with yb, Tb
 // pointing one sample before the interval's left end and kb at it (the moment of y alone is not
 // needed by the known rows). AVX2 + FMA clone (contracted multiply-adds) and the baseline.
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void heldStiffnessIncrements(const double* __restrict__ yb, const double* __restrict__ kb,
                              const double* __restrict__ Tb, Eigen::Index lo, Eigen::Index hi,
                              const double* wa, const double* wm, double inv_me, double ff,
@@ -671,7 +669,7 @@ void heldStiffnessIncrements(const double* __restrict__ yb, const double* __rest
 // Interior intervals [lo, hi) of the greybox formulation: the increments of y (ay, my), of -F
 // (ag, mg) and of s y (as, ms), yb and Tb pointing one sample before the interval's left end and
 // sb at it (the same expressions as the generic path, in one loop; clones as above).
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void greyIncrements(const double* __restrict__ yb, const double* __restrict__ Tb,
                     const double* __restrict__ sb, Eigen::Index lo, Eigen::Index hi,
                     const double* wa, const double* wm, double ff, double* __restrict__ ay,
@@ -1019,7 +1017,7 @@ GD_ALWAYS_INLINE inline void forcedRows(const WindowPass& p, const RowColumns& c
 }
 
 // forcedRows for the formulation's choices, AVX2 + FMA clone.
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void forcedRowsOf(const WindowPass& p, const RowColumns& c, Eigen::MatrixXd* rows) {
   if (p.grey) {
     p.load ? forcedRows<true, true>(p, c, rows) : forcedRows<true, false>(p, c, rows);
@@ -1181,7 +1179,7 @@ GD_ALWAYS_INLINE inline void projectedGram(const Eigen::MatrixXd& rows, Eigen::I
 }
 
 // projectedGram for nc columns (the compiled-in counts 2-6, else run-time), AVX2 + FMA clone.
-GD_FMA_CLONES
+GEAR_FMA_CLONES
 void gramOf(int nc, const Eigen::MatrixXd& rows, Eigen::Index L, int rc, double* mean,
             double* slope, double* raw, Eigen::MatrixXd* gram) {
   switch (nc) {
