@@ -955,22 +955,26 @@ struct FusedSums {
     }
   }
 
-  // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice.
+  // ring: 16 x W vectors, zero at first: the raw rows of the last 8 samples, twice. P: the AR
+  // order nm.p when fixed at compile time (-1: nm.p).
+  template <int P = -1>
   GD_FUSED_INLINE void add(const NoiseModel& nm, Index i, const V4d* w, V4d* ring) {
-    accumulate(nm, i, w, ring, Nv, wlag, eprev, rows);
+    accumulate<P>(nm, i, w, ring, Nv, wlag, eprev, rows);
   }
 
   // add() on sums held elsewhere (fusedSpan's locals, kept in registers).
+  template <int P = -1>
   static GD_FUSED_INLINE void accumulate(const NoiseModel& nm, Index i, const V4d* w, V4d* ring,
                                          V4d (*Nv)[W], double& wlag, double& eprev, long& rows) {
+    const int order = P >= 0 ? P : nm.p;
     V4d e[W];
     for (int v = 0; v < W; ++v) e[v] = w[v];
-    if (nm.p > 0) {  // e = w_i + a_1 w_{i-1} + ... + a_p w_{i-p} in this order
+    if (order > 0) {  // e = w_i + a_1 w_{i-1} + ... + a_p w_{i-p} in this order
       V4d* slot = ring + (i & 7) * W;
       for (int v = 0; v < W; ++v) slot[v] = slot[v + 8 * W] = w[v];
-      if (i < nm.p) return;
+      if (i < order) return;
       const V4d* prev = slot + 7 * W;
-      for (int k = 0; k < nm.p; ++k) {
+      for (int k = 0; k < order; ++k) {
         const double ak = nm.a[k];
         for (int v = 0; v < W; ++v) e[v] += ak * prev[v - k * W];
       }
@@ -1019,7 +1023,7 @@ struct FusedCarry {
 
 // Samples i..end of a pass (rows i..end, intervals i..end - 1, none stepped in parts) in local
 // copies of the carried values (kept in registers: no call, no address taken).
-template <int M, bool Affine, bool Var>
+template <int M, bool Affine, bool Var, int P>
 GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarry<M>* k) {
   constexpr int V = (M + 3) / 4, W = M / 4 + 1;
   V4d a[V], c[V];
@@ -1041,7 +1045,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
       V4dU* out = reinterpret_cast<V4dU*>(f->keep + 4 * W * i);
       for (int v = 0; v < W; ++v) out[v] = w[v];
     }
-    FusedSums<M>::accumulate(f->nm, i, w, k->ring, Nv, wlag, eprev, rows);
+    FusedSums<M>::template accumulate<P>(f->nm, i, w, k->ring, Nv, wlag, eprev, rows);
     if (i == end) break;
     if constexpr (Var) {  // C1 the last unknown (lane M - 1)
       double e0, e1;
@@ -1064,7 +1068,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
   k->y = y, k->vel = vel;
 }
 
-template <int M, bool Affine, bool Var = false>
+template <int M, bool Affine, bool Var = false, int P = -1>
 GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
   constexpr int V = (M + 3) / 4;
   FusedCarry<M> k;
@@ -1076,7 +1080,7 @@ GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
     // Up to the next interval stepped in parts (a call: the carried values through memory).
     Index end = i;
     while (end + 1 < n && f->key[end] != SegmentTable::kSplit) ++end;
-    fusedSpan<M, Affine, Var>(f, i, end, &k);
+    fusedSpan<M, Affine, Var, P>(f, i, end, &k);
     if (end + 1 >= n) break;
     double x[2] = {k.y, k.vel};
     std::memcpy(f->s[0], k.a, sizeof(V4d) * V);
@@ -1092,7 +1096,7 @@ GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
 
 // The sums of the rows a pass kept (f->rrev, f->keep) under the noise model f->nm: the numbers
 // of a new pass at the same unknowns.
-template <int M>
+template <int M, int P = -1>
 GD_FUSED_INLINE void fusedRowsImpl(FusedPass* f) {
   constexpr int W = M / 4 + 1;
   FusedSums<M> sums;
@@ -1100,7 +1104,7 @@ GD_FUSED_INLINE void fusedRowsImpl(FusedPass* f) {
   for (Index i = 0; i < f->n; ++i) {
     V4d w[W];
     std::memcpy(w, f->keep + 4 * W * i, sizeof(w));
-    sums.add(f->nm, i, w, ring);
+    sums.template add<P>(f->nm, i, w, ring);
   }
   sums.finish(f);
 }
@@ -1121,6 +1125,15 @@ GD_FUSED_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
 GD_FUSED_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
 GD_FUSED_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
 GD_FUSED_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
+// The known piecewise problem's passes (3 unknowns) by AR order: the filter unrolled.
+template <int P>
+GD_FUSED_CLONES void fusedAffine3Ar(FusedPass* f) {
+  fusedPassImpl<3, true, false, P>(f);
+}
+template <int P>
+GD_FUSED_CLONES void fusedRows3Ar(FusedPass* f) {
+  fusedRowsImpl<3, P>(f);
+}
 
 // kind 0: the RK4 step, 1: the affine maps, 2: the kept rows, 3: the affine maps with the
 // variation test's C1 at 0 (FusedVar; 4 to 6 unknowns).
@@ -1130,6 +1143,16 @@ void runFused(FusedPass* f, int m, int kind) {
       {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6},
       {fusedRows3, fusedRows4, fusedRows5, fusedRows6},
       {nullptr, fusedAffineVar4, fusedAffineVar5, fusedAffineVar6}};
+  static_assert(kMaxArOrder == 6, "one pass per AR order 0..6");
+  static void (*const kByOrder[2][kMaxArOrder + 1])(FusedPass*) = {
+      {fusedAffine3Ar<0>, fusedAffine3Ar<1>, fusedAffine3Ar<2>, fusedAffine3Ar<3>,
+       fusedAffine3Ar<4>, fusedAffine3Ar<5>, fusedAffine3Ar<6>},
+      {fusedRows3Ar<0>, fusedRows3Ar<1>, fusedRows3Ar<2>, fusedRows3Ar<3>, fusedRows3Ar<4>,
+       fusedRows3Ar<5>, fusedRows3Ar<6>}};
+  if (m == 3 && (kind == 1 || kind == 2) && f->nm.p >= 0 && f->nm.p <= kMaxArOrder) {
+    kByOrder[kind - 1][f->nm.p](f);
+    return;
+  }
   kPass[kind][m - 3](f);
 }
 
