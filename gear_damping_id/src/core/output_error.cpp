@@ -1125,14 +1125,22 @@ GD_FUSED_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
 GD_FUSED_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
 GD_FUSED_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
 GD_FUSED_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
-// The known piecewise problem's passes (3 unknowns) by AR order: the filter unrolled.
-template <int P>
-GD_FUSED_CLONES void fusedAffine3Ar(FusedPass* f) {
-  fusedPassImpl<3, true, false, P>(f);
+// The known piecewise problem's passes by AR order P (the filter unrolled): kind (runFused) 1
+// and 2 with 3 unknowns, the load test's 0 and 3 with 4.
+template <int M, int Kind, int P>
+GD_FUSED_CLONES void fusedAr(FusedPass* f) {
+  if constexpr (Kind == 2) {
+    fusedRowsImpl<M, P>(f);
+  } else {
+    fusedPassImpl<M, Kind != 0, Kind == 3, P>(f);
+  }
 }
-template <int P>
-GD_FUSED_CLONES void fusedRows3Ar(FusedPass* f) {
-  fusedRowsImpl<3, P>(f);
+using FusedOrders = std::array<void (*)(FusedPass*), kMaxArOrder + 1>;
+template <int M, int Kind>
+constexpr FusedOrders fusedOrders() {
+  static_assert(kMaxArOrder == 6, "one pass per AR order 0..6");
+  return {fusedAr<M, Kind, 0>, fusedAr<M, Kind, 1>, fusedAr<M, Kind, 2>, fusedAr<M, Kind, 3>,
+          fusedAr<M, Kind, 4>, fusedAr<M, Kind, 5>, fusedAr<M, Kind, 6>};
 }
 
 // kind 0: the RK4 step, 1: the affine maps, 2: the kept rows, 3: the affine maps with the
@@ -1143,14 +1151,17 @@ void runFused(FusedPass* f, int m, int kind) {
       {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6},
       {fusedRows3, fusedRows4, fusedRows5, fusedRows6},
       {nullptr, fusedAffineVar4, fusedAffineVar5, fusedAffineVar6}};
-  static_assert(kMaxArOrder == 6, "one pass per AR order 0..6");
-  static void (*const kByOrder[2][kMaxArOrder + 1])(FusedPass*) = {
-      {fusedAffine3Ar<0>, fusedAffine3Ar<1>, fusedAffine3Ar<2>, fusedAffine3Ar<3>,
-       fusedAffine3Ar<4>, fusedAffine3Ar<5>, fusedAffine3Ar<6>},
-      {fusedRows3Ar<0>, fusedRows3Ar<1>, fusedRows3Ar<2>, fusedRows3Ar<3>, fusedRows3Ar<4>,
-       fusedRows3Ar<5>, fusedRows3Ar<6>}};
-  if (m == 3 && (kind == 1 || kind == 2) && f->nm.p >= 0 && f->nm.p <= kMaxArOrder) {
-    kByOrder[kind - 1][f->nm.p](f);
+  static const FusedOrders kByOrder[4] = {fusedOrders<3, 1>(), fusedOrders<3, 2>(),
+                                          fusedOrders<4, 0>(), fusedOrders<4, 3>()};
+  const int row = m == 3   ? (kind == 1   ? 0
+                              : kind == 2 ? 1
+                                          : -1)
+                  : m == 4 ? (kind == 0   ? 2
+                              : kind == 3 ? 3
+                                          : -1)
+                           : -1;
+  if (row >= 0 && f->nm.p >= 0 && f->nm.p <= kMaxArOrder) {
+    kByOrder[row][f->nm.p](f);
     return;
   }
   kPass[kind][m - 3](f);
