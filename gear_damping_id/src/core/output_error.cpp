@@ -1036,28 +1036,36 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
   long rows = k->sums.rows;
   double y = k->y, vel = k->vel;
   const Index n = f->n;
+  // The pass's inputs in locals: the kept rows' stores (may_alias) would otherwise make every
+  // sample reload them from *f.
+  const double *const ym = f->y, *const T = f->T, *const Tm = f->T_mid;
+  double *const rrev = f->rrev, *const keep = f->keep;
+  const unsigned char* const key = f->key;
+  const FusedMap* const maps = f->maps;
+  const FusedVar* const var = f->var;
+  const double t_ref = f->t_ref;
+  const NoiseModel nm = f->nm;
   for (;; ++i) {
-    const double r = f->y[i] - y;
-    f->rrev[n - 1 - i] = r;
+    const double r = ym[i] - y;
+    rrev[n - 1 - i] = r;
     V4d w[W];
     fusedRow<M>(r, a, w);
-    if (f->keep != nullptr) {
-      V4dU* out = reinterpret_cast<V4dU*>(f->keep + 4 * W * i);
+    if (keep != nullptr) {
+      V4dU* out = reinterpret_cast<V4dU*>(keep + 4 * W * i);
       for (int v = 0; v < W; ++v) out[v] = w[v];
     }
-    FusedSums<M>::template accumulate<P>(f->nm, i, w, k->ring, Nv, wlag, eprev, rows);
+    FusedSums<M>::template accumulate<P>(nm, i, w, k->ring, Nv, wlag, eprev, rows);
     if (i == end) break;
     if constexpr (Var) {  // C1 the last unknown (lane M - 1)
       double e0, e1;
-      fusedVarTerm(f->var[f->key[i]], y, vel, f->T[i], f->T_mid[i], f->T[i + 1], f->t_ref, &e0,
-                   &e1);
-      fusedAffineStep<V>(f->maps[f->key[i]], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
+      fusedVarTerm(var[key[i]], y, vel, T[i], Tm[i], T[i + 1], t_ref, &e0, &e1);
+      fusedAffineStep<V>(maps[key[i]], T[i], Tm[i], T[i + 1], &y, &vel, a, c);
       a[(M - 1) / 4][(M - 1) % 4] += e0;
       c[(M - 1) / 4][(M - 1) % 4] += e1;
     } else if constexpr (Affine) {
-      fusedAffineStep<V>(f->maps[f->key[i]], f->T[i], f->T_mid[i], f->T[i + 1], &y, &vel, a, c);
+      fusedAffineStep<V>(maps[key[i]], T[i], Tm[i], T[i + 1], &y, &vel, a, c);
     } else {
-      fusedLinearStep<V>(f, i, f->key[i], &y, &vel, a, c);
+      fusedLinearStep<V>(f, i, key[i], &y, &vel, a, c);
     }
   }
   for (int v = 0; v < V; ++v) k->a[v] = a[v], k->c[v] = c[v];
