@@ -802,6 +802,7 @@ typedef double V4dU __attribute__((vector_size(32), aligned(8), may_alias));
 // z_k+ = R z_k + S_k x + H_k T (zero S, H for the initial-state unknowns).
 struct FusedMap {
   double R[2][2], G[2][3];
+  V4d Rv[2][2];    // R broadcast (the lanes' products read it from memory, no broadcast per step)
   V4d S[2][2][2];  // [row][y, v][lanes k / 4]
   V4d H[2][3][2];  // [row][stage][lanes k / 4]
 };
@@ -893,8 +894,8 @@ GD_FUSED_INLINE void fusedAffineStep(const FusedMap& mp, double T0, double T1, d
                    mp.H[0][1][v] * T1 + mp.H[0][2][v] * T2;
     const V4d f1 = mp.S[1][0][v] * y0 + mp.S[1][1][v] * v0 + mp.H[1][0][v] * T0 +
                    mp.H[1][1][v] * T1 + mp.H[1][2][v] * T2;
-    const V4d na = mp.R[0][0] * a[v] + mp.R[0][1] * c[v] + f0;
-    c[v] = mp.R[1][0] * a[v] + mp.R[1][1] * c[v] + f1;
+    const V4d na = mp.Rv[0][0] * a[v] + mp.Rv[0][1] * c[v] + f0;
+    c[v] = mp.Rv[1][0] * a[v] + mp.Rv[1][1] * c[v] + f1;
     a[v] = na;
   }
   *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
@@ -1525,6 +1526,12 @@ class Refinement {
   static void toLanes(const SegmentSimulator::AffineMap& am, int m, FusedMap* out) {
     *out = FusedMap{};
     std::copy(&am.R[0][0], &am.R[0][0] + 4, &out->R[0][0]);
+    for (int row = 0; row < 2; ++row) {
+      for (int c = 0; c < 2; ++c) {
+        const double r = am.R[row][c];
+        out->Rv[row][c] = V4d{r, r, r, r};
+      }
+    }
     std::copy(&am.G[0][0], &am.G[0][0] + 6, &out->G[0][0]);
     for (int k = 0; k < m; ++k) {
       if (!am.coupled[k]) continue;
