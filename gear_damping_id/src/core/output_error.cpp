@@ -1022,6 +1022,18 @@ struct FusedCarry {
   V4d ring[16 * W] = {};
 };
 
+// The RK4 step's coefficients (fusedLinearStep) as a local copy of the pass (its reads then
+// need no reload after each may_alias store of a kept row); nothing for the affine maps.
+struct FusedNoCopy {};
+template <bool Affine>
+GD_FUSED_INLINE auto fusedLinearCopy(const FusedPass* f) {
+  if constexpr (Affine) {
+    return FusedNoCopy{};
+  } else {
+    return *f;
+  }
+}
+
 // Samples i..end of a pass (rows i..end, intervals i..end - 1, none stepped in parts) in local
 // copies of the carried values (kept in registers: no call, no address taken).
 template <int M, bool Affine, bool Var, int P>
@@ -1046,6 +1058,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
   const FusedVar* const var = f->var;
   const double t_ref = f->t_ref;
   const NoiseModel nm = f->nm;
+  [[maybe_unused]] const auto lin = fusedLinearCopy<Affine>(f);
   for (;; ++i) {
     const double r = ym[i] - y;
     rrev[n - 1 - i] = r;
@@ -1066,7 +1079,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
     } else if constexpr (Affine) {
       fusedAffineStep<V>(maps[key[i]], T[i], Tm[i], T[i + 1], &y, &vel, a, c);
     } else {
-      fusedLinearStep<V>(f, i, key[i], &y, &vel, a, c);
+      fusedLinearStep<V>(&lin, i, key[i], &y, &vel, a, c);
     }
   }
   for (int v = 0; v < V; ++v) k->a[v] = a[v], k->c[v] = c[v];
