@@ -986,8 +986,16 @@ struct FusedSums {
     ++rows;
     for (int q = 0; q <= M; ++q) {
       const double eq = e[q / 4][q % 4];
-      for (int v = 0; v < W; ++v) Nv[q][v] += e[v] * eq;
+      for (int v = 0; v < W; ++v) {
+        if (q >= 4 * v) Nv[q][v] += e[v] * eq;  // the others by symmetry (gram())
+      }
     }
+  }
+
+  // The sum of e_a e_b: Nv[a] holds the columns b of its vectors v with a >= 4 v (accumulate(); the
+  // same products in the same order as Nv[b]'s column a).
+  GD_FUSED_INLINE double gram(int a, int b) const {
+    return a >= 4 * (b / 4) ? Nv[a][b / 4][b % 4] : Nv[b][a / 4][a % 4];
   }
 
   // The sums into f, and the autocovariances (lag k in lane k: r_i times r_i, r_{i-1}, ... in
@@ -1004,9 +1012,9 @@ struct FusedSums {
       acc_hi += r * hi;
     }
     for (int q = 0; q < M; ++q) {
-      for (int k = 0; k < M; ++k) f->N[q][k] = Nv[q + 1][(k + 1) / 4][(k + 1) % 4];
+      for (int k = 0; k < M; ++k) f->N[q][k] = gram(q + 1, k + 1);
     }
-    for (int k = 0; k < M; ++k) f->rhs[k] = Nv[0][(k + 1) / 4][(k + 1) % 4];
+    for (int k = 0; k < M; ++k) f->rhs[k] = gram(0, k + 1);
     for (int k = 0; k < 4; ++k) f->acov[k] = acc_lo[k], f->acov[4 + k] = acc_hi[k];
     f->cost = Nv[0][0][0], f->wlag = wlag, f->rows = rows;
   }
