@@ -15,6 +15,7 @@
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/sdof_integrator.hpp"
+#include "gear_sim/simd_clones.hpp"
 
 namespace gear_damping_id {
 
@@ -783,13 +784,9 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // generic RK4 at 1e-9). Intervals stepped in parts call back into the generic RK4.
 
 // The passes are compiled for x86-64-v3 (AVX2 + FMA) as well as the baseline, chosen at load
-// time (GCC target_clones; other compilers build the baseline), their helpers inlined into each
-// clone. On one machine every run takes the same clone, so results do not depend on the run.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define GD_FUSED_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define GD_FUSED_CLONES
-#endif
+// time (GEAR_FMA_CLONES, gear_sim/simd_clones.hpp; other compilers build the baseline), their
+// helpers inlined into each clone. On one machine every run takes the same clone, so results do
+// not depend on the run.
 #define GD_FUSED_INLINE inline __attribute__((always_inline))
 
 constexpr int kFusedLanes = 8;  // sensitivities of the fused pass (two vectors of four)
@@ -1140,25 +1137,25 @@ GD_FUSED_INLINE void fusedRowsImpl(FusedPass* f) {
 }
 
 // The passes by number of unknowns (3 to 6), affine maps or the RK4 step.
-GD_FUSED_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
-GD_FUSED_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
-GD_FUSED_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
-GD_FUSED_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
-GD_FUSED_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
-GD_FUSED_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
-GD_FUSED_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
-GD_FUSED_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
-GD_FUSED_CLONES void fusedAffineVar4(FusedPass* f) { fusedPassImpl<4, true, true>(f); }
-GD_FUSED_CLONES void fusedAffineVar5(FusedPass* f) { fusedPassImpl<5, true, true>(f); }
-GD_FUSED_CLONES void fusedAffineVar6(FusedPass* f) { fusedPassImpl<6, true, true>(f); }
-GD_FUSED_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
-GD_FUSED_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
-GD_FUSED_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
-GD_FUSED_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
+GEAR_FMA_CLONES void fusedAffine3(FusedPass* f) { fusedPassImpl<3, true>(f); }
+GEAR_FMA_CLONES void fusedAffine4(FusedPass* f) { fusedPassImpl<4, true>(f); }
+GEAR_FMA_CLONES void fusedAffine5(FusedPass* f) { fusedPassImpl<5, true>(f); }
+GEAR_FMA_CLONES void fusedAffine6(FusedPass* f) { fusedPassImpl<6, true>(f); }
+GEAR_FMA_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
+GEAR_FMA_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
+GEAR_FMA_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
+GEAR_FMA_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
+GEAR_FMA_CLONES void fusedAffineVar4(FusedPass* f) { fusedPassImpl<4, true, true>(f); }
+GEAR_FMA_CLONES void fusedAffineVar5(FusedPass* f) { fusedPassImpl<5, true, true>(f); }
+GEAR_FMA_CLONES void fusedAffineVar6(FusedPass* f) { fusedPassImpl<6, true, true>(f); }
+GEAR_FMA_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
+GEAR_FMA_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
+GEAR_FMA_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
+GEAR_FMA_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
 // The known piecewise problem's passes by AR order P (the filter unrolled): kind (runFused) 1
 // and 2 with 3 unknowns, the load test's 0 and 3 with 4.
 template <int M, int Kind, int P>
-GD_FUSED_CLONES void fusedAr(FusedPass* f) {
+GEAR_FMA_CLONES void fusedAr(FusedPass* f) {
   if constexpr (Kind == 2) {
     fusedRowsImpl<M, P>(f);
   } else {
