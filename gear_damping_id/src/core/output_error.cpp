@@ -100,16 +100,6 @@ struct SegmentTable {
   size_t intervals() const { return key.size(); }
 };
 
-// The within-segment variation test's first evaluation (C1 = 0, so C is constant) on a held
-// interval: the C1 sensitivity's forcing -(T1_q - t_ref) v_q at the four RK4 stages is not affine
-// in the state and the torques (a product of both), so it is added to the affine map's step of
-// that pair: e = sum_q P_q f_q, with the state's stage velocities v_q (v_0 = v, v_1..3 = vs[q - 1]
-// . (y, v, T0, T_mid, T1)) and P_q the pair's RK4 response to a unit forcing at stage q.
-struct FusedVar {
-  double vs[3][5];
-  double P[2][4];
-};
-
 // Integrates eq. (4) and its sensitivities over one damping segment with the forward model.
 class SegmentSimulator {
  public:
@@ -210,30 +200,6 @@ class SegmentSimulator {
       maps[k] = affineMap(2 + 2 * p.m, p, K, t.key_sv[k], fm_.signal().dt);
     }
     return true;
-  }
-
-  // FusedVar of a held interval with stiffness K and damping C (the RK4 of rk4Pair by unit
-  // inputs).
-  FusedVar varMap(double C, double K) const {
-    const double h = fm_.signal().dt, ff = fm_.gear().force_factor;
-    const double Cs[4] = {C, C, C, C}, Ks[4] = {K, K, K, K};
-    FusedVar w;
-    for (int j = 0; j < 5; ++j) {  // unit y, v, T0, T_mid, T1
-      const double T[4] = {j == 2 ? 1.0 : 0.0, j == 3 ? 1.0 : 0.0, j == 3 ? 1.0 : 0.0,
-                           j == 4 ? 1.0 : 0.0};
-      const double F[4] = {ff * T[0], ff * T[1], ff * T[2], ff * T[3]};
-      double z[2] = {j == 0 ? 1.0 : 0.0, j == 1 ? 1.0 : 0.0}, ys[4], vs[4];
-      rk4Pair(z, F, Cs, Ks, h, ys, vs);
-      for (int q = 1; q < 4; ++q) w.vs[q - 1][j] = vs[q];
-    }
-    for (int q = 0; q < 4; ++q) {  // unit forcing at stage q
-      const double f[4] = {q == 0 ? 1.0 : 0.0, q == 1 ? 1.0 : 0.0, q == 2 ? 1.0 : 0.0,
-                           q == 3 ? 1.0 : 0.0};
-      double z[2] = {0.0, 0.0};
-      rk4Pair(z, f, Cs, Ks, h, nullptr, nullptr);
-      w.P[0][q] = z[0], w.P[1][q] = z[1];
-    }
-    return w;
   }
 
   // Interval i (from the segment's start) of table t stepped in parts by the generic RK4 (runTable
@@ -818,9 +784,6 @@ struct FusedPass {
   const void* ctx = nullptr;
   double* rrev = nullptr;  // n + 8: the residuals in reverse order, then zeros
   double* keep = nullptr;  // null or n x 4 (m / 4 + 1): the raw rows (r, J) (fusedRow)
-  // The variation test at C1 = 0 on the affine maps (kind 3): the last unknown is C1, whose
-  // pair's step adds FusedVar's term of the held key (t_ref below).
-  const FusedVar* var = nullptr;
   // The RK4 step in lanes (fusedPassImpl<M, false>: a smooth stiffness or a load-varying C, as
   // SegmentSimulator::stepLinear): K of the held keys (with the greybox mesh state) or three
   // stage values per interval, C = theta0 + theta1 (T1 - t_ref), F = ff T1, and the weights of
@@ -897,23 +860,6 @@ GD_FUSED_INLINE void fusedAffineStep(const FusedMap& mp, double T0, double T1, d
   }
   *y = mp.R[0][0] * y0 + mp.R[0][1] * v0 + mp.G[0][0] * T0 + mp.G[0][1] * T1 + mp.G[0][2] * T2;
   *vel = mp.R[1][0] * y0 + mp.R[1][1] * v0 + mp.G[1][0] * T0 + mp.G[1][1] * T1 + mp.G[1][2] * T2;
-}
-
-// FusedVar's term (e0, e1) of an interval from its start state (y, v) and stage torques.
-GD_FUSED_INLINE void fusedVarTerm(const FusedVar& w, double y, double v, double T0, double T1,
-                                  double T2, double t_ref, double* e0, double* e1) {
-  const double u[5] = {y, v, T0, T1, T2};
-  const double dT[4] = {T0 - t_ref, T1 - t_ref, T1 - t_ref, T2 - t_ref};
-  double f[4];
-  f[0] = -(dT[0] * v);
-  for (int q = 1; q < 4; ++q) {
-    double vq = 0.0;
-    for (int j = 0; j < 5; ++j) vq += w.vs[q - 1][j] * u[j];
-    f[q] = -(dT[q] * vq);
-  }
-  double s0 = 0.0, s1 = 0.0;
-  for (int q = 0; q < 4; ++q) s0 += w.P[0][q] * f[q], s1 += w.P[1][q] * f[q];
-  *e0 = s0, *e1 = s1;
 }
 
 // *out = {lo[3], hi[0], hi[1], hi[2]}.
@@ -1041,7 +987,7 @@ GD_FUSED_INLINE auto fusedLinearCopy(const FusedPass* f) {
 
 // Samples i..end of a pass (rows i..end, intervals i..end - 1, none stepped in parts) in local
 // copies of the carried values (kept in registers: no call, no address taken).
-template <int M, bool Affine, bool Var, int P>
+template <int M, bool Affine, int P>
 GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarry<M>* k) {
   constexpr int V = (M + 3) / 4, W = M / 4 + 1;
   V4d a[V], c[V];
@@ -1060,8 +1006,6 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
   double *const rrev = f->rrev, *const keep = f->keep;
   const unsigned char* const key = f->key;
   const FusedMap* const maps = f->maps;
-  const FusedVar* const var = f->var;
-  const double t_ref = f->t_ref;
   const NoiseModel nm = f->nm;
   [[maybe_unused]] const auto lin = fusedLinearCopy<Affine>(f);
   for (;; ++i) {
@@ -1075,13 +1019,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
     }
     FusedSums<M>::template accumulate<P>(nm, i, w, k->ring, Nv, wlag, eprev, rows);
     if (i == end) break;
-    if constexpr (Var) {  // C1 the last unknown (lane M - 1)
-      double e0, e1;
-      fusedVarTerm(var[key[i]], y, vel, T[i], Tm[i], T[i + 1], t_ref, &e0, &e1);
-      fusedAffineStep<V>(maps[key[i]], T[i], Tm[i], T[i + 1], &y, &vel, a, c);
-      a[(M - 1) / 4][(M - 1) % 4] += e0;
-      c[(M - 1) / 4][(M - 1) % 4] += e1;
-    } else if constexpr (Affine) {
+    if constexpr (Affine) {
       fusedAffineStep<V>(maps[key[i]], T[i], Tm[i], T[i + 1], &y, &vel, a, c);
     } else {
       fusedLinearStep<V>(&lin, i, key[i], &y, &vel, a, c);
@@ -1095,7 +1033,7 @@ GD_FUSED_INLINE void fusedSpan(const FusedPass* f, Index i, Index end, FusedCarr
   k->y = y, k->vel = vel;
 }
 
-template <int M, bool Affine, bool Var = false, int P = -1>
+template <int M, bool Affine, int P = -1>
 GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
   constexpr int V = (M + 3) / 4;
   FusedCarry<M> k;
@@ -1107,7 +1045,7 @@ GD_FUSED_INLINE void fusedPassImpl(FusedPass* f) {
     // Up to the next interval stepped in parts (a call: the carried values through memory).
     Index end = i;
     while (end + 1 < n && f->key[end] != SegmentTable::kSplit) ++end;
-    fusedSpan<M, Affine, Var, P>(f, i, end, &k);
+    fusedSpan<M, Affine, P>(f, i, end, &k);
     if (end + 1 >= n) break;
     double x[2] = {k.y, k.vel};
     std::memcpy(f->s[0], k.a, sizeof(V4d) * V);
@@ -1145,21 +1083,18 @@ GEAR_FMA_CLONES void fusedLinear3(FusedPass* f) { fusedPassImpl<3, false>(f); }
 GEAR_FMA_CLONES void fusedLinear4(FusedPass* f) { fusedPassImpl<4, false>(f); }
 GEAR_FMA_CLONES void fusedLinear5(FusedPass* f) { fusedPassImpl<5, false>(f); }
 GEAR_FMA_CLONES void fusedLinear6(FusedPass* f) { fusedPassImpl<6, false>(f); }
-GEAR_FMA_CLONES void fusedAffineVar4(FusedPass* f) { fusedPassImpl<4, true, true>(f); }
-GEAR_FMA_CLONES void fusedAffineVar5(FusedPass* f) { fusedPassImpl<5, true, true>(f); }
-GEAR_FMA_CLONES void fusedAffineVar6(FusedPass* f) { fusedPassImpl<6, true, true>(f); }
 GEAR_FMA_CLONES void fusedRows3(FusedPass* f) { fusedRowsImpl<3>(f); }
 GEAR_FMA_CLONES void fusedRows4(FusedPass* f) { fusedRowsImpl<4>(f); }
 GEAR_FMA_CLONES void fusedRows5(FusedPass* f) { fusedRowsImpl<5>(f); }
 GEAR_FMA_CLONES void fusedRows6(FusedPass* f) { fusedRowsImpl<6>(f); }
 // The known piecewise problem's passes by AR order P (the filter unrolled): kind (runFused) 1
-// and 2 with 3 unknowns, the load test's 0 and 3 with 4.
+// and 2 with 3 unknowns, the load test's 0 with 4.
 template <int M, int Kind, int P>
 GEAR_FMA_CLONES void fusedAr(FusedPass* f) {
   if constexpr (Kind == 2) {
     fusedRowsImpl<M, P>(f);
   } else {
-    fusedPassImpl<M, Kind != 0, Kind == 3, P>(f);
+    fusedPassImpl<M, Kind != 0, P>(f);
   }
 }
 using FusedOrders = std::array<void (*)(FusedPass*), kMaxArOrder + 1>;
@@ -1170,22 +1105,18 @@ constexpr FusedOrders fusedOrders() {
           fusedAr<M, Kind, 4>, fusedAr<M, Kind, 5>, fusedAr<M, Kind, 6>};
 }
 
-// kind 0: the RK4 step, 1: the affine maps, 2: the kept rows, 3: the affine maps with the
-// variation test's C1 at 0 (FusedVar; 4 to 6 unknowns).
+// kind 0: the RK4 step, 1: the affine maps, 2: the kept rows.
 void runFused(FusedPass* f, int m, int kind) {
-  static void (*const kPass[4][4])(FusedPass*) = {
+  static void (*const kPass[3][4])(FusedPass*) = {
       {fusedLinear3, fusedLinear4, fusedLinear5, fusedLinear6},
       {fusedAffine3, fusedAffine4, fusedAffine5, fusedAffine6},
-      {fusedRows3, fusedRows4, fusedRows5, fusedRows6},
-      {nullptr, fusedAffineVar4, fusedAffineVar5, fusedAffineVar6}};
-  static const FusedOrders kByOrder[4] = {fusedOrders<3, 1>(), fusedOrders<3, 2>(),
-                                          fusedOrders<4, 0>(), fusedOrders<4, 3>()};
+      {fusedRows3, fusedRows4, fusedRows5, fusedRows6}};
+  static const FusedOrders kByOrder[3] = {fusedOrders<3, 1>(), fusedOrders<3, 2>(),
+                                          fusedOrders<4, 0>()};
   const int row = m == 3   ? (kind == 1   ? 0
                               : kind == 2 ? 1
                                           : -1)
-                  : m == 4 ? (kind == 0   ? 2
-                              : kind == 3 ? 3
-                                          : -1)
+                  : m == 4 ? (kind == 0 ? 2 : -1)
                            : -1;
   if (row >= 0 && f->nm.p >= 0 && f->nm.p <= kMaxArOrder) {
     kByOrder[row][f->nm.p](f);
@@ -1586,19 +1517,10 @@ class Refinement {
     if (p.m < 3 || p.m > 6 || t.e - t.b < 2) return false;
     SegmentSimulator::AffineMap am[kMaxMaps];
     FusedMap maps[kMaxMaps];
-    FusedVar vars[kMaxMaps];
     FusedPass f;
-    // The variation test at C1 = 0: the maps of the problem without C1, plus its pair's term.
-    const bool var = !t.smooth && c1AtZero(p);
-    Params pm = p;
-    if (var) --pm.m;
-    const bool affine = sim_.heldMaps(t, pm, am);
+    const bool affine = sim_.heldMaps(t, p, am);
     if (affine) {
-      for (int k = 0; k < t.n_keys; ++k) {
-        toLanes(am[k], pm.m, &maps[k]);
-        if (var) vars[k] = sim_.varMap(p.theta0, am[k].K);
-      }
-      f.var = vars, f.t_ref = p.t_ref;
+      for (int k = 0; k < t.n_keys; ++k) toLanes(am[k], p.m, &maps[k]);
     } else {
       linearLanes(t, p, &f);
     }
@@ -1631,20 +1553,8 @@ class Refinement {
       x[0] = z[0], x[1] = z[1];
       for (int k = 0; k < q.p->m; ++k) s[0][k] = z[2 + 2 * k], s[1][k] = z[3 + 2 * k];
     };
-    runFused(&f, p.m, affine ? (var ? 3 : 1) : 0);
+    runFused(&f, p.m, affine ? 1 : 0);
     *out = normalOf(f, p.m);
-    return true;
-  }
-
-  // Whether p is the variation test's problem at C1 = 0 (variationTest: C1 the last unknown, no
-  // STE or stiffness shape): C is constant, so the held intervals take the affine maps.
-  static bool c1AtZero(const Params& p) {
-    if (p.m < 4 || p.role[p.m - 1] != Role::Theta1 || p.theta1 != 0.0 || p.nste > 0 || p.nb > 0)
-      return false;
-    for (int k = 0; k + 1 < p.m; ++k) {
-      if (p.role[k] == Role::Theta1 || p.role[k] == Role::Ste || p.role[k] == Role::Basis)
-        return false;
-    }
     return true;
   }
 
