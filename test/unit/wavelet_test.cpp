@@ -760,6 +760,22 @@ void expectIdentical(const WaveletResult& a, const WaveletResult& b, const std::
   }
 }
 
+// The per-mode path (no full scalogram) with the defaults' mode search.
+WaveletOptions perModeOptions() {
+  WaveletOptions o;
+  o.full_scalogram = false;
+  return o;
+}
+
+// The per-mode path with the paper's three modes given and fit rows at omega0 30: 300 Hz at
+// omega0 30 is wider than the grid's padding, so the fits use their own transform.
+WaveletOptions explicitModeOptions() {
+  WaveletOptions o = perModeOptions();
+  o.mode_frequencies = {300.0, 1731.0, 7375.0};
+  o.fit_omega0 = 30.0;
+  return o;
+}
+
 // One WaveletAnalyzer reused over records of different lengths, signals and options (its
 // plans, buffers and the result's capacity carried from call to call) gives exactly what a
 // fresh analyzeWavelet gives: the reuse is a speed-up only.
@@ -767,12 +783,8 @@ TEST(WaveletAnalyzer, ReusedAcrossCallsGivesBitIdenticalResults) {
   WaveletAnalyzer analyzer;
   WaveletResult reused;  // reused too: its vectors keep their capacity
   std::string error;
-  WaveletOptions per_mode;
-  per_mode.full_scalogram = false;
-  // 300 Hz at omega0 30 is wider than the grid's padding: the fits use their own transform.
-  WaveletOptions explicit_modes = per_mode;
-  explicit_modes.mode_frequencies = {300.0, 1731.0, 7375.0};
-  explicit_modes.fit_omega0 = 30.0;
+  const WaveletOptions per_mode = perModeOptions();
+  const WaveletOptions explicit_modes = explicitModeOptions();
   const std::vector<std::pair<std::vector<double>, const WaveletOptions*>> cases = {
       {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 4), &per_mode},
       {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 5), &per_mode},
@@ -823,11 +835,8 @@ TEST(WaveletAnalyzer, PerModePathOnSeveralThreadsGivesTheOneThreadResult) {
     }
     return y;
   };
-  WaveletOptions one;
-  one.full_scalogram = false;
-  WaveletOptions explicit_modes = one;
-  explicit_modes.mode_frequencies = {300.0, 1731.0, 7375.0};
-  explicit_modes.fit_omega0 = 30.0;
+  const WaveletOptions one = perModeOptions();
+  const WaveletOptions explicit_modes = explicitModeOptions();
   const std::vector<std::pair<std::vector<double>, const WaveletOptions*>> cases = {
       {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 11), &one},
       {freeDecay(kPaperModes, kPaperFs, kPaperN, 30.0, 12), &one},

@@ -134,6 +134,11 @@ class MorletCwt {
   /// order (mean = that sum / size(), as setSignal computes it): the same spectrum without a
   /// second pass over the samples. Internal if not configured.
   gear_sim::Status setCheckedSignal(const double* y, double mean);
+  /// setSignal's check of n samples: all finite (InvalidInput "<who>: sample j is not finite
+  /// (v)" naming the first that is not; Internal if y is null) and their mean, summed in index
+  /// order. The mean setCheckedSignal expects.
+  static gear_sim::Status checkedMean(const double* y, long n, double* mean,
+                                      const char* who = "MorletCwt");
 
   /// Coefficients W of row i (0 <= i < rows()) for the current signal: returns a pointer to
   /// size() complex values (time order, sample j at t = j/fs), owned by the object and valid
@@ -209,9 +214,7 @@ class MorletCwt {
                                const std::vector<double>& frequencies_hz,
                                const std::vector<double>& omega0s, FftPlanning planning,
                                long fft_length = 0);
-  /// setSignal's check of n samples (all finite; InvalidInput naming the first that is not)
-  /// and their mean; then its transform of samples already checked, whose mean is `mean`.
-  static gear_sim::Status checkedMean(const double* y, long n, double* mean);
+  /// setSignal's transform of samples already checked, whose mean is `mean`.
   void loadChecked(const double* y, double mean);
   const std::complex<double>* computeRow(double frequency_hz, double omega0);
   bool rowAtAllowed(double frequency_hz, double omega0) const;

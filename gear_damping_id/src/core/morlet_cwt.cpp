@@ -508,12 +508,16 @@ double paddedExtent(long n, double sample_rate, const std::vector<double>& frequ
   }
   return static_cast<double>(n) + std::ceil(kPadScales * s_max);
 }
+
+// The fast FFT length for a padded extent; -1 when it is beyond any FFT.
+long fftLengthFor(double padded) {
+  return padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+}
 }  // namespace
 
 long MorletCwt::paddedLength(long n, double sample_rate, const std::vector<double>& frequencies_hz,
                              const std::vector<double>& omega0s) {
-  const double padded = paddedExtent(n, sample_rate, frequencies_hz, omega0s);
-  return padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+  return fftLengthFor(paddedExtent(n, sample_rate, frequencies_hz, omega0s));
 }
 
 Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double sample_rate,
@@ -551,7 +555,7 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
     }
   }
   const double padded = paddedExtent(n, sample_rate, frequencies_hz, omega0s);
-  long n_fft = padded < 4e15 ? fastFftLength(static_cast<long>(padded)) : -1;
+  long n_fft = fftLengthFor(padded);
   if (n_fft > 0 && fft_length > static_cast<long>(padded)) n_fft = fft_length;
   if (n_fft < 0 || n_fft > (1L << 40)) {
     return Status::resourceLimit("MorletCwt: padded length for n = " + std::to_string(n) +
@@ -602,8 +606,7 @@ Status MorletCwt::setSignal(const double* y) {
   if (!configured()) return Status::internal("MorletCwt: not configured");
   double mean = 0.0;
   if (Status st = checkedMean(y, n_, &mean); !st.ok()) return st;
-  loadChecked(y, mean);
-  return {};
+  return setCheckedSignal(y, mean);
 }
 
 Status MorletCwt::setCheckedSignal(const double* y, double mean) {
@@ -614,13 +617,13 @@ Status MorletCwt::setCheckedSignal(const double* y, double mean) {
   return {};
 }
 
-Status MorletCwt::checkedMean(const double* y, long n, double* mean) {
-  if (!y) return Status::internal("MorletCwt: null signal");
+Status MorletCwt::checkedMean(const double* y, long n, double* mean, const char* who) {
+  if (!y) return Status::internal(std::string(who) + ": null signal");
   double sum = 0.0;
   for (long j = 0; j < n; ++j) {
     if (!std::isfinite(y[j])) {
-      return Status::invalidInput("MorletCwt: sample " + std::to_string(j) + " is not finite (" +
-                                  num(y[j]) + ")");
+      return Status::invalidInput(std::string(who) + ": sample " + std::to_string(j) +
+                                  " is not finite (" + num(y[j]) + ")");
     }
     sum += y[j];
   }

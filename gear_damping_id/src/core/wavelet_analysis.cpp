@@ -664,16 +664,7 @@ Status checkInput(Analysis* an) {
     return Status::invalidArgument(
         "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0", "sample_rate");
   }
-  double sum = 0.0;
-  for (long j = 0; j < a.n; ++j) {
-    if (!std::isfinite(a.y[j])) {
-      return Status::invalidInput("analyzeWavelet: sample " + std::to_string(j) +
-                                  " is not finite (" + num(a.y[j]) + ")");
-    }
-    sum += a.y[j];
-  }
-  an->mean = sum / static_cast<double>(a.n);
-  return {};
+  return MorletCwt::checkedMean(a.y, a.n, &an->mean, "analyzeWavelet");
 }
 
 // The frequency grid (explicit, or log-spaced from f_min to f_max) and the mode frequencies,
@@ -1197,11 +1188,11 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
     Status s;
     const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w) ||
                       (!a->opt.full_scalogram && sameLength(a->own, *a, fit_f, fit_w));
+    ahead = same && a->own_loaded;
     if (!same) s = a->own.configure(a->n, a->fs, fit_f, fit_w, FftPlanning::Estimate);
-    if (s.ok() && !(same && a->own_loaded)) s = a->own.setCheckedSignal(a->y, a->mean);
+    if (s.ok() && !ahead) s = a->own.setCheckedSignal(a->y, a->mean);
     if (!s.ok()) return s;
     fit = &a->own;
-    ahead = same && a->own_loaded;
   }
   const double hf = ahead ? a->ahead_hf : highFrequencyLevel(*a, fit, a->rows.front().get());
   highFrequencyNoise(a, seeds, hf);
