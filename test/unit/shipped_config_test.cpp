@@ -114,12 +114,27 @@ TEST(ShippedConfig, NodeReadersRefuseATypoAndAWrongTypeInAShippedFile) {
   nodes::ParamReader p3(std::make_shared<gear_test::YamlParams>(invalid));
   nodes::WaveletNodeOptions o3;
   EXPECT_FALSE(nodes::readWaveletParameters(p3, &o3));
+}
 
-  YAML::Node no_threads = YAML::LoadFile(configPath("wavelet.yaml"));
-  no_threads["threads"] = 0;
-  nodes::ParamReader p4(std::make_shared<gear_test::YamlParams>(no_threads));
-  nodes::WaveletNodeOptions o4;
-  EXPECT_FALSE(nodes::readWaveletParameters(p4, &o4));
+// ~threads of wavelet_node: out of [1, 256], or not an integer (a double, a string, a list, a
+// boolean; an integer beyond 32 bits cannot reach the parameter server) stops the node
+// at start; the range's ends are read as given.
+TEST(ShippedConfig, WaveletReaderChecksTheThreadsParameter) {
+  auto readThreads = [](const YAML::Node& value, nodes::WaveletNodeOptions* o) {
+    YAML::Node n = YAML::LoadFile(configPath("wavelet.yaml"));
+    n["threads"] = value;
+    nodes::ParamReader p(std::make_shared<gear_test::YamlParams>(n));
+    return nodes::readWaveletParameters(p, o);
+  };
+  for (const char* bad : {"0", "-1", "257", "2.5", "two", "1e12", "[2]", "true"}) {
+    nodes::WaveletNodeOptions o;
+    EXPECT_FALSE(readThreads(YAML::Load(bad), &o)) << "threads: " << bad;
+  }
+  for (int good : {1, 2, 256}) {
+    nodes::WaveletNodeOptions o;
+    ASSERT_TRUE(readThreads(YAML::Node(good), &o)) << "threads: " << good;
+    EXPECT_EQ(o.wavelet.threads, good);
+  }
 }
 
 // The STE parameters of damping_id_node (~ste, ~ste_damping, ~ste_calibration_segments) on the
