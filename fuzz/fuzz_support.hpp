@@ -8,14 +8,30 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 namespace gear_fuzz {
 
-/// A file name in $TMPDIR (or /tmp) unique to this process.
+namespace detail {
+inline std::vector<std::string>& tempFiles() {
+  static std::vector<std::string> files;
+  return files;
+}
+inline void removeTempFiles() {
+  for (const std::string& f : tempFiles()) std::remove(f.c_str());
+}
+}  // namespace detail
+
+/// A file name in $TMPDIR (or /tmp) unique to this process; the file is removed when the
+/// process exits normally (libFuzzer's end of a campaign or of -runs; a crash leaves it).
 inline std::string tempPath(const std::string& extension) {
   const char* dir = std::getenv("TMPDIR");
-  return std::string(dir && *dir ? dir : "/tmp") + "/gear_fuzz_" + std::to_string(::getpid()) +
-         "." + extension;
+  std::string path = std::string(dir && *dir ? dir : "/tmp") + "/gear_fuzz_" +
+                     std::to_string(::getpid()) + "." + extension;
+  // The list exists before the handler is registered, so it outlives the handler's call.
+  if (detail::tempFiles().empty()) std::atexit(detail::removeTempFiles);
+  detail::tempFiles().push_back(path);
+  return path;
 }
 
 inline bool writeFile(const std::string& path, const std::uint8_t* data, size_t size) {

@@ -110,24 +110,30 @@ run_unit_test() {  # run_unit_test BINARY: XML, log and exit status in $results
 }
 
 run_fuzz_target() {  # run_fuzz_target TARGET: JUnit case and log in $results
-  local target=$1 work log rc execs
+  local target=$1 work tmp log rc execs left
   work=$(mktemp -d)
+  tmp=$(mktemp -d)  # the target's TMPDIR: what it leaves behind is counted, then removed
   log="$results/fuzz_$target.log"
   # Single process; new inputs go to a scratch corpus, the seeds in the repository stay.
-  "$bin/fuzz_$target" -seed=1 -max_total_time="$fuzz_seconds" -timeout=20 -rss_limit_mb=2560 \
-    -print_final_stats=1 -artifact_prefix="$results/fuzz_${target}_" \
+  TMPDIR="$tmp" "$bin/fuzz_$target" -seed=1 -max_total_time="$fuzz_seconds" -timeout=20 \
+    -rss_limit_mb=2560 -print_final_stats=1 -artifact_prefix="$results/fuzz_${target}_" \
     "$work" "$GEAR_REPO/fuzz/corpus/$target" >"$log" 2>&1
   rc=$?
   execs=$(grep -m1 -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$')
+  left=$(find "$tmp" -mindepth 1 | wc -l)
   if [ $rc -ne 0 ]; then
     echo "sanitize: fuzz_$target found a failure (exit $rc, log $log):" >&2
     grep -m5 -E "ERROR|runtime error|SUMMARY|Test unit written" "$log" >&2
     junit "$results/fuzz_$target.xml" fuzz "$target" "exit $rc after ${execs:-?} runs, see $log"
+  elif [ "$left" -ne 0 ]; then
+    echo "sanitize: fuzz_$target left $left temporary files in its TMPDIR:" \
+      "$(find "$tmp" -mindepth 1 | head -3 | tr '\n' ' ')" >&2
+    junit "$results/fuzz_$target.xml" fuzz "$target" "left $left temporary files after a clean exit"
   else
     junit "$results/fuzz_$target.xml" fuzz "$target" ""
   fi
   echo "sanitize: fuzz_$target ${fuzz_seconds} s, ${execs:-?} executions" >&2
-  rm -rf "$work"
+  rm -rf "$work" "$tmp"
 }
 
 # One pool for both: a fuzz target starts as soon as a test binary's slot frees, so no core idles
