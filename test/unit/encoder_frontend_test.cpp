@@ -17,6 +17,7 @@
 #include "gear_sim/rig_csv.hpp"
 #include "id_test_support.hpp"
 #include "rig_test_support.hpp"
+#include "scratch_dir.hpp"
 #include "status_support.hpp"
 
 namespace {
@@ -261,7 +262,8 @@ TEST(EncoderNoise, QuantisationModelMatchesTheMeasuredNoise) {
 namespace {
 
 std::string writeTemp(const std::string& name, const std::string& text) {
-  const std::string path = ::testing::TempDir() + "/rigfront_" + name;
+  const std::string path =
+      (gear_test::processScratch("encoder_frontend_test") / ("rigfront_" + name)).string();
   std::FILE* f = std::fopen(path.c_str(), "w");
   std::fputs(text.c_str(), f);
   std::fclose(f);

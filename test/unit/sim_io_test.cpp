@@ -8,12 +8,15 @@
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
+#include "scratch_dir.hpp"
 #include "status_support.hpp"
 
 namespace {
 
+// In the binary's scratch directory (removed at exit; the CSV-load case names its table
+// relative to the YAML beside it).
 std::string tempPath(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / ("gear_sim_io_test_" + name)).string();
+  return (gear_test::processScratch("gear_sim_io_test") / ("gear_sim_io_test_" + name)).string();
 }
 
 std::string writeFile(const std::string& name, const std::string& text) {

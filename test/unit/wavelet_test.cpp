@@ -18,6 +18,7 @@
 
 #include "../../gear_damping_id/src/core/decimated_row.hpp"
 #include "per_mode_agreement.hpp"
+#include "scratch_dir.hpp"
 #include "status_support.hpp"
 
 namespace gear_damping_id {
@@ -994,7 +995,7 @@ TEST(WaveletCsv, WritesADecimatedScalogramAndTheSpectraOrReportsTheIoError) {
   std::string error;
   ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kPaperFs, options, &r), &error)) << error;
   ASSERT_EQ(r.modulus.cols(), kPaperN);
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = gear_test::processScratch("wavelet_test").string();
   const std::string scal = dir + "/wavelet_test_scalogram.csv";
   const std::string spec = dir + "/wavelet_test_spectrum.csv";
   ASSERT_EQ(writeScalogramCsv(r, scal, 1000).message(), "");

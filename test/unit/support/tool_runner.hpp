@@ -11,6 +11,8 @@
 #include <sstream>
 #include <string>
 
+#include "scratch_dir.hpp"
+
 namespace gear_test {
 
 struct ToolRun {
@@ -49,23 +51,5 @@ inline ToolRun runTool(const std::string& tool, const std::string& args,
                        const std::filesystem::path& dir) {
   return runShell(std::string(GEAR_TOOL_DIR) + "/" + tool + " " + args, dir, tool);
 }
-
-/// A fresh scratch directory under the system temp dir, removed by the destructor.
-class ScratchDir {
- public:
-  explicit ScratchDir(const std::string& name)
-      : path_(std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid()))) {
-    std::filesystem::remove_all(path_);
-    std::filesystem::create_directories(path_);
-  }
-  ~ScratchDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
 
 }  // namespace gear_test
