@@ -498,6 +498,28 @@ void segmentLevels(const double* y, Eigen::Index n, double sum, const double* d3
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
 constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
 
+// solveEquilibrated's eigendecomposition path for q >= 2 unknowns (at most MAX): run-time sizes
+// with compile-time bounds, the dynamic-size algorithms, without heap allocations.
+template <int MAX, typename D>
+bool eigenSolve(const Eigen::Ref<const Eigen::MatrixXd>& G,
+                const Eigen::Ref<const Eigen::VectorXd>& r, const D& d, double max_condition,
+                Eigen::VectorXd* x, Eigen::MatrixXd* inverse, double* condition) {
+  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, MAX, MAX> Small;
+  const Eigen::Index q = G.rows();
+  const Small S = d.asDiagonal() * G * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Small> es(S);
+  if (es.info() != Eigen::Success) return false;
+  const auto& lam = es.eigenvalues();
+  const double lmax = lam[q - 1], lmin = lam[0];
+  *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
+  if (!(*condition <= max_condition)) return false;
+  const Small& V = es.eigenvectors();
+  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
+  *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
+  if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
+  return true;
+}
+
 // Solves the symmetric positive semi-definite system G x = r after equilibration
 // (D G D, D = diag(G)^-1/2) by a symmetric eigendecomposition. Returns false when G is not
 // positive definite or its equilibrated 2-norm condition number (of the underlying design matrix,
@@ -534,23 +556,9 @@ bool solveEquilibrated(const Eigen::Ref<const Eigen::MatrixXd>& G,
     if (inverse) inverse->setConstant(1, 1, (d[0] * sinv) * d[0]);
     return true;
   }
-  // Run-time sizes with compile-time bounds: the dynamic-size algorithms, without heap
-  // allocations.
-  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, IntegralMethod::kMaxColumns,
-                        IntegralMethod::kMaxColumns>
-      Small;
-  const Small S = d.asDiagonal() * G * d.asDiagonal();
-  Eigen::SelfAdjointEigenSolver<Small> es(S);
-  if (es.info() != Eigen::Success) return false;
-  const auto& lam = es.eigenvalues();
-  const double lmax = lam[q - 1], lmin = lam[0];
-  *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
-  if (!(*condition <= max_condition)) return false;
-  const Small& V = es.eigenvectors();
-  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
-  *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
-  if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
-  return true;
+  return q <= 4 ? eigenSolve<4>(G, r, d, max_condition, x, inverse, condition)
+                : eigenSolve<IntegralMethod::kMaxColumns>(G, r, d, max_condition, x, inverse,
+                                                          condition);
 }
 
 }  // namespace
