@@ -498,6 +498,28 @@ void segmentLevels(const double* y, Eigen::Index n, double sum, const double* d3
 // Relative rounding level of a residual sum of squares computed as b'b - b'X x.
 constexpr double kRssFloor = 64.0 * std::numeric_limits<double>::epsilon();
 
+// solveEquilibrated's eigendecomposition path for q >= 2 unknowns (at most MAX): run-time sizes
+// with compile-time bounds, the dynamic-size algorithms, without heap allocations.
+template <int MAX, typename D>
+bool eigenSolve(const Eigen::Ref<const Eigen::MatrixXd>& G,
+                const Eigen::Ref<const Eigen::VectorXd>& r, const D& d, double max_condition,
+                Eigen::VectorXd* x, Eigen::MatrixXd* inverse, double* condition) {
+  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, MAX, MAX> Small;
+  const Eigen::Index q = G.rows();
+  const Small S = d.asDiagonal() * G * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Small> es(S);
+  if (es.info() != Eigen::Success) return false;
+  const auto& lam = es.eigenvalues();
+  const double lmax = lam[q - 1], lmin = lam[0];
+  *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
+  if (!(*condition <= max_condition)) return false;
+  const Small& V = es.eigenvectors();
+  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
+  *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
+  if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
+  return true;
+}
+
 // Solves the symmetric positive semi-definite system G x = r after equilibration
 // (D G D, D = diag(G)^-1/2) by a symmetric eigendecomposition. Returns false when G is not
 // positive definite or its equilibrated 2-norm condition number (of the underlying design matrix,
@@ -534,23 +556,9 @@ bool solveEquilibrated(const Eigen::Ref<const Eigen::MatrixXd>& G,
     if (inverse) inverse->setConstant(1, 1, (d[0] * sinv) * d[0]);
     return true;
   }
-  // Run-time sizes with compile-time bounds: the dynamic-size algorithms, without heap
-  // allocations.
-  typedef Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, IntegralMethod::kMaxColumns,
-                        IntegralMethod::kMaxColumns>
-      Small;
-  const Small S = d.asDiagonal() * G * d.asDiagonal();
-  Eigen::SelfAdjointEigenSolver<Small> es(S);
-  if (es.info() != Eigen::Success) return false;
-  const auto& lam = es.eigenvalues();
-  const double lmax = lam[q - 1], lmin = lam[0];
-  *condition = lmin > 0.0 ? std::sqrt(lmax / lmin) : std::numeric_limits<double>::infinity();
-  if (!(*condition <= max_condition)) return false;
-  const Small& V = es.eigenvectors();
-  const Small Sinv = V * lam.cwiseInverse().asDiagonal() * V.transpose();
-  *x = d.asDiagonal() * (Sinv * (d.asDiagonal() * r));
-  if (inverse) *inverse = d.asDiagonal() * Sinv * d.asDiagonal();
-  return true;
+  return q <= 4 ? eigenSolve<4>(G, r, d, max_condition, x, inverse, condition)
+                : eigenSolve<IntegralMethod::kMaxColumns>(G, r, d, max_condition, x, inverse,
+                                                          condition);
 }
 
 }  // namespace
@@ -972,21 +980,23 @@ struct RowColumns {
 };
 
 // Pass 2 of the known and the greybox square formulations (GREY), any damping model (LOAD: the
-// load law's column): prefix sums -> rows, the same integrals as generalRows with the
-// formulation's choices compiled in. Blocked: four rows per step, each running sum scanned in
-// the lanes of one vector with its carry from the previous block (a different summation order
-// from generalRows' one-row chains: equal to rounding).
+// load law's column, its increments dS formed here, as loadIncrements would): prefix sums -> rows,
+// the same integrals as generalRows with the formulation's choices compiled in. Blocked: four rows
+// per step, each running sum scanned in the lanes of one vector with its carry from the previous
+// block (a different summation order from generalRows' one-row chains: equal to rounding).
 template <bool GREY, bool LOAD>
 GD_ALWAYS_INLINE inline void forcedRows(const WindowPass& p, const RowColumns& c,
                                         Eigen::MatrixXd* rows) {
-  const double *ay = p.ay, *my = p.my, *ag = p.ag, *mg = p.mg, *as = p.as, *ms = p.ms, *dS = p.dS;
+  const double *ay = p.ay, *my = p.my, *ag = p.ag, *mg = p.mg, *as = p.as, *ms = p.ms;
   const double* y = p.y + p.w0;
+  const double* T = LOAD ? p.T + p.w0 : nullptr;
   double* colb = &(*rows)(0, c.b);
   double* colC = &(*rows)(0, c.C);
   double* colL = LOAD ? &(*rows)(0, c.L) : nullptr;
   double* colK0 = GREY ? &(*rows)(0, c.K0) : nullptr;
   double* colDK = GREY ? &(*rows)(0, c.DK) : nullptr;
   const V4 h = V4{0.0, 0.0, 0.0, 0.0} + p.h, half_h = 0.5 * h, T_c = h * 0.0 + p.T_c;
+  const V4 T_cx = {p.T_c, p.T_c, p.T_c, p.T_c};  // (exact, a -0.0 too: loadIncrements' T_c)
   V4 P = {0.0, 0.0, 0.0, 0.0};
   DoubleIntegral Iy, Ikf, Is, Id;  // of y, K y - F (known) or -F, s y, (T1 - T_c) dy
   colb[0] = y[0];                  // row 0: every integral zero
@@ -1000,13 +1010,15 @@ GD_ALWAYS_INLINE inline void forcedRows(const WindowPass& p, const RowColumns& c
     const V4 Pr = P + scan4(a);
     P = lastLane(Pr);
     store4(colC + r, -Pr, n);
-    store4(colb + r, load4(y + r, n) + Ikf.step(h, load4(ag + i, n), load4(mg + i, n)), n);
+    const V4 yr = load4(y + r, n);
+    store4(colb + r, yr + Ikf.step(h, load4(ag + i, n), load4(mg + i, n)), n);
     if (GREY) {
       store4(colK0 + r, -Iy.step(h, a, load4(my + i, n)), n);
       store4(colDK + r, -Is.step(h, load4(as + i, n), load4(ms + i, n)), n);
     }
-    if (LOAD) {
-      const V4 d = load4(dS + i, n);
+    if (LOAD) {  // loadIncrements' dS of intervals i .. i + n - 1, the same operations
+      const V4 d =
+          0.5 * ((load4(T + i, n) - T_cx) + (load4(T + r, n) - T_cx)) * (yr - load4(y + i, n));
       store4(colL + r, -(T_c * Pr + Id.step(h, d, half_h * d)), n);
     }
   };
@@ -1087,8 +1099,9 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
   for (Eigen::Index i = 0; i < p.i_lo; ++i) edgeIncrements(p, i);
   for (Eigen::Index i = p.i_hi; i < p.ni; ++i) edgeIncrements(p, i);
   nearBreakIncrements(p);
-  if (p.load) loadIncrements(p);
   const int nb = shape_ ? n_basis_ : 0;
+  const bool forced = nb == 0 && (p.known || p.grey);  // (forcedRows forms the load law's dS)
+  if (p.load && !forced) loadIncrements(p);
   if (nb > 0) basisIncrements(p, basis_, nb, &basis_inc_);
   const RowColumns c{columnIndex(Column::DampC),
                      columnIndex(Column::DampLoad),
@@ -1097,7 +1110,7 @@ void IntegralMethod::windowRows(const SignalView& s, Eigen::Index w0, Eigen::Ind
                      columnIndex(Column::ForceConst),
                      columnIndex(Column::StiffBasis),
                      q};
-  if (nb == 0 && (p.known || p.grey)) return forcedRowsOf(p, c, &rows_);
+  if (forced) return forcedRowsOf(p, c, &rows_);
   generalRows(p, c, basis_inc_, nb, fbar, &rows_);
 }
 
