@@ -2858,6 +2858,28 @@ inline bool sameBits(double a, double b) {
   return x == y;
 }
 
+// The forcing part (g1, g2) of the steps of plain intervals i = 0 .. len - 1 (record samples
+// j0 + i; HeldKnownStages::Plain), the scaled damping and stiffness stages b, c, k1, km held over
+// them: per step what heldResponse's scalar loop computed (held()'s values, rk4AffineForcing), the
+// same operations in the same order per lane. The steps are independent, so the loop vectorises;
+// GEAR_AVX2_CLONES is AVX2 without FMA (nothing contracted), so every clone gives the same bits.
+GEAR_AVX2_CLONES
+void plainForcing(const HeldKnownStages::Plain& p, double inv_h, double h2, double b, double c,
+                  double k1, double km, Index j0, Index len, double* __restrict g1,
+                  double* __restrict g2) {
+  const double* __restrict T = p.T;
+  const double w0 = p.w[0], w1 = p.w[1], w2 = p.w[2], w3 = p.w[3], ff = p.force_factor;
+  for (Index i = 0; i < len; ++i) {
+    const Index j = j0 + i;
+    const double tm = w0 * T[j - 1] + w1 * T[j] + w2 * T[j + 1] + w3 * T[j + 2];
+    gear_sim::AffineStep a;
+    gear_sim::rk4AffineForcing(inv_h, b, c, k1, km, h2 * (ff * T[j]), h2 * (ff * tm),
+                               h2 * (ff * T[j + 1]), &a);
+    g1[i] = a.g1;
+    g2[i] = a.g2;
+  }
+}
+
 // gear_sim::integrateSdofAffineBlocks for one RK4 step per sample (substeps 1) with the
 // common case's stages taken per interval as scalars (HeldKnownStages::held; the other
 // intervals from `stages`, split ones by advanceSdof with `coeffs`): the same steps, stages and
@@ -2879,6 +2901,8 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
   gear_sim::AffineStep hom;
   bool have = false;
   const char no_split = 0;
+  constexpr Index kPlainRun = 256;
+  double g1[kPlainRun], g2[kPlainRun];  // the forcing parts of a run of plain intervals
   gear_sim::SdofState s = initial;
   y_out[0] = s.y;
   // Whether interval n has a breakpoint strictly inside (the scan cursor moved to it).
@@ -2917,23 +2941,25 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
     if (!fast) continue;
     // The plain intervals that follow (HeldKnownStages::plainEnd) with the same stiffness, bit
     // for bit (so the same damping, stiffness and homogeneous part): held()'s values read from
-    // the arrays, the stages' scaled damping and stiffness loop constants, and so are the
-    // forcing part's terms made of them alone (hoisted by the compiler: the same operations, the
-    // same values).
+    // the arrays, the stages' scaled damping and stiffness loop constants (plainForcing; its
+    // terms made of them alone are hoisted by the compiler: the same operations, the same
+    // values).
     const Index end = std::min(n_samples - 1, held.plainEnd(n - 1));
     const HeldKnownStages::Plain p = held.plain();
-    const double b = now[1], cc = now[2], k1 = now[5], km = now[4], K = k[0];
+    const double K = k[0];
     const gear_sim::AffineStep m = hom;
-    while (n < end && !split(n)) {
-      const Index j = p.begin + n;
-      if (!sameBits(p.k[j] * p.inv_me, K)) break;
-      const double* T = p.T;
-      const double tm = p.w[0] * T[j - 1] + p.w[1] * T[j] + p.w[2] * T[j + 1] + p.w[3] * T[j + 2];
-      a = m;
-      gear_sim::rk4AffineForcing(inv_h, b, cc, k1, km, h2 * (p.force_factor * T[j]),
-                                 h2 * (p.force_factor * tm), h2 * (p.force_factor * T[j + 1]), &a);
-      s = {a.m11 * s.y + a.m12 * s.v + a.g1, a.m21 * s.y + a.m22 * s.v + a.g2};
-      y_out[++n] = s.y;
+    for (Index len = kPlainRun; len == kPlainRun;) {
+      // The next run of such intervals (at most kPlainRun; split() asked in the order of a
+      // step-by-step loop), their forcing parts first, then the serial recursion.
+      len = 0;
+      while (len < kPlainRun && n + len < end && !split(n + len) &&
+             sameBits(p.k[p.begin + n + len] * p.inv_me, K))
+        ++len;
+      plainForcing(p, inv_h, h2, now[1], now[2], now[5], now[4], p.begin + n, len, g1, g2);
+      for (Index i = 0; i < len; ++i) {
+        s = {m.m11 * s.y + m.m12 * s.v + g1[i], m.m21 * s.y + m.m22 * s.v + g2[i]};
+        y_out[++n] = s.y;
+      }
     }
   }
   return {};
