@@ -2880,6 +2880,73 @@ void plainForcing(const HeldKnownStages::Plain& p, double inv_h, double h2, doub
   }
 }
 
+// Whether x[0 .. n) are all finite (what Eigen's allFinite() answers): x - x is 0 for a finite
+// x and NaN otherwise, so the sum of the differences is 0 exactly when every x is finite, in any
+// order; summed in four lanes, branch-free (vectorised; AVX2 clone).
+GEAR_AVX2_CLONES
+bool finiteValues(const double* x, Index n) {
+  typedef double V4 __attribute__((vector_size(32)));
+  V4 acc = {0.0, 0.0, 0.0, 0.0};
+  Index i = 0;
+  for (; i + 4 <= n; i += 4) {
+    V4 v;
+    std::memcpy(&v, x + i, sizeof(V4));
+    acc += v - v;
+  }
+  double sum = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+  for (; i < n; ++i) sum += x[i] - x[i];
+  return sum == 0.0;
+}
+
+// The number of leading k[0 .. len) whose product with inv_me has the bits of K (sameBits), four
+// at a time (vectorised; AVX2 clone: the same products).
+GEAR_AVX2_CLONES
+Index sameProducts(const double* k, Index len, double inv_me, double K) {
+  typedef double V4 __attribute__((vector_size(32)));
+  typedef std::int64_t L4 __attribute__((vector_size(32)));
+  std::int64_t kbits;
+  std::memcpy(&kbits, &K, 8);
+  Index i = 0;
+  for (; i + 4 <= len; i += 4) {
+    V4 v;
+    std::memcpy(&v, k + i, sizeof(V4));
+    v *= inv_me;
+    L4 bits;
+    std::memcpy(&bits, &v, sizeof(L4));
+    const L4 same = bits == kbits;
+    if (!(same[0] & same[1] & same[2] & same[3])) break;
+  }
+  while (i < len && sameBits(k[i] * inv_me, K)) ++i;
+  return i;
+}
+
+// The first interval m in [m0, limit) (limit if none) that has a breakpoint strictly inside, as
+// heldResponse's split(m) finds it, from `scan` (at or before the first breakpoint after the
+// start of interval m0; a copy is moved). With B the first breakpoint after the start t0 + m dt,
+// split(m') for m' >= m is B < t0 + (m' + 1) dt until the start reaches B, and that end is
+// monotone in m': the first m' where it exceeds B is found from an estimate and checked with
+// the same expressions. Where a start equals B exactly, the search goes on from there past B.
+template <class It>
+Index firstSplit(It scan, It bp_end, double t0, double dt, Index m0, Index limit) {
+  for (Index m = m0; m < limit;) {
+    const double ta = t0 + m * dt;
+    while (scan != bp_end && *scan <= ta) ++scan;
+    if (scan == bp_end) return limit;
+    const double B = *scan;
+    auto past = [&](Index q) { return t0 + (q + 1) * dt > B; };  // interval q ends after B
+    double x = (B - t0) / dt - 1.0;
+    if (!(x >= static_cast<double>(m))) x = static_cast<double>(m);
+    if (!(x <= static_cast<double>(limit))) x = static_cast<double>(limit);
+    Index q = static_cast<Index>(x);
+    while (q > m && past(q - 1)) --q;
+    while (q < limit && !past(q)) ++q;
+    if (q >= limit) return limit;
+    if (t0 + q * dt < B) return q;  // B lies inside interval q
+    m = q;                          // interval q starts at B
+  }
+  return limit;
+}
+
 // gear_sim::integrateSdofAffineBlocks for one RK4 step per sample (substeps 1) with the
 // common case's stages taken per interval as scalars (HeldKnownStages::held; the other
 // intervals from `stages`, split ones by advanceSdof with `coeffs`): the same steps, stages and
@@ -2949,12 +3016,13 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
     const double K = k[0];
     const gear_sim::AffineStep m = hom;
     for (Index len = kPlainRun; len == kPlainRun;) {
-      // The next run of such intervals (at most kPlainRun; split() asked in the order of a
-      // step-by-step loop), their forcing parts first, then the serial recursion.
-      len = 0;
-      while (len < kPlainRun && n + len < end && !split(n + len) &&
-             sameBits(p.k[p.begin + n + len] * p.inv_me, K))
-        ++len;
+      // The next run of such intervals (at most kPlainRun): up to the first that split() or the
+      // stiffness stops (the cursor left where it is: split() moves it on when asked), their
+      // forcing parts first, then the serial recursion.
+      const Index most = std::min(kPlainRun, end - n);
+      if (most <= 0) break;
+      const Index stop = firstSplit(scan, bp_end, t0, dt, n, n + most);
+      len = sameProducts(p.k + p.begin + n, stop - n, p.inv_me, K);
       plainForcing(p, inv_h, h2, now[1], now[2], now[5], now[4], p.begin + n, len, g1, g2);
       for (Index i = 0; i < len; ++i) {
         s = {m.m11 * s.y + m.m12 * s.v + g1[i], m.m21 * s.y + m.m22 * s.v + g2[i]};
@@ -3033,7 +3101,7 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
                                                           substeps, out->modeled.data(), nullptr);
       !e.ok())
     return e.withContext("modeled response");
-  if (!out->modeled.allFinite()) {
+  if (!finiteValues(out->modeled.data(), n)) {
     return gear_sim::Status::notIdentifiable(
         "modeled response: the re-simulation diverged (non-finite values)");
   }
