@@ -54,6 +54,12 @@ bool channelIsHeld(const double* channel, Eigen::Index lo, Eigen::Index hi);
 long findBreaks(const SignalView& signal, const double* channel, bool held, double contact_ratio,
                 Eigen::Index lo, Eigen::Index hi, std::vector<QuadratureBreak>* out);
 
+/// Appends the switches of a held channel on the intervals `changes` (ascending, as heldChanges
+/// lists them) to `out`, as findBreaks (held) appends them: each located by `mesh_phase`
+/// (switchFractionFromPhase), at th = 1 where it cannot be. Returns the number not located.
+long locateHeldSwitches(const SignalView& signal, const double* channel, double contact_ratio,
+                        const std::vector<long>& changes, std::vector<QuadratureBreak>* out);
+
 class ForwardModel {
  public:
   using Index = Eigen::Index;

@@ -96,6 +96,17 @@ long findBreaks(const SignalView& s, const double* k, bool held, double contact_
   return unlocated;
 }
 
+long locateHeldSwitches(const SignalView& s, const double* k, double contact_ratio,
+                        const std::vector<long>& changes, std::vector<QuadratureBreak>* out) {
+  long unlocated = 0;
+  for (const long j : changes) {
+    const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, k[j + 1] > k[j], contact_ratio);
+    if (std::isnan(th)) ++unlocated;
+    out->push_back({j, std::isnan(th) ? 1.0 : th});
+  }
+  return unlocated;
+}
+
 ForwardModel::ForwardModel(const SignalView& s, const GearConstants& g, Formulation f,
                            const Ranges& ranges)
     : signal_(s),
@@ -112,12 +123,18 @@ ForwardModel::ForwardModel(const SignalView& s, const GearConstants& g, Formulat
                      : f == Formulation::Greybox ? s.mesh_state
                                                  : nullptr;
   if (ch == nullptr) return;
+  // One scan per range finds whether the stiffness is held and where it switches (heldChanges:
+  // what channelIsHeld and findBreaks find in two, as the integral method reads a segment); a
+  // smooth stiffness (known only) is searched for jumps and kinks.
+  std::vector<long> changes;
   for (size_t r = 0; r < ranges_.size(); ++r) {
     const auto [lo, hi] = ranges_[r];
     if (hi - lo < 2) continue;
-    const bool held = f == Formulation::Greybox || channelIsHeld(ch, lo, hi);
+    changes.clear();
+    const bool held = heldChanges(ch, lo, std::min(hi, s.n), f == Formulation::Known, &changes);
     smooth_[r] = !held;
-    unlocated_ += findBreaks(s, ch, held, g.contact_ratio, lo, hi, &breaks_);
+    unlocated_ += held ? locateHeldSwitches(s, ch, g.contact_ratio, changes, &breaks_)
+                       : findBreaks(s, ch, false, g.contact_ratio, lo, hi, &breaks_);
   }
 }
 

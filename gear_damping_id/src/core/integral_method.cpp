@@ -1358,12 +1358,7 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
                           : heldChanges(brk, begin, end, f == Formulation::Known, &changes_);
     held_k_ = f == Formulation::Known && held;
     if (held) {
-      for (const Eigen::Index j : changes_) {
-        const double th =
-            switchFractionFromPhase(s.mesh_phase, j, s.n, brk[j + 1] > brk[j], gear_.contact_ratio);
-        if (std::isnan(th)) ++unlocated_switches_;
-        breaks_.push_back({static_cast<long>(j), std::isnan(th) ? 1.0 : th});
-      }
+      unlocated_switches_ += locateHeldSwitches(s, brk, gear_.contact_ratio, changes_, &breaks_);
     } else {
       unlocated_switches_ += findBreaks(s, brk, false, gear_.contact_ratio, begin, end, &breaks_);
     }

@@ -2858,6 +2858,95 @@ inline bool sameBits(double a, double b) {
   return x == y;
 }
 
+// The forcing part (g1, g2) of the steps of plain intervals i = 0 .. len - 1 (record samples
+// j0 + i; HeldKnownStages::Plain), the scaled damping and stiffness stages b, c, k1, km held over
+// them: per step what heldResponse's scalar loop computed (held()'s values, rk4AffineForcing), the
+// same operations in the same order per lane. The steps are independent, so the loop vectorises;
+// GEAR_AVX2_CLONES is AVX2 without FMA (nothing contracted), so every clone gives the same bits.
+GEAR_AVX2_CLONES
+void plainForcing(const HeldKnownStages::Plain& p, double inv_h, double h2, double b, double c,
+                  double k1, double km, Index j0, Index len, double* __restrict g1,
+                  double* __restrict g2) {
+  const double* __restrict T = p.T;
+  const double w0 = p.w[0], w1 = p.w[1], w2 = p.w[2], w3 = p.w[3], ff = p.force_factor;
+  for (Index i = 0; i < len; ++i) {
+    const Index j = j0 + i;
+    const double tm = w0 * T[j - 1] + w1 * T[j] + w2 * T[j + 1] + w3 * T[j + 2];
+    gear_sim::AffineStep a;
+    gear_sim::rk4AffineForcing(inv_h, b, c, k1, km, h2 * (ff * T[j]), h2 * (ff * tm),
+                               h2 * (ff * T[j + 1]), &a);
+    g1[i] = a.g1;
+    g2[i] = a.g2;
+  }
+}
+
+// Whether x[0 .. n) are all finite (what Eigen's allFinite() answers): x - x is 0 for a finite
+// x and NaN otherwise, so the sum of the differences is 0 exactly when every x is finite, in any
+// order; summed in four lanes, branch-free (vectorised; AVX2 clone).
+GEAR_AVX2_CLONES
+bool finiteValues(const double* x, Index n) {
+  typedef double V4 __attribute__((vector_size(32)));
+  V4 acc = {0.0, 0.0, 0.0, 0.0};
+  Index i = 0;
+  for (; i + 4 <= n; i += 4) {
+    V4 v;
+    std::memcpy(&v, x + i, sizeof(V4));
+    acc += v - v;
+  }
+  double sum = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+  for (; i < n; ++i) sum += x[i] - x[i];
+  return sum == 0.0;
+}
+
+// The number of leading k[0 .. len) whose product with inv_me has the bits of K (sameBits), four
+// at a time (vectorised; AVX2 clone: the same products).
+GEAR_AVX2_CLONES
+Index sameProducts(const double* k, Index len, double inv_me, double K) {
+  typedef double V4 __attribute__((vector_size(32)));
+  typedef std::int64_t L4 __attribute__((vector_size(32)));
+  std::int64_t kbits;
+  std::memcpy(&kbits, &K, 8);
+  Index i = 0;
+  for (; i + 4 <= len; i += 4) {
+    V4 v;
+    std::memcpy(&v, k + i, sizeof(V4));
+    v *= inv_me;
+    L4 bits;
+    std::memcpy(&bits, &v, sizeof(L4));
+    const L4 same = bits == kbits;
+    if (!(same[0] & same[1] & same[2] & same[3])) break;
+  }
+  while (i < len && sameBits(k[i] * inv_me, K)) ++i;
+  return i;
+}
+
+// The first interval m in [m0, limit) (limit if none) that has a breakpoint strictly inside, as
+// heldResponse's split(m) finds it, from `scan` (at or before the first breakpoint after the
+// start of interval m0; a copy is moved). With B the first breakpoint after the start t0 + m dt,
+// split(m') for m' >= m is B < t0 + (m' + 1) dt until the start reaches B, and that end is
+// monotone in m': the first m' where it exceeds B is found from an estimate and checked with
+// the same expressions. Where a start equals B exactly, the search goes on from there past B.
+template <class It>
+Index firstSplit(It scan, It bp_end, double t0, double dt, Index m0, Index limit) {
+  for (Index m = m0; m < limit;) {
+    const double ta = t0 + m * dt;
+    while (scan != bp_end && *scan <= ta) ++scan;
+    if (scan == bp_end) return limit;
+    const double B = *scan;
+    auto past = [&](Index q) { return t0 + (q + 1) * dt > B; };  // interval q ends after B
+    double x = (B - t0) / dt - 1.0;
+    if (!(x >= static_cast<double>(m))) x = static_cast<double>(m);
+    if (!(x <= static_cast<double>(limit))) x = static_cast<double>(limit);
+    Index q = static_cast<Index>(x);
+    while (q > m && past(q - 1)) --q;
+    while (q < limit && !past(q)) ++q;
+    if (q >= limit) return limit;
+    if (t0 + q * dt < B) return q;  // B lies inside interval q
+    m = q;                          // interval q starts at B
+  }
+  return limit;
+}
+
 // gear_sim::integrateSdofAffineBlocks for one RK4 step per sample (substeps 1) with the
 // common case's stages taken per interval as scalars (HeldKnownStages::held; the other
 // intervals from `stages`, split ones by advanceSdof with `coeffs`): the same steps, stages and
@@ -2879,6 +2968,8 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
   gear_sim::AffineStep hom;
   bool have = false;
   const char no_split = 0;
+  constexpr Index kPlainRun = 256;
+  double g1[kPlainRun], g2[kPlainRun];  // the forcing parts of a run of plain intervals
   gear_sim::SdofState s = initial;
   y_out[0] = s.y;
   // Whether interval n has a breakpoint strictly inside (the scan cursor moved to it).
@@ -2917,23 +3008,26 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
     if (!fast) continue;
     // The plain intervals that follow (HeldKnownStages::plainEnd) with the same stiffness, bit
     // for bit (so the same damping, stiffness and homogeneous part): held()'s values read from
-    // the arrays, the stages' scaled damping and stiffness loop constants, and so are the
-    // forcing part's terms made of them alone (hoisted by the compiler: the same operations, the
-    // same values).
+    // the arrays, the stages' scaled damping and stiffness loop constants (plainForcing; its
+    // terms made of them alone are hoisted by the compiler: the same operations, the same
+    // values).
     const Index end = std::min(n_samples - 1, held.plainEnd(n - 1));
     const HeldKnownStages::Plain p = held.plain();
-    const double b = now[1], cc = now[2], k1 = now[5], km = now[4], K = k[0];
+    const double K = k[0];
     const gear_sim::AffineStep m = hom;
-    while (n < end && !split(n)) {
-      const Index j = p.begin + n;
-      if (!sameBits(p.k[j] * p.inv_me, K)) break;
-      const double* T = p.T;
-      const double tm = p.w[0] * T[j - 1] + p.w[1] * T[j] + p.w[2] * T[j + 1] + p.w[3] * T[j + 2];
-      a = m;
-      gear_sim::rk4AffineForcing(inv_h, b, cc, k1, km, h2 * (p.force_factor * T[j]),
-                                 h2 * (p.force_factor * tm), h2 * (p.force_factor * T[j + 1]), &a);
-      s = {a.m11 * s.y + a.m12 * s.v + a.g1, a.m21 * s.y + a.m22 * s.v + a.g2};
-      y_out[++n] = s.y;
+    for (Index len = kPlainRun; len == kPlainRun;) {
+      // The next run of such intervals (at most kPlainRun): up to the first that split() or the
+      // stiffness stops (the cursor left where it is: split() moves it on when asked), their
+      // forcing parts first, then the serial recursion.
+      const Index most = std::min(kPlainRun, end - n);
+      if (most <= 0) break;
+      const Index stop = firstSplit(scan, bp_end, t0, dt, n, n + most);
+      len = sameProducts(p.k + p.begin + n, stop - n, p.inv_me, K);
+      plainForcing(p, inv_h, h2, now[1], now[2], now[5], now[4], p.begin + n, len, g1, g2);
+      for (Index i = 0; i < len; ++i) {
+        s = {m.m11 * s.y + m.m12 * s.v + g1[i], m.m21 * s.y + m.m22 * s.v + g2[i]};
+        y_out[++n] = s.y;
+      }
     }
   }
   return {};
@@ -3007,7 +3101,7 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
                                                           substeps, out->modeled.data(), nullptr);
       !e.ok())
     return e.withContext("modeled response");
-  if (!out->modeled.allFinite()) {
+  if (!finiteValues(out->modeled.data(), n)) {
     return gear_sim::Status::notIdentifiable(
         "modeled response: the re-simulation diverged (non-finite values)");
   }
