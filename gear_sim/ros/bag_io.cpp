@@ -186,7 +186,7 @@ __attribute__((target("avx2"))) void countOutsideAvx2(const RawArray& a,
     out += ((v >= range.low) & (v <= range.high)) ? 0 : 1;  // (no branch: inRange's && has one)
   }
   if (out > 0) {
-    for (size_t i = 0; i < a.size(); ++i) nf += finite(a[i]) ? 0 : 1;
+    for (size_t j = 0; j < a.size(); ++j) nf += finite(a[j]) ? 0 : 1;
   }
   *non_finite = nf;
   *outside = out;

@@ -46,15 +46,24 @@ bool channelIsHeld(const double* k, Eigen::Index lo, Eigen::Index hi) {
   return true;
 }
 
+namespace {
+// The switch of k on interval j appended to `out`: located by `mesh_phase`
+// (switchFractionFromPhase), at th = 1 where it cannot be. 1 when it cannot, else 0.
+long appendSwitch(const SignalView& s, const double* k, double contact_ratio, long j,
+                  std::vector<QuadratureBreak>* out) {
+  const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, k[j + 1] > k[j], contact_ratio);
+  out->push_back({j, std::isnan(th) ? 1.0 : th});
+  return std::isnan(th) ? 1 : 0;
+}
+}  // namespace
+
 long findBreaks(const SignalView& s, const double* k, bool held, double contact_ratio,
                 Eigen::Index lo, Eigen::Index hi, std::vector<QuadratureBreak>* out) {
   using Index = Eigen::Index;
   long unlocated = 0;
   const Index last = std::min(hi, s.n) - 1;  // intervals j < last
   auto located = [&](Index j) {
-    const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, k[j + 1] > k[j], contact_ratio);
-    if (std::isnan(th)) ++unlocated;
-    out->push_back({static_cast<long>(j), std::isnan(th) ? 1.0 : th});
+    unlocated += appendSwitch(s, k, contact_ratio, static_cast<long>(j), out);
   };
   if (held) {
     Index j = lo;
@@ -99,11 +108,7 @@ long findBreaks(const SignalView& s, const double* k, bool held, double contact_
 long locateHeldSwitches(const SignalView& s, const double* k, double contact_ratio,
                         const std::vector<long>& changes, std::vector<QuadratureBreak>* out) {
   long unlocated = 0;
-  for (const long j : changes) {
-    const double th = switchFractionFromPhase(s.mesh_phase, j, s.n, k[j + 1] > k[j], contact_ratio);
-    if (std::isnan(th)) ++unlocated;
-    out->push_back({j, std::isnan(th) ? 1.0 : th});
-  }
+  for (const long j : changes) unlocated += appendSwitch(s, k, contact_ratio, j, out);
   return unlocated;
 }
 

@@ -2885,12 +2885,11 @@ void plainForcing(const HeldKnownStages::Plain& p, double inv_h, double h2, doub
 // order; summed in four lanes, branch-free (vectorised; AVX2 clone).
 GEAR_AVX2_CLONES
 bool finiteValues(const double* x, Index n) {
-  typedef double V4 __attribute__((vector_size(32)));
-  V4 acc = {0.0, 0.0, 0.0, 0.0};
+  V4d acc = {0.0, 0.0, 0.0, 0.0};
   Index i = 0;
   for (; i + 4 <= n; i += 4) {
-    V4 v;
-    std::memcpy(&v, x + i, sizeof(V4));
+    V4d v;
+    std::memcpy(&v, x + i, sizeof(V4d));
     acc += v - v;
   }
   double sum = (acc[0] + acc[1]) + (acc[2] + acc[3]);
@@ -2902,14 +2901,13 @@ bool finiteValues(const double* x, Index n) {
 // at a time (vectorised; AVX2 clone: the same products).
 GEAR_AVX2_CLONES
 Index sameProducts(const double* k, Index len, double inv_me, double K) {
-  typedef double V4 __attribute__((vector_size(32)));
   typedef std::int64_t L4 __attribute__((vector_size(32)));
   std::int64_t kbits;
   std::memcpy(&kbits, &K, 8);
   Index i = 0;
   for (; i + 4 <= len; i += 4) {
-    V4 v;
-    std::memcpy(&v, k + i, sizeof(V4));
+    V4d v;
+    std::memcpy(&v, k + i, sizeof(V4d));
     v *= inv_me;
     L4 bits;
     std::memcpy(&bits, &v, sizeof(L4));
