@@ -34,13 +34,17 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <exception>
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "gear_damping_id/input_checks.hpp"
@@ -317,27 +321,137 @@ double streamedWindow(const gear_sim_ros::BagSignalInfo& info, const gd::GearCon
   return gd::defaultWindowLength(whole, gear);
 }
 
-// The modeled responses of a group's identified segments `outs` (each from its segment's state,
-// independent of the others) into (*resps)[j], (*have)[j] whether there is one: the first half of
-// the group on a thread of its own while this one does the second (the bag's reading threads
-// leave most of the second core free), the same responses as one after the other. Each
-// response's own NRMSE and fit only with `fit_metrics` (the record's fit is FitAccumulator's).
-void groupResponses(const gd::SignalView& view, const gd::GearConstants& gear,
-                    const std::vector<gd::SegmentDriver::SegmentOutput>& outs,
-                    std::vector<gd::ModeledResponse>* resps, std::vector<char>* have,
-                    bool fit_metrics) {
-  const size_t n = outs.size();
-  if (resps->size() < n) resps->resize(n);
-  have->assign(n, 0);
-  const auto part = [&](size_t j0, size_t j1) {
-    for (size_t j = j0; j < j1; ++j)
-      (*have)[j] = outs[j].estimate.identifiable &&
-                   gd::modeledResponse(view, gear, outs[j].result, &(*resps)[j], fit_metrics).ok();
-  };
-  if (n < 8) return part(0, n);
-  std::thread helper(part, size_t{0}, n / 2);
-  part(n / 2, n);
-  helper.join();
+// The modeled responses of a streamed record's groups (issue 18) on this thread and one helper
+// created once per record: the caller publishes a group's segments as the driver identifies them
+// (a batch at a time), the helper computes their responses meanwhile, and finish() has this
+// thread claim the rest with it, one segment at a time, then waits for the helper's last. Each
+// response is from its own segment's state and stored by index, so the responses are those of
+// one after the other whatever the scheduling. Each response's own NRMSE and fit only with
+// `fit_metrics` (the record's fit is FitAccumulator's). The group's view must stay valid until
+// finish() or quiesce() has returned.
+class GroupResponses {
+ public:
+  GroupResponses(const gd::GearConstants& gear, bool fit_metrics)
+      : gear_(gear), fit_metrics_(fit_metrics), helper_([this] { helperLoop(); }) {}
+  GroupResponses(const GroupResponses&) = delete;
+  GroupResponses& operator=(const GroupResponses&) = delete;
+  ~GroupResponses() {
+    quiesce();
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    work_cv_.notify_one();
+    helper_.join();
+  }
+  // A group of n segments on `view` (the previous group finished or quiesced).
+  void begin(const gd::SignalView& view, size_t n) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    view_ = view;
+    n_ = n;
+    ready_ = next_ = done_ = 0;
+    outs_.resize(n);
+    if (resps_.size() < n) resps_.resize(n);  // (reused: their vectors keep their storage)
+    have_.assign(n, 0);
+  }
+  // The group's next identified segments (in order).
+  void publish(std::vector<gd::SegmentDriver::SegmentOutput>&& outs) {
+    const size_t at = ready_;  // (written by this thread only)
+    // (Slots from `ready_` on are read by no one until ready_ passes them.)
+    std::move(outs.begin(), outs.end(), outs_.begin() + static_cast<std::ptrdiff_t>(at));
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      ready_ = at + outs.size();
+    }
+    work_cv_.notify_one();
+  }
+  // Every published segment's response computed (this thread helping); an exception of one
+  // rethrown once none is being computed.
+  void finish() {
+    for (size_t j; claim(&j);) compute(j);
+    quiesce();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+  // No new claims, and none being computed on return.
+  void quiesce() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_ += ready_ - next_;  // the unclaimed ones count as done (no response)
+    next_ = ready_;
+    done_cv_.wait(lock, [&] { return done_ == next_; });
+  }
+  const gd::ModeledResponse& response(size_t j) const { return resps_[j]; }
+  bool has(size_t j) const { return have_[j] != 0; }
+
+ private:
+  bool claim(size_t* j) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (next_ >= ready_) return false;
+    *j = next_++;
+    return true;
+  }
+  void compute(size_t j) {
+    try {
+      const gd::SegmentDriver::SegmentOutput& o = outs_[j];
+      have_[j] = o.estimate.identifiable &&
+                 gd::modeledResponse(view_, gear_, o.result, &resps_[j], fit_metrics_).ok();
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (!error_) error_ = std::current_exception();
+    }
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      ++done_;
+    }
+    done_cv_.notify_one();
+  }
+  void helperLoop() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      work_cv_.wait(lock, [&] { return stop_ || next_ < ready_; });
+      if (stop_) return;
+      const size_t j = next_++;
+      lock.unlock();
+      compute(j);
+      lock.lock();
+    }
+  }
+
+  const gd::GearConstants& gear_;
+  const bool fit_metrics_;
+  gd::SignalView view_;
+  std::vector<gd::SegmentDriver::SegmentOutput> outs_;
+  std::vector<gd::ModeledResponse> resps_;
+  std::vector<char> have_;
+  std::mutex mutex_;
+  std::condition_variable work_cv_, done_cv_;
+  size_t n_ = 0, ready_ = 0, next_ = 0, done_ = 0;  // published, claimed, computed
+  bool stop_ = false;
+  std::exception_ptr error_;
+  std::thread helper_;  // last: started once the members above exist
+};
+
+// A group's segments `segs` of `view` identified by `driver` and their responses computed
+// (GroupResponses): with one identification thread in batches of kPublishBatch segments, each
+// published as it is identified (the driver's add() one after the other, as addAll of the
+// group), so the helper computes responses while the next batch is identified; with more, the
+// group at once (addAll's workers). The responses are computed when this returns, also when it
+// throws (the view is then no longer read).
+void identifyPublishing(gd::SegmentDriver* driver, const gd::SignalView& view, const Ranges& segs,
+                        int threads, GroupResponses* responses) {
+  constexpr size_t kPublishBatch = 8;
+  struct Quiesce {
+    GroupResponses* r;
+    ~Quiesce() { r->quiesce(); }
+  } quiesce{responses};
+  responses->begin(view, segs.size());
+  const size_t step = threads <= 1 ? kPublishBatch : segs.size();
+  Ranges part;
+  for (size_t a = 0; a < segs.size(); a += step) {
+    const auto from = segs.begin() + static_cast<std::ptrdiff_t>(a);
+    part.assign(from, from + static_cast<std::ptrdiff_t>(std::min(step, segs.size() - a)));
+    responses->publish(driver->addAll(view, part));
+  }
+  responses->finish();
 }
 
 // Streaming analysis of a long bag through the segment driver (segment_driver.hpp), the
@@ -392,9 +506,8 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
   // block's end), so the feeder hands on views of the blocks themselves (pushHeld, no copy).
   const Ranges reads = feeder.heldRanges();
   progress->setTotal(static_cast<double>(ranges.back().second - ranges.front().first));
-  // A group's responses, reused from group to group (their vectors keep their storage).
-  std::vector<gd::ModeledResponse> resps;
-  std::vector<char> have;
+  // (each response's own fit only for the bag's messages, which carry it)
+  GroupResponses responses(gear, bag->active());
   const auto sink = [&](const gd::SignalView& view, const Ranges& segs, size_t first) {
     if (wavelet_dte != nullptr && wavelet_dte->size() < wavelet_max) {
       for (const auto& r : segs) {  // the analysed samples, in order
@@ -404,17 +517,18 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
       }
     }
     for (size_t k = 0; k < runs->size(); ++k) {
-      const auto outs = drivers[k].addAll(view, segs);
-      if (drivers[k].sharedModel() || ste.options != nullptr) continue;  // no response
-      // (each response's own fit only for the bag's messages, which carry it)
-      groupResponses(view, gear, outs, &resps, &have, bag->active());
-      for (size_t j = 0; j < outs.size(); ++j) {  // in order: the fit's sums and the bag
-        if (!have[j]) continue;
-        fits[k].add(resps[j]);
+      if (drivers[k].sharedModel() || ste.options != nullptr) {  // no response
+        drivers[k].addAll(view, segs);
+        continue;
+      }
+      identifyPublishing(&drivers[k], view, segs, threads, &responses);
+      for (size_t j = 0; j < segs.size(); ++j) {  // in order: the fit's sums and the bag
+        if (!responses.has(j)) continue;
+        fits[k].add(responses.response(j));
         if (bag->active())  // the message only when a bag is written
           bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),
                      gear_damping_ros::toMsg(
-                         resps[j], info.sample_rate,
+                         responses.response(j), info.sample_rate,
                          info.first_index + static_cast<std::uint64_t>(ranges[first + j].first)));
       }
     }
@@ -1009,10 +1123,14 @@ int Analysis::loadInOnePass() {
   if (!onePassOptions()) return kAgain;
   StderrCapture capture;  // ROS's messages of the opening: once, whichever way the bag is read
   const gear_sim_ros::RigBagTopics rig_topics;
-  if ((topic.empty() && gear_sim_ros::isRigBag(input, rig_topics)) ||
-      !gear_sim_ros::previewSignalBag(input, topic, &bag_info) ||
-      !(bag_info.samples > max_in_memory))
+  // The preview first: it constructs its rosbag::Bag on a thread of its own while this one walks
+  // the file's structure, which the rig check then finds walked (checkBagStructure keeps it).
+  if (!gear_sim_ros::previewSignalBag(input, topic, &bag_info)) return kAgain;
+  if (topic.empty() && gear_sim_ros::isRigBag(input, rig_topics)) {
+    bag_info = gear_sim_ros::BagSignalInfo{};  // a rig bag is read as before the preview
     return kAgain;
+  }
+  if (!(bag_info.samples > max_in_memory)) return kAgain;
   held.push_back(capture.release());
   streaming = true;
   one_pass = true;
