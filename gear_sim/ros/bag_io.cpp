@@ -69,6 +69,9 @@ struct RawChunk {
   double sample_rate = 0.0;
   std::uint64_t first_index = 0;
   RawArray dte, dte_velocity, stiffness, torque, mesh_state, mesh_phase, damping;
+  // The scan found every value of the ranged channels (kPlausibleRanges) in its range: they are
+  // read as they are (plausibleCopy would keep every one). Set only by ChunkScan::addInPlace.
+  bool plausible = false;
 };
 
 // Where the fields of a SignalChunk's `n` serialized bytes lie, into *c; the layout problem
@@ -726,7 +729,11 @@ class ChunkScan {
   // The same, its fields into *c.
   Status addInPlace(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
     if (Status s = layout(bytes, n, c); !s.ok()) return s;
-    return add(*c);
+    const std::int64_t counted = out_.non_finite_values + out_.out_of_range_values;
+    if (Status s = add(*c); !s.ok()) return s;
+    // (each channel adds the values outside its range, the non-finite ones included)
+    c->plausible = out_.non_finite_values + out_.out_of_range_values == counted;
+    return {};
   }
 
   using Where = std::function<std::string()>;
@@ -1280,7 +1287,11 @@ class RangeBlocks {
     const size_t j0 = static_cast<size_t>(lo - b);
     gapUpTo(i0);
     auto channel = [&](const RawArray& from, size_t k, Eigen::VectorXd& to) {
-      if (to.size() > 0) plausibleCopy(from.p + 8 * j0, n, kPlausibleRanges[k], to.data() + i0);
+      if (to.size() == 0) return;
+      if (c.plausible)  // (the same bits as plausibleCopy's, with a fraction of its instructions)
+        std::memcpy(to.data() + i0, from.p + 8 * j0, 8 * static_cast<size_t>(n));
+      else
+        plausibleCopy(from.p + 8 * j0, n, kPlausibleRanges[k], to.data() + i0);
     };
     channel(c.dte, 0, block_.dte);
     channel(c.dte_velocity, 1, block_.dte_velocity);
