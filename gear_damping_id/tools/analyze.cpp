@@ -340,15 +340,14 @@ class GroupResponses {
     {
       const std::lock_guard<std::mutex> lock(mutex_);
       stop_ = true;
+      work_cv_.notify_one();
     }
-    work_cv_.notify_one();
     helper_.join();
   }
   // A group of n segments on `view` (the previous group finished or quiesced).
   void begin(const gd::SignalView& view, size_t n) {
     const std::lock_guard<std::mutex> lock(mutex_);
     view_ = view;
-    n_ = n;
     ready_ = next_ = done_ = 0;
     outs_.resize(n);
     if (resps_.size() < n) resps_.resize(n);  // (reused: their vectors keep their storage)
@@ -359,11 +358,9 @@ class GroupResponses {
     const size_t at = ready_;  // (written by this thread only)
     // (Slots from `ready_` on are read by no one until ready_ passes them.)
     std::move(outs.begin(), outs.end(), outs_.begin() + static_cast<std::ptrdiff_t>(at));
-    {
-      const std::lock_guard<std::mutex> lock(mutex_);
-      ready_ = at + outs.size();
-    }
-    work_cv_.notify_one();
+    const std::lock_guard<std::mutex> lock(mutex_);
+    ready_ = at + outs.size();
+    work_cv_.notify_one();  // (under the lock, as drd and helgrind expect)
   }
   // Every published segment's response computed (this thread helping); an exception of one
   // rethrown once none is being computed.
@@ -398,10 +395,8 @@ class GroupResponses {
       const std::lock_guard<std::mutex> lock(mutex_);
       if (!error_) error_ = std::current_exception();
     }
-    {
-      const std::lock_guard<std::mutex> lock(mutex_);
-      ++done_;
-    }
+    const std::lock_guard<std::mutex> lock(mutex_);
+    ++done_;
     done_cv_.notify_one();
   }
   void helperLoop() {
@@ -424,7 +419,7 @@ class GroupResponses {
   std::vector<char> have_;
   std::mutex mutex_;
   std::condition_variable work_cv_, done_cv_;
-  size_t n_ = 0, ready_ = 0, next_ = 0, done_ = 0;  // published, claimed, computed
+  size_t ready_ = 0, next_ = 0, done_ = 0;  // published, claimed, computed (or skipped)
   bool stop_ = false;
   std::exception_ptr error_;
   std::thread helper_;  // last: started once the members above exist
