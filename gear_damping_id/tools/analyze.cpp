@@ -537,9 +537,12 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
     feeder.pushHeld(block, r, sink);
     return gear_sim::Status();
   };
+  // (the views hold no time, dte_velocity or damping column: the blocks need none)
+  gear_sim_ros::StreamColumns columns;
+  columns.time = columns.dte_velocity = columns.damping = false;
   if (gear_sim::Status s = one_pass != nullptr
-                               ? gear_sim_ros::scanStreamSignalBag(one_pass, reads, feed)
-                               : gear_sim_ros::streamSignalBag(info, reads, feed);
+                               ? gear_sim_ros::scanStreamSignalBag(one_pass, reads, feed, columns)
+                               : gear_sim_ros::streamSignalBag(info, reads, feed, columns);
       !s.ok())
     return s;
   for (size_t k = 0; k < runs->size(); ++k) {

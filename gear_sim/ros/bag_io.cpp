@@ -1203,8 +1203,8 @@ class RangeBlocks {
   using Ranges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
   using Sink = std::function<Status(const gear_sim::SignalTable&, size_t)>;
   RangeBlocks(const BagSignalInfo& info, const Ranges& ranges, const Sink& sink,
-              gear_sim::SignalTable& block)
-      : info_(info), ranges_(ranges), sink_(sink), block_(block) {
+              gear_sim::SignalTable& block, const StreamColumns& columns)
+      : info_(info), ranges_(ranges), sink_(sink), block_(block), columns_(columns) {
     start();
   }
   // Emits every range that ends at or before sample `upto` (gap samples NaN).
@@ -1232,26 +1232,27 @@ class RangeBlocks {
             &block_.mesh_state, &block_.mesh_phase,   &block_.damping};
   }
   // Range r_'s block sized, its time column set, its overlap with the previous range (carry_)
-  // written.
+  // written (the columns left out empty).
   void start() {
     const Eigen::Index n = ranges_[r_].second - ranges_[r_].first;
     auto make = [&](bool present, Eigen::VectorXd& v) { v.resize(present ? n : 0); };
-    block_.time.resize(n);
+    block_.time.resize(columns_.time ? n : 0);
+    const Eigen::Index times = block_.time.size();
     const std::uint64_t first = info_.first_index + static_cast<std::uint64_t>(ranges_[r_].first);
-    if (n < std::numeric_limits<int>::max()) {
-      sampleTimes(first, n, info_.sample_rate, block_.time.data());
+    if (times < std::numeric_limits<int>::max()) {
+      sampleTimes(first, times, info_.sample_rate, block_.time.data());
     } else {
-      for (Eigen::Index i = 0; i < n; ++i)
+      for (Eigen::Index i = 0; i < times; ++i)
         block_.time[i] =
             static_cast<double>(first + static_cast<std::uint64_t>(i)) / info_.sample_rate;
     }
     make(true, block_.dte);
-    make(info_.dte_velocity, block_.dte_velocity);
+    make(info_.dte_velocity && columns_.dte_velocity, block_.dte_velocity);
     make(info_.stiffness, block_.stiffness);
     make(info_.torque, block_.torque);
     make(info_.mesh_state, block_.mesh_state);
     make(info_.mesh_phase, block_.mesh_phase);
-    make(info_.damping, block_.damping);
+    make(info_.damping && columns_.damping, block_.damping);
     filled_ = std::min<Eigen::Index>(carried_, n);
     const auto to = channels();
     for (size_t k = 0; k < to.size(); ++k)
@@ -1309,6 +1310,7 @@ class RangeBlocks {
   const Ranges& ranges_;
   const Sink& sink_;
   gear_sim::SignalTable& block_;
+  const StreamColumns columns_;
   size_t r_ = 0;
   Eigen::Index filled_ = 0;
   Eigen::Index carried_ = 0;              // samples of carry_ (the overlap)
@@ -1320,7 +1322,8 @@ class RangeBlocks {
 Status streamInto(const BagSignalInfo& info,
                   const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
                   const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
-                  gear_sim::SignalTable& block, PassScan* pass = nullptr) {
+                  gear_sim::SignalTable& block, PassScan* pass = nullptr,
+                  const StreamColumns& columns = {}) {
   if (ranges.empty()) return {};
   for (size_t k = 0; k < ranges.size(); ++k)
     if (ranges[k].second < ranges[k].first || ranges[k].second > info.samples ||
@@ -1332,7 +1335,7 @@ Status streamInto(const BagSignalInfo& info,
           std::to_string(ranges[k].first) + ", " + std::to_string(ranges[k].second) +
           ") is not ascending within the record's " + std::to_string(info.samples) + " samples");
     }
-  RangeBlocks blocks(info, ranges, sink, block);
+  RangeBlocks blocks(info, ranges, sink, block, columns);
   try {
     // Reads ahead on its own thread.
     ChunkReader reader(info, pass);
@@ -1368,8 +1371,8 @@ class BlockPipe {
  public:
   BlockPipe(const BagSignalInfo& info,
             const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-            PassScan* pass = nullptr)
-      : thread_([this, &info, &ranges, pass] { run(info, ranges, pass); }) {}
+            PassScan* pass = nullptr, const StreamColumns& columns = {})
+      : thread_([this, &info, &ranges, pass, columns] { run(info, ranges, pass, columns); }) {}
   ~BlockPipe() { stopAndJoin(mutex_, cv_, &stop_, thread_); }
   BlockPipe(const BlockPipe&) = delete;
   BlockPipe& operator=(const BlockPipe&) = delete;
@@ -1391,7 +1394,8 @@ class BlockPipe {
 
  private:
   void run(const BagSignalInfo& info,
-           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges, PassScan* pass) {
+           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges, PassScan* pass,
+           const StreamColumns& columns) {
     gear_sim::SignalTable block;
     const Status s = streamInto(
         info, ranges,
@@ -1405,7 +1409,7 @@ class BlockPipe {
           cv_.notify_all();
           return Status();
         },
-        block, pass);
+        block, pass, columns);
     std::lock_guard<std::mutex> lock(mutex_);
     status_ = s;
     done_ = true;
@@ -1425,8 +1429,9 @@ class BlockPipe {
 
 Status streamSignalBag(const BagSignalInfo& info,
                        const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
-  BlockPipe pipe(info, ranges);
+                       const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
+                       const StreamColumns& columns) {
+  BlockPipe pipe(info, ranges, nullptr, columns);
   return pipe.drain(sink);
 }
 
@@ -1530,13 +1535,14 @@ bool previewSignalBag(const std::string& path, const std::string& topic, BagSign
   return true;
 }
 
-Status scanStreamSignalBag(
-    BagSignalInfo* info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-    const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink) {
+Status scanStreamSignalBag(BagSignalInfo* info,
+                           const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
+                           const std::function<Status(const gear_sim::SignalTable&, size_t)>& sink,
+                           const StreamColumns& columns) {
   PassScan pass(scanStart(*info));
   Status s;
   {
-    BlockPipe pipe(*info, ranges, &pass);
+    BlockPipe pipe(*info, ranges, &pass, columns);
     s = pipe.drain(sink);
   }  // the reader threads joined
   if (!pass.status.ok()) return pass.status;

@@ -115,15 +115,25 @@ struct BagSignalInfo {
 gear_sim::Status scanSignalBag(const std::string& path, const std::string& topic,
                                BagSignalInfo* info);
 
+/// The columns of a stream's blocks (streamSignalBag, scanStreamSignalBag): by default the time
+/// and every channel the record has; a sink that reads none of some leaves them out (those
+/// columns of its blocks are then empty: neither computed nor copied).
+struct StreamColumns {
+  bool time = true;
+  bool dte_velocity = true;
+  bool damping = true;
+};
+
 /// Streams the record scanned into `info` as SignalTable blocks, one per range [begin, end) of
 /// sample numbers counted from info.first_index (within [0, info.samples), begins and ends
 /// ascending; a range may begin before the previous one ends, its block then holds the overlap
 /// too): sink(table, range_index) gets the samples of each range (gaps as NaN, time = global
 /// index / sample_rate). Samples outside the ranges are skipped. A failed Status from the sink
-/// stops the stream and is returned as is.
+/// stops the stream and is returned as is. `columns`: the blocks' columns.
 gear_sim::Status streamSignalBag(
     const BagSignalInfo& info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
+    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink,
+    const StreamColumns& columns = {});
 
 /// One pass instead of scanSignalBag's and streamSignalBag's (issue 18: `analyze` reads the bag
 /// once). previewSignalBag does what scanSignalBag does before its pass (the topic, the
@@ -142,7 +152,8 @@ bool previewSignalBag(const std::string& path, const std::string& topic, BagSign
 /// scanSignalBag and streamSignalBag, which give the error to report.
 gear_sim::Status scanStreamSignalBag(
     BagSignalInfo* info, const std::vector<std::pair<Eigen::Index, Eigen::Index>>& ranges,
-    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink);
+    const std::function<gear_sim::Status(const gear_sim::SignalTable&, size_t)>& sink,
+    const StreamColumns& columns = {});
 
 /// The whole record as one table (gaps as NaN).
 gear_sim::Status readSignalBag(const BagSignalInfo& info, gear_sim::SignalTable* out);
