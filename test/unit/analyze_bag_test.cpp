@@ -620,6 +620,58 @@ TEST_F(AnalyzeBag, OnePassEqualsTheScanThenTheStream) {
   EXPECT_FALSE(gear_test::ok(gear_sim_ros::scanSignalBag(dup.string(), "", &a), &e));
 }
 
+// Blocks without the columns a sink leaves out (StreamColumns): those are empty, every other
+// column has the bits of the full blocks, on both streaming paths (the one-pass scan copies a
+// plausible chunk as it is, an implausible one value by value).
+TEST_F(AnalyzeBag, ColumnsLeftOutOfTheBlocksAreEmptyAndTheOthersUnchanged) {
+  const fs::path bag = writeBag("columns.bag", [](size_t k, gear_damping::SignalChunk* c) {
+    if (k == 2) c->dte[3] = 2.0;  // out of range: read as NaN
+    if (k == 4) c->dte_velocity[1] = std::numeric_limits<double>::quiet_NaN();
+    return k != 6;  // a gap
+  });
+  std::string e;
+  gear_sim_ros::BagSignalInfo info;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::scanSignalBag(bag.string(), "", &info), &e)) << e;
+  ASSERT_TRUE(info.dte_velocity && info.damping);
+  const std::vector<std::pair<Eigen::Index, Eigen::Index>> ranges = {
+      {0, 700}, {698, 1800}, {2900, 3600}, {3500, 4000}};
+  using Blocks = std::vector<gear_sim::SignalTable>;
+  const auto keep = [](Blocks* out) {
+    return [out](const gear_sim::SignalTable& t, size_t) {
+      out->push_back(t);
+      return gear_sim::Status();
+    };
+  };
+  gear_sim_ros::StreamColumns none;
+  none.time = none.dte_velocity = none.damping = false;
+  Blocks full, part, pass;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::streamSignalBag(info, ranges, keep(&full)), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim_ros::streamSignalBag(info, ranges, keep(&part), none), &e));
+  gear_sim_ros::BagSignalInfo preview;
+  ASSERT_TRUE(gear_sim_ros::previewSignalBag(bag.string(), "", &preview));
+  ASSERT_TRUE(
+      gear_test::ok(gear_sim_ros::scanStreamSignalBag(&preview, ranges, keep(&pass), none), &e))
+      << e;
+  ASSERT_EQ(full.size(), ranges.size());
+  const auto same = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+    return a.size() == b.size() &&
+           std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<size_t>(a.size())) == 0;
+  };
+  for (const Blocks* b : {&part, &pass}) {
+    ASSERT_EQ(b->size(), full.size());
+    for (size_t k = 0; k < full.size(); ++k) {
+      const gear_sim::SignalTable &f = full[k], &t = (*b)[k];
+      EXPECT_EQ(f.time.size(), ranges[k].second - ranges[k].first) << k;
+      EXPECT_EQ(t.time.size() + t.dte_velocity.size() + t.damping.size(), 0) << k;
+      EXPECT_TRUE(same(f.dte, t.dte) && same(f.stiffness, t.stiffness) &&
+                  same(f.torque, t.torque) && same(f.mesh_state, t.mesh_state) &&
+                  same(f.mesh_phase, t.mesh_phase))
+          << k;
+    }
+  }
+  EXPECT_TRUE(full[0].dte.hasNaN() || full[1].dte.hasNaN());  // the out-of-range value
+}
+
 // `analyze` on a streamed bag reads it once (with --bag-out: scan, then stream): the same
 // outputs, also when the first chunk's stiffness differs from the rest and when the scan fails
 // late (the record is then analysed again: the scan's message and exit code).
