@@ -193,7 +193,7 @@ void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, do
 }
 
 // addAll's record of a segment done by a worker: as addOne records it (consume: moved into the
-// kept history, and the rest of the output freed).
+// kept history, and the output's one-segment list freed by the recorder, not by the serial end).
 void SegmentDriver::recordParallelOutput(SegmentOutput* out,
                                          const std::pair<Eigen::Index, Eigen::Index>& range,
                                          long unlocated, double dt, bool outputs) {
@@ -203,7 +203,7 @@ void SegmentDriver::recordParallelOutput(SegmentOutput* out,
     recordPiecewise(*out, unlocated, dt);
   } else {
     recordPiecewise(std::move(*out), unlocated, dt);
-    *out = SegmentOutput();
+    std::vector<SegmentEstimate>().swap(out->result.segments);  // (its heap block freed here)
   }
 }
 
