@@ -8,6 +8,7 @@
 #include <iostream>
 #include <limits>
 
+#include "gear_sim/window_prefix.hpp"
 #include "id_test_support.hpp"
 #include "status_support.hpp"
 
@@ -367,6 +368,44 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksAtBlockEdgesAndSho
             }
           }
         }
+      }
+    }
+  }
+}
+
+// A record longer than the default window's prefix (its mean stiffness summed by the calling
+// thread while the threads claim the record's blocks in order): bad steps in several blocks, the
+// first of them early, late or in the prefix's last block; the first is named and a clean record
+// gets defaultWindowLength's window, bit for bit, for any thread count.
+TEST_F(IdentificationInput, LongRecordPassNamesTheFirstBadStepWhateverTheThreadsClaim) {
+  const double dt = 1e-6;
+  const long n = gear_sim::kWindowPrefixSamples + 5 * 8192 + 77;
+  SignalTable clean;
+  clean.time.resize(n), clean.dte.resize(n), clean.stiffness.resize(n), clean.torque.resize(n);
+  for (long i = 0; i < n; ++i) {
+    clean.time[i] = 0.5 + static_cast<double>(i) * dt;
+    clean.dte[i] = 1e-6 * std::sin(0.01 * static_cast<double>(i));
+    clean.stiffness[i] = 3e8 + 1e8 * std::cos(0.003 * static_cast<double>(i));
+    clean.torque[i] = 100.0;
+  }
+  clean.stiffness[4000] = kNaN;  // in the prefix: its finite samples' mean
+  const std::vector<std::vector<long>> cases = {
+      {}, {n - 1}, {n - 1, 9000}, {140000, 20000}, {131071, n - 2}, {8192, 8191}, {1, n / 2}};
+  for (const auto& bad : cases) {
+    SignalTable t = clean;
+    for (const long i : bad) t.time[i] += 0.3 * dt;
+    const gear_sim::Status sep =
+        gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+    const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
+    for (const int threads : {1, 2, 3, 4, 7}) {
+      SCOPED_TRACE("bad steps " + std::to_string(bad.size()) + ", threads " +
+                   std::to_string(threads));
+      double w = kNaN;
+      const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), threads, &w);
+      ASSERT_EQ(s.ok(), sep.ok());
+      EXPECT_EQ(s.message(), sep.message());
+      if (sep.ok()) {
+        EXPECT_EQ(w, w_sep);  // bit-identical
       }
     }
   }

@@ -158,6 +158,8 @@ class SegmentDriver {
   void recordPiecewise(const SegmentOutput& out, long unlocated, double dt,
                        bool keep_estimate = true);
   void recordPiecewise(SegmentOutput&& out, long unlocated, double dt);  // moves into kept_
+  void recordParallelOutput(SegmentOutput* out, const std::pair<Eigen::Index, Eigen::Index>& range,
+                            long unlocated, double dt, bool outputs);
   SegmentOutput addOne(const SignalView& v, Eigen::Index begin, Eigen::Index end,
                        bool refine_allowed, bool consume);
   SegmentOutput addShared(const SignalView& v, Eigen::Index begin, Eigen::Index end);

@@ -2,6 +2,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <cstring>
@@ -330,30 +331,37 @@ gear_sim::Status checkRecord(const gear_sim::SignalTable& t, const GearConstants
   // (defaultWindowLength's sum, the same additions in the same order).
   gear_sim::FiniteSum prefix;
   const bool share_prefix = !(o.window_length > 0.0) && k == nullptr && view.stiffness != nullptr;
-  // Contiguous runs of blocks per thread; each stops at its first bad step.
-  auto run = [&](Eigen::Index b0, Eigen::Index b1, bool with_prefix) {
-    for (Eigen::Index b = b0; b < b1; ++b) {
+  // Blocks claimed in order by the threads (a thread that starts late or shares its core does
+  // fewer); a thread stops at its first bad step, and no block after a known bad one is started.
+  const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
+  std::atomic<Eigen::Index> next{0}, first_bad{blocks};
+  // The calling thread's prefix in `shares` near-equal parts, one during each block it checks
+  // (its expected number of blocks), the rest after them.
+  const Eigen::Index shares = (blocks + parts - 1) / parts, p = gear_sim::kWindowPrefixSamples;
+  auto run = [&](bool with_prefix) {
+    Eigen::Index done = 0;
+    for (Eigen::Index b = next++; b < blocks && b < first_bad.load(); b = next++) {
       const Eigen::Index lo = b * kRecordBlock, hi = std::min(n, lo + kRecordBlock);
       double sum = 0.0;
-      PrefixShare share;
-      if (with_prefix) {  // the (b - b0)'th of b1 - b0 near-equal parts of the prefix
-        const Eigen::Index p = gear_sim::kWindowPrefixSamples;
-        share = {view.stiffness, p * (b - b0) / (b1 - b0), p * (b - b0 + 1) / (b1 - b0), &prefix};
-      }
+      const bool with_share = with_prefix && done < shares;
+      const PrefixShare share{view.stiffness, p * done / shares, p * (done + 1) / shares, &prefix};
       const Eigen::Index i =
-          stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum, with_prefix ? &share : nullptr);
+          stepsAndSum(t.time.data(), k, lo, hi, ref, tol, &sum, with_share ? &share : nullptr);
       if (i < hi) {
         bad[static_cast<size_t>(b)] = i;
+        for (Eigen::Index f = first_bad.load(); b < f && !first_bad.compare_exchange_weak(f, b);) {
+        }
         return;
       }
       if (k != nullptr) sums[static_cast<size_t>(b)] = sum;
+      done += with_share ? 1 : 0;
     }
+    if (with_prefix && done < shares)
+      prefix.add(view.stiffness, static_cast<size_t>(p * done / shares), static_cast<size_t>(p));
   };
-  const Eigen::Index parts = std::max<Eigen::Index>(1, std::min<Eigen::Index>(threads, blocks));
   std::vector<std::thread> pool;
-  for (Eigen::Index p = 1; p < parts; ++p)
-    pool.emplace_back(run, blocks * p / parts, blocks * (p + 1) / parts, false);
-  run(0, blocks / parts, share_prefix);
+  for (Eigen::Index w = 1; w < parts; ++w) pool.emplace_back(run, false);
+  run(share_prefix);
   for (auto& th : pool) th.join();
   for (const Eigen::Index i : bad) {
     if (i < n) return badStep(t, i, ref, o.time_tolerance, -1);

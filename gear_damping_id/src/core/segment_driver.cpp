@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <mutex>
 #include <thread>
 
 #include "gear_damping_id/damping_units.hpp"
@@ -18,8 +19,9 @@ bool sharedUnknowns(const IdentificationOptions& o) {
   return o.model != DampingModel::Piecewise || o.formulation == Formulation::Legacy;
 }
 
-// Runs work(i) for i in [0, n) on `threads` threads (work items claimed in order; each result is
-// stored by index, so the outcome does not depend on the scheduling).
+// Runs work(i) for i in [0, n) on `threads` threads, the calling thread being worker 0 (work
+// items claimed in order; each result is stored by index, so the outcome does not depend on the
+// scheduling).
 void parallelFor(size_t n, int threads, const std::function<void(size_t, int)>& work) {
   const int t = static_cast<int>(std::min<size_t>(static_cast<size_t>(std::max(threads, 1)), n));
   if (t <= 1) {
@@ -27,12 +29,12 @@ void parallelFor(size_t n, int threads, const std::function<void(size_t, int)>& 
     return;
   }
   std::atomic<size_t> next{0};
+  auto claim = [&](int w) {
+    for (size_t i = next++; i < n; i = next++) work(i, w);
+  };
   std::vector<std::thread> pool;
-  for (int w = 0; w < t; ++w) {
-    pool.emplace_back([&, w] {
-      for (size_t i = next++; i < n; i = next++) work(i, w);
-    });
-  }
+  for (int w = 1; w < t; ++w) pool.emplace_back(claim, w);
+  claim(0);
   for (auto& th : pool) th.join();
 }
 
@@ -188,6 +190,21 @@ void SegmentDriver::recordPiecewise(const SegmentOutput& out, long unlocated, do
     noise_samples_ += n;
   }
   if (keep_estimate) keep({out.estimate, seg.windows});
+}
+
+// addAll's record of a segment done by a worker: as addOne records it (consume: moved into the
+// kept history, and the output's one-segment list freed by the recorder, not by the serial end).
+void SegmentDriver::recordParallelOutput(SegmentOutput* out,
+                                         const std::pair<Eigen::Index, Eigen::Index>& range,
+                                         long unlocated, double dt, bool outputs) {
+  if (range.second - range.first < 1) {
+    keep({out->estimate, {}});
+  } else if (outputs) {
+    recordPiecewise(*out, unlocated, dt);
+  } else {
+    recordPiecewise(std::move(*out), unlocated, dt);
+    std::vector<SegmentEstimate>().swap(out->result.segments);  // (its heap block freed here)
+  }
 }
 
 IdentificationResult SegmentDriver::piecewiseResult(size_t last) const {
@@ -382,7 +399,21 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   // Runs of kChunk consecutive segments per claim: a worker's next segment is then mostly its
   // own, so the samples the integral method prefetches for it are used by the same core.
   constexpr size_t kChunk = 8;
-  parallelFor((ranges.size() + kChunk - 1) / kChunk, limits_.threads, [&](size_t chunk, int w) {
+  const size_t chunks = (ranges.size() + kChunk - 1) / kChunk;
+  // The chunks are recorded in segment order while the workers run (not after them): a worker
+  // that finished a chunk and finds the recorder free records every finished chunk from the first
+  // one not yet recorded on (done[c], set after chunk c's outputs were written); the calling
+  // thread records what is left after the join.
+  std::vector<std::atomic<bool>> done(chunks);
+  std::mutex recorder;
+  size_t recorded = 0;  // chunks recorded (by the holder of `recorder`)
+  auto recordFinished = [&] {
+    for (; recorded < chunks && done[recorded].load(std::memory_order_acquire); ++recorded) {
+      for (size_t i = recorded * kChunk; i < std::min(ranges.size(), (recorded + 1) * kChunk); ++i)
+        recordParallelOutput(&outs[i], ranges[i], unlocated[i], v.dt, outputs);
+    }
+  };
+  parallelFor(chunks, limits_.threads, [&](size_t chunk, int w) {
     for (size_t i = chunk * kChunk; i < std::min(ranges.size(), (chunk + 1) * kChunk); ++i) {
       const auto& r = ranges[i];
       if (r.second - r.first < 1) {
@@ -392,15 +423,13 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
       outs[i] = piecewiseSegment(&workers[static_cast<size_t>(w)], v, r.first, r.second, true);
       unlocated[i] = workers[static_cast<size_t>(w)].unlocatedSwitches();
     }
+    done[chunk].store(true, std::memory_order_release);
+    if (recorder.try_lock()) {
+      recordFinished();
+      recorder.unlock();
+    }
   });
-  for (size_t i = 0; i < ranges.size(); ++i) {
-    if (ranges[i].second - ranges[i].first < 1)
-      keep({outs[i].estimate, {}});
-    else if (outputs)
-      recordPiecewise(outs[i], unlocated[i], v.dt);
-    else
-      recordPiecewise(std::move(outs[i]), unlocated[i], v.dt);
-  }
+  recordFinished();
   if (!outputs) outs.clear();
   return outs;
 }
