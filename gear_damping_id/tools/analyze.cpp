@@ -754,7 +754,8 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
   app.add_option("--t-start", t_start, "analyse from this time [s]");
   app.add_option("--t-end", t_end, "analyse up to this time [s]");
   app.add_option("--refine", refine,
-                 "output-error refinement: auto (when the data are noisy) | always | never")
+                 "output-error refinement of the known and greybox estimates: auto (= always, clean data "
+                 "too, docs/trust.md) | always | never")
       ->check(CLI::IsMember({"auto", "always", "never"}));
   app.add_option(
          "--stiffness-shape", stiffness_shape,

@@ -81,11 +81,15 @@ struct IdentificationOptions {
   double max_condition = 1e6;
   /// Relative tolerance on the uniformity of the time step (|dt_i - dt| <= tol * dt).
   double time_tolerance = 1e-6;
-  /// Output-error refinement of the integral-method estimate (output_error.hpp): Auto refines
-  /// when the data are noisy enough for it to matter (the integral method's relative standard
-  /// error of C above `refine_threshold`), Always / Never force it. Only the `known` and
-  /// `greybox` formulations are refined (paper and legacy are kept as printed, for comparison).
+  /// Output-error refinement of the integral-method estimate (output_error.hpp): Auto and Always
+  /// refine, Never does not. Only the `known` and `greybox` formulations are refined (paper and
+  /// legacy are kept as printed, for comparison). Auto once skipped clean data (the integral
+  /// method's relative standard error of C below `refine_threshold`); it refines them too,
+  /// because there its C_std leave out the quadrature error and damping varying within a
+  /// segment (docs/trust.md, integral_std).
   enum class Refine { Auto, Always, Never } refine = Refine::Auto;
+  /// The median relative standard error of C above which integral-method estimates count as
+  /// noisy (the wording of the run warning integral_std, quality_flags.hpp).
   double refine_threshold = 2e-4;
   int max_iterations = 30;  ///< Gauss-Newton iterations of the refinement
   /// Greybox stiffness parametrisation (ignored by the other formulations). fourier/table need

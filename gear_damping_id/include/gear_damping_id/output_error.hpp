@@ -110,10 +110,12 @@ gear_sim::Status refineOutputError(const SignalView& signal,
 /// for fewer than 5 samples.
 double torqueNoiseEstimate(const double* torque, Eigen::Index n);
 
-/// Whether options.refine asks for refinement of this result (Auto: the median relative standard
-/// error of C over the identifiable segments, or of the shared C, exceeds refine_threshold, i.e.
-/// the data are noisy; never for the paper and legacy formulations).
-bool wantsRefinement(const IdentificationOptions& options, const IdentificationResult& result);
+/// Whether options.refine asks for the output-error refinement: Auto and Always for the known and
+/// greybox formulations, never for paper and legacy (kept as printed, for comparison). Auto
+/// refines clean data too: there the integral method's C_std describe only its residual, while
+/// its quadrature error and damping that varies within a segment bias C by more (held-out
+/// noise-free cases: 0.05-0.7 % at 5-50 C_std; docs/trust.md "integral_std").
+bool wantsRefinement(const IdentificationOptions& options);
 
 /// Extremes over a mesh cycle (720 phases) of the stiffness curve [N/m] of a fourier/table shape.
 void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve, double* k_min,

@@ -39,7 +39,7 @@
 // stopped without converging), refine_failed (it diverged: integral estimates reported),
 // refine_skipped (a streamed shared-damping run is not refined), switches_unlocated (stiffness
 // switches that mesh_phase could not locate), integral_std (the reported estimates are the
-// integral method's and the data are noisy: their C_std understate the scatter;
+// integral method's: their C_std understate the error, on noisy and on clean data;
 // flagIntegralStandardErrors).
 #pragma once
 
@@ -118,11 +118,13 @@ void applyQualityFlags(const IdentificationOptions& options, IdentificationResul
 
 /// The run warning integral_std, recomputed (idempotent): when `result` reports the integral
 /// method's estimates (estimator "integral": `--refine never`, the paper and legacy formulations,
-/// a skipped or failed refinement) and the data are noisy by the refinement's own criterion (the
-/// median C_std / |C| of its identifiable unrefined estimates above options.refine_threshold).
-/// Those C_std are the integral equations' standard errors: the noise inside the integrals
-/// (errors in the regressors) is not in them, so they understate the scatter (Table 1 case at
-/// 40 dB SNR: errors 1.8 times C_std in rms, +-2 C_std covering 74 % instead of 95 %).
+/// a skipped or failed refinement) and some are identifiable and unrefined. Those C_std are the
+/// integral equations' standard errors. On noisy data (median C_std / |C| above
+/// options.refine_threshold) the noise inside the integrals (errors in the regressors) is not in
+/// them, so they understate the scatter (Table 1 case at 40 dB SNR: errors 1.8 times C_std in
+/// rms, +-2 C_std covering 74 % instead of 95 %); on clean data they measure the residual only,
+/// while the quadrature error and damping varying within a segment bias C by more (noise-free
+/// held-out gears: up to 16 % of C at 54 C_std). The text says which.
 void flagIntegralStandardErrors(const IdentificationOptions& options, IdentificationResult* result);
 
 /// After an output-error refinement of `integral` into `refined` (same segments), keeps the

@@ -1161,22 +1161,9 @@ double torqueNoiseEstimate(const double* torque, Index n) {
   return 1.482602218505602 * *mid / std::sqrt(70.0);
 }
 
-bool wantsRefinement(const IdentificationOptions& o, const IdentificationResult& r) {
+bool wantsRefinement(const IdentificationOptions& o) {
   if (o.formulation != Formulation::Known && o.formulation != Formulation::Greybox) return false;
-  if (o.refine == IdentificationOptions::Refine::Never) return false;
-  if (o.refine == IdentificationOptions::Refine::Always) return true;
-  std::vector<double> rel;
-  for (const auto& s : r.segments) {
-    if (s.identifiable && std::isfinite(s.C_std) && s.C != 0.0) {
-      rel.push_back(std::abs(s.C_std / s.C));
-    }
-  }
-  if (r.constant && r.constant->identifiable && r.constant->C != 0.0) {
-    rel.push_back(std::abs(r.constant->C_std / r.constant->C));
-  }
-  if (rel.empty()) return false;
-  std::nth_element(rel.begin(), rel.begin() + rel.size() / 2, rel.end());
-  return rel[rel.size() / 2] > o.refine_threshold;
+  return o.refine != IdentificationOptions::Refine::Never;
 }
 
 namespace {

@@ -132,7 +132,7 @@ SegmentDriver::SegmentOutput SegmentDriver::piecewiseSegment(IntegralMethod* m, 
   // Below-noise segments are not identifiable before the refinement (which leaves them alone).
   applyQualityFlags(options_, &seg);
   const bool wants =
-      seg.segments.size() == 1 && seg.segments[0].identifiable && wantsRefinement(options_, seg);
+      seg.segments.size() == 1 && seg.segments[0].identifiable && wantsRefinement(options_);
   if (wants && !options_.refinable()) {
     seg.warnings.push_back(
         {quality_code::kRefineSkipped,
@@ -448,7 +448,7 @@ IdentificationResult SegmentDriver::finish(const SignalView* record,
     return done.finish(record, ranges);
   }
   IdentificationResult r = result();
-  if (!shared_ || !wantsRefinement(options_, r)) return r;
+  if (!shared_ || !wantsRefinement(options_)) return r;
   auto integral = [&]() {  // the integral estimates reported: their run warnings again
     flagIntegralStandardErrors(options_, &r);
     return r;

@@ -179,7 +179,7 @@ void refineWithSte(const SignalView& view,
                    SteResult* st) {
   IdentificationResult flagged = *res;
   applyQualityFlags(options, &flagged);
-  if (!st->separable || !wantsRefinement(options, flagged)) {
+  if (!st->separable || !wantsRefinement(options)) {
     *res = std::move(flagged);
     return;
   }
@@ -922,7 +922,7 @@ gear_sim::Status identifySegmentWithHeldSte(const SignalView& view, Eigen::Index
   seg.estimator = "integral_ste_held";
   IdentificationResult flagged = seg;
   applyQualityFlags(options, &flagged);
-  if (!(seg.segments[0].C > 0.0) || !wantsRefinement(options, flagged)) {
+  if (!(seg.segments[0].C > 0.0) || !wantsRefinement(options)) {
     seg = std::move(flagged);
     return {};
   }
