@@ -753,9 +753,10 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
                  "integration window [s] (default: two natural periods from the data)");
   app.add_option("--t-start", t_start, "analyse from this time [s]");
   app.add_option("--t-end", t_end, "analyse up to this time [s]");
-  app.add_option("--refine", refine,
-                 "output-error refinement of the known and greybox estimates: auto (= always, clean data "
-                 "too, docs/trust.md) | always | never")
+  app.add_option(
+         "--refine", refine,
+         "output-error refinement of the known and greybox estimates: auto (= always, clean data "
+         "too, docs/trust.md) | always | never")
       ->check(CLI::IsMember({"auto", "always", "never"}));
   app.add_option(
          "--stiffness-shape", stiffness_shape,

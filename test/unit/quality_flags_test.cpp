@@ -215,8 +215,8 @@ TEST(QualityFlags, CleanDataAreRefined) {
     wrong += s.warnings.empty() && err > std::max(kCleanSE * s.C_std, kNoiseFreeRel * truth);
     worst = std::max(worst, err / truth);
   }
-  std::cout << "[ measured ] clean held-out case: refined " << t.str() << " integral estimates: "
-            << wrong << " of " << integral.segments.size()
+  std::cout << "[ measured ] clean held-out case: refined " << t.str()
+            << " integral estimates: " << wrong << " of " << integral.segments.size()
             << " segments unflagged beyond 4 SE and 0.05 %, worst " << worst * 100 << " %\n";
   EXPECT_GT(wrong, 0);  // what the integral_std warning is for
 }
