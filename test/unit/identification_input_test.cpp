@@ -321,6 +321,20 @@ TEST_F(IdentificationInput, BadStepAtChunkEdgesIsNamedExactly) {
   }
 }
 
+// A clean record of n samples from t0 at step dt: a slow sine DTE, a smooth stiffness, a
+// constant torque.
+SignalTable smoothRecord(long n, double t0, double dt) {
+  SignalTable r;
+  r.time.resize(n), r.dte.resize(n), r.stiffness.resize(n), r.torque.resize(n);
+  for (long i = 0; i < n; ++i) {
+    r.time[i] = t0 + static_cast<double>(i) * dt;
+    r.dte[i] = 1e-6 * std::sin(0.01 * static_cast<double>(i));
+    r.stiffness[i] = 3e8 + 1e8 * std::cos(0.003 * static_cast<double>(i));
+    r.torque[i] = 100.0;
+  }
+  return r;
+}
+
 // checkRecord at its blocks' edges: records shorter than a block and of one, two or four
 // blocks (more threads than blocks, up to 16), a bad step (a gap, or a NaN time) on either side
 // of a block edge, at the first and the last step, and stiffness with a NaN at a block edge, an
@@ -330,14 +344,7 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksAtBlockEdgesAndSho
   const double dt = 1e-6;
   constexpr long kBlock = 8192;
   for (const long n : {2L, 3L, 4L, 5L, 100L, kBlock - 1, kBlock, kBlock + 1, 3 * kBlock + 5}) {
-    SignalTable clean;
-    clean.time.resize(n), clean.dte.resize(n), clean.stiffness.resize(n), clean.torque.resize(n);
-    for (long i = 0; i < n; ++i) {
-      clean.time[i] = 0.25 + static_cast<double>(i) * dt;
-      clean.dte[i] = 1e-6 * std::sin(0.01 * static_cast<double>(i));
-      clean.stiffness[i] = 3e8 + 1e8 * std::cos(0.003 * static_cast<double>(i));
-      clean.torque[i] = 100.0;
-    }
+    const SignalTable clean = smoothRecord(n, 0.25, dt);
     for (const long bad : {-1L, 1L, 2L, 3L, n - 1, kBlock - 1, kBlock, kBlock + 1, 2 * kBlock}) {
       if (bad >= n || (bad < 1 && bad != -1)) continue;
       for (const int time_kind : {0, 1}) {  // a gap from `bad` on; a NaN time sample
@@ -380,14 +387,7 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksAtBlockEdgesAndSho
 TEST_F(IdentificationInput, LongRecordPassNamesTheFirstBadStepWhateverTheThreadsClaim) {
   const double dt = 1e-6;
   const long n = gear_sim::kWindowPrefixSamples + 5 * 8192 + 77;
-  SignalTable clean;
-  clean.time.resize(n), clean.dte.resize(n), clean.stiffness.resize(n), clean.torque.resize(n);
-  for (long i = 0; i < n; ++i) {
-    clean.time[i] = 0.5 + static_cast<double>(i) * dt;
-    clean.dte[i] = 1e-6 * std::sin(0.01 * static_cast<double>(i));
-    clean.stiffness[i] = 3e8 + 1e8 * std::cos(0.003 * static_cast<double>(i));
-    clean.torque[i] = 100.0;
-  }
+  SignalTable clean = smoothRecord(n, 0.5, dt);
   clean.stiffness[4000] = kNaN;  // in the prefix: its finite samples' mean
   const std::vector<std::vector<long>> cases = {
       {}, {n - 1}, {n - 1, 9000}, {140000, 20000}, {131071, n - 2}, {8192, 8191}, {1, n / 2}};
