@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 #include <iostream>
 #include <limits>
+#include <string>
 
 #include "gear_sim/window_prefix.hpp"
 #include "id_test_support.hpp"
@@ -34,6 +36,24 @@ class IdentificationInput : public PiecewiseDefaultCase {
     o.formulation = f;
     o.model = m;
     return o;
+  }
+  // checkRecord on `t` with each thread count gives checkSignalTable's status and message and,
+  // on a clean record, defaultWindowLength's window bit for bit.
+  static void expectRecordPassMatches(const SignalTable& t, std::initializer_list<int> threads,
+                                      const std::string& label) {
+    const gear_sim::Status sep =
+        gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
+    const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
+    for (const int n : threads) {
+      SCOPED_TRACE(label + ", threads " + std::to_string(n));
+      double w = kNaN;
+      const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), n, &w);
+      ASSERT_EQ(s.ok(), sep.ok());
+      EXPECT_EQ(s.message(), sep.message());
+      if (sep.ok()) {
+        EXPECT_EQ(w, w_sep);  // bit-identical
+      }
+    }
   }
 };
 
@@ -359,21 +379,10 @@ TEST_F(IdentificationInput, RecordPassMatchesTheSeparateChecksAtBlockEdgesAndSho
           if (k_kind == 2) t.stiffness[0] = kInf;
           if (k_kind == 3) t.stiffness.setConstant(kNaN);
           if (k_kind == 4) t.stiffness.setConstant(1e308);  // the sum overflows
-          const gear_sim::Status sep =
-              gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
-          const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
-          for (const int threads : {1, 2, 3, 5, 16}) {
-            SCOPED_TRACE("n " + std::to_string(n) + ", bad " + std::to_string(bad) + ", time " +
-                         std::to_string(time_kind) + ", stiffness " + std::to_string(k_kind) +
-                         ", threads " + std::to_string(threads));
-            double w = kNaN;
-            const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), threads, &w);
-            ASSERT_EQ(s.ok(), sep.ok());
-            EXPECT_EQ(s.message(), sep.message());
-            if (sep.ok()) {
-              EXPECT_EQ(w, w_sep);  // bit-identical
-            }
-          }
+          expectRecordPassMatches(t, {1, 2, 3, 5, 16},
+                                  "n " + std::to_string(n) + ", bad " + std::to_string(bad) +
+                                      ", time " + std::to_string(time_kind) + ", stiffness " +
+                                      std::to_string(k_kind));
         }
       }
     }
@@ -394,20 +403,7 @@ TEST_F(IdentificationInput, LongRecordPassNamesTheFirstBadStepWhateverTheThreads
   for (const auto& bad : cases) {
     SignalTable t = clean;
     for (const long i : bad) t.time[i] += 0.3 * dt;
-    const gear_sim::Status sep =
-        gear_damping_id::checkSignalTable(t, Formulation::Known, DampingModel::Piecewise);
-    const double w_sep = gear_damping_id::defaultWindowLength(SignalView::of(t), gear());
-    for (const int threads : {1, 2, 3, 4, 7}) {
-      SCOPED_TRACE("bad steps " + std::to_string(bad.size()) + ", threads " +
-                   std::to_string(threads));
-      double w = kNaN;
-      const gear_sim::Status s = gear_damping_id::checkRecord(t, gear(), opts(), threads, &w);
-      ASSERT_EQ(s.ok(), sep.ok());
-      EXPECT_EQ(s.message(), sep.message());
-      if (sep.ok()) {
-        EXPECT_EQ(w, w_sep);  // bit-identical
-      }
-    }
+    expectRecordPassMatches(t, {1, 2, 3, 4, 7}, "bad steps " + std::to_string(bad.size()));
   }
 }
 
