@@ -48,32 +48,31 @@ def gear_yaml(r):
                  f"  fourier_cos: [{a * r.uniform(0.3, 0.8)}, {a * r.uniform(0, 0.3)}]\n"
                  f"  fourier_sin: [{a * r.uniform(0, 0.3)}, 0.0]\n")
     rpm = r.uniform(800, 6000)
+    # Each profile's text draws its own numbers, and only the chosen one is drawn (lambdas).
     load_kind = r.choice(['constant', 'sine', 'step', 'ramp'])
     mean = r.uniform(30, 400)
-    if load_kind == 'constant':
-        load = f"  profile: constant\n  mean: {mean}\n"
-    elif load_kind == 'sine':
-        load = (f"  profile: sine\n  mean: {mean}\n  amplitude: {mean * r.uniform(0.05, 0.6)}\n"
-                f"  frequency: {r.uniform(10, 300)}\n")
-    elif load_kind == 'step':
-        load = (f"  profile: step\n  initial: {mean}\n  final: {mean * r.uniform(0.5, 1.5)}\n"
-                f"  step_time: {r.uniform(0.005, 0.045)}\n")
-    else:
-        load = (f"  profile: ramp\n  initial: {mean}\n  final: {mean * r.uniform(0.5, 1.5)}\n"
-                "  ramp_start: 0.0\n  ramp_end: 0.05\n")
+    load = {
+        'constant': lambda: f"  profile: constant\n  mean: {mean}\n",
+        'sine': lambda: (f"  profile: sine\n  mean: {mean}\n"
+                         f"  amplitude: {mean * r.uniform(0.05, 0.6)}\n"
+                         f"  frequency: {r.uniform(10, 300)}\n"),
+        'step': lambda: (f"  profile: step\n  initial: {mean}\n"
+                         f"  final: {mean * r.uniform(0.5, 1.5)}\n"
+                         f"  step_time: {r.uniform(0.005, 0.045)}\n"),
+        'ramp': lambda: (f"  profile: ramp\n  initial: {mean}\n"
+                         f"  final: {mean * r.uniform(0.5, 1.5)}\n  ramp_start: 0.0\n"
+                         "  ramp_end: 0.05\n"),
+    }[load_kind]()
     law = r.choice(['constant', 'load_dependent', 'load_linear', 'piecewise'])
     xi = r.uniform(0.02, 0.12)
-    if law == 'constant':
-        damping = f"  model: constant\n  ratio: {xi}\n"
-    elif law == 'load_dependent':
-        damping = (f"  model: load_dependent\n  ratio: {xi}\n"
-                   f"  load_sensitivity: {r.uniform(0, 1)}\n")
-    elif law == 'load_linear':
-        damping = f"  model: load_linear\n  c0: {r.uniform(100, 600)}\n  c1: {r.uniform(0, 3)}\n"
-    else:
-        damping = (f"  model: piecewise\n  ratios: [{xi}, {xi * r.uniform(0.6, 1.4)}, "
-                   f"{xi * r.uniform(0.6, 1.4)}]\n  times: [0.0, {r.uniform(0.01, 0.02)}, "
-                   f"{r.uniform(0.025, 0.04)}]\n")
+    damping = f"  model: {law}\n" + {
+        'constant': lambda: f"  ratio: {xi}\n",
+        'load_dependent': lambda: f"  ratio: {xi}\n  load_sensitivity: {r.uniform(0, 1)}\n",
+        'load_linear': lambda: f"  c0: {r.uniform(100, 600)}\n  c1: {r.uniform(0, 3)}\n",
+        'piecewise': lambda: (f"  ratios: [{xi}, {xi * r.uniform(0.6, 1.4)}, "
+                              f"{xi * r.uniform(0.6, 1.4)}]\n  times: [0.0, "
+                              f"{r.uniform(0.01, 0.02)}, {r.uniform(0.025, 0.04)}]\n"),
+    }[law]()
     rate = r.choice([2.5e5, 5e5, 1e6])
     snr = r.choice(['.inf', '40', '30', '20'])
     text = (f"pinion:\n  teeth: {z1}\n  inertia: {r.uniform(1e-4, 1e-3)}\n  base_radius: {r1}\n"
