@@ -11,9 +11,9 @@ each identifiable segment's C with the time-mean of the true c(t)/Me over the se
 damping at the segment's mean load for the laws linear in the load). Segments that straddle a
 step of a piecewise-in-time truth are left out. A segment is "wrong" when neither it nor its run
 carries a warning and it is more than 4 standard errors and more than 0.05 % (the noise-free
-accuracy bar) from the truth. Prints one line per case and a JSON summary: counts (with the number of noisy clean
-segments expected beyond 4 C_std by chance), and per noise level the share of clean segments
-within +-1.96 C_std (95 % if calibrated) and the rms of (C - truth) / C_std.
+accuracy bar) from the truth. Prints one line per case and a JSON summary: counts (with the
+number of noisy clean segments expected beyond 4 C_std by chance), and per noise level the share
+of clean segments within +-1.96 C_std (95 % if calibrated) and the rms of (C - truth) / C_std.
 
   scripts/heldout_sweep.py --bin-dir WS/devel/lib/gear_damping --cases 300 --seed 3000 \\
       --out /tmp/sweep [-- --refine never]
