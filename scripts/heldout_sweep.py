@@ -21,6 +21,7 @@ of clean segments within +-1.96 C_std (95 % if calibrated) and the rms of (C - t
 Used for docs/method.md section 4 (Refinement: clean data) and docs/trust.md (integral_std).
 """
 import argparse
+import bisect
 import csv
 import json
 import math
@@ -123,7 +124,7 @@ def read_truth(path):
 
 def segment_truth(t, c, t0, t1, me):
     """(mean of c/Me over [t0, t1), whether c varies there)."""
-    vals = [c[i] for i in range(len(t)) if t0 - 1e-12 <= t[i] < t1 - 1e-12]
+    vals = c[bisect.bisect_left(t, t0 - 1e-12):bisect.bisect_left(t, t1 - 1e-12)]  # t ascending
     if not vals:
         return math.nan, False
     mean = sum(vals) / len(vals)

@@ -387,15 +387,16 @@ class GroupResponses {
     return true;
   }
   void compute(size_t j) {
+    std::exception_ptr error;
     try {
       const gd::SegmentDriver::SegmentOutput& o = outs_[j];
       have_[j] = o.estimate.identifiable &&
                  gd::modeledResponse(view_, gear_, o.result, &resps_[j], fit_metrics_).ok();
     } catch (...) {
-      const std::lock_guard<std::mutex> lock(mutex_);
-      if (!error_) error_ = std::current_exception();
+      error = std::current_exception();
     }
     const std::lock_guard<std::mutex> lock(mutex_);
+    if (error && !error_) error_ = std::move(error);
     ++done_;
     done_cv_.notify_one();
   }

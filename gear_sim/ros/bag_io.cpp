@@ -728,6 +728,7 @@ class ChunkScan {
   }
   // The same, its fields into *c.
   Status addInPlace(const std::uint8_t* bytes, std::uint32_t n, RawChunk* c) {
+    c->plausible = false;  // (a reused RawChunk keeps no verdict of the chunk before)
     if (Status s = layout(bytes, n, c); !s.ok()) return s;
     const std::int64_t counted = out_.non_finite_values + out_.out_of_range_values;
     if (Status s = add(*c); !s.ok()) return s;
