@@ -1199,6 +1199,7 @@ class Refinement {
     if (gear_sim::Status s = startValues(); !s.ok()) return s;
     if (gear_sim::Status s = iterate(); !s.ok()) return s;
     if (gear_sim::Status s = covariances(); !s.ok()) return s;
+    if (gear_sim::Status s = positiveVariances(); !s.ok()) return s;
     torqueNoise();
     fillSegments();
     fillShared();
@@ -1869,6 +1870,33 @@ class Refinement {
     res_->noise_ar.assign(record_noise.a, record_noise.a + record_noise.p);
     res_->estimator = "output_error";
     res_->iterations = iterations_;
+    return {};
+  }
+
+  // The covariance at the refined estimate must give every reported variance (C, and the greybox
+  // levels) a positive finite value. A response that diverges (C far below zero: the sensitivities
+  // overflow) or a singular problem gives zero or NaN, which would be reported as C_std = 0, an
+  // exact number: the refinement has failed, and the caller keeps the integral estimate.
+  gear_sim::Status positiveVariances() const {
+    auto bad = [](double v) { return !(v > 0.0) || !std::isfinite(v); };
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      const Eigen::MatrixXd ll = localCovariance(i);
+      const Eigen::MatrixXd ss = sigma2Of(i) * Ainv_of_[i];
+      double v = cVariance(ll, ss);
+      bool levels_bad = false;
+      if (grey_ && !shape_) {
+        const int a = piecewise_ ? 3 : 2;
+        levels_bad = bad(ll(a, a)) || bad(ll(a, a) + ll(a + 1, a + 1) + 2 * ll(a, a + 1));
+      }
+      if (bad(v) || levels_bad) {
+        std::ostringstream m;
+        m << "refinement: the covariance at the refined estimate is not positive (segment at "
+          << res_->segments[i].t_start << " s, C variance " << v
+          << "): the model response diverges or the unknowns are not separable";
+        return gear_sim::Status::notIdentifiable(m.str());
+      }
+    }
     return {};
   }
 
