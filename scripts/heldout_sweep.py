@@ -13,7 +13,8 @@ step of a piecewise-in-time truth are left out. A segment is "wrong" when neithe
 carries a warning and it is more than 4 standard errors and more than 0.05 % (the noise-free
 accuracy bar) from the truth. Prints one line per case and a JSON summary: counts (with the
 number of noisy clean segments expected beyond 4 C_std by chance), and per noise level the share
-of clean segments within +-1.96 C_std (95 % if calibrated) and the rms of (C - truth) / C_std.
+of clean segments within +-1.96 C_std (95 % if calibrated) and the rms of (C - truth) / C_std,
+and the clean, flagged and wrong counts per true stiffness shape (--stiffness: only that shape).
 
   scripts/heldout_sweep.py --bin-dir WS/devel/lib/gear_damping --cases 300 --seed 3000 \\
       --out /tmp/sweep [-- --refine never]
@@ -131,8 +132,10 @@ def segment_truth(t, c, t0, t1, me):
     return mean / me, max(vals) - min(vals) > 1e-9 * abs(mean)
 
 
-def tally_case(result, t, c, law, snr, totals, z_by_snr):
+def tally_case(result, t, c, law, snr, totals, z_by_snr, by_shape):
     wrong = []
+    shape_totals = by_shape.setdefault(totals['_shape'], dict.fromkeys(['clean', 'flagged',
+                                                                          'wrong'], 0))
     for run_ in result['runs']:
         me = run_['equivalent_mass']
         run_warned = bool(run_['warnings'])  # e.g. integral_std: every C_std of the run
@@ -147,13 +150,16 @@ def tally_case(result, t, c, law, snr, totals, z_by_snr):
                 continue
             if s['warnings'] or run_warned:
                 totals['flagged'] += 1
+                shape_totals['flagged'] += 1
                 continue
             totals['clean'] += 1
+            shape_totals['clean'] += 1
             err = s['C'] - truth
             z = err / s['C_std'] if s['C_std'] > 0 else math.inf
             z_by_snr.setdefault(snr, []).append(z)
             if abs(z) > 4 and abs(err) > 5e-4 * abs(truth):
                 totals['wrong'] += 1
+                shape_totals['wrong'] += 1
                 wrong.append((round(s['t_start'], 4), round(err / truth, 5), round(z, 1)))
     return wrong
 
@@ -164,15 +170,19 @@ def main():
     ap.add_argument('--cases', type=int, default=100)
     ap.add_argument('--seed', type=int, default=1, help='first case seed (case i: seed + i)')
     ap.add_argument('--out', required=True, help='scratch directory for YAML, CSV and JSON')
+    ap.add_argument('--stiffness', choices=['square', 'trapezoid', 'fourier'],
+                    help='only the drawn cases with this true stiffness shape (same seeds)')
     ap.add_argument('analyze_args', nargs='*', help='extra analyze options (after --)')
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     totals = dict.fromkeys(['cases', 'segments', 'not_identifiable', 'straddling', 'flagged',
                             'clean', 'wrong'], 0)
-    z_by_snr = {}
+    z_by_snr, by_shape = {}, {}
     for i in range(a.cases):
         seed = a.seed + i
         text, info = gear_yaml(random.Random(seed))
+        if a.stiffness and info['stiffness'] != a.stiffness:
+            continue
         name = os.path.join(a.out, f'case{seed}')
         if not simulate(a.bin_dir, name, text, info):
             continue
@@ -185,7 +195,8 @@ def main():
         with open(name + '.json') as f:
             result = json.load(f)
         t, c = read_truth(name + '.csv')
-        wrong = tally_case(result, t, c, info['damping'], info['snr'], totals, z_by_snr)
+        totals['_shape'] = info['stiffness']
+        wrong = tally_case(result, t, c, info['damping'], info['snr'], totals, z_by_snr, by_shape)
         print(seed, info, 'wrong', len(wrong), wrong[:3], flush=True)
     coverage = {}
     for snr, zs in sorted(z_by_snr.items()):
@@ -198,7 +209,9 @@ def main():
     # |z| > 4 happens to 6.3e-5 of calibrated normal errors: the noisy clean segments' share.
     noisy = sum(len(zs) for snr, zs in z_by_snr.items() if snr != '.inf')
     totals['wrong_expected_by_chance'] = round(6.3e-5 * noisy, 2)
-    print(json.dumps({'totals': totals, 'by_snr': coverage}, indent=1))
+    totals.pop('_shape', None)
+    print(json.dumps({'totals': totals, 'by_snr': coverage, 'by_true_stiffness': by_shape},
+                     indent=1))
     return 0
 
 

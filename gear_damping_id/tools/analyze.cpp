@@ -763,7 +763,8 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
          "--stiffness-shape", stiffness_shape,
          "greybox stiffness: square (two levels switched by mesh_state) | fourier:H (mean + "
          "H harmonics of mesh_phase) | table:N (periodic piecewise linear over N nodes of "
-         "mesh_phase); fourier/table are not refined (default square)")
+         "mesh_phase), refined jointly with C (default square; square assumes the stiffness "
+         "switches at once: flag shape_mismatch, docs/trust.md)")
       ->check([](const std::string& v) {
         gd::StiffnessShape s;
         return gd::parseStiffnessShape(v, &s) ? std::string()

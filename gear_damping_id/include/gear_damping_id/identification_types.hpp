@@ -157,6 +157,10 @@ struct SegmentEstimate {
   /// refinement's prewhitened problem with the extra unknown C1 of
   /// C(t) = C0 + C1 (T1(t) - mean_torque), from the converged constant-C fit.
   double variation_z = kNaN;  ///< [-] C1 / std(C1): N(0, 1) when C is constant in the segment
+  /// Greybox square levels (refined piecewise estimates): the score of a stiffness that ramps
+  /// over part of the natural period around each switch instead of switching at once
+  /// (output_error.cpp, Refinement::shapeScore). N(0, 1) when the square wave holds.
+  double shape_z = kNaN;  ///< [-]
   /// C0 of that model, the damping at the segment's mean load [1/s], and its standard error:
   /// then also C and C_std (the time mean of a C(t) linear in the load, constant included).
   double C_mean_load = kNaN, C_mean_load_std = kNaN;

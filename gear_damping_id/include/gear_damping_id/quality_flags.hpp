@@ -29,6 +29,9 @@
 //                        kVariationZ standard errors from zero (SegmentEstimate::variation_z);
 //                        (C is then the damping at the segment's mean load, which the
 //                        constant-C fit, a weighted mean of C(t), need not be)
+//   shape_mismatch       greybox square levels: a stiffness ramped around the mesh switches fits
+//                        better than one switching at once, by more than kShapeZ standard
+//                        errors (SegmentEstimate::shape_z): C can be biased by several C_std
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
 // Live input code (added by damping_id_node, not by applyQualityFlags):
@@ -58,6 +61,7 @@ inline constexpr const char* kModelMismatch = "model_mismatch";
 inline constexpr const char* kRefineDisagrees = "refine_disagrees";
 inline constexpr const char* kResidualsNotWhite = "residuals_not_white";
 inline constexpr const char* kDampingVaries = "damping_varies";
+inline constexpr const char* kShapeMismatch = "shape_mismatch";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -109,6 +113,11 @@ struct QualityLimits {
   /// residual RMS exceeds kWhitenessFloor of the DTE's standard deviation: on noise-free data
   /// the standard error of C1 describes the refinement's discretisation error, not noise.
   static constexpr double kVariationZ = 3.0;
+  /// Greybox square levels: |SegmentEstimate::shape_z| beyond this is flagged shape_mismatch.
+  /// shape_z is N(0, 1) when the stiffness switches at once (a score test of the refinement's
+  /// prewhitened least squares), so a square-wave stiffness is flagged with probability 0.27 %
+  /// per segment; judged above kWhitenessFloor like the others.
+  static constexpr double kShapeZ = 3.0;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -1141,6 +1141,97 @@ void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve
   }
 }
 
+// The greybox square model's response over samples [b, e) with its mesh state s(t) (0/1,
+// switching at the breaks fm.heldSplit locates) and with s_w(t), the same state ramped linearly
+// over `hw` samples either side of each switch: yhat_w - yhat at every sample into column 0 of
+// *out; with t_ref finite also the sensitivity of yhat to C1 of C(t) = C + C1 (T1(t) - t_ref)
+// (forcing -(T1 - t_ref) yhat', from rest) into column 1. RK4 over the pieces between the
+// sample instants, the switches and the ramps' corners (K is constant or linear on each piece);
+// x = [y0, v0, C, K0, dK] of the piecewise greybox problem; torque(j, u) the torque at u in
+// [0, 1] of interval j. These are directions of the shape test (Refinement::shapeScore), so
+// their accuracy is not critical.
+template <class Torque>
+void rampedResponseChange(const ForwardModel& fm, Index b, Index e, const Eigen::VectorXd& x,
+                          double hw, double t_ref, Torque&& torque, Eigen::MatrixXd* out) {
+  const double* st = fm.signal().mesh_state;
+  struct Switch {
+    double u, before, after;  // instant [samples from b], states either side
+  };
+  std::vector<Switch> sw;
+  for (Index j = b; j + 1 < e; ++j) {
+    if (st[j] != st[j + 1]) sw.push_back({double(j - b) + fm.heldSplit(j), st[j], st[j + 1]});
+  }
+  const double C = x[2], K0 = x[3], dK = x[4], h = fm.signal().dt;
+  const double ff = fm.gear().force_factor;
+  const bool c1 = std::isfinite(t_ref);
+  // z = [y, v, C1 sensitivity and its rate] of the square model; w = [y, v] of the ramped one.
+  double z[4] = {x[0], x[1], 0.0, 0.0}, w[2] = {x[0], x[1]};
+  auto deriv = [&](const double* q, double T, double K, bool sens, double* dq) {
+    dq[0] = q[1];
+    dq[1] = ff * T - C * q[1] - K * q[0];
+    if (sens) dq[2] = q[3], dq[3] = -(T - t_ref) * q[1] - C * q[3] - K * q[2];
+  };
+  auto rk4 = [&](double* q, int dim, const double* T, const double* K, double hs) {
+    double k[4][4], t[4];
+    const bool sens = dim == 4;
+    deriv(q, T[0], K[0], sens, k[0]);
+    for (int i = 0; i < dim; ++i) t[i] = q[i] + 0.5 * hs * k[0][i];
+    deriv(t, T[1], K[1], sens, k[1]);
+    for (int i = 0; i < dim; ++i) t[i] = q[i] + 0.5 * hs * k[1][i];
+    deriv(t, T[1], K[1], sens, k[2]);
+    for (int i = 0; i < dim; ++i) t[i] = q[i] + hs * k[2][i];
+    deriv(t, T[2], K[2], sens, k[3]);
+    for (int i = 0; i < dim; ++i)
+      q[i] += hs / 6.0 * (k[0][i] + 2.0 * (k[1][i] + k[2][i]) + k[3][i]);
+  };
+  out->setZero(e - b, 2);
+  size_t k0 = 0;    // the first switch whose ramp ends after the interval's start
+  double cuts[16];  // 2 + 3 per switch, at most 4 switches
+  for (Index j = b; j + 1 < e; ++j) {
+    const double u0 = double(j - b), u1 = u0 + 1.0;
+    while (k0 < sw.size() && sw[k0].u + hw <= u0) ++k0;
+    const double s0 = k0 == 0 ? st[b] : sw[k0 - 1].after;  // the state before switch k0
+    size_t k1 = k0;  // switches k0 .. k1-1 reach into the interval (at most 4 counted)
+    while (k1 < sw.size() && k1 < k0 + 4 && sw[k1].u - hw < u1) ++k1;
+    auto square = [&](double u) {
+      double s = s0;
+      for (size_t k = k0; k < k1; ++k) s = u >= sw[k].u ? sw[k].after : s;
+      return s;
+    };
+    auto ramped = [&](double u) {
+      for (size_t k = k0; k < k1; ++k) {
+        const Switch& q = sw[k];
+        if (std::abs(u - q.u) < hw)
+          return q.before + (q.after - q.before) * (u - q.u + hw) / (2 * hw);
+      }
+      return square(u);
+    };
+    int nc = 0;
+    cuts[nc++] = u0, cuts[nc++] = u1;
+    for (size_t k = k0; k < k1; ++k) {
+      for (double c : {sw[k].u - hw, sw[k].u, sw[k].u + hw}) {
+        if (c > u0 && c < u1) cuts[nc++] = c;
+      }
+    }
+    std::sort(cuts, cuts + nc);
+    for (int q = 0; q + 1 < nc; ++q) {
+      const double ua = cuts[q], ub = cuts[q + 1], um = 0.5 * (ua + ub);
+      if (!(ub > ua)) continue;
+      const double us[3] = {ua, um, ub}, Ksq = K0 + dK * square(um);
+      double T[3], Kw[3];
+      for (int k = 0; k < 3; ++k) {
+        T[k] = torque(j, us[k] - u0);
+        Kw[k] = k1 > k0 ? K0 + dK * ramped(us[k]) : Ksq;
+      }
+      const double Ks[3] = {Ksq, Ksq, Ksq};
+      rk4(z, c1 ? 4 : 2, T, Ks, (ub - ua) * h);
+      rk4(w, 2, T, Kw, (ub - ua) * h);
+    }
+    (*out)(j + 1 - b, 0) = w[0] - z[0];
+    (*out)(j + 1 - b, 1) = z[2];
+  }
+}
+
 double shapeStiffness(const StiffnessShape& shape, const std::vector<double>& curve, double phase) {
   double b[2 * StiffnessShape::kMaxHarmonics + 1];
   shape.basis(phase, b);
@@ -1917,6 +2008,76 @@ class Refinement {
     return piecewise_ ? ll(2, 2) : ss(0, 0);
   }
 
+  // Shape test of the greybox square levels (piecewise model): a score test of one more unknown g
+  // in K = K0 + dK (s + g (s_w - s)), s_w the mesh state ramped linearly around each switch (over
+  // a fifth of the natural period, at most 0.4 of the shortest interval between switches). The
+  // response change d (rampedResponseChange), the residual e and the sensitivities J at the
+  // converged estimate, prewhitened by the segment's noise model; J holds, beside the unknowns,
+  // the damping's variation with the load (C1 of variationTest, where the torque varies), so
+  // that a damping that follows the load does not raise the score. With d and e projected off
+  // J: z = d'e / (sigma |d|), sigma^2 = |e|^2 / (rows - columns of J): N(0, 1) when the
+  // stiffness switches at once. A stiffness that ramps (a trapezoid) biases C by many C_std
+  // while the residual can stay at the noise level; z then grows. NaN without a switch.
+  double shapeScore(size_t i, double variation_z) const {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    const double* st = s_.mesh_state;
+    double last = -1.0, spacing = INFINITY;
+    int switches = 0;
+    for (Index j = b; j + 1 < e; ++j) {
+      if (st[j] == st[j + 1]) continue;
+      const double u = static_cast<double>(j) + fm_.heldSplit(j);
+      if (switches++ > 0) spacing = std::min(spacing, u - last);
+      last = u;
+    }
+    if (switches == 0 || !(res_->omega0 > 0.0)) return kNaN;
+    const double period = 2.0 * M_PI / (res_->omega0 * s_.dt);  // samples
+    const double hw = std::min(0.1 * period, 0.2 * spacing);
+    if (!(hw > 0.0)) return kNaN;
+    // The residual and the unknowns' sensitivities at the solution (solutionRows), the change d
+    // and, where the damping varies with the load (|variation_z| > 1), the C1 sensitivity.
+    const Eigen::MatrixXd sol = solutionRows(i, true);
+    double mean_t = 0.0;
+    const bool c1 = std::abs(variation_z) > 1.0 && torqueVaries(b, e, &mean_t);
+    const SegmentTable* tab = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    auto torque = [&](Index j, double u) {  // quadratic through the stage torques, or the cubic
+      if (tab == nullptr) return fm_.torque(j, u, b, e);
+      const double t0 = tab->T[j - b], tm = tab->T_mid[j - b], t1 = tab->T[j + 1 - b];
+      return t0 * (1.0 - u) * (1.0 - 2.0 * u) + tm * 4.0 * u * (1.0 - u) + t1 * u * (2.0 * u - 1.0);
+    };
+    Eigen::MatrixXd dc;
+    rampedResponseChange(fm_, b, e, loc_[i], hw, c1 ? mean_t : kNaN, torque, &dc);
+    const Index m = sol.cols() - 1;
+    Eigen::MatrixXd rows(e - b, 2 + m + (c1 ? 1 : 0));  // e, d, J, (C1)
+    rows.col(0) = sol.col(0);
+    rows.col(1) = dc.col(0);
+    rows.middleCols(2, m) = sol.rightCols(m);
+    if (c1) rows.col(2 + m) = dc.col(1);
+    const Eigen::MatrixXd w = whiten(rows, noise_of_[i]);
+    Eigen::MatrixXd J = w.rightCols(w.cols() - 2);
+    for (Index c = 0; c < J.cols(); ++c) {
+      const double norm = J.col(c).norm();
+      if (norm > 0.0) J.col(c) /= norm;
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+    const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
+    const Eigen::VectorXd dp = w.col(1) - J * qr.solve(w.col(1));
+    const double dof = static_cast<double>(w.rows() - qr.rank());
+    const double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
+    return dof > 0.0 && den > 0.0 ? dp.dot(ep) / den : kNaN;
+  }
+
+  // Whether the torque varies within samples [b, e) (relative standard deviation above 1e-9),
+  // with its mean into *mean.
+  bool torqueVaries(Index b, Index e, double* mean) const {
+    if (s_.torque == nullptr || e - b < 2) return false;
+    double mean_t = 0.0, var_t = 0.0;
+    for (Index n = b; n < e; ++n) mean_t += s_.torque[n];
+    mean_t /= static_cast<double>(e - b);
+    for (Index n = b; n < e; ++n) var_t += (s_.torque[n] - mean_t) * (s_.torque[n] - mean_t);
+    *mean = mean_t;
+    return std::sqrt(var_t / static_cast<double>(e - b)) > 1e-9 * std::abs(mean_t);
+  }
+
   // Rows n >= p of `M` (one row per sample of a segment) filtered by the AR model as the
   // residuals are (Accumulator): e_n = M_n + sum_k a_k M_{n-k}.
   static Eigen::MatrixXd whiten(const Eigen::MatrixXd& M, const NoiseModel& nm) {
@@ -1942,11 +2103,17 @@ class Refinement {
   }
 
   // Segment i's sensitivities at the solution, prewhitened (rows x m).
-  // Held stiffness and constant C: from the rows of a fused pass (the same numbers).
   Eigen::MatrixXd whitenedSensitivities(size_t i) const {
+    return whiten(solutionRows(i, false), noise_of_[i]);
+  }
+
+  // Segment i's rows at the solution, not whitened: the residual y - yhat (column 0, when
+  // `residual`) and the sensitivities (rows x (residual + m)). Held stiffness and constant C:
+  // from the rows of a fused pass (the same numbers).
+  Eigen::MatrixXd solutionRows(size_t i, bool residual) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
-    Eigen::MatrixXd J(e - b, m_);
-    const int m = m_;
+    const int m = m_, r0 = residual ? 1 : 0;
+    Eigen::MatrixXd J(e - b, r0 + m);
     const Params p = makeParams(loc_[i], sh_);
     const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
     KeptRows rows;
@@ -1955,14 +2122,16 @@ class Refinement {
         evaluateFused(*t, p, NoiseModel{}, &unused, &rows)) {
       const Index stride = 4 * (m / 4 + 1);  // the row (r, J_1..J_m) of each sample
       for (Index n = 0; n < e - b; ++n) {
-        for (int a = 0; a < m; ++a) J(n, a) = rows.J[static_cast<size_t>(stride * n + a + 1)];
+        for (int a = 1 - r0; a <= m; ++a)
+          J(n, a - 1 + r0) = rows.J[static_cast<size_t>(stride * n + a)];
       }
     } else {
       sim_.run(b, e, p, substeps_, [&](Index n, const double* z) {
-        for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
+        if (residual) J(n - b, 0) = s_.dte[n] - z[0];
+        for (int a = 0; a < m; ++a) J(n - b, r0 + a) = z[2 + 2 * a];
       });
     }
-    return whiten(J, noise_of_[i]);
+    return J;
   }
 
   // The converged model's response (zero initial state, no STE forcing: linear in the torque)
@@ -1985,9 +2154,10 @@ class Refinement {
   }
 
   // The converged model of segment i for its response to the torque: state only, from rest.
-  Params noiseParams(size_t i) const {
+  Params noiseParams(size_t i, bool state = false) const {
     Params p = makeParams(loc_[i], sh_);
-    p.m = 0, p.nste = 0, p.y0 = 0.0, p.v0 = 0.0;
+    p.m = 0, p.nste = 0;
+    if (!state) p.y0 = 0.0, p.v0 = 0.0;  // from rest (the response to the torque alone)
     return p;
   }
 
@@ -2280,13 +2450,8 @@ class Refinement {
   // fit weights C(t) by the response's sensitivity to it. Skipped when the torque is unknown or
   // does not vary in the segment (C1 not identifiable: the constant-C fit is then the same).
   void variationTest(size_t i, double sigma2, SegmentEstimate* e) const {
-    const Index b = ranges_[i].first, en = ranges_[i].second;
-    if (s_.torque == nullptr || en - b < 2) return;
-    double mean_t = 0.0, var_t = 0.0;
-    for (Index n = b; n < en; ++n) mean_t += s_.torque[n];
-    mean_t /= static_cast<double>(en - b);
-    for (Index n = b; n < en; ++n) var_t += (s_.torque[n] - mean_t) * (s_.torque[n] - mean_t);
-    if (!(std::sqrt(var_t / static_cast<double>(en - b)) > 1e-9 * std::abs(mean_t))) return;
+    double mean_t = 0.0;
+    if (!torqueVaries(ranges_[i].first, ranges_[i].second, &mean_t)) return;
     Params p = makeParams(loc_[i], sh_);
     if (p.m + 1 > kMaxParams) return;
     p.role[p.m] = Role::Theta1;
@@ -2394,6 +2559,8 @@ class Refinement {
         e.C_weighted = x[k];
         e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
         variationTest(i, sigma2, &e);
+        if (grey_ && !shape_ && ste_ == nullptr && s_.mesh_state != nullptr)
+          e.shape_z = shapeScore(i, e.variation_z);
         if (std::isfinite(e.C_mean_load)) {
           const double t = std::isfinite(e.C_torque_std) ? e.C_torque_std : 0.0;
           e.C_mean_load_std = std::hypot(e.C_mean_load_std, t);

@@ -111,6 +111,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   emit("refined", s.refined);
   emit("residual_rms", s.residual_rms);
   emit("samples", s.samples);
+  if (std::isfinite(s.shape_z)) emit("shape_z", s.shape_z);
   emit("signal_std", s.signal_std);
   if (n > 0) {
     emit("stiffness_curve", SegmentCurve{s.stiffness_curve, n});
