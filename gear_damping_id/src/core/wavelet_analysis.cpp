@@ -734,17 +734,9 @@ double meanPowerOf(const Analysis& a, double f, double omega0) {
   return a.power.sum(omega0 * a.fs / (f * N), omega0) / (static_cast<double>(a.n) * N);
 }
 
-// One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
-// noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
-// the time-averaged scalogram.
-Status spectraAndNoise(Analysis* a) {
-  // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
-    if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
-        !s.ok())
-      return s;
-  }
-  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
+// The PSD of the loaded record (a->scal's spectrum) and the white-noise estimate sigma_n from
+// the median of its bins' |Y_k|^2 (spectraAndNoise).
+void psdAndNoise(Analysis* a) {
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
@@ -761,6 +753,30 @@ Status spectraAndNoise(Analysis* a) {
   }
   res.noise_std = std::sqrt(medianOfNonNegative(p2.data(), kmax, 1) /
                             (static_cast<double>(a->n) * std::log(2.0)));
+}
+
+// One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
+// noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
+// the time-averaged scalogram.
+Status spectraAndNoise(Analysis* a) {
+  // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
+  if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
+    if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
+        !s.ok())
+      return s;
+  }
+  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
+  const long N = a->scal.paddedSize(), kmax = N / 2;
+  const std::complex<double>* Y = a->scal.spectrum();
+  WaveletResult& res = a->res;
+  // Per-mode path on several threads: the PSD and its median on a thread of their own while
+  // this one sums the rows' power (they read Y and write apart; the same values as in turn).
+  std::future<void> psd;
+  if (!a->opt.full_scalogram && a->opt.threads >= 2) {
+    psd = gear_sim::startAsync([a] { psdAndNoise(a); });
+  } else {
+    psdAndNoise(a);
+  }
   res.scalogram_power.resize(a->grid.size());
   if (!a->opt.full_scalogram) {
     // Largest sigma_k of any row: f < fs/2, omega0 >= 3 (a > 6/N).
@@ -772,6 +788,7 @@ Status spectraAndNoise(Analysis* a) {
     res.scalogram_power[size_t(i)] =
         meanPowerOf(*a, a->grid[static_cast<size_t>(i)], a->opt.omega0);
   }
+  if (psd.valid()) psd.get();
   return {};
 }
 
