@@ -136,5 +136,94 @@ const std::complex<double>* DecimatedRows::row(const std::complex<double>* spect
   return reinterpret_cast<const std::complex<double>*>(out_);
 }
 
+BlockedRow::~BlockedRow() {
+  std::lock_guard<std::mutex> lock(fftwPlannerMutex());
+  for (auto& p : plans_) {
+    fftw_destroy_plan(p.second.r2c);
+    fftw_destroy_plan(p.second.c2c);
+  }
+  fftw_free(seg_);
+  fftw_free(spec_);
+  fftw_free(band_);
+  fftw_free(out_);
+  fftw_free(w_);
+}
+
+bool BlockedRow::configure(const double* y, long n, double mean, double s_samples, double omega0) {
+  const long K = static_cast<long>(std::ceil(8.0 * s_samples));
+  long L = kMinBlock;
+  while (L < 8 * (2 * K + 1)) L *= 2;
+  if (L > kMaxBlock || n < 1) return false;
+  const double a = 2.0 * 3.14159265358979323846 * s_samples / static_cast<double>(L);
+  if (std::floor((omega0 + kBandHalfWidth) / a) >= static_cast<double>(L / 2)) return false;
+  if (!seg_) {  // the largest block's buffers, once: every plan points into them
+    seg_ = fftw_alloc_real(static_cast<size_t>(kMaxBlock));
+    spec_ = fftw_alloc_complex(static_cast<size_t>(kMaxBlock / 2 + 1));
+    band_ = fftw_alloc_complex(static_cast<size_t>(kMaxBlock));
+    out_ = fftw_alloc_complex(static_cast<size_t>(kMaxBlock));
+    if (!seg_ || !spec_ || !band_ || !out_) return false;
+  }
+  Plans& p = plans_[L];
+  if (!p.r2c || !p.c2c) {
+    std::lock_guard<std::mutex> lock(fftwPlannerMutex());
+    if (!p.r2c) p.r2c = fftw_plan_dft_r2c_1d(static_cast<int>(L), seg_, spec_, FFTW_ESTIMATE);
+    if (!p.c2c)
+      p.c2c = fftw_plan_dft_1d(static_cast<int>(L), band_, out_, FFTW_BACKWARD, FFTW_ESTIMATE);
+    if (!p.r2c || !p.c2c) return false;
+  }
+  if (n > w_cap_) {
+    fftw_free(w_);
+    w_ = reinterpret_cast<std::complex<double>*>(fftw_alloc_complex(static_cast<size_t>(n)));
+    adviseHugePages(w_, sizeof(fftw_complex) * static_cast<size_t>(n));
+    w_cap_ = w_ ? n : 0;
+    if (!w_) return false;
+  }
+  if (static_cast<long>(env_.size()) < n) env_.resize(static_cast<size_t>(n));
+  plan_ = p;
+  y_ = y;
+  n_ = n;
+  mean_ = mean;
+  L_ = L;
+  A_ = K;
+  H_ = L - 2 * K;
+  bandOf(a, omega0, L, &lo_, &hi_);
+  psi_.resize(static_cast<size_t>(std::max(0L, hi_ - lo_ + 1)));
+  for (long q = lo_; q <= hi_; ++q) {  // MorletCwt's multiplier on L bins (2 Psi / L)
+    const double x = a * static_cast<double>(q) - omega0;
+    psi_[static_cast<size_t>(q - lo_)] = 2.0 / static_cast<double>(L) * std::exp(-0.5 * x * x);
+  }
+  std::memset(band_, 0, sizeof(fftw_complex) * static_cast<size_t>(L));
+  done_.assign(static_cast<size_t>((n + H_ - 1) / H_), 0);
+  return true;
+}
+
+void BlockedRow::ensure(long j0, long j1) {
+  j0 = std::max(0L, j0);
+  j1 = std::min(n_ - 1, j1);
+  for (long b = j0 / H_; b <= j1 / H_ && j0 <= j1; ++b) {
+    if (!done_[static_cast<size_t>(b)]) computeBlock(b);
+  }
+}
+
+void BlockedRow::computeBlock(long b) {
+  done_[static_cast<size_t>(b)] = 1;
+  const long first = b * H_ - A_;  // sample of seg_[0]
+  const long i0 = std::max(0L, -first), i1 = std::min(L_, n_ - first);
+  for (long i = 0; i < std::min(i0, L_); ++i) seg_[i] = 0.0;
+  for (long i = i0; i < i1; ++i) seg_[i] = y_[first + i] - mean_;
+  for (long i = std::max(i0, i1); i < L_; ++i) seg_[i] = 0.0;
+  fftw_execute_dft_r2c(plan_.r2c, seg_, spec_);
+  for (long q = lo_; q <= hi_; ++q) {
+    const double g = psi_[static_cast<size_t>(q - lo_)];
+    band_[q][0] = spec_[q][0] * g;
+    band_[q][1] = spec_[q][1] * g;
+  }
+  fftw_execute_dft(plan_.c2c, band_, out_);
+  const long j0 = b * H_, m = std::min(H_, n_ - j0);
+  std::memcpy(reinterpret_cast<double*>(w_ + j0), out_ + A_,
+              sizeof(fftw_complex) * static_cast<size_t>(m));
+  modulusOf(reinterpret_cast<const double*>(w_ + j0), m, env_.data() + j0);
+}
+
 }  // namespace wavelet_detail
 }  // namespace gear_damping_id

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <map>
 #include <mutex>
+#include <vector>
 
 namespace gear_damping_id {
 namespace wavelet_detail {
@@ -61,6 +62,56 @@ class DecimatedRows {
   fftw_complex* in_ = nullptr;   // the folded band C
   fftw_complex* out_ = nullptr;  // the decimated row
   long capacity_ = 0;
+};
+
+// Per-mode path: W of one row at every sample of the ranges asked for, computed from the record
+// itself in overlapping blocks (overlap-save) instead of one inverse FFT of the padded length: a
+// fit row whose grid is every sample (s*fs < 2*kFitSamplesPerScale) needs every sample only over
+// its peak and its decay region (docs/wavelet.md "Speed"). A block of L samples (the smallest
+// power of two >= kMinBlock and >= 8 (2K + 1), K = ceil(8 s fs) the wavelet's half-span) gives
+// its L - 2K middle samples: r2c of the mean-removed samples (zero outside [0, n)), the band
+// times Psi(s w_q) (q = 0..L/2, the row's multiplier on L bins), one inverse FFT of L. Equal to
+// the padded row up to the wavelet's tail beyond 8 scales (e^-32) and the ringing of the
+// analytic cut at zero frequency (Psi(0) = 2 e^-18 at omega0 = 6; ~1e-8 of the row's peak).
+class BlockedRow {
+ public:
+  BlockedRow() = default;
+  BlockedRow(const BlockedRow&) = delete;
+  BlockedRow& operator=(const BlockedRow&) = delete;
+  ~BlockedRow();
+
+  // The row (scale s_samples = s*fs [samples], omega0) of the record y[0..n) with mean `mean`.
+  // False (and nothing computed) when its band reaches the Nyquist frequency or its block would
+  // exceed kMaxBlock, or FFTW cannot plan: the caller computes the full row instead.
+  bool configure(const double* y, long n, double mean, double s_samples, double omega0);
+  // Makes w()[j] and env()[j] = |w()[j]| valid for j in [j0, j1] (clipped to [0, n)).
+  void ensure(long j0, long j1);
+  const std::complex<double>* w() const { return w_; }
+  const std::vector<double>& env() const { return env_; }
+
+  static constexpr long kMinBlock = 1024, kMaxBlock = 16384;
+
+ private:
+  void computeBlock(long b);
+
+  struct Plans {
+    fftw_plan r2c = nullptr, c2c = nullptr;
+  };
+  std::map<long, Plans> plans_;
+  Plans plan_;
+  double* seg_ = nullptr;              // one block's samples (L doubles)
+  fftw_complex* spec_ = nullptr;       // their r2c spectrum (L/2 + 1)
+  fftw_complex* band_ = nullptr;       // the band times the multiplier (L, zero outside it)
+  fftw_complex* out_ = nullptr;        // the block's row (L)
+  long cap_ = 0;                       // length the block buffers hold
+  std::complex<double>* w_ = nullptr;  // the row at every sample (valid where computed)
+  long w_cap_ = 0;
+  std::vector<double> env_;  // |W| (valid where computed)
+  std::vector<double> psi_;  // multiplier over [lo_, hi_]
+  std::vector<char> done_;   // per block: computed
+  const double* y_ = nullptr;
+  long n_ = 0, L_ = 0, A_ = 0, H_ = 0, lo_ = 0, hi_ = -1;
+  double mean_ = 0.0;
 };
 
 }  // namespace wavelet_detail

@@ -158,6 +158,17 @@ struct RowEnvelope {
   double fs = 0.0, f = 0.0, omega0 = 0.0, s = 0.0, coi = 0.0;
   long j_peak = 0;    // sample index of the envelope's maximum
   bool full = false;  // the full path's row (every sample, medians over every sample)
+  // Per-mode path, D = 1: w and |W| are computed on demand (BlockedRow, see prepareBlockedRow);
+  // null: every point is there.
+  wavelet_detail::BlockedRow* fine = nullptr;
+  // Makes the points [m, m1] valid (on demand: a block's worth from m on); the last one made valid.
+  long ready(long m, long m1) const {
+    if (!fine) return m1;
+    const long e = std::min(m1, m + kReadyChunk - 1);
+    fine->ensure(m, e);
+    return e;
+  }
+  static constexpr long kReadyChunk = 4096;
 };
 
 // The per-mode path's grid: every D-th sample, D = the largest divisor of the FFT length <=
@@ -278,12 +289,15 @@ bool decayRegion(const RowEnvelope& r, const std::vector<double>& env, double si
   // region ends at the last point before the first one below the limit.
   const long m0 = gridCeil(std::max(0L, static_cast<long>(std::ceil(t0 * r.fs))), r.D);
   const long m1 = gridFloor(static_cast<long>(std::floor(t1 * r.fs)), r.D);
+  if (m0 <= m1 && m0 < r.points) r.ready(m0, m0);
   if (m0 <= m1 && m0 < r.points && env[static_cast<size_t>(m0)] < limit) {
     out->why = "envelope is below " + num(opt.floor_factor) + " x noise floor (" + num(out->floor) +
                ") at the start of the decay region (" + num(t0) + " s)";
     return false;
   }
+  long valid = m0 - 1;  // points up to here are computed (every point unless r.fine)
   for (long m = m0; m <= m1 && m < r.points; ++m) {
+    if (m > valid) valid = r.ready(m, std::min(m1, r.points - 1));
     if (env[static_cast<size_t>(m)] < limit) {
       t1 = static_cast<double>((m - 1) * r.D) * dt;
       out->reached_floor = true;
@@ -467,6 +481,7 @@ RowFit fitRow(const PreparedRow& p, const std::vector<double>& env, double sigma
               " and >= one wavelet scale " + num(r.s) + " s)";
     return out;
   }
+  if (r.fine) r.fine->ensure(j0, j1);  // a given region (decayRegion's scan made its own)
   envelopeFit(r, env, j0, m, work, p.cache, &out);
   return out;
 }
@@ -589,7 +604,8 @@ class BinnedPower {
 // threads one (WaveletOptions::threads); the first also serves the noise row.
 struct RowScratch {
   wavelet_detail::DecimatedRows decimated;
-  std::vector<double> env, work;
+  wavelet_detail::BlockedRow blocked;  // the rows of grid D = 1 (prepareBlockedRow)
+  std::vector<double> env, work, coarse;
   PointCache points;
 };
 
@@ -718,17 +734,9 @@ double meanPowerOf(const Analysis& a, double f, double omega0) {
   return a.power.sum(omega0 * a.fs / (f * N), omega0) / (static_cast<double>(a.n) * N);
 }
 
-// One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
-// noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
-// the time-averaged scalogram.
-Status spectraAndNoise(Analysis* a) {
-  // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
-  if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
-    if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
-        !s.ok())
-      return s;
-  }
-  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
+// The PSD of the loaded record (a->scal's spectrum) and the white-noise estimate sigma_n from
+// the median of its bins' |Y_k|^2 (spectraAndNoise).
+void psdAndNoise(Analysis* a) {
   const long N = a->scal.paddedSize(), kmax = N / 2;
   const std::complex<double>* Y = a->scal.spectrum();
   WaveletResult& res = a->res;
@@ -745,6 +753,30 @@ Status spectraAndNoise(Analysis* a) {
   }
   res.noise_std = std::sqrt(medianOfNonNegative(p2.data(), kmax, 1) /
                             (static_cast<double>(a->n) * std::log(2.0)));
+}
+
+// One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
+// noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
+// the time-averaged scalogram.
+Status spectraAndNoise(Analysis* a) {
+  // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
+  if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
+    if (Status s = a->scal.configure(a->n, a->fs, a->grid, a->opt.omega0, FftPlanning::Estimate);
+        !s.ok())
+      return s;
+  }
+  if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
+  const long N = a->scal.paddedSize(), kmax = N / 2;
+  const std::complex<double>* Y = a->scal.spectrum();
+  WaveletResult& res = a->res;
+  // Per-mode path on several threads: the PSD and its median on a thread of their own while
+  // this one sums the rows' power (they read Y and write apart; the same values as in turn).
+  std::future<void> psd;
+  if (!a->opt.full_scalogram && a->opt.threads >= 2) {
+    psd = gear_sim::startAsync([a] { psdAndNoise(a); });
+  } else {
+    psdAndNoise(a);
+  }
   res.scalogram_power.resize(a->grid.size());
   if (!a->opt.full_scalogram) {
     // Largest sigma_k of any row: f < fs/2, omega0 >= 3 (a > 6/N).
@@ -756,6 +788,7 @@ Status spectraAndNoise(Analysis* a) {
     res.scalogram_power[size_t(i)] =
         meanPowerOf(*a, a->grid[static_cast<size_t>(i)], a->opt.omega0);
   }
+  if (psd.valid()) psd.get();
   return {};
 }
 
@@ -944,6 +977,43 @@ void highFrequencyNoise(Analysis* a, const std::vector<ModeSeed>& seeds, double 
   if (clear && hf > 0.0 && hf < a->res.noise_std) a->res.noise_std = hf;
 }
 
+// Per-mode path, a row whose grid is every sample (D = 1; BlockedRow configured for it): every
+// sample is needed only about its peak and over its decay region, which BlockedRow computes on
+// demand (decayRegion's scan, fitRow). The peak and the noise floor come from the row at every
+// Dc-th sample (Dc the largest divisor of N <= max(2, s*fs/kMedianPointsPerScale): the noise
+// median over its points outside the COI, the median's points per scale of the other rows, at
+// least every 2nd sample), the peak refined on the samples within Dc of the coarse one. A null
+// p.row.w when the coarse row cannot be computed.
+PreparedRow prepareBlockedRow(const Analysis& a, const MorletCwt& fit, const RowEnvelope& r,
+                              double gain, RowScratch* rs) {
+  PreparedRow p;
+  p.cache = &rs->points;
+  p.cache->c1 = p.cache->c0 - 1;
+  const double per_median = r.s * r.fs / kMedianPointsPerScale;
+  const long Dc = wavelet_detail::DecimatedRows::divisorAtMost(
+      fit.paddedSize(), std::max(2L, static_cast<long>(per_median)));
+  RowEnvelope coarse = r;
+  coarse.D = Dc;
+  coarse.points = (r.n + Dc - 1) / Dc;
+  coarse.w = decimatedRow(a, fit, r.f, r.omega0, Dc, rs);
+  if (!coarse.w) return p;
+  growScratch(&rs->coarse, coarse.points);
+  modulusOf(reinterpret_cast<const double*>(coarse.w), coarse.points, rs->coarse.data());
+  p.floor = rowNoiseFloor(coarse, rs->coarse, gain, a.res.noise_std, a.opt);
+  const long g =
+      static_cast<long>(std::max_element(rs->coarse.begin(), rs->coarse.begin() + coarse.points) -
+                        rs->coarse.begin());
+  const long j0 = std::max(0L, (g - 1) * Dc + 1), j1 = std::min(r.n - 1, (g + 1) * Dc - 1);
+  rs->blocked.ensure(j0, j1);
+  const std::vector<double>& env = rs->blocked.env();
+  p.row = r;
+  p.row.w = rs->blocked.w();
+  p.row.fine = &rs->blocked;
+  p.row.j_peak = std::max_element(env.begin() + j0, env.begin() + j1 + 1) - env.begin();
+  p.peak = env[static_cast<size_t>(p.row.j_peak)];
+  return p;
+}
+
 // Fit of one mode's row at omega0 (two passes: the second shifts the region's start by
 // sigma*s^2 once sigma is known). Writes only *rs (and, on the full path, fit's row buffers):
 // the per-mode path fits modes on several threads, each with its own RowScratch.
@@ -953,6 +1023,11 @@ RowFit fitAt(const Analysis* a, MorletCwt* fit, const ModeSeed& seed, double ome
   RowEnvelope row;
   row.s = morletScale(f, omega);
   row.n = a->n;
+  row.fs = a->fs;
+  row.f = f;
+  row.omega0 = omega;
+  row.coi = std::sqrt(2.0) * row.s;
+  bool blocked = false;
   if (a->opt.full_scalogram) {
     row.w = fit->rowAt(f, omega);
     row.points = a->n;
@@ -962,22 +1037,26 @@ RowFit fitAt(const Analysis* a, MorletCwt* fit, const ModeSeed& seed, double ome
     row.D = wavelet_detail::DecimatedRows::divisorAtMost(
         fit->paddedSize(), static_cast<long>(row.s * a->fs / kFitSamplesPerScale));
     row.points = (a->n + row.D - 1) / row.D;
-    if (fit->fitsPadding(f, omega)) row.w = decimatedRow(*a, *fit, f, omega, row.D, rs);
+    blocked = row.D == 1 && fit->fitsPadding(f, omega) &&
+              rs->blocked.configure(a->y, a->n, a->mean, row.s * a->fs, omega);
+    if (!blocked && fit->fitsPadding(f, omega)) row.w = decimatedRow(*a, *fit, f, omega, row.D, rs);
   }
-  if (!row.w) {
+  const double gain = gainOf(*a, *fit, f, omega), sn = a->res.noise_std;
+  PreparedRow p;
+  if (blocked) {
+    p = prepareBlockedRow(*a, *fit, row, gain, rs);
+  } else if (row.w) {
+    p = prepareRow(row, gain, sn, a->opt, &rs->env, &rs->points);
+  }
+  if (!p.row.w) {
     RowFit r;
     r.why = "could not compute the wavelet row";
     return r;
   }
-  row.fs = a->fs;
-  row.f = f;
-  row.omega0 = omega;
-  row.coi = std::sqrt(2.0) * row.s;
-  const double gain = gainOf(*a, *fit, f, omega), sn = a->res.noise_std;
-  const PreparedRow p = prepareRow(row, gain, sn, a->opt, &rs->env, &rs->points);
-  RowFit r = fitRow(p, rs->env, sigma_guess, seed.region, a->opt, &rs->work);
+  const std::vector<double>& env = blocked ? rs->blocked.env() : rs->env;
+  RowFit r = fitRow(p, env, sigma_guess, seed.region, a->opt, &rs->work);
   if (r.ok && !seed.region && r.sigma > 0.0) {
-    RowFit r2 = fitRow(p, rs->env, r.sigma, nullptr, a->opt, &rs->work);
+    RowFit r2 = fitRow(p, env, r.sigma, nullptr, a->opt, &rs->work);
     if (r2.ok) r = r2;
   }
   return r;
