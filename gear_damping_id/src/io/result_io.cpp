@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -121,7 +122,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   emit("t_start", s.t_start);
   if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
   if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
-  emit("warnings", warningsJson(s.warnings));
+  emit("warnings", s.warnings);
   emit("windows", s.windows);
   emit("xi", s.xi);
 }
@@ -138,6 +139,8 @@ json segmentJson(const SegmentEstimate& s, Formulation f) {
       json a = json::array();
       for (size_t i = 0; i < v.n; ++i) a.push_back(num(v.at(i)));
       j[key] = std::move(a);
+    } else if constexpr (std::is_same_v<V, QualityWarnings>) {
+      j[key] = warningsJson(v);
     } else {
       j[key] = v;
     }
@@ -474,21 +477,10 @@ gear_sim::Status writeJsonAtomically(const std::string& path, const json& doc, O
 namespace {
 
 // Text as nlohmann's serializer writes it (dump(..., true, false, 2): pretty, indent 2 with ' '),
-// into any of its output adapters: the pieces AnalysisJsonWriter and the segment objects share.
+// into any of its output adapters: the pieces AnalysisJsonWriter writes around the segments.
 class JsonText {
  public:
   explicit JsonText(nlohmann::detail::output_adapter_t<char> out) : out_(out), s_(out, ' ') {}
-
-  // The elements [a, b) of a `segments` array of n at indentation `at`, each with its
-  // separator: segmentJson's bytes, written straight from the estimates (no tree is built).
-  void segmentElements(const std::vector<SegmentEstimate>& segs, size_t a, size_t b, Formulation f,
-                       unsigned at) {
-    for (size_t i = a; i < b; ++i) {
-      indent(at);
-      segment(segs[i], f, at);
-      separator(i + 1 < segs.size());
-    }
-  }
 
  protected:
   // After an element: ",\n" when another follows, else "\n".
@@ -499,46 +491,98 @@ class JsonText {
   }
   // Any value as the serializer writes it at indentation `at`.
   void scalar(const json& v, unsigned at) { s_.dump(v, true, false, 2, at); }
-  // A double as the serializer writes it (its dump_float: null when not finite, else
-  // nlohmann::detail::to_chars into a 64-character buffer), without building a json value.
-  void number(double v) {
-    if (!std::isfinite(v)) return out_->write_characters("null", 4);
-    std::array<char, 64> text;
-    const char* end = nlohmann::detail::to_chars(text.data(), text.data() + text.size(), v);
-    out_->write_characters(text.data(), static_cast<size_t>(end - text.data()));
-  }
 
   nlohmann::detail::output_adapter_t<char> out_;
   nlohmann::detail::serializer<json> s_;
+};
+
+// The elements of a `segments` array appended to a string, segmentJson's bytes as the
+// serializer writes them (dump(..., true, false, 2)) but straight into the string's buffer: a
+// double as its dump_float (null when not finite, else its to_chars), a bool, an
+// integer (decimal, as its dump_integer) and an empty warnings array as their text; only a
+// reason and non-empty warnings (text to escape) go through the serializer.
+class SegmentText {
+ public:
+  // Writing from the start of `buffer` (grown as needed, its bytes beyond size() unspecified).
+  explicit SegmentText(std::string* buffer)
+      : text_(*buffer), s_(std::make_shared<StringOut>(scratch_), ' ') {}
+  // The length of the text written.
+  size_t size() const { return used_; }
+
+  // The elements [a, b) of a `segments` array of n at indentation `at`, each with its
+  // separator.
+  void elements(const std::vector<SegmentEstimate>& segs, size_t a, size_t b, Formulation f,
+                unsigned at) {
+    for (size_t i = a; i < b; ++i) {
+      put(kSpaces, at);
+      segment(segs[i], f, at);
+      i + 1 < segs.size() ? put(",\n", 2) : put("\n", 1);
+    }
+  }
 
  private:
+  using StringOut = nlohmann::detail::output_string_adapter<char>;
+  static constexpr const char* kSpaces =
+      "                                                                ";
+  static constexpr size_t kNumberRoom = 64;  // the serializer's number buffer
+
+  // Room for n more bytes at the end of the text written so far.
+  char* room(size_t n) {
+    if (text_.size() - used_ < n) text_.resize(std::max(2 * text_.size(), used_ + n + 4096));
+    return &text_[used_];
+  }
+  void put(const char* s, size_t n) {
+    std::memcpy(room(n), s, n);
+    used_ += n;
+  }
+  void number(double v) {
+    if (!std::isfinite(v)) return put("null", 4);
+    char* p = room(kNumberRoom);
+    used_ += static_cast<size_t>(nlohmann::detail::to_chars(p, p + kNumberRoom, v) - p);
+  }
+  template <class Int>
+  void integer(Int v) {
+    char* p = room(kNumberRoom);
+    used_ += static_cast<size_t>(std::to_chars(p, p + kNumberRoom, v).ptr - p);
+  }
+  // Any value through the serializer at indentation `at`.
+  void serialized(const json& v, unsigned at) {
+    scratch_.clear();
+    s_.dump(v, true, false, 2, at);
+    put(scratch_.data(), scratch_.size());
+  }
   // One field of a segment object: separator, indentation, key.
   void field(const char* key, unsigned at, bool* first) {
-    out_->write_characters(*first ? "\n" : ",\n", *first ? 1 : 2);
+    *first ? put("\n", 1) : put(",\n", 2);
     *first = false;
-    indent(at);
-    out_->write_character('"');
-    out_->write_characters(key, std::strlen(key));
-    out_->write_characters("\": ", 3);
+    put(kSpaces, at);
+    put("\"", 1);
+    put(key, std::strlen(key));
+    put("\": ", 3);
   }
   void curve(const SegmentCurve& c, unsigned at) {
-    out_->write_characters("[\n", 2);
+    put("[\n", 2);
     for (size_t i = 0; i < c.n; ++i) {
-      indent(at + 2);
+      put(kSpaces, at + 2);
       number(c.at(i));
-      separator(i + 1 < c.n);
+      i + 1 < c.n ? put(",\n", 2) : put("\n", 1);
     }
-    indent(at);
-    out_->write_character(']');
+    put(kSpaces, at);
+    put("]", 1);
   }
   // segmentJson(s, f) at indentation `at`: its keys in the order of a std::map (bytewise).
   void segment(const SegmentEstimate& s, Formulation f, unsigned at);
+
+  std::string& text_;
+  size_t used_ = 0;
+  std::string scratch_;
+  nlohmann::detail::serializer<json> s_;
 };
 
-void JsonText::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
+void SegmentText::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
   const unsigned in = at + 2;
   bool first = true;
-  out_->write_character('{');
+  put("{", 1);
   segmentFields(s, f, [&](const char* key, const auto& v) {
     using V = std::decay_t<decltype(v)>;
     field(key, in, &first);
@@ -546,13 +590,20 @@ void JsonText::segment(const SegmentEstimate& s, Formulation f, unsigned at) {
       number(v);
     } else if constexpr (std::is_same_v<V, SegmentCurve>) {
       curve(v, in);
+    } else if constexpr (std::is_same_v<V, bool>) {
+      v ? put("true", 4) : put("false", 5);
+    } else if constexpr (std::is_integral_v<V>) {
+      integer(v);
+    } else if constexpr (std::is_same_v<V, QualityWarnings>) {
+      if (v.empty()) return put("[]", 2);
+      serialized(warningsJson(v), in);
     } else {
-      scalar(json(v), in);
+      serialized(json(v), in);
     }
   });
-  out_->write_character('\n');
-  indent(at);
-  out_->write_character('}');
+  put("\n", 1);
+  put(kSpaces, at);
+  put("}", 1);
 }
 
 // The document as serializer::dump(doc, true, false, 2) writes it (nlohmann's pretty printer:
@@ -628,19 +679,23 @@ class AnalysisJsonWriter : JsonText {
     const Formulation f = r.result.formulation;
     if (segs.empty()) return out_->write_characters("[]", 2);
     out_->write_characters("[\n", 2);
+    std::string mine, later;  // (reused: the batches' text)
     for (size_t a = 0; a < segs.size(); a += 2 * kBatch) {
       const size_t b = std::min(a + kBatch, segs.size()), c = std::min(b + kBatch, segs.size());
-      std::string later;
+      size_t later_size = 0;
       std::future<void> other;
       if (c > b)
         other = gear_sim::startAsync([&] {
-          JsonText(std::make_shared<nlohmann::detail::output_string_adapter<char>>(later))
-              .segmentElements(segs, b, c, f, at + 2);
+          SegmentText text(&later);
+          text.elements(segs, b, c, f, at + 2);
+          later_size = text.size();
         });
-      segmentElements(segs, a, b, f, at + 2);
+      SegmentText text(&mine);
+      text.elements(segs, a, b, f, at + 2);
+      out_->write_characters(mine.data(), text.size());
       if (other.valid()) {
         other.get();
-        out_->write_characters(later.data(), later.size());
+        out_->write_characters(later.data(), later_size);
       }
     }
     indent(at);
