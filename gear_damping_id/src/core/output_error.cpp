@@ -10,6 +10,8 @@
 #include <map>
 #include <memory>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "gear_damping_id/damping_units.hpp"
 #include "gear_damping_id/forward_model.hpp"
@@ -41,6 +43,29 @@ constexpr int kMaxArOrder = 6;
 // enough; the third round only runs when the coefficients still moved.
 constexpr int kMaxNoiseRounds = 3;
 constexpr double kArChangeTol = 1e-3;  // max |a_k| change that ends the rounds
+
+// An allocator whose resize leaves new elements default-initialised (doubles: not written). The
+// fused passes' row buffers are written in full by the pass before they are read; zeroing them
+// first cost about four instructions per element.
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    if constexpr (sizeof...(A) == 0) {
+      ::new (static_cast<void*>(p)) U;
+    } else {
+      ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+    }
+  }
+};
+using RowBuffer = std::vector<double, NoInitAllocator<double>>;
 
 // Parameters of one segment: roles and values.
 struct Params {
@@ -1313,7 +1338,7 @@ class Refinement {
   struct KeptRows {
     size_t seg = static_cast<size_t>(-1);  // none
     int m = 0;
-    std::vector<double> rrev, J;
+    RowBuffer rrev, J;
   };
 
   Normal evaluate(size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
@@ -1515,7 +1540,7 @@ class Refinement {
     f.maps = maps, f.key = t.key.data(), f.T = t.T.data(), f.T_mid = t.T_mid.data();
     f.y = s_.dte + t.b, f.n = t.e - t.b, f.nm = nm;
     f.x[0] = p.y0, f.x[1] = p.v0;
-    std::vector<double>& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
+    RowBuffer& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
     if (rrev.size() < static_cast<size_t>(f.n + 8)) rrev.resize(f.n + 8);
     std::fill(rrev.begin() + f.n, rrev.begin() + f.n + 8, 0.0);
     f.rrev = rrev.data();
@@ -1944,7 +1969,7 @@ class Refinement {
     Normal unused;
     if (t != nullptr && !t->smooth && SegmentSimulator::constantC(p) &&
         (kept || evaluateFused(*t, p, NoiseModel{}, &unused, &rows))) {
-      const std::vector<double>& Jr = kept ? final_rows_[i].J : rows.J;
+      const RowBuffer& Jr = kept ? final_rows_[i].J : rows.J;
       const Index stride = 4 * (m / 4 + 1);  // the row (r, J_1..J_m) of each sample
       for (Index n = 0; n < e - b; ++n) {
         for (int a = 0; a < m; ++a) J(n, a) = Jr[static_cast<size_t>(stride * n + a + 1)];
@@ -2498,7 +2523,7 @@ class Refinement {
   bool curvature_ar_ = false;                      // estimated under an AR noise model
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
-  mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
+  mutable RowBuffer fused_rrev_;              // evaluateFused's scratch
   mutable KeptRows kept_[2];                  // gaussNewton: accepted, trial
   std::vector<KeptRows> final_rows_;          // keepFinalRows: at the solution, by segment
   size_t kept_samples_ = 0;                   // samples held in final_rows_ so far
