@@ -10,6 +10,8 @@
 #include <map>
 #include <memory>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "gear_damping_id/damping_units.hpp"
 #include "gear_damping_id/forward_model.hpp"
@@ -41,6 +43,29 @@ constexpr int kMaxArOrder = 6;
 // enough; the third round only runs when the coefficients still moved.
 constexpr int kMaxNoiseRounds = 3;
 constexpr double kArChangeTol = 1e-3;  // max |a_k| change that ends the rounds
+
+// An allocator whose resize leaves new elements default-initialised (doubles: not written). The
+// fused passes' row buffers are written in full by the pass before they are read; zeroing them
+// first cost about four instructions per element.
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    if constexpr (sizeof...(A) == 0) {
+      ::new (static_cast<void*>(p)) U;
+    } else {
+      ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+    }
+  }
+};
+using RowBuffer = std::vector<double, NoInitAllocator<double>>;
 
 // Parameters of one segment: roles and values.
 struct Params {
@@ -1288,6 +1313,7 @@ class Refinement {
   gear_sim::Status run() {
     setUnknowns();
     if (gear_sim::Status s = startValues(); !s.ok()) return s;
+    torqueLevels();
     if (gear_sim::Status s = iterate(); !s.ok()) return s;
     if (gear_sim::Status s = covariances(); !s.ok()) return s;
     if (gear_sim::Status s = positiveVariances(); !s.ok()) return s;
@@ -1404,7 +1430,7 @@ class Refinement {
   struct KeptRows {
     size_t seg = static_cast<size_t>(-1);  // none
     int m = 0;
-    std::vector<double> rrev, J;
+    RowBuffer rrev, J;
   };
 
   Normal evaluate(size_t i, const Eigen::VectorXd& x, const Eigen::VectorXd& g,
@@ -1606,7 +1632,7 @@ class Refinement {
     f.maps = maps, f.key = t.key.data(), f.T = t.T.data(), f.T_mid = t.T_mid.data();
     f.y = s_.dte + t.b, f.n = t.e - t.b, f.nm = nm;
     f.x[0] = p.y0, f.x[1] = p.v0;
-    std::vector<double>& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
+    RowBuffer& rrev = keep != nullptr ? keep->rrev : fused_rrev_;
     if (rrev.size() < static_cast<size_t>(f.n + 8)) rrev.resize(f.n + 8);
     std::fill(rrev.begin() + f.n, rrev.begin() + f.n + 8, 0.0);
     f.rrev = rrev.data();
@@ -1924,8 +1950,24 @@ class Refinement {
         noise = next;
       }
       for (size_t i : set) noise_of_[i] = noise;
+      if (set.size() == 1) keepFinalRows(set[0]);
     }
     return {};
+  }
+
+  // One segment's problem with torque noise: the rows of its last accepted pass (kept_[0], at
+  // the solution) are kept for whitenedSensitivities, which would otherwise repeat that pass
+  // (the rows do not depend on the noise model), within kKeptBudget samples over the segments.
+  void keepFinalRows(size_t i) {
+    constexpr size_t kKeptBudget = size_t{1} << 20;  // samples: ~42 MB of rows at 3 unknowns
+    KeptRows& k = kept_[0];
+    if (!(torque_sigma_[i] > 0.0) || k.seg != i || k.m != m_) return;
+    const size_t n = static_cast<size_t>(ranges_[i].second - ranges_[i].first);
+    if (kept_samples_ + n > kKeptBudget) return;
+    if (final_rows_.size() != nseg_) final_rows_.resize(nseg_);
+    final_rows_[i] = std::move(k);
+    k = KeptRows{};
+    kept_samples_ += n;
   }
 
   // Covariances at the solution and the pooled noise statistics.
@@ -2109,21 +2151,24 @@ class Refinement {
 
   // Segment i's rows at the solution, not whitened: the residual y - yhat (column 0, when
   // `residual`) and the sensitivities (rows x (residual + m)). Held stiffness and constant C:
-  // from the rows of a fused pass (the same numbers).
+  // from the rows of a fused pass (the same numbers), those of the last accepted pass where
+  // they were kept (keepFinalRows).
   Eigen::MatrixXd solutionRows(size_t i, bool residual) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
     const int m = m_, r0 = residual ? 1 : 0;
     Eigen::MatrixXd J(e - b, r0 + m);
     const Params p = makeParams(loc_[i], sh_);
     const SegmentTable* t = sim_.tableApplies(substeps_) ? &tableOf(i) : nullptr;
+    const bool kept = i < final_rows_.size() && final_rows_[i].seg == i && final_rows_[i].m == m;
     KeptRows rows;
     Normal unused;
     if (t != nullptr && !t->smooth && SegmentSimulator::constantC(p) &&
-        evaluateFused(*t, p, NoiseModel{}, &unused, &rows)) {
+        (kept || evaluateFused(*t, p, NoiseModel{}, &unused, &rows))) {
+      const RowBuffer& Jr = kept ? final_rows_[i].J : rows.J;
       const Index stride = 4 * (m / 4 + 1);  // the row (r, J_1..J_m) of each sample
       for (Index n = 0; n < e - b; ++n) {
         for (int a = 1 - r0; a <= m; ++a)
-          J(n, a - 1 + r0) = rows.J[static_cast<size_t>(stride * n + a)];
+          J(n, a - 1 + r0) = Jr[static_cast<size_t>(stride * n + a)];
       }
     } else {
       sim_.run(b, e, p, substeps_, [&](Index n, const double* z) {
@@ -2176,23 +2221,36 @@ class Refinement {
     }
   }
 
+  // Each active segment's torque-noise level (model-free), before the iteration (keepFinalRows):
+  // torque_sd_ the estimate, torque_sigma_ the level used (zero where the torque is exact to
+  // rounding). None for the load law or without a torque channel.
+  void torqueLevels() {
+    torque_sd_.assign(nseg_, kNaN);
+    torque_sigma_.assign(nseg_, 0.0);
+    if (s_.torque == nullptr || load_) return;
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      const Index b = ranges_[i].first, e = ranges_[i].second;
+      const double sd = torqueNoiseEstimate(s_.torque + b, e - b);
+      torque_sd_[i] = sd;
+      double peak = 0.0;
+      for (Index n = b; n < e; ++n) peak = std::max(peak, std::abs(s_.torque[n]));
+      if (std::isfinite(sd) && sd > 1e-12 * peak) torque_sigma_[i] = sd;
+    }
+  }
+
   // Torque-meter noise (output_error.hpp): each segment's estimated level, and the covariance
   // its response adds to the unknowns: tcov_ll_ (locals) and tcov_ss_ (shared, of the segment's
   // problem). Zero where the torque is exact to rounding.
   void torqueNoise() {
     tcov_ll_.assign(nseg_, Eigen::MatrixXd::Zero(nl_, nl_));
     tcov_ss_.assign(nseg_, Eigen::MatrixXd::Zero(ns_, ns_));
-    torque_sigma_.assign(nseg_, 0.0);
     if (s_.torque == nullptr || load_) return;
     bool any = false;
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
-      const Index b = ranges_[i].first, e = ranges_[i].second;
-      const double sd = torqueNoiseEstimate(s_.torque + b, e - b);
-      res_->segments[i].torque_noise_std = sd;
-      double peak = 0.0;
-      for (Index n = b; n < e; ++n) peak = std::max(peak, std::abs(s_.torque[n]));
-      if (std::isfinite(sd) && sd > 1e-12 * peak) torque_sigma_[i] = sd, any = true;
+      res_->segments[i].torque_noise_std = torque_sd_[i];
+      any = any || torque_sigma_[i] > 0.0;
     }
     if (!any) return;
     noise_torque_.assign(static_cast<size_t>(s_.n), 0.0);
@@ -2209,8 +2267,10 @@ class Refinement {
       // The residual change -G w of a torque noise w moves the unknowns by the solve map of the
       // converged problem applied to Jw^T W G w (Jw the prewhitened sensitivities).
       std::vector<Eigen::MatrixXd> Jw(set.size());
-      for (size_t q = 0; q < set.size(); ++q)
+      for (size_t q = 0; q < set.size(); ++q) {
         if (torque_sigma_[set[q]] > 0.0) Jw[q] = whitenedSensitivities(set[q]);
+        if (set[q] < final_rows_.size()) final_rows_[set[q]] = KeptRows{};
+      }
       if (reference_)
         torqueNoiseImpulses(set, Jw);
       else if (noise_sim_->tableApplies(substeps_))
@@ -2658,13 +2718,15 @@ class Refinement {
   bool curvature_ar_ = false;                      // estimated under an AR noise model
   std::vector<Normal> n1_scratch_;
   mutable std::vector<SegmentTable> tables_;  // tableOf's cache
-  mutable std::vector<double> fused_rrev_;    // evaluateFused's scratch
+  mutable RowBuffer fused_rrev_;              // evaluateFused's scratch
   mutable KeptRows kept_[2];                  // gaussNewton: accepted, trial
+  std::vector<KeptRows> final_rows_;          // keepFinalRows: at the solution, by segment
+  size_t kept_samples_ = 0;                   // samples held in final_rows_ so far
   mutable SegmentTable scratch_;
   mutable size_t cached_ = 0;
   // Torque noise (torqueNoise): per-segment level and added covariances, and the draws' model
   // (the record with the torque channel replaced by one draw of noise).
-  std::vector<double> torque_sigma_;
+  std::vector<double> torque_sigma_, torque_sd_;
   std::vector<Eigen::MatrixXd> tcov_ll_, tcov_ss_;
   std::vector<double> noise_torque_;
   SignalView noise_view_;
