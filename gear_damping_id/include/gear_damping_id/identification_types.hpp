@@ -161,6 +161,8 @@ struct SegmentEstimate {
   /// over part of the natural period around each switch instead of switching at once
   /// (output_error.cpp, Refinement::shapeScore). N(0, 1) when the square wave holds.
   double shape_z = kNaN;  ///< [-]
+  /// The change of C that fit with the ramp's coefficient free would make, relative to C.
+  double shape_shift = kNaN;  ///< [-]
   /// C0 of that model, the damping at the segment's mean load [1/s], and its standard error:
   /// then also C and C_std (the time mean of a C(t) linear in the load, constant included).
   double C_mean_load = kNaN, C_mean_load_std = kNaN;

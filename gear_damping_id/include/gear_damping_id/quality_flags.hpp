@@ -31,7 +31,8 @@
 //                        constant-C fit, a weighted mean of C(t), need not be)
 //   shape_mismatch       greybox square levels: a stiffness ramped around the mesh switches fits
 //                        better than one switching at once, by more than kShapeZ standard
-//                        errors (SegmentEstimate::shape_z): C can be biased by several C_std
+//                        errors (SegmentEstimate::shape_z) and moving C by more than kShapeShift
+//                        (SegmentEstimate::shape_shift): C can be biased by several C_std
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike.
 // Live input code (added by damping_id_node, not by applyQualityFlags):
@@ -118,6 +119,11 @@ struct QualityLimits {
   /// prewhitened least squares), so a square-wave stiffness is flagged with probability 0.27 %
   /// per segment; judged above kWhitenessFloor like the others.
   static constexpr double kShapeZ = 3.0;
+  /// ... and only where the ramp, fitted, would move C by more than this fraction of C (the
+  /// noise-free accuracy bar): noise-free, the residual is deterministic (the simulator's and the
+  /// refinement's discretisations, a damping that varies nonlinearly within the segment), so
+  /// the score is large while C is right to far better than this.
+  static constexpr double kShapeShift = 5e-4;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -2060,7 +2060,11 @@ class Refinement {
   // J: z = d'e / (sigma |d|), sigma^2 = |e|^2 / (rows - columns of J): N(0, 1) when the
   // stiffness switches at once. A stiffness that ramps (a trapezoid) biases C by many C_std
   // while the residual can stay at the noise level; z then grows. NaN without a switch.
-  double shapeScore(size_t i, double variation_z) const {
+  struct ShapeScore {
+    double z = kNaN;      // the score, N(0, 1) when the stiffness switches at once
+    double shift = kNaN;  // the ramped fit's change of C, relative to C
+  };
+  ShapeScore shapeScore(size_t i, double variation_z) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
     const double* st = s_.mesh_state;
     double last = -1.0, spacing = INFINITY;
@@ -2071,10 +2075,10 @@ class Refinement {
       if (switches++ > 0) spacing = std::min(spacing, u - last);
       last = u;
     }
-    if (switches == 0 || !(res_->omega0 > 0.0)) return kNaN;
+    if (switches == 0 || !(res_->omega0 > 0.0)) return {};
     const double period = 2.0 * M_PI / (res_->omega0 * s_.dt);  // samples
     const double hw = std::min(0.1 * period, 0.2 * spacing);
-    if (!(hw > 0.0)) return kNaN;
+    if (!(hw > 0.0)) return {};
     // The residual and the unknowns' sensitivities at the solution (solutionRows), the change d
     // and, where the damping varies with the load (|variation_z| > 1), the C1 sensitivity.
     const Eigen::MatrixXd sol = solutionRows(i, true);
@@ -2096,16 +2100,22 @@ class Refinement {
     if (c1) rows.col(2 + m) = dc.col(1);
     const Eigen::MatrixXd w = whiten(rows, noise_of_[i]);
     Eigen::MatrixXd J = w.rightCols(w.cols() - 2);
+    const double c_norm = J.col(2).norm();  // unknown 2: C
     for (Index c = 0; c < J.cols(); ++c) {
       const double norm = J.col(c).norm();
       if (norm > 0.0) J.col(c) /= norm;
     }
     const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+    const Eigen::VectorXd beta = qr.solve(w.col(1));  // d regressed on the sensitivities
     const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
-    const Eigen::VectorXd dp = w.col(1) - J * qr.solve(w.col(1));
+    const Eigen::VectorXd dp = w.col(1) - J * beta;
     const double dof = static_cast<double>(w.rows() - qr.rank());
     const double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
-    return dof > 0.0 && den > 0.0 ? dp.dot(ep) / den : kNaN;
+    if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
+    // Frisch-Waugh: the enlarged fit's g = d'e / |d|^2 (both projected) moves the unknowns by
+    // -beta g, C by -beta_C g (beta_C back in C's units).
+    const double g = dp.dot(ep) / dp.squaredNorm();
+    return {dp.dot(ep) / den, -beta[2] / c_norm * g / std::abs(loc_[i][2])};
   }
 
   // Whether the torque varies within samples [b, e) (relative standard deviation above 1e-9),
@@ -2619,8 +2629,10 @@ class Refinement {
         e.C_weighted = x[k];
         e.C_weighted_std = std::sqrt(std::max(cov_ll(k, k), 0.0));
         variationTest(i, sigma2, &e);
-        if (grey_ && !shape_ && ste_ == nullptr && s_.mesh_state != nullptr)
-          e.shape_z = shapeScore(i, e.variation_z);
+        if (grey_ && !shape_ && ste_ == nullptr && s_.mesh_state != nullptr) {
+          const ShapeScore sc = shapeScore(i, e.variation_z);
+          e.shape_z = sc.z, e.shape_shift = sc.shift;
+        }
         if (std::isfinite(e.C_mean_load)) {
           const double t = std::isfinite(e.C_torque_std) ? e.C_torque_std : 0.0;
           e.C_mean_load_std = std::hypot(e.C_mean_load_std, t);

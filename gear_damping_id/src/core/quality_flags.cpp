@@ -45,7 +45,7 @@ void flagEstimate(SegmentEstimate* e) {
     e->C = e->C_std = e->c = e->xi = kNaN;
     e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
     e->C_integral = e->C_integral_std = kNaN;
-    e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = kNaN;
+    e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = e->shape_shift = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
     e->refined = false;
@@ -96,13 +96,14 @@ void flagEstimate(SegmentEstimate* e) {
                      " 1/s; --model load_law describes the law"});
   }
   if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
-      std::abs(e->shape_z) > L::kShapeZ) {
+      std::abs(e->shape_z) > L::kShapeZ && std::abs(e->shape_shift) > L::kShapeShift) {
     w.push_back(
         {quality_code::kShapeMismatch,
          "greybox square levels: the data favour a stiffness that ramps around the mesh "
          "switches over one that switches at once (score " +
              num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
-             "); C can be biased by several C_std: use the measured stiffness "
+             "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
+             " %): C can be biased by several C_std: use the measured stiffness "
              "(--formulation known) or a --stiffness-shape that ramps (table:N, fourier:H)"});
   }
   if (e->refined && std::isfinite(e->C_integral)) {
