@@ -124,6 +124,10 @@ struct QualityLimits {
   /// refinement's discretisations, a damping that varies nonlinearly within the segment), so
   /// the score is large while C is right to far better than this.
   static constexpr double kShapeShift = 5e-4;
+  /// ... and only where torque-meter noise is a small part of C's error (C_torque_std at most
+  /// this fraction of C_std): the score's variance leaves that noise out, and with 1 N*m of it
+  /// on the Table 1 case the score's rms grew to 1.5-2.0 (5-14 % of the segments beyond 3).
+  static constexpr double kShapeTorqueShare = 0.5;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes
