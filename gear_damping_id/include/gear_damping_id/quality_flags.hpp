@@ -32,14 +32,19 @@
 //   shape_mismatch       greybox square levels: a stiffness ramped around the mesh switches fits
 //                        better than one switching at once, by more than kShapeZ standard
 //                        errors (SegmentEstimate::shape_z) and moving C by more than kShapeShift
-//                        (SegmentEstimate::shape_shift): C can be biased by several C_std
+//                        (SegmentEstimate::shape_shift): C can be biased by several C_std;
+//                        or, for the run's segments together, by more than kShapePooledZ
+//                        (the pooled score; then every such segment whose ramp moves C by
+//                        more than kShapeShift is flagged, and the run too)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
-// identification flag a segment alike.
+// identification flag a segment alike; the pooled shape score depends on the result's segments
+// (the whole record in batch and streamed analysis, the kept history in live identification).
 // Live input code (added by damping_id_node, not by applyQualityFlags):
 //   torque_unstamped     the segment's torque was paired with the joint states without time
 //                        stamps (rig_frontend_node with a std_msgs/Float64 torque marks its
 //                        chunks): C can be biased by the pairing's lag (measured up to 10 %)
-// Run codes (IdentificationResult::warnings): refine_not_converged (the output-error refinement
+// Run codes (IdentificationResult::warnings): shape_mismatch (the pooled shape score above),
+// refine_not_converged (the output-error refinement
 // stopped without converging), refine_failed (it diverged: integral estimates reported),
 // refine_skipped (a streamed shared-damping run is not refined), switches_unlocated (stiffness
 // switches that mesh_phase could not locate), integral_std (the reported estimates are the
@@ -128,6 +133,13 @@ struct QualityLimits {
   /// this fraction of C_std): the score's variance leaves that noise out, and with 1 N*m of it
   /// on the Table 1 case the score's rms grew to 1.5-2.0 (5-14 % of the segments beyond 3).
   static constexpr double kShapeTorqueShare = 0.5;
+  /// The record's segments together: where |sum(shape_z) / sqrt(n)| over the n judged segments of
+  /// a run exceeds this, each of them whose fitted ramp would move C by more than kShapeShift is
+  /// flagged shape_mismatch and the run carries shape_mismatch. The pooled score is N(0, 1) for a
+  /// square-wave stiffness (independent segments); 4 is a false alarm of 6e-5 per run at rms 1
+  /// (measured rms 0.6-1.15 on square-stiffness records of 28-500 segments, docs/trust.md), while a
+  /// ramp that scores 2-3 in every segment gives 14-60 over 50 segments.
+  static constexpr double kShapePooledZ = 4.0;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -25,6 +25,18 @@ std::string num(double v) {
   return s.str();
 }
 
+// Whether the shape test judges the estimate: its score exists and means what it says (above
+// the discretisation floor, torque-meter noise a small part of C's error).
+bool shapeJudged(const SegmentEstimate& e) {
+  return e.identifiable && e.refined && std::isfinite(e.shape_z) &&
+         e.residuals.rms > L::kWhitenessFloor * e.signal_std &&
+         !(e.C_torque_std > L::kShapeTorqueShare * e.C_std);
+}
+
+const char* const kShapeAdvice =
+    "C can be biased by several C_std: use the measured stiffness (--formulation known) or a "
+    "--stiffness-shape that ramps (table:N, fourier:H)";
+
 // Flags one identifiable estimate in place.
 void flagEstimate(SegmentEstimate* e) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
@@ -95,17 +107,14 @@ void flagEstimate(SegmentEstimate* e) {
                      num(e->C_weighted) + " +- " + num(e->C_weighted_std) +
                      " 1/s; --model load_law describes the law"});
   }
-  if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
-      std::abs(e->shape_z) > L::kShapeZ && std::abs(e->shape_shift) > L::kShapeShift &&
-      !(e->C_torque_std > L::kShapeTorqueShare * e->C_std)) {
-    w.push_back(
-        {quality_code::kShapeMismatch,
-         "greybox square levels: the data favour a stiffness that ramps around the mesh "
-         "switches over one that switches at once (score " +
-             num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
-             "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
-             " %): C can be biased by several C_std: use the measured stiffness "
-             "(--formulation known) or a --stiffness-shape that ramps (table:N, fourier:H)"});
+  if (shapeJudged(*e) && std::abs(e->shape_z) > L::kShapeZ &&
+      std::abs(e->shape_shift) > L::kShapeShift) {
+    w.push_back({quality_code::kShapeMismatch,
+                 "greybox square levels: the data favour a stiffness that ramps around the mesh "
+                 "switches over one that switches at once (score " +
+                     num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
+                     "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
+                     " %): " + kShapeAdvice});
   }
   if (e->refined && std::isfinite(e->C_integral)) {
     // Like with like: the refinement's constant-C fit where C is the mean-load damping.
@@ -123,6 +132,47 @@ void flagEstimate(SegmentEstimate* e) {
                        " % (> " + num(100.0 * L::kDisagreeRelative) + " %)"});
     }
   }
+}
+
+// The shape test of the record's segments together: their scores pooled, Z = sum z / sqrt(n),
+// are N(0, 1) for a square-wave stiffness (the segments' noise is independent), while a ramp
+// the test sees weakly in each segment adds up. Beyond kShapePooledZ each judged segment whose
+// fitted ramp would move C by more than kShapeShift is flagged, and the run says so (the
+// stiffness shape is the gear pair's, so the model is wrong for the whole record).
+void flagPooledShape(IdentificationResult* r) {
+  auto& rw = r->warnings;
+  rw.erase(std::remove_if(
+               rw.begin(), rw.end(),
+               [](const QualityWarning& q) { return q.code == quality_code::kShapeMismatch; }),
+           rw.end());
+  double sum = 0.0;
+  long n = 0;
+  for (const auto& e : r->segments) {
+    if (shapeJudged(e)) sum += e.shape_z, ++n;
+  }
+  if (n < 2) return;
+  const double Z = sum / std::sqrt(static_cast<double>(n));
+  if (!(std::abs(Z) > L::kShapePooledZ)) return;
+  const std::string pooled = "the record's " + std::to_string(n) +
+                             " judged segments together favour a stiffness that ramps around "
+                             "the mesh switches (pooled shape score sum(shape_z)/sqrt(n) = " +
+                             num(Z) + ", > " + num(L::kShapePooledZ) + ")";
+  long flagged = 0;
+  for (auto& e : r->segments) {
+    if (!shapeJudged(e) || !(std::abs(e.shape_shift) > L::kShapeShift)) continue;
+    ++flagged;
+    if (hasCode(e.warnings, quality_code::kShapeMismatch)) continue;
+    e.warnings.push_back({quality_code::kShapeMismatch,
+                          "greybox square levels: " + pooled + "; this segment's score " +
+                              num(e.shape_z) + ", its fitted ramp would move C by " +
+                              num(100.0 * e.shape_shift) + " %: " + kShapeAdvice});
+  }
+  if (flagged == 0) return;
+  rw.push_back({quality_code::kShapeMismatch,
+                "greybox square levels: " + pooled + "; " + std::to_string(flagged) +
+                    " segments whose fitted ramp would move C by more than " +
+                    num(100.0 * L::kShapeShift) +
+                    " % are flagged shape_mismatch: " + kShapeAdvice});
 }
 
 }  // namespace
@@ -144,6 +194,7 @@ std::string joinCodes(const QualityWarnings& warnings, const std::string& sep) {
 void applyQualityFlags(const IdentificationOptions& /*options*/, IdentificationResult* r) {
   for (auto& e : r->segments) flagEstimate(&e);
   if (r->constant) flagEstimate(&*r->constant);
+  flagPooledShape(r);
 }
 
 void flagIntegralStandardErrors(const IdentificationOptions& options, IdentificationResult* r) {
