@@ -368,9 +368,9 @@ TEST(QualityFlags, ShapeScoreIsStandardNormalOnSquareStiffness) {
 // wide (the Table 1 gear with 10 % transitions, constant damping, 30 dB; a hostile test of
 // 2026-11-27) scores only 2-3 in each segment, below the segment test's 3, while C comes out up
 // to 8x the truth: 122 of 308 segments were clean and > 4 C_std off over 20 seeds. Pooled over a
-// record of 50 segments the scores give 14-20; every segment whose fitted ramp moves C is then
-// flagged and the run says why. Here, 2 seeds: no segment is left clean and > 4 C_std off, and
-// the run carries shape_mismatch.
+// record of 50 segments the scores give 17-21 (20 seeds); every segment whose fitted ramp moves C
+// is then flagged and the run says why. Here, 2 seeds: no segment is left clean and > 4 C_std off,
+// and the run carries shape_mismatch.
 TEST(QualityFlags, PooledShapeScoreFlagsARampTheSegmentsSeeWeakly) {
   SimConfig c = table1Config();
   c.mesh.model = gear_sim::StiffnessModel::Trapezoid;

@@ -137,8 +137,9 @@ struct QualityLimits {
   /// a run exceeds this, each of them whose fitted ramp would move C by more than kShapeShift is
   /// flagged shape_mismatch and the run carries shape_mismatch. The pooled score is N(0, 1) for a
   /// square-wave stiffness (independent segments); 4 is a false alarm of 6e-5 per run at rms 1
-  /// (measured rms 0.6-1.15 on square-stiffness records of 28-500 segments, docs/trust.md), while a
-  /// ramp that scores 2-3 in every segment gives 14-60 over 50 segments.
+  /// (measured: rms 1.15 over 40 random square-stiffness records of 28-50 segments, |Z| <= 1.1 on
+  /// Table 1 records of 200-500 segments; docs/trust.md), while a ramp that scores 2-3 in every
+  /// segment pools to 12-21 over 50 segments.
   static constexpr double kShapePooledZ = 4.0;
 };
 
