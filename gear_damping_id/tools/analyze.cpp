@@ -5,7 +5,7 @@
 //     [--topic T] [--csv-out DIR] [--bag-out OUT.bag]
 //     [--wavelet [--f-min HZ] [--f-max HZ] [--scales N] [--omega0 W] [--mode-freq HZ]...
 //                [--decay-region T0,T1]...]
-//     [--threads N] [--summary | --table] [--quiet]
+//     [--threads N (default: one per core)] [--summary | --table] [--quiet]
 //
 // Identifies the mesh damping of a DTE record (CSV with the docs/method.md §6 columns, or a bag of
 // gear_damping/SignalChunk messages) with the integral method (docs/method.md §4) for every
@@ -649,7 +649,7 @@ class Analysis {
   gd::IdentificationOptions base;
   std::optional<double> t_start, t_end;
   long max_in_memory = 1000000;
-  int threads = 1;
+  int threads = 0;  // 0: one per core (checkOptions)
   bool wavelet = false;
   gd::WaveletOptions wopt;
   std::vector<std::string> regions;
@@ -784,8 +784,8 @@ void Analysis::declareIdentificationOptions(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   app.add_option("--threads", threads,
                  "identify this many segments in parallel, and compute the wavelet scalogram's "
-                 "rows on this many threads (same results as 1; default 1)")
-      ->check(CLI::Range(1, 256));
+                 "rows on this many threads (same results as 1; default 0: one per core)")
+      ->check(CLI::Range(0, 256));
 }
 
 // The output directories and bags.
@@ -889,6 +889,8 @@ int Analysis::parse(int argc, char** argv) {
 // Options: validated before any file is read, each message naming the option.
 int Analysis::checkOptions() {
   is_bag = endsWith(input, ".bag");
+  if (threads == 0)  // the results are the same for any count (docs/architecture.md)
+    threads = static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1u, 256u));
   if (!is_bag && !endsWith(input, ".csv"))
     return fail(kExitUsage, "--input " + input + ": must end in .csv or .bag");
   if (!bag_out.empty() && !endsWith(bag_out, ".bag"))

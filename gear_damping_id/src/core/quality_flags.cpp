@@ -156,7 +156,8 @@ void flagPooledShape(IdentificationResult* r) {
   const std::string pooled = "the record's " + std::to_string(n) +
                              " judged segments together favour a stiffness that ramps around "
                              "the mesh switches (pooled shape score sum(shape_z)/sqrt(n) = " +
-                             num(Z) + ", > " + num(L::kShapePooledZ) + ")";
+                             num(Z) + ", > " + num(L::kShapePooledZ) +
+                             "; without mesh_phase, switches between samples do too)";
   long flagged = 0;
   for (auto& e : r->segments) {
     if (!shapeJudged(e) || !(std::abs(e.shape_shift) > L::kShapeShift)) continue;
