@@ -156,7 +156,13 @@ struct SegmentEstimate {
   /// torque channel that varies in the segment; NaN otherwise): one Gauss-Newton step of the
   /// refinement's prewhitened problem with the extra unknown C1 of
   /// C(t) = C0 + C1 (T1(t) - mean_torque), from the converged constant-C fit.
-  double variation_z = kNaN;  ///< [-] C1 / std(C1): N(0, 1) when C is constant in the segment
+  /// The constant model's C (IdentificationResult::constant) instead: the score test of one C per
+  /// segment against the shared C, as a z-score (Wilson-Hilferty of its chi-square with n - 1
+  /// degrees of freedom; N(0, 1) when the damping is the same in every segment), with
+  /// variation_spread the estimated rms spread of the segments' C about the shared C beyond the
+  /// noise, relative to C (Refinement::constancyTest in output_error.cpp).
+  double variation_z = kNaN;       ///< [-] C1 / std(C1): N(0, 1) when C is constant in the segment
+  double variation_spread = kNaN;  ///< [-] constant model only
   /// Greybox square levels (refined piecewise estimates): the score of a stiffness that ramps
   /// over part of the natural period around each switch instead of switching at once
   /// (output_error.cpp, Refinement::shapeScore). N(0, 1) when the square wave holds.

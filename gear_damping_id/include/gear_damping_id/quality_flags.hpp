@@ -28,7 +28,9 @@
 //                        C1 (T1 - mean T1) added to the refined segment's model is more than
 //                        kVariationZ standard errors from zero (SegmentEstimate::variation_z);
 //                        (C is then the damping at the segment's mean load, which the
-//                        constant-C fit, a weighted mean of C(t), need not be)
+//                        constant-C fit, a weighted mean of C(t), need not be); on the constant
+//                        model's C: the damping differs between the segments (variation_z
+//                        beyond kVariationZ, variation_spread beyond kVariationSpread)
 //   shape_mismatch       greybox square levels: a stiffness ramped around the mesh switches fits
 //                        better than one switching at once, by more than kShapeZ standard
 //                        errors (SegmentEstimate::shape_z) and moving C by more than kShapeShift
@@ -119,6 +121,12 @@ struct QualityLimits {
   /// residual RMS exceeds kWhitenessFloor of the DTE's standard deviation: on noise-free data
   /// the standard error of C1 describes the refinement's discretisation error, not noise.
   static constexpr double kVariationZ = 3.0;
+  /// The constant model's C is flagged damping_varies where its constancy test
+  /// (SegmentEstimate::variation_z, one-sided: 0.135 % false alarms) exceeds kVariationZ and the
+  /// segments' C spread beyond the noise by more than this fraction of C (the noise-free
+  /// accuracy bar): noise-free, the test's residual is deterministic and the score large while
+  /// every segment's damping is right to far better than this.
+  static constexpr double kVariationSpread = 5e-4;
   /// Greybox square levels: |SegmentEstimate::shape_z| beyond this is flagged shape_mismatch.
   /// shape_z is N(0, 1) when the stiffness switches at once (a score test of the refinement's
   /// prewhitened least squares), so a square-wave stiffness is flagged with probability 0.27 %

@@ -2667,12 +2667,51 @@ class Refinement {
     }
   }
 
+  // The constant model's test of one damping for every segment (flag damping_varies): the score
+  // test of one C_i per segment against the shared C at the refined estimate,
+  //   S = (sum u_i^2 / I_i - (sum u_i)^2 / sum I_i) / sigma^2 ~ chi-square(n - 1)
+  // when the damping is the same in every segment (u_i: segment i's score of its own C, I_i its
+  // information, both with the segment's locals profiled out, from the prewhitened normal
+  // equations at the solution; sigma^2 the pooled innovation variance), into e->variation_z by
+  // the Wilson-Hilferty transform; and the spread of the segments' C beyond the noise (a method
+  // of moments: the one-step deviations u_i / I_i have the I-weighted variance
+  // sigma^2 (S - (n - 1)) / sum I_i beyond the noise), relative to C, into e->variation_spread.
+  // Both stay NaN where not judged: other shared unknowns (the STE), fewer than two segments, or
+  // a residual RMS below kWhitenessFloor of the DTE's standard deviation.
+  void constancyTest(SegmentEstimate* e) const {
+    if (piecewise_ || load_ || ns_ != 1 || !(sigma2_pooled_ > 0.0)) return;
+    double su2 = 0.0, su = 0.0, si = 0.0, raw = 0.0, dev2 = 0.0;
+    int n = 0;
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i]) continue;
+      const Normal& nm = normals_[i];
+      const Eigen::VectorXd ncl = nm.N.block(nl_, 0, 1, nl_).transpose();
+      const double u = nm.rhs[nl_] - ncl.dot(Nll_inv_[i] * nm.rhs.head(nl_));
+      const double info = nm.N(nl_, nl_) - ncl.dot(Nll_inv_[i] * ncl);
+      if (!(info > 0.0) || !std::isfinite(u)) return;
+      su2 += u * u / info, su += u, si += info, ++n;
+      raw += nm.raw;
+      const Index b = ranges_[i].first, end = ranges_[i].second;
+      double mean = 0.0;
+      for (Index k = b; k < end; ++k) mean += s_.dte[k];
+      mean /= static_cast<double>(std::max<Index>(end - b, 1));
+      for (Index k = b; k < end; ++k) dev2 += (s_.dte[k] - mean) * (s_.dte[k] - mean);
+    }
+    constexpr double kFloor2 = QualityLimits::kWhitenessFloor * QualityLimits::kWhitenessFloor;
+    if (n < 2 || !(raw > kFloor2 * dev2)) return;
+    const double df = n - 1.0, S = (su2 - su * su / si) / sigma2_pooled_;
+    const double v = 2.0 / (9.0 * df);
+    e->variation_z = (std::cbrt(std::max(S, 0.0) / df) - (1.0 - v)) / std::sqrt(v);
+    e->variation_spread = std::sqrt(std::max(S - df, 0.0) * sigma2_pooled_ / si) / std::abs(sh_[0]);
+  }
+
   // The shared estimates: constant C, the load law, the STE; the run's convergence warning.
   void fillShared() {
     const Eigen::MatrixXd& Ainv = Ainv_of_[problems_[0][0]];
     const Eigen::MatrixXd& tcov = tcov_ss_[problems_[0][0]];  // torque noise (zero: none)
     if (res_->constant && !piecewise_ && !load_) {
       fillC(&*res_->constant, sh_[0], sigma2_pooled_ * Ainv(0, 0) + tcov(0, 0));
+      constancyTest(&*res_->constant);
       if (!all_converged_)
         res_->constant->warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
     }

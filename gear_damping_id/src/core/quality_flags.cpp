@@ -37,8 +37,8 @@ const char* const kShapeAdvice =
     "C can be biased by several C_std: use the measured stiffness (--formulation known) or a "
     "--stiffness-shape that ramps (table:N, fourier:H)";
 
-// Flags one identifiable estimate in place.
-void flagEstimate(SegmentEstimate* e) {
+// Flags one identifiable estimate in place; `shared`: the constant model's C.
+void flagEstimate(SegmentEstimate* e, bool shared) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
   auto& w = e->warnings;
   w.erase(
@@ -58,6 +58,7 @@ void flagEstimate(SegmentEstimate* e) {
     e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
     e->C_integral = e->C_integral_std = kNaN;
     e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = e->shape_shift = kNaN;
+    e->variation_spread = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
     e->refined = false;
@@ -96,7 +97,19 @@ void flagEstimate(SegmentEstimate* e) {
                      num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
                      "): the model leaves structure in the data, C_std understates the error"});
   }
-  if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
+  if (shared && e->refined && e->variation_z > L::kVariationZ &&
+      e->variation_spread > L::kVariationSpread) {
+    w.push_back({quality_code::kDampingVaries,
+                 "the damping is not the same in every segment: the test of one C per segment "
+                 "against the shared C is " +
+                     num(e->variation_z) + " standard errors beyond constancy (> " +
+                     num(L::kVariationZ) + "), the segments' C spread by about " +
+                     num(100.0 * e->variation_spread) +
+                     " % rms beyond the noise (or some segments' model misfits: see their flags); "
+                     "C is a weighted mean of the segments' damping and C_std leaves the "
+                     "variation out: --model piecewise or load_law describe it"});
+  }
+  if (!shared && e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
       std::abs(e->variation_z) > L::kVariationZ) {
     w.push_back({quality_code::kDampingVaries,
                  "the damping varies with the load within the segment: a term C1 (T1 - mean T1) "
@@ -193,8 +206,8 @@ std::string joinCodes(const QualityWarnings& warnings, const std::string& sep) {
 }
 
 void applyQualityFlags(const IdentificationOptions& /*options*/, IdentificationResult* r) {
-  for (auto& e : r->segments) flagEstimate(&e);
-  if (r->constant) flagEstimate(&*r->constant);
+  for (auto& e : r->segments) flagEstimate(&e, false);
+  if (r->constant) flagEstimate(&*r->constant, true);
   flagPooledShape(r);
 }
 

@@ -92,7 +92,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   }
   emit("C_std", s.C_std);
   if (std::isfinite(s.C_torque_std)) emit("C_torque_std", s.C_torque_std);
-  if (std::isfinite(s.variation_z)) {
+  if (std::isfinite(s.variation_z) && std::isfinite(s.C_weighted)) {  // not the constant's
     emit("C_weighted", s.C_weighted);
     emit("C_weighted_std", s.C_weighted_std);
   }
@@ -121,6 +121,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   emit("t_end", s.t_end);
   emit("t_start", s.t_start);
   if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
+  if (std::isfinite(s.variation_spread)) emit("variation_spread", s.variation_spread);
   if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
   emit("warnings", s.warnings);
   emit("windows", s.windows);
