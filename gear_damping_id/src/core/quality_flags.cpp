@@ -96,8 +96,7 @@ void flagEstimate(SegmentEstimate* e) {
                      " 1/s; --model load_law describes the law"});
   }
   if (e->refined && e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
-      std::abs(e->shape_z) > L::kShapeZ && std::abs(e->shape_shift) > L::kShapeShift &&
-      !(e->C_torque_std > L::kShapeTorqueShare * e->C_std)) {
+      std::abs(e->shape_z) > L::kShapeZ && std::abs(e->shape_shift) > L::kShapeShift) {
     w.push_back(
         {quality_code::kShapeMismatch,
          "greybox square levels: the data favour a stiffness that ramps around the mesh "
