@@ -320,11 +320,12 @@ TEST(QualityFlags, GreyboxOnSlowTrapezoidIsFlaggedByTheShapeTest) {
 }
 
 // The shape test's score is N(0, 1) where the stiffness does switch at once: on the Table 1 case
-// (square stiffness; noise-free, no segment flagged) with white noise at 30 dB and AR(1) noise of
-// rho 0.9 (which the refinement's AR model whitens), 20 seeds each. The rms of n standard normal
-// scores lies within 1 +- 3 / sqrt(2 n) (3 sigma); |z| > 3 has probability 0.27 %, so at most a few
-// segments of each set are flagged shape_mismatch (Poisson mean n * 0.0027; 6 or more has
-// probability < 1e-3 for n = 200).
+// (square stiffness; noise-free, no segment flagged) with white noise at 30 dB, AR(1) noise of
+// rho 0.9 (which the refinement's AR model whitens) and white noise with 1 N*m of torque-meter
+// noise (before the score's variance carried it: rms 1.5-2.0), 20 seeds each. The rms of n standard
+// normal scores lies within 1 +- 3 / sqrt(2 n) (3 sigma); |z| > 3 has probability 0.27 %, so at
+// most a few segments of each set are flagged shape_mismatch (Poisson mean n * 0.0027; 6 or more
+// has probability < 1e-3 for n = 200).
 TEST(QualityFlags, ShapeScoreIsStandardNormalOnSquareStiffness) {
   const SimConfig c = table1Config();
   const SignalTable clean = simulateOrFail(c);
@@ -338,7 +339,9 @@ TEST(QualityFlags, ShapeScoreIsStandardNormalOnSquareStiffness) {
         << "noise-free segment at " << s.t_start << ": shape_z " << s.shape_z << ", shift "
         << s.shape_shift;
   }
-  for (double rho : {0.0, 0.9}) {
+  // rho: AR(1) noise of that lag-1 correlation (0: white); torque: white torque-meter noise
+  // [N*m], which the score's variance carries as C_std does (C_torque_std ~ C_std at 1 N*m).
+  for (const auto& [rho, torque] : {std::pair{0.0, 0.0}, {0.9, 0.0}, {0.0, 1.0}}) {
     double sum2 = 0.0;
     int n = 0, flagged = 0;
     for (unsigned long seed = 1; seed <= 20; ++seed) {
@@ -348,6 +351,7 @@ TEST(QualityFlags, ShapeScoreIsStandardNormalOnSquareStiffness) {
       } else {
         addAr1Noise(&t.dte, 30.0, rho, 900 + seed);
       }
+      if (torque > 0.0) addTorqueNoise(&t.torque, torque, 950 + seed);
       for (const auto& s : identifyOrFail(t, c, o).segments) {
         if (!s.identifiable || !std::isfinite(s.shape_z)) continue;
         sum2 += s.shape_z * s.shape_z;
@@ -357,10 +361,11 @@ TEST(QualityFlags, ShapeScoreIsStandardNormalOnSquareStiffness) {
     }
     ASSERT_GT(n, 150) << rho;
     const double rms = std::sqrt(sum2 / n);
-    std::cout << "[ measured ] shape score on square stiffness, 30 dB, AR(1) rho " << rho << ": "
-              << n << " segments, rms " << rms << ", " << flagged << " flagged shape_mismatch\n";
-    EXPECT_NEAR(rms, 1.0, 3.0 / std::sqrt(2.0 * n)) << rho;
-    EXPECT_LE(flagged, 5) << rho;
+    std::cout << "[ measured ] shape score on square stiffness, 30 dB, AR(1) rho " << rho
+              << ", torque noise " << torque << " N*m: " << n << " segments, rms " << rms << ", "
+              << flagged << " flagged shape_mismatch\n";
+    EXPECT_NEAR(rms, 1.0, 3.0 / std::sqrt(2.0 * n)) << rho << " " << torque;
+    EXPECT_LE(flagged, 5) << rho << " " << torque;
   }
 }
 
@@ -448,6 +453,42 @@ TEST(QualityFlags, PooledShapeRuleFlagsOnlySegmentsWhoseRampMovesC) {
     EXPECT_TRUE(r.warnings.empty()) << zz.size();
     for (const auto& s : r.segments) EXPECT_TRUE(s.warnings.empty()) << zz.size();
   }
+}
+
+// Greybox square levels on short ramps (a trapezoid of 3 % transitions, constant damping) with
+// 1 N*m of torque-meter noise at 30 dB: C_torque_std is most of C_std there, which kept the
+// shape test from being judged while its variance left the torque noise out (500 segments: 13
+// flagged shape_mismatch, 164 clean and > 4 C_std off). Now the score carries the torque noise and
+// is judged: no segment clean and > 4 C_std off, and most flagged (measured 492 of 500).
+TEST(QualityFlags, GreyboxOnShortRampsWithTorqueNoiseIsFlagged) {
+  SimConfig c = table1Config();
+  c.mesh.model = gear_sim::StiffnessModel::Trapezoid;
+  c.mesh.transition_fraction = 0.03;
+  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
+  const SignalTable clean = simulateOrFail(c);
+  IdentificationOptions o;
+  o.formulation = Formulation::Greybox;
+  int identifiable = 0, shape_flagged = 0, clean_far = 0;
+  double share = 0.0;
+  for (unsigned long seed : {31, 32, 33}) {
+    SignalTable t = noisy(clean, 30.0, seed);
+    addTorqueNoise(&t.torque, 1.0, seed + 100);
+    for (const auto& s : identifyOrFail(t, c, o).segments) {
+      if (!s.identifiable) continue;
+      ++identifiable;
+      shape_flagged += gd::hasCode(s.warnings, qc::kShapeMismatch) ? 1 : 0;
+      const double truth = trueC(t, c, s.t_start, s.t_end);
+      clean_far += s.warnings.empty() && std::abs(s.C - truth) > kCleanSE * s.C_std ? 1 : 0;
+      share = std::max(share, s.C_torque_std / s.C_std);
+    }
+  }
+  std::cout << "[ measured ] greybox on a 3 % trapezoid, 30 dB, 1 N*m torque noise: "
+            << identifiable << " identifiable segments, " << shape_flagged
+            << " flagged shape_mismatch, " << clean_far << " clean and > 4 C_std off; largest "
+            << "C_torque_std / C_std " << share << "\n";
+  EXPECT_GT(share, 0.5);  // the case the gate excluded
+  EXPECT_EQ(clean_far, 0);
+  EXPECT_GE(2 * shape_flagged, identifiable);
 }
 
 TEST(QualityFlags, GreyboxOnFourierStiffnessIsFlagged) {

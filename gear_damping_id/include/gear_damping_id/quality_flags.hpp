@@ -116,10 +116,11 @@ struct QualityLimits {
   static constexpr double kWhitenessFloor = 1e-5;
   /// Within-segment damping variation: |C1 / std(C1)| beyond this is flagged. C1 / std(C1) is
   /// N(0, 1) when the damping is constant in the segment (the refinement's prewhitened least
-  /// squares), so a constant damping is flagged with probability 2 (1 - Phi(3)) = 0.27 % per
-  /// segment (one record of 10 segments in 37). Judged, like the whiteness, only where the
-  /// residual RMS exceeds kWhitenessFloor of the DTE's standard deviation: on noise-free data
-  /// the standard error of C1 describes the refinement's discretisation error, not noise.
+  /// squares; std(C1) carries the torque-meter noise as C_std does), so a constant damping is
+  /// flagged with probability 2 (1 - Phi(3)) = 0.27 % per segment (one record of 10 segments in
+  /// 37). Judged, like the whiteness, only where the residual RMS exceeds kWhitenessFloor of the
+  /// DTE's standard deviation: on noise-free data the standard error of C1 describes the
+  /// refinement's discretisation error, not noise.
   static constexpr double kVariationZ = 3.0;
   /// The constant model's C is flagged damping_varies where its constancy test
   /// (SegmentEstimate::variation_z, one-sided: 0.135 % false alarms) exceeds kVariationZ and the
@@ -129,18 +130,15 @@ struct QualityLimits {
   static constexpr double kVariationSpread = 5e-4;
   /// Greybox square levels: |SegmentEstimate::shape_z| beyond this is flagged shape_mismatch.
   /// shape_z is N(0, 1) when the stiffness switches at once (a score test of the refinement's
-  /// prewhitened least squares), so a square-wave stiffness is flagged with probability 0.27 %
-  /// per segment; judged above kWhitenessFloor like the others.
+  /// prewhitened least squares; its variance carries the torque-meter noise as C_std does), so
+  /// a square-wave stiffness is flagged with probability 0.27 % per segment; judged above
+  /// kWhitenessFloor like the others.
   static constexpr double kShapeZ = 3.0;
   /// ... and only where the ramp, fitted, would move C by more than this fraction of C (the
   /// noise-free accuracy bar): noise-free, the residual is deterministic (the simulator's and the
   /// refinement's discretisations, a damping that varies nonlinearly within the segment), so
   /// the score is large while C is right to far better than this.
   static constexpr double kShapeShift = 5e-4;
-  /// ... and only where torque-meter noise is a small part of C's error (C_torque_std at most
-  /// this fraction of C_std): the score's variance leaves that noise out, and with 1 N*m of it
-  /// on the Table 1 case the score's rms grew to 1.5-2.0 (5-14 % of the segments beyond 3).
-  static constexpr double kShapeTorqueShare = 0.5;
   /// The record's segments together: where |sum(shape_z) / sqrt(n)| over the n judged segments of
   /// a run exceeds this, each of them whose fitted ramp would move C by more than kShapeShift is
   /// flagged shape_mismatch and the run carries shape_mismatch. The pooled score is N(0, 1) for a

@@ -2064,7 +2064,7 @@ class Refinement {
     double z = kNaN;      // the score, N(0, 1) when the stiffness switches at once
     double shift = kNaN;  // the ramped fit's change of C, relative to C
   };
-  ShapeScore shapeScore(size_t i, double variation_z) const {
+  ShapeScore shapeScore(size_t i, double variation_z) {
     const Index b = ranges_[i].first, e = ranges_[i].second;
     const double* st = s_.mesh_state;
     double last = -1.0, spacing = INFINITY;
@@ -2110,7 +2110,9 @@ class Refinement {
     const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
     const Eigen::VectorXd dp = w.col(1) - J * beta;
     const double dof = static_cast<double>(w.rows() - qr.rank());
-    const double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
+    double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
+    if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)  // the torque noise's response on dp
+      den = std::sqrt(den * den + torqueProjectedVariance(i, dp));
     if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
     // Frisch-Waugh: the enlarged fit's g = d'e / |d|^2 (both projected) moves the unknowns by
     // -beta g, C by -beta_C g (beta_C back in C's units).
@@ -2157,6 +2159,22 @@ class Refinement {
   // Segment i's sensitivities at the solution, prewhitened (rows x m).
   Eigen::MatrixXd whitenedSensitivities(size_t i) const {
     return whiten(solutionRows(i, false), noise_of_[i]);
+  }
+
+  // Segment i's sensitivities at p (p.m unknowns: the variation test's enlarged problem),
+  // prewhitened (rows x p.m).
+  Eigen::MatrixXd whitenedSensitivitiesAt(size_t i, const Params& p) const {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    Eigen::MatrixXd J(e - b, p.m);
+    auto visit = [&](Index n, const double* z) {
+      for (int a = 0; a < p.m; ++a) J(n - b, a) = z[2 + 2 * a];
+    };
+    if (sim_.tableApplies(substeps_)) {
+      sim_.runTable<0>(tableOf(i), p, visit);
+    } else {
+      sim_.run(b, e, p, substeps_, visit);
+    }
+    return whiten(J, noise_of_[i]);
   }
 
   // Segment i's rows at the solution, not whitened: the residual y - yhat (column 0, when
@@ -2330,8 +2348,11 @@ class Refinement {
   // to the sensitivities gives the weight of each response sample, and the adjoint (backward)
   // recursion of the state steps x_{j+1} = A_j x_j + (the torque samples' terms) carries the
   // weights to the torque samples. Split intervals' maps by unit inputs through the generic RK4.
+  // Jw's columns: the problem's unknowns, or one projected direction (torqueProjectedVariance).
   Eigen::MatrixXd torqueResponseGram(size_t i, const Eigen::MatrixXd& Jw) {
-    switch (m_) {  // the common problem sizes unrolled
+    switch (Jw.cols()) {  // the common problem sizes unrolled
+      case 1:
+        return torqueResponseGramOf<1>(i, Jw);
       case 3:
         return torqueResponseGramOf<3>(i, Jw);
       case 4:
@@ -2342,12 +2363,12 @@ class Refinement {
         return torqueResponseGramOf<0>(i, Jw);
     }
   }
-  // MT: the number of unknowns when fixed at compile time (0: m_).
+  // MT: Jw's columns when fixed at compile time (0: Jw.cols()).
   template <int MT>
   Eigen::MatrixXd torqueResponseGramOf(size_t i, const Eigen::MatrixXd& Jw) {
     const Index b = ranges_[i].first, e = ranges_[i].second, n = e - b;
     const NoiseModel& nm = noise_of_[i];
-    const int m = MT > 0 ? MT : m_;
+    const int m = MT > 0 ? MT : static_cast<int>(Jw.cols());
     // Row-major scratch reused over the segments (first touch of fresh pages is slow here).
     std::vector<double>& U = adj_u_;  // W^T Jw, a row per sample
     U.assign(static_cast<size_t>(n * m), 0.0);
@@ -2424,6 +2445,41 @@ class Refinement {
       for (int a = 0; a < m; ++a) Mc(s, a) = M[static_cast<size_t>(s * m + a)];
     }
     return Mc.transpose() * Mc;
+  }
+
+  // The variance the torque-meter noise adds to u'e, e segment i's prewhitened residual and u a
+  // direction in its rows (a score's): sigma_T^2 |G^T W^T u|^2, the torque noise's response
+  // G w projected on u, as C_std carries it (torqueNoise). Exact by torqueResponseGram with one
+  // column where the step maps are tabled; otherwise by unit impulses on the reference path,
+  // else by kDraws Rademacher draws (torqueNoiseDraws' seeding). Zero without a known level.
+  double torqueProjectedVariance(size_t i, const Eigen::VectorXd& u) {
+    const double sd = torque_sigma_.empty() ? 0.0 : torque_sigma_[i];
+    if (!(sd > 0.0) || noise_sim_ == nullptr) return 0.0;
+    if (!reference_ && noise_sim_->tableApplies(substeps_))
+      return sd * sd * torqueResponseGram(i, u)(0, 0);
+    constexpr int kDraws = 64;
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    SegmentTable tab;
+    if (noise_sim_->tableApplies(substeps_)) noise_sim_->buildTable(b, e, &tab);
+    double sum = 0.0;
+    if (reference_) {
+      for (Index s = b; s < e; ++s) {
+        noise_torque_[static_cast<size_t>(s)] = sd;
+        const double r = u.dot(responseToTorque(i, &tab));
+        noise_torque_[static_cast<size_t>(s)] = 0.0;
+        sum += r * r;
+      }
+      return sum;
+    }
+    std::uint64_t rng =
+        0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(std::llround(s_.time(b) / s_.dt));
+    for (int d = 0; d < kDraws; ++d) {
+      drawTorqueNoise(i, &rng);
+      const double r = u.dot(responseToTorque(i, &tab));
+      sum += r * r;
+    }
+    std::fill(noise_torque_.begin() + b, noise_torque_.begin() + e, 0.0);
+    return sum / kDraws;
   }
 
   // The reference (tests): exact by brute force, one unit impulse sigma e_s of the torque per
@@ -2519,7 +2575,7 @@ class Refinement {
   // C(t) is linear in the load over the segment (constant C included), whereas the constant-C
   // fit weights C(t) by the response's sensitivity to it. Skipped when the torque is unknown or
   // does not vary in the segment (C1 not identifiable: the constant-C fit is then the same).
-  void variationTest(size_t i, double sigma2, SegmentEstimate* e) const {
+  void variationTest(size_t i, double sigma2, SegmentEstimate* e) {
     double mean_t = 0.0;
     if (!torqueVaries(ranges_[i].first, ranges_[i].second, &mean_t)) return;
     Params p = makeParams(loc_[i], sh_);
@@ -2537,7 +2593,10 @@ class Refinement {
     if (!(schur > 1e-10 * aug.N(last, last))) return;
     Eigen::MatrixXd inv = aug.N.ldlt().solve(Eigen::MatrixXd::Identity(p.m, p.m));
     Eigen::VectorXd d = inv * aug.rhs;
-    const double var1 = sigma2 * inv(last, last);
+    double var1 = sigma2 * inv(last, last);
+    // Torque-meter noise: the response of d[last] = e_last' inv Jw' e to it (torqueNoise).
+    if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)
+      var1 += torqueProjectedVariance(i, whitenedSensitivitiesAt(i, p) * inv.col(last));
     if (!(var1 > 0.0) || !std::isfinite(d[last])) return;
     e->variation_z = d[last] / std::sqrt(var1);
     // Where C1 is significant the one step, linearised at C1 = 0, is iterated (Gauss-Newton on

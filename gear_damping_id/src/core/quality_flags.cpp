@@ -26,11 +26,10 @@ std::string num(double v) {
 }
 
 // Whether the shape test judges the estimate: its score exists and means what it says (above
-// the discretisation floor, torque-meter noise a small part of C's error).
+// the discretisation floor).
 bool shapeJudged(const SegmentEstimate& e) {
   return e.identifiable && e.refined && std::isfinite(e.shape_z) &&
-         e.residuals.rms > L::kWhitenessFloor * e.signal_std &&
-         !(e.C_torque_std > L::kShapeTorqueShare * e.C_std);
+         e.residuals.rms > L::kWhitenessFloor * e.signal_std;
 }
 
 const char* const kShapeAdvice =

@@ -124,6 +124,13 @@ inline double addWhiteNoise(Eigen::VectorXd* y, double snr_db, unsigned long see
   return sigma;
 }
 
+/// White Gaussian torque-meter noise of standard deviation `sd` [N*m] on y, std::mt19937_64(seed).
+inline void addTorqueNoise(Eigen::VectorXd* y, double sd, unsigned long seed) {
+  std::mt19937_64 gen(seed);
+  std::normal_distribution<double> nd(0.0, sd);
+  for (Eigen::Index i = 0; i < y->size(); ++i) (*y)[i] += nd(gen);
+}
+
 // Stationary AR(1) noise x_n = rho x_{n-1} + sqrt(1 - rho^2) sigma w_n at SNR `snr_db` (std of
 // x is sigma, as for white noise), std::mt19937_64(seed).
 inline void addAr1Noise(Eigen::VectorXd* y, double snr_db, double rho, unsigned long seed) {
