@@ -2112,7 +2112,7 @@ class Refinement {
     const double dof = static_cast<double>(w.rows() - qr.rank());
     double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
     if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)  // the torque noise's response on dp
-      den = std::sqrt(den * den + torqueProjectedVariance(i, dp));
+      den = std::sqrt(den * den + torqueProjectedVariance(i, dp, den * den));
     if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
     // Frisch-Waugh: the enlarged fit's g = d'e / |d|^2 (both projected) moves the unknowns by
     // -beta g, C by -beta_C g (beta_C back in C's units).
@@ -2450,14 +2450,16 @@ class Refinement {
   // The variance the torque-meter noise adds to u'e, e segment i's prewhitened residual and u a
   // direction in its rows (a score's): sigma_T^2 |G^T W^T u|^2, the torque noise's response
   // G w projected on u, as C_std carries it (torqueNoise). Exact by torqueResponseGram with one
-  // column where the step maps are tabled; otherwise by unit impulses on the reference path,
-  // else by kDraws Rademacher draws (torqueNoiseDraws' seeding). Zero without a known level.
-  double torqueProjectedVariance(size_t i, const Eigen::VectorXd& u) {
+  // column where the step maps are tabled; otherwise by unit impulses on the reference path, else
+  // by Rademacher draws (torqueNoiseDraws' seeding and rule: batches of 16 until the Monte Carlo
+  // standard error is below 10 % of the total variance, `base` + the added, at most 64).
+  double torqueProjectedVariance(size_t i, const Eigen::VectorXd& u, double base) {
     const double sd = torque_sigma_.empty() ? 0.0 : torque_sigma_[i];
     if (!(sd > 0.0) || noise_sim_ == nullptr) return 0.0;
     if (!reference_ && noise_sim_->tableApplies(substeps_))
       return sd * sd * torqueResponseGram(i, u)(0, 0);
-    constexpr int kDraws = 64;
+    constexpr int kBatch = 16, kMaxDraws = 64;
+    constexpr double kMonteCarloTol = 0.1;  // of the total variance
     const Index b = ranges_[i].first, e = ranges_[i].second;
     SegmentTable tab;
     if (noise_sim_->tableApplies(substeps_)) noise_sim_->buildTable(b, e, &tab);
@@ -2473,13 +2475,19 @@ class Refinement {
     }
     std::uint64_t rng =
         0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(std::llround(s_.time(b) / s_.dt));
-    for (int d = 0; d < kDraws; ++d) {
-      drawTorqueNoise(i, &rng);
-      const double r = u.dot(responseToTorque(i, &tab));
-      sum += r * r;
+    int draws = 0;
+    while (draws < kMaxDraws) {
+      for (int d = 0; d < kBatch; ++d) {
+        drawTorqueNoise(i, &rng);
+        const double r = u.dot(responseToTorque(i, &tab));
+        sum += r * r;
+      }
+      draws += kBatch;
+      const double vt = sum / draws;
+      if (std::sqrt(2.0 / draws) * vt <= kMonteCarloTol * (base + vt)) break;
     }
     std::fill(noise_torque_.begin() + b, noise_torque_.begin() + e, 0.0);
-    return sum / kDraws;
+    return sum / draws;
   }
 
   // The reference (tests): exact by brute force, one unit impulse sigma e_s of the torque per
@@ -2596,7 +2604,7 @@ class Refinement {
     double var1 = sigma2 * inv(last, last);
     // Torque-meter noise: the response of d[last] = e_last' inv Jw' e to it (torqueNoise).
     if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)
-      var1 += torqueProjectedVariance(i, whitenedSensitivitiesAt(i, p) * inv.col(last));
+      var1 += torqueProjectedVariance(i, whitenedSensitivitiesAt(i, p) * inv.col(last), var1);
     if (!(var1 > 0.0) || !std::isfinite(d[last])) return;
     e->variation_z = d[last] / std::sqrt(var1);
     // Where C1 is significant the one step, linearised at C1 = 0, is iterated (Gauss-Newton on
