@@ -43,6 +43,10 @@ constexpr int kMaxArOrder = 6;
 // enough; the third round only runs when the coefficients still moved.
 constexpr int kMaxNoiseRounds = 3;
 constexpr double kArChangeTol = 1e-3;  // max |a_k| change that ends the rounds
+// The curve shape test's variance leaves the torque-meter noise out (the square levels' carries
+// it): it is not computed where that noise is more than this share of C's standard error (with
+// 1 N*m on the Table 1 case the square score without it reached rms 1.5-2.0).
+constexpr double kCurveTorqueShare = 0.5;
 
 // An allocator whose resize leaves new elements default-initialised (doubles: not written). The
 // fused passes' row buffers are written in full by the pass before they are read; zeroing them
@@ -2120,6 +2124,79 @@ class Refinement {
     return {dp.dot(ep) / den, -beta[2] / c_norm * g / std::abs(loc_[i][2])};
   }
 
+  // Shape test of a greybox fourier:H / table:N curve (piecewise model, no STE): a score test
+  // of the unknowns a finer curve adds. At the refined curve the finer one (table:2N with the
+  // midpoint nodes the averages of their neighbours; fourier:2H, at most kMaxHarmonics, with
+  // zero extra coefficients) gives the same stiffness; one run of the finer model there gives
+  // the residual e, the sensitivities J of the current unknowns (table: a coarse node's hat is
+  // the fine hat on it plus half of each neighbouring midpoint's) and D of the q extra ones
+  // (table: the midpoint nodes; fourier: harmonics H+1..2H), plus the damping's variation with
+  // the load as in shapeScore. Prewhitened, projected off J: S = |P_D e|^2 / sigma^2 is
+  // chi-square q when the curve is right, reported as its Wilson-Hilferty z; the shift is the
+  // enlarged fit's change of C (Frisch-Waugh), relative to C. NaN where the finer curve
+  // exceeds the shape limits.
+  ShapeScore curveScore(size_t i, double variation_z) const {
+    const StiffnessShape& sh = o_.stiffness_shape;
+    const bool table = sh.kind == StiffnessShape::Kind::Table;
+    StiffnessShape fine = sh;
+    fine.n = table ? 2 * sh.n : std::min(2 * sh.n, int{StiffnessShape::kMaxHarmonics});
+    if (fine.n == sh.n || fine.n > StiffnessShape::kMaxNodes || !(std::abs(loc_[i][2]) > 0.0))
+      return {};
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    const int nbf = fine.unknowns(), q = nbf - nb_;
+    double mean_t = 0.0;
+    const bool c1 = std::abs(variation_z) > 1.0 && torqueVaries(b, e, &mean_t);
+    // The finer model's unknowns: the locals before the basis, the fine basis, (C1).
+    const Params p = makeParams(loc_[i], sh_);
+    Params pf = p;
+    pf.nb = nbf;
+    pf.m = basis_first_ + nbf + (c1 ? 1 : 0);
+    for (int k = 0; k < nbf; ++k) pf.role[basis_first_ + k] = Role::Basis;
+    for (int k = 0; k < nbf; ++k) {
+      const int j = k / 2, j1 = (j + 1) % sh.n;
+      pf.basis[k] = !table ? (k < nb_ ? p.basis[k] : 0.0)
+                           : (k % 2 == 0 ? p.basis[j] : 0.5 * (p.basis[j] + p.basis[j1]));
+    }
+    if (c1) pf.role[pf.m - 1] = Role::Theta1, pf.theta1 = 0.0, pf.t_ref = mean_t;
+    const SegmentSimulator sim(fm_, false, &fine, nullptr);
+    const int mj = basis_first_ + nb_ + (c1 ? 1 : 0);
+    Eigen::MatrixXd rows(e - b, 1 + mj + q);  // e, J (C1 last), D
+    sim.run(b, e, pf, substeps_, [&](Index n, const double* z) {
+      auto F = [&](int k) { return z[2 + 2 * (basis_first_ + (k + nbf) % nbf)]; };
+      rows(n - b, 0) = s_.dte[n] - z[0];
+      for (int a = 0; a < basis_first_; ++a) rows(n - b, 1 + a) = z[2 + 2 * a];
+      for (int k = 0; k < nb_; ++k)
+        rows(n - b, 1 + basis_first_ + k) =
+            table ? F(2 * k) + 0.5 * (F(2 * k - 1) + F(2 * k + 1)) : F(k);
+      if (c1) rows(n - b, mj) = z[2 + 2 * (pf.m - 1)];
+      for (int k = 0; k < q; ++k) rows(n - b, 1 + mj + k) = table ? F(2 * k + 1) : F(nb_ + k);
+    });
+    return projectedScore(whiten(rows, noise_of_[i]), mj, std::abs(loc_[i][2]));
+  }
+
+  // The score of the last q columns of w = [e, J (mj columns, C the third), D (q)] (curveScore).
+  static ShapeScore projectedScore(const Eigen::MatrixXd& w, Index mj, double C) {
+    Eigen::MatrixXd J = w.middleCols(1, mj), D = w.rightCols(w.cols() - 1 - mj);
+    const double c_norm = J.col(2).norm();
+    for (Eigen::MatrixXd* M : {&J, &D}) {
+      for (Index c = 0; c < M->cols(); ++c) {
+        const double norm = M->col(c).norm();
+        if (norm > 0.0) M->col(c) /= norm;
+      }
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+    const Eigen::MatrixXd beta = qr.solve(D);  // D regressed on the sensitivities
+    const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
+    const Eigen::MatrixXd Dp = D - J * beta;
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qd(Dp);
+    const Eigen::VectorXd g = qd.solve(ep);  // the enlarged fit's extra unknowns
+    const double dof = static_cast<double>(w.rows() - qr.rank()), df = qd.rank();
+    const double s2 = ep.squaredNorm() / dof;
+    if (!(dof > 0.0 && s2 > 0.0 && df > 0.0 && c_norm > 0.0)) return {};
+    const double S = (Dp * g).squaredNorm() / s2, v = 2.0 / (9.0 * df);
+    return {(std::cbrt(S / df) - (1.0 - v)) / std::sqrt(v), -(beta * g)[2] / c_norm / C};
+  }
+
   // Whether the torque varies within samples [b, e) (relative standard deviation above 1e-9),
   // with its mean into *mean.
   bool torqueVaries(Index b, Index e, double* mean) const {
@@ -2698,6 +2775,10 @@ class Refinement {
         variationTest(i, sigma2, &e);
         if (grey_ && !shape_ && ste_ == nullptr && s_.mesh_state != nullptr) {
           const ShapeScore sc = shapeScore(i, e.variation_z);
+          e.shape_z = sc.z, e.shape_shift = sc.shift;
+        } else if (shape_ && ste_ == nullptr &&
+                   !(e.C_torque_std > kCurveTorqueShare * std::sqrt(std::max(cov_ll(k, k), 0.0)))) {
+          const ShapeScore sc = curveScore(i, e.variation_z);
           e.shape_z = sc.z, e.shape_shift = sc.shift;
         }
         if (std::isfinite(e.C_mean_load)) {

@@ -35,6 +35,12 @@ bool shapeJudged(const SegmentEstimate& e) {
 const char* const kShapeAdvice =
     "C can be biased by several C_std: use the measured stiffness (--formulation known) or a "
     "--stiffness-shape that ramps (table:N, fourier:H)";
+const char* const kCurveAdvice =
+    "C can be biased by several C_std: use the measured stiffness (--formulation known) or a "
+    "finer --stiffness-shape (more table nodes or harmonics, or nodes on the stiffness' corners)";
+
+// A fourier/table curve's shape test (curveScore) rather than the square levels' (shapeScore).
+bool curveShape(const SegmentEstimate& e) { return !e.stiffness_curve.empty(); }
 
 // Flags one identifiable estimate in place; `shared`: the constant model's C.
 void flagEstimate(SegmentEstimate* e, bool shared) {
@@ -121,12 +127,21 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
   }
   if (shapeJudged(*e) && std::abs(e->shape_z) > L::kShapeZ &&
       std::abs(e->shape_shift) > L::kShapeShift) {
-    w.push_back({quality_code::kShapeMismatch,
-                 "greybox square levels: the data favour a stiffness that ramps around the mesh "
-                 "switches over one that switches at once (score " +
-                     num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
-                     "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
-                     " %): " + kShapeAdvice});
+    if (curveShape(*e)) {
+      w.push_back({quality_code::kShapeMismatch,
+                   "greybox stiffness shape: a finer curve (twice the table nodes or harmonics) "
+                   "fits better (score " +
+                       num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
+                       "; fitted, the finer curve would move C by " + num(100.0 * e->shape_shift) +
+                       " %): " + kCurveAdvice});
+    } else {
+      w.push_back({quality_code::kShapeMismatch,
+                   "greybox square levels: the data favour a stiffness that ramps around the mesh "
+                   "switches over one that switches at once (score " +
+                       num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
+                       "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
+                       " %): " + kShapeAdvice});
+    }
   }
   if (e->refined && std::isfinite(e->C_integral)) {
     // Like with like: the refinement's constant-C fit where C is the mean-load damping.
@@ -165,27 +180,35 @@ void flagPooledShape(IdentificationResult* r) {
   if (n < 2) return;
   const double Z = sum / std::sqrt(static_cast<double>(n));
   if (!(std::abs(Z) > L::kShapePooledZ)) return;
-  const std::string pooled = "the record's " + std::to_string(n) +
-                             " judged segments together favour a stiffness that ramps around "
-                             "the mesh switches (pooled shape score sum(shape_z)/sqrt(n) = " +
-                             num(Z) + ", > " + num(L::kShapePooledZ) +
-                             "; without mesh_phase, switches between samples do too)";
+  const bool curve = std::any_of(r->segments.begin(), r->segments.end(),
+                                 [](const SegmentEstimate& e) { return curveShape(e); });
+  const std::string what = curve ? "greybox stiffness shape: " : "greybox square levels: ";
+  const std::string advice = curve ? kCurveAdvice : kShapeAdvice;
+  const std::string moved =
+      curve ? ", its finer curve would move C by " : ", its fitted ramp would move C by ";
+  const std::string pooled =
+      "the record's " + std::to_string(n) +
+      (curve ? " judged segments together favour a finer curve (twice the table nodes or "
+               "harmonics; pooled shape score sum(shape_z)/sqrt(n) = " +
+                   num(Z) + ", > " + num(L::kShapePooledZ) + ")"
+             : " judged segments together favour a stiffness that ramps around "
+               "the mesh switches (pooled shape score sum(shape_z)/sqrt(n) = " +
+                   num(Z) + ", > " + num(L::kShapePooledZ) +
+                   "; without mesh_phase, switches between samples do too)");
   long flagged = 0;
   for (auto& e : r->segments) {
     if (!shapeJudged(e) || !(std::abs(e.shape_shift) > L::kShapeShift)) continue;
     ++flagged;
     if (hasCode(e.warnings, quality_code::kShapeMismatch)) continue;
-    e.warnings.push_back({quality_code::kShapeMismatch,
-                          "greybox square levels: " + pooled + "; this segment's score " +
-                              num(e.shape_z) + ", its fitted ramp would move C by " +
-                              num(100.0 * e.shape_shift) + " %: " + kShapeAdvice});
+    e.warnings.push_back(
+        {quality_code::kShapeMismatch, what + pooled + "; this segment's score " + num(e.shape_z) +
+                                           moved + num(100.0 * e.shape_shift) + " %: " + advice});
   }
   if (flagged == 0) return;
   rw.push_back({quality_code::kShapeMismatch,
-                "greybox square levels: " + pooled + "; " + std::to_string(flagged) +
-                    " segments whose fitted ramp would move C by more than " +
-                    num(100.0 * L::kShapeShift) +
-                    " % are flagged shape_mismatch: " + kShapeAdvice});
+                what + pooled + "; " + std::to_string(flagged) + " segments whose " +
+                    (curve ? "finer curve" : "fitted ramp") + " would move C by more than " +
+                    num(100.0 * L::kShapeShift) + " % are flagged shape_mismatch: " + advice});
 }
 
 }  // namespace
