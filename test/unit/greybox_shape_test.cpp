@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <iostream>
 
 #include "gear_damping_id/quality_flags.hpp"
@@ -105,6 +106,26 @@ SimConfig fourierCase() {
   return c;
 }
 
+// fourier:2 on fourierCase() with 2 ms segments (with five stiffness unknowns many 1 ms segments
+// of the forced response are below the noise at 40 dB): f(seed, record, config, result) for 12
+// records with white noise at 40 dB, seeds seed0 + 1 ... seed0 + 12.
+void forEachNoisyFourier2Fit(unsigned long seed0,
+                             const std::function<void(int, const SignalTable&, const SimConfig&,
+                                                      const IdentificationResult&)>& f) {
+  SimConfig c = fourierCase();
+  setPiecewiseTruth(&c, 2e-3);
+  const SignalTable clean = simulateOrFail(c);
+  IdentificationOptions o;
+  o.formulation = Formulation::Greybox;
+  o.stiffness_shape = shape("fourier:2");
+  o.segment_length = 2e-3;
+  for (int seed = 1; seed <= 12; ++seed) {
+    SignalTable t = clean;
+    addWhiteNoise(&t.dte, 40.0, seed0 + seed);
+    f(seed, t, c, identifyOrFail(t, c, o));
+  }
+}
+
 TEST(GreyboxShape, FourierShapeOnFourierStiffness) {
   const SimConfig c = fourierCase();
   expectExact(c, "fourier:2", "fourier stiffness (2 harmonics)");
@@ -193,31 +214,20 @@ TEST(GreyboxShape, RefinedJointlyWithTheCurve) {
 }
 
 TEST(GreyboxShape, RefinedAt40dBWithinItsStandardErrors) {
-  // 2 ms segments: with five stiffness unknowns many 1 ms segments of the forced response are
-  // below the noise at 40 dB (not identifiable, so not refined).
-  SimConfig c = fourierCase();
-  setPiecewiseTruth(&c, 2e-3);
-  const SignalTable clean = simulateOrFail(c);
-  IdentificationOptions o;
-  o.formulation = Formulation::Greybox;
-  o.stiffness_shape = shape("fourier:2");
-  o.segment_length = 2e-3;
   long covered = 0, total = 0;
-  for (int seed = 1; seed <= 12; ++seed) {
-    SignalTable t = clean;
-    addWhiteNoise(&t.dte, 40.0, 4400 + seed);
-    const IdentificationResult r = identifyOrFail(t, c, o);
-    ASSERT_EQ(r.estimator, "output_error");
-    for (const auto& s : r.segments) {
-      // Where the forced response holds too little damping information against the noise (the
-      // stiffness curve's unknowns absorb much of it), the segment is honestly below_noise.
-      if (!s.identifiable) continue;
-      const double z = (s.C - trueC(t, c, s.t_start, s.t_end)) / s.C_std;
-      covered += std::abs(z) <= 2.0;
-      ++total;
-      EXPECT_LT(std::abs(z), 4.5) << "seed " << seed << " segment at " << s.t_start;
-    }
-  }
+  forEachNoisyFourier2Fit(
+      4400, [&](int seed, const SignalTable& t, const SimConfig& c, const IdentificationResult& r) {
+        ASSERT_EQ(r.estimator, "output_error");
+        for (const auto& s : r.segments) {
+          // Where the forced response holds too little damping information against the noise (the
+          // stiffness curve's unknowns absorb much of it), the segment is honestly below_noise.
+          if (!s.identifiable) continue;
+          const double z = (s.C - trueC(t, c, s.t_start, s.t_end)) / s.C_std;
+          covered += std::abs(z) <= 2.0;
+          ++total;
+          EXPECT_LT(std::abs(z), 4.5) << "seed " << seed << " segment at " << s.t_start;
+        }
+      });
   std::cout << "[ measured ] refined fourier:2 at 40 dB: +-2 SE coverage "
             << 100.0 * covered / total << " % of " << total << " segments\n";
   // An honest SE covers 95 %; with >= 30 draws 80 % is > 3.7 binomial standard deviations below.
@@ -282,26 +292,17 @@ TEST(GreyboxShape, CurveShapeTestFlagsTheWrongTable) {
 // Where the curve is right (fourier:2 on a two-harmonic Fourier stiffness, 40 dB), the score is
 // N(0, 1): its rms over the judged segments within 1 +- 3 / sqrt(2 n), and no pooled alarm.
 TEST(GreyboxShape, CurveShapeScoreCalibratedWhereTheCurveIsRight) {
-  SimConfig c = fourierCase();
-  setPiecewiseTruth(&c, 2e-3);
-  const SignalTable clean = simulateOrFail(c);
-  IdentificationOptions o;
-  o.formulation = Formulation::Greybox;
-  o.stiffness_shape = shape("fourier:2");
-  o.segment_length = 2e-3;
   double sum2 = 0.0;
   long n = 0, flagged = 0;
-  for (int seed = 1; seed <= 12; ++seed) {
-    SignalTable t = clean;
-    addWhiteNoise(&t.dte, 40.0, 5500 + seed);
-    const IdentificationResult r = identifyOrFail(t, c, o);
-    EXPECT_FALSE(gd::hasCode(r.warnings, gd::quality_code::kShapeMismatch)) << "seed " << seed;
-    for (const auto& s : r.segments) {
-      if (!std::isfinite(s.shape_z)) continue;
-      sum2 += s.shape_z * s.shape_z, ++n;
-      flagged += gd::hasCode(s.warnings, gd::quality_code::kShapeMismatch);
-    }
-  }
+  forEachNoisyFourier2Fit(
+      5500, [&](int seed, const SignalTable&, const SimConfig&, const IdentificationResult& r) {
+        EXPECT_FALSE(gd::hasCode(r.warnings, gd::quality_code::kShapeMismatch)) << "seed " << seed;
+        for (const auto& s : r.segments) {
+          if (!std::isfinite(s.shape_z)) continue;
+          sum2 += s.shape_z * s.shape_z, ++n;
+          flagged += gd::hasCode(s.warnings, gd::quality_code::kShapeMismatch);
+        }
+      });
   ASSERT_GE(n, 30);
   const double rms = std::sqrt(sum2 / n);
   std::cout << "[ measured ] fourier:2 on a Fourier stiffness at 40 dB: shape_z rms " << rms

@@ -127,21 +127,17 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
   }
   if (shapeJudged(*e) && std::abs(e->shape_z) > L::kShapeZ &&
       std::abs(e->shape_shift) > L::kShapeShift) {
-    if (curveShape(*e)) {
-      w.push_back({quality_code::kShapeMismatch,
-                   "greybox stiffness shape: a finer curve (twice the table nodes or harmonics) "
-                   "fits better (score " +
-                       num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
-                       "; fitted, the finer curve would move C by " + num(100.0 * e->shape_shift) +
-                       " %): " + kCurveAdvice});
-    } else {
-      w.push_back({quality_code::kShapeMismatch,
-                   "greybox square levels: the data favour a stiffness that ramps around the mesh "
-                   "switches over one that switches at once (score " +
-                       num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
-                       "; fitted, the ramp would move C by " + num(100.0 * e->shape_shift) +
-                       " %): " + kShapeAdvice});
-    }
+    const bool curve = curveShape(*e);
+    w.push_back({quality_code::kShapeMismatch,
+                 std::string(curve ? "greybox stiffness shape: a finer curve (twice the table "
+                                     "nodes or harmonics) fits better"
+                                   : "greybox square levels: the data favour a stiffness that "
+                                     "ramps around the mesh switches over one that switches at "
+                                     "once") +
+                     " (score " + num(e->shape_z) + " standard errors, > " + num(L::kShapeZ) +
+                     "; fitted, " + (curve ? "the finer curve" : "the ramp") + " would move C by " +
+                     num(100.0 * e->shape_shift) +
+                     " %): " + (curve ? kCurveAdvice : kShapeAdvice)});
   }
   if (e->refined && std::isfinite(e->C_integral)) {
     // Like with like: the refinement's constant-C fit where C is the mean-load damping.
