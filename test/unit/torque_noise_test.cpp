@@ -169,6 +169,13 @@ TEST(TorqueNoise, ExactPropagationEqualsTheImpulseSum) {
     if (run.m == DampingModel::Constant) {
       same(fast.constant->C, reference.constant->C, "constant C");
       same(fast.constant->C_std, reference.constant->C_std, "constant C_std");
+      // The constancy test's per-segment torque variance: the kept right-hand-side covariance
+      // (fast) against impulses on the score's direction (reference).
+      ASSERT_TRUE(std::isfinite(reference.constant->variation_z)) << label;
+      EXPECT_NEAR(fast.constant->variation_z, reference.constant->variation_z, kScoreTol)
+          << label << " constant variation_z";
+      worst_z =
+          std::max(worst_z, std::abs(fast.constant->variation_z - reference.constant->variation_z));
     }
     std::cout << "[ measured ] " << label << ": largest C_torque_std / C_std " << share
               << ", largest score difference " << worst_z << "\n";

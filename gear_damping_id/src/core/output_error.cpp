@@ -2350,6 +2350,7 @@ class Refinement {
   void torqueNoise() {
     tcov_ll_.assign(nseg_, Eigen::MatrixXd::Zero(nl_, nl_));
     tcov_ss_.assign(nseg_, Eigen::MatrixXd::Zero(ns_, ns_));
+    tgram_.assign(nseg_, Eigen::MatrixXd());
     if (s_.torque == nullptr || load_) return;
     bool any = false;
     for (size_t i = 0; i < nseg_; ++i) {
@@ -2402,6 +2403,7 @@ class Refinement {
       const double sd = torque_sigma_[i];
       Q[q] = sd > 0.0 ? Eigen::MatrixXd(sd * sd * torqueResponseGram(i, Jw[q]))
                       : Eigen::MatrixXd::Zero(m_, m_);
+      tgram_[i] = Q[q];
       P[q] = Eigen::MatrixXd::Zero(ns, m_);
       P[q].leftCols(nl) = -normals_[i].N.block(nl, 0, ns, nl) * Nll_inv_[i];
       P[q].rightCols(ns).setIdentity();
@@ -2826,9 +2828,15 @@ class Refinement {
   // sigma^2 (S - (n - 1)) / sum I_i beyond the noise), relative to C, into e->variation_spread.
   // Both stay NaN where not judged: other shared unknowns (the STE), fewer than two segments, or
   // a residual RMS below kWhitenessFloor of the DTE's standard deviation.
-  void constancyTest(SegmentEstimate* e) const {
+  // Torque-meter noise adds t_i (constancyTorqueVariance) to u_i's variance sigma^2 I_i; with
+  // V_i = sigma^2 I_i + t_i the one-step deviations d_i = u_i / I_i, weighted w_i = I_i^2 / V_i,
+  // give S = sum w_i d_i^2 - (sum w_i d_i)^2 / sum w_i ~ chi-square(n - 1) (the same S when every
+  // t_i is zero, computed as before then) and the spread sqrt((S - (n - 1)) / sum w_i).
+  void constancyTest(SegmentEstimate* e) {
     if (piecewise_ || load_ || ns_ != 1 || !(sigma2_pooled_ > 0.0)) return;
     double su2 = 0.0, su = 0.0, si = 0.0, raw = 0.0, dev2 = 0.0;
+    double sw = 0.0, swd = 0.0, swd2 = 0.0;  // with the torque noise (w_i, w_i d_i, w_i d_i^2)
+    bool torque = false;
     int n = 0;
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
@@ -2838,6 +2846,10 @@ class Refinement {
       const double info = nm.N(nl_, nl_) - ncl.dot(Nll_inv_[i] * ncl);
       if (!(info > 0.0) || !std::isfinite(u)) return;
       su2 += u * u / info, su += u, si += info, ++n;
+      const double t = constancyTorqueVariance(i, ncl, sigma2_pooled_ * info);
+      const double var = sigma2_pooled_ * info + t;
+      torque = torque || t > 0.0;
+      sw += info * info / var, swd += u * info / var, swd2 += u * u / var;
       raw += nm.raw;
       const Index b = ranges_[i].first, end = ranges_[i].second;
       double mean = 0.0;
@@ -2847,10 +2859,24 @@ class Refinement {
     }
     constexpr double kFloor2 = QualityLimits::kWhitenessFloor * QualityLimits::kWhitenessFloor;
     if (n < 2 || !(raw > kFloor2 * dev2)) return;
-    const double df = n - 1.0, S = (su2 - su * su / si) / sigma2_pooled_;
-    const double v = 2.0 / (9.0 * df);
+    const double df = n - 1.0, v = 2.0 / (9.0 * df);
+    const double S = torque ? swd2 - swd * swd / sw : (su2 - su * su / si) / sigma2_pooled_;
+    const double c_var = torque ? 1.0 / sw : sigma2_pooled_ / si;  // the weighted mean's
     e->variation_z = (std::cbrt(std::max(S, 0.0) / df) - (1.0 - v)) / std::sqrt(v);
-    e->variation_spread = std::sqrt(std::max(S - df, 0.0) * sigma2_pooled_ / si) / std::abs(sh_[0]);
+    e->variation_spread = std::sqrt(std::max(S - df, 0.0) * c_var) / std::abs(sh_[0]);
+  }
+
+  // The variance the torque-meter noise adds to segment i's profiled score of C in the constant
+  // model, u_i = a' Jw' e with a = [-N_ll^-1 N_lc; 1] (ncl = N_lc): a' Q_i a with Q_i the
+  // right-hand side's covariance where torqueNoiseExact kept it, else torqueProjectedVariance of
+  // the direction Jw a (`base`: the score's variance without it). Zero without a known level.
+  double constancyTorqueVariance(size_t i, const Eigen::VectorXd& ncl, double base) {
+    if (torque_sigma_.empty() || !(torque_sigma_[i] > 0.0)) return 0.0;
+    Eigen::VectorXd a(nl_ + 1);
+    a.head(nl_) = -(Nll_inv_[i] * ncl);
+    a[nl_] = 1.0;
+    if (i < tgram_.size() && tgram_[i].rows() == a.size()) return a.dot(tgram_[i] * a);
+    return torqueProjectedVariance(i, whitenedSensitivities(i) * a, base);
   }
 
   // The shared estimates: constant C, the load law, the STE; the run's convergence warning.
@@ -2927,6 +2953,8 @@ class Refinement {
   // (the record with the torque channel replaced by one draw of noise).
   std::vector<double> torque_sigma_, torque_sd_;
   std::vector<Eigen::MatrixXd> tcov_ll_, tcov_ss_;
+  // Per segment, the covariance of the right-hand side's torque-noise part (torqueNoiseExact).
+  std::vector<Eigen::MatrixXd> tgram_;
   std::vector<double> noise_torque_;
   SignalView noise_view_;
   std::unique_ptr<ForwardModel> noise_fm_;
