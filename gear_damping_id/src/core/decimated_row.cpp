@@ -145,9 +145,21 @@ LowBand::~LowBand() {
 
 bool LowBand::compute(const double* y, long n, double mean, long N, long K) {
   if (K < 1 || K > N / 2 + 1) return false;
-  long M = 2 * K;
-  while (M < N && N % M != 0) ++M;
-  if (N % M != 0) M = N;
+  // The divisor of N in [2K, 3K] with the most factors of 2 (FFTW's cheapest per point here:
+  // 28 instructions per point at 70560 = 2^5 3^2 5 7^2 against 33 at 63000 = 2^3 3^2 5^3 7),
+  // else the smallest divisor >= 2K.
+  long M = N == N_ && K == K_ ? M_ : 0;
+  int twos = M > 0 ? 64 : -1;
+  for (long m = 2 * K; twos < 64 && m <= std::min(N, 3 * K); ++m) {
+    if (N % m != 0) continue;
+    const int t = __builtin_ctzl(static_cast<unsigned long>(m));
+    if (t > twos) M = m, twos = t;
+  }
+  if (M == 0) {
+    M = 2 * K;
+    while (M < N && N % M != 0) ++M;
+    if (N % M != 0) M = N;
+  }
   const long R = N / M, bins = M / 2 + 1;
   if (M != M_ || R != R_) {
     std::lock_guard<std::mutex> lock(fftwPlannerMutex());
@@ -169,6 +181,8 @@ bool LowBand::compute(const double* y, long n, double mean, long N, long K) {
     M_ = M;
     R_ = R;
   }
+  N_ = N;
+  K_ = K;
   // e^{-2 pi i k/N} per bin (re-seeded every kTwiddleBlock bins) and e^{-2 pi i k v0/N} per
   // chunk's first component.
   const double w_n = -2.0 * kPi / static_cast<double>(N);

@@ -120,8 +120,8 @@ class BlockedRow {
 // components x_v[a] = y[aR + v] (a = 0..M-1, zero beyond the record),
 //   Y_k = sum_{v<R} e^{-2 pi i k v/N} X_v[k],  X_v the length-M r2c DFT of x_v (k <= M/2):
 // R transforms of length M (in cache) and K*R products instead of one memory-bound transform of
-// length N. M is the smallest divisor of N with M/2 >= K; the sum over v runs by Horner's rule in
-// e^{-2 pi i k/N} within chunks of kChunk components, the twiddles advance by recurrences
+// length N. M is a divisor of N with M/2 >= K (see compute); the sum over v runs by Horner's rule
+// in e^{-2 pi i k/N} within chunks of kChunk components, the twiddles advance by recurrences
 // re-seeded every kTwiddleBlock bins (relative drift < kTwiddleBlock * 2 eps).
 class LowBand {
  public:
@@ -140,9 +140,9 @@ class LowBand {
   static constexpr long kTwiddleBlock = 64;
   void accumulate(long v0, long c, long K, long N);
   fftw_plan plan_ = nullptr;
-  long M_ = 0, R_ = 0;
-  double* in_ = nullptr;         // kChunk components of M samples
-  fftw_complex* out_ = nullptr;  // their spectra, M/2 + 1 bins each
+  long M_ = 0, R_ = 0, N_ = 0, K_ = 0;  // K_, N_: the last call's (M_ chosen for them)
+  double* in_ = nullptr;                // kChunk components of M samples
+  fftw_complex* out_ = nullptr;         // their spectra, M/2 + 1 bins each
   std::vector<std::complex<double>> Y_, step_;
 };
 
