@@ -71,9 +71,10 @@ struct WaveletOptions {
   double floor_factor = 3.0;
   /// Compute and keep the full scalogram (for figures). false: only the rows the damping fits
   /// need are transformed, and the spectra come from the signal's FFT alone; the wide rows'
-  /// Parseval sums are binned (within 1e-6) and the envelope fits and noise medians use every
-  /// floor(s*fs/16)-th sample (xi within 1e-6, f_d within 1e-8 of the full path, relative, on
-  /// free decays; see docs/wavelet.md, "Speed").
+  /// Parseval sums are binned and the envelope fits and noise medians use decimated grids: an
+  /// estimator statistically indistinguishable from the full path (xi and f_d within 1/10 of
+  /// its seed-to-seed scatter, the same decisions; docs/wavelet.md, "Speed"). Records of
+  /// n >= 32768 take one FFT padded by n/512 (the PSD then on that grid; "shared mode").
   bool full_scalogram = true;
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
@@ -161,7 +162,8 @@ struct WaveletResult {
   long scalogram_decimation = 1;
   /// One-sided power spectral density of the mean-removed record without window (a free decay
   /// is its own window; a Hann window would suppress the start where it carries its energy):
-  /// psd_k = 2*|Y_k|^2 / (n*fs) [unit^2/Hz] on the zero-padded grid f_k = k*fs/N.
+  /// psd_k = 2*|Y_k|^2 / (n*fs) [unit^2/Hz] on the zero-padded grid f_k = k*fs/N (N: the
+  /// scalogram grid's padding, or the per-mode path's shared transform's; docs/wavelet.md).
   std::vector<double> spectrum_freq, spectrum_power;
   /// Time-averaged scalogram (MorletCwt::meanPower) on `frequencies` [unit^2].
   std::vector<double> scalogram_power;

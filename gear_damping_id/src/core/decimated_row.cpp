@@ -136,6 +136,100 @@ const std::complex<double>* DecimatedRows::row(const std::complex<double>* spect
   return reinterpret_cast<const std::complex<double>*>(out_);
 }
 
+LowBand::~LowBand() {
+  std::lock_guard<std::mutex> lock(fftwPlannerMutex());
+  if (plan_) fftw_destroy_plan(plan_);
+  if (in_) fftw_free(in_);
+  if (out_) fftw_free(out_);
+}
+
+bool LowBand::compute(const double* y, long n, double mean, long N, long K) {
+  if (K < 1 || K > N / 2 + 1) return false;
+  // The divisor of N in [2K, 3K] with the most factors of 2 (FFTW's cheapest per point here:
+  // 28 instructions per point at 70560 = 2^5 3^2 5 7^2 against 33 at 63000 = 2^3 3^2 5^3 7),
+  // else the smallest divisor >= 2K.
+  long M = N == N_ && K == K_ ? M_ : 0;
+  int twos = M > 0 ? 64 : -1;
+  for (long m = 2 * K; twos < 64 && m <= std::min(N, 3 * K); ++m) {
+    if (N % m != 0) continue;
+    const int t = __builtin_ctzl(static_cast<unsigned long>(m));
+    if (t > twos) M = m, twos = t;
+  }
+  if (M == 0) {
+    M = 2 * K;
+    while (M < N && N % M != 0) ++M;
+    if (N % M != 0) M = N;
+  }
+  const long R = N / M, bins = M / 2 + 1;
+  if (M != M_ || R != R_) {
+    std::lock_guard<std::mutex> lock(fftwPlannerMutex());
+    if (plan_) fftw_destroy_plan(plan_);
+    if (in_) fftw_free(in_);
+    if (out_) fftw_free(out_);
+    plan_ = nullptr;
+    M_ = R_ = 0;
+    in_ = fftw_alloc_real(static_cast<size_t>(kChunk * M));
+    out_ = fftw_alloc_complex(static_cast<size_t>(kChunk * bins));
+    if (!in_ || !out_) return false;
+    // Rows a >= ceil(n/R) stay zero: only rows below are written (per chunk), and the r2c is
+    // out of place (FFTW preserves its input).
+    std::memset(in_, 0, sizeof(double) * static_cast<size_t>(kChunk * M));
+    const int m = static_cast<int>(M);
+    plan_ = fftw_plan_many_dft_r2c(1, &m, static_cast<int>(kChunk), in_, nullptr, 1, m, out_,
+                                   nullptr, 1, static_cast<int>(bins), FFTW_ESTIMATE);
+    if (!plan_) return false;
+    M_ = M;
+    R_ = R;
+  }
+  N_ = N;
+  K_ = K;
+  // e^{-2 pi i k/N} per bin (re-seeded every kTwiddleBlock bins) and e^{-2 pi i k v0/N} per
+  // chunk's first component.
+  const double w_n = -2.0 * kPi / static_cast<double>(N);
+  step_.resize(static_cast<size_t>(K));
+  for (long k0 = 0; k0 < K; k0 += kTwiddleBlock) {
+    const long k1 = std::min(K, k0 + kTwiddleBlock);
+    std::complex<double> w = std::polar(1.0, w_n * static_cast<double>(k0));
+    const std::complex<double> r = std::polar(1.0, w_n);
+    for (long k = k0; k < k1; ++k, w *= r) step_[static_cast<size_t>(k)] = w;
+  }
+  Y_.assign(static_cast<size_t>(K), std::complex<double>(0.0, 0.0));
+  const long rows = std::min(M, (n + R - 1) / R);
+  for (long v0 = 0; v0 < R; v0 += kChunk) {
+    const long c = std::min(kChunk, R - v0);
+    for (long a = 0; a < rows; ++a) {
+      const long t0 = a * R + v0;
+      for (long j = 0; j < c; ++j) in_[j * M + a] = t0 + j < n ? y[t0 + j] - mean : 0.0;
+    }
+    fftw_execute(plan_);
+    accumulate(v0, c, K, N);
+  }
+  return true;
+}
+
+// Y_k += e^{-2 pi i k v0/N} sum_{j<c} (e^{-2 pi i k/N})^j X_{v0+j}[k] (Horner over j).
+void LowBand::accumulate(long v0, long c, long K, long N) {
+  const long bins = M_ / 2 + 1;
+  const double w_n = -2.0 * kPi / static_cast<double>(N);
+  for (long k0 = 0; k0 < K; k0 += kTwiddleBlock) {
+    const long k1 = std::min(K, k0 + kTwiddleBlock);
+    const double ph = w_n * static_cast<double>((k0 * v0) % N);
+    std::complex<double> t = std::polar(1.0, ph);
+    const std::complex<double> r = std::polar(1.0, w_n * static_cast<double>(v0));
+    for (long k = k0; k < k1; ++k, t *= r) {
+      const double* x = reinterpret_cast<const double*>(out_) + 2 * k;
+      const std::complex<double> w = step_[static_cast<size_t>(k)];
+      double hr = x[2 * bins * (c - 1)], hi = x[2 * bins * (c - 1) + 1];
+      for (long j = c - 2; j >= 0; --j) {
+        const double u = hr * w.real() - hi * w.imag() + x[2 * bins * j];
+        hi = hr * w.imag() + hi * w.real() + x[2 * bins * j + 1];
+        hr = u;
+      }
+      Y_[static_cast<size_t>(k)] += t * std::complex<double>(hr, hi);
+    }
+  }
+}
+
 BlockedRow::~BlockedRow() {
   std::lock_guard<std::mutex> lock(fftwPlannerMutex());
   for (auto& p : plans_) {

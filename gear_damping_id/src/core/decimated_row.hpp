@@ -114,5 +114,37 @@ class BlockedRow {
   double mean_ = 0.0;
 };
 
+// Per-mode path: the first K bins Y_0..Y_{K-1} of the length-N r2c DFT of the mean-removed
+// record zero-padded to N (the grid's padding), for the low rows whose 8-scale padding exceeds
+// the shared transform's (docs/wavelet.md "Speed"). With the record's R = N/M polyphase
+// components x_v[a] = y[aR + v] (a = 0..M-1, zero beyond the record),
+//   Y_k = sum_{v<R} e^{-2 pi i k v/N} X_v[k],  X_v the length-M r2c DFT of x_v (k <= M/2):
+// R transforms of length M (in cache) and K*R products instead of one memory-bound transform of
+// length N. M is a divisor of N with M/2 >= K (see compute); the sum over v runs by Horner's rule
+// in e^{-2 pi i k/N} within chunks of kChunk components, the twiddles advance by recurrences
+// re-seeded every kTwiddleBlock bins (relative drift < kTwiddleBlock * 2 eps).
+class LowBand {
+ public:
+  LowBand() = default;
+  LowBand(const LowBand&) = delete;
+  LowBand& operator=(const LowBand&) = delete;
+  ~LowBand();
+
+  // Y_0..Y_{K-1} of y[0..n) - mean zero-padded to N (K <= N/2 + 1). False when FFTW cannot plan
+  // or no memory.
+  bool compute(const double* y, long n, double mean, long N, long K);
+  const std::complex<double>* spectrum() const { return Y_.data(); }
+
+ private:
+  static constexpr long kChunk = 8;  // components per batch of transforms
+  static constexpr long kTwiddleBlock = 64;
+  void accumulate(long v0, long c, long K, long N);
+  fftw_plan plan_ = nullptr;
+  long M_ = 0, R_ = 0, N_ = 0, K_ = 0;  // K_, N_: the last call's (M_ chosen for them)
+  double* in_ = nullptr;                // kChunk components of M samples
+  fftw_complex* out_ = nullptr;         // their spectra, M/2 + 1 bins each
+  std::vector<std::complex<double>> Y_, step_;
+};
+
 }  // namespace wavelet_detail
 }  // namespace gear_damping_id

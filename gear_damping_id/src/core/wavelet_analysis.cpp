@@ -623,9 +623,17 @@ struct Analysis {
   std::vector<double>& psd;  // scratch: |Y_k|^2 for the noise median (keeps its size)
   BinnedPower& power;        // per-mode path: the Parseval sums of the wide rows (see above)
   std::vector<std::unique_ptr<RowScratch>>& rows;  // one per fitting thread (at least one)
-  double mean = 0.0;                               // of the samples (checkInput)
-  bool own_loaded = false;  // `own` holds this record's spectrum already (loadOwnAhead)
-  double ahead_hf = kNaN;   // and the noise row's level from it (highFrequencyLevel)
+  wavelet_detail::LowBand& low;  // shared mode: the low rows' bins on the grid's padding
+  BinnedPower& low_power;        // and their Parseval sums
+  double mean = 0.0;             // of the samples (checkInput)
+  bool own_loaded = false;       // `own` holds this record's spectrum already (loadOwnAhead)
+  double ahead_hf = kNaN;        // and the noise row's level from it (highFrequencyLevel)
+  // Per-mode path, shared mode (sharedMode): `scal` is the one transform of the record, padded
+  // by n/kSharedPadDivisor; rows whose 8 scales exceed that padding take their Parseval sums
+  // from `low`, the first low_bins bins of the grid's padding low_n (0: none needed).
+  bool shared = false;
+  long low_n = 0, low_bins = 0;
+  bool hf_ahead = false;  // ahead_hf is the noise row's level from `scal` (shared mode)
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -730,8 +738,45 @@ Status frequencyGrid(Analysis* a) {
 // scalogram; through the binned sums of the wide rows on the per-mode path (within 1e-6).
 double meanPowerOf(const Analysis& a, double f, double omega0) {
   if (a.opt.full_scalogram) return a.scal.meanPowerAt(f, omega0);
+  if (a.shared && !a.scal.fitsPadding(f, omega0)) {
+    const double N1 = static_cast<double>(a.low_n);
+    return a.low_power.sum(omega0 * a.fs / (f * N1), omega0) / (static_cast<double>(a.n) * N1);
+  }
   const double N = static_cast<double>(a.scal.paddedSize());
   return a.power.sum(omega0 * a.fs / (f * N), omega0) / (static_cast<double>(a.n) * N);
+}
+
+// Row (f, omega0) on the low band's grid padding (shared mode): a = s*w per bin and the bins of
+// its Parseval band (MorletCwt's).
+struct LowRow {
+  double coef;
+  long lo = 0, hi = 0;
+};
+LowRow lowRow(const Analysis& a, double f, double omega0) {
+  LowRow r{omega0 * a.fs / (f * static_cast<double>(a.low_n))};
+  wavelet_detail::bandOf(r.coef, omega0, a.low_n, &r.lo, &r.hi, kPowerBandHalfWidth);
+  return r;
+}
+
+// MorletCwt::meanPowerAt's exact sum, on the low band's grid padding for the low rows in shared
+// mode (explicit mode frequencies).
+double exactPowerOf(const Analysis& a, double f, double omega0) {
+  if (!a.shared || a.scal.fitsPadding(f, omega0)) return a.scal.meanPowerAt(f, omega0);
+  const LowRow r = lowRow(a, f, omega0);
+  const double* y = reinterpret_cast<const double*>(a.low.spectrum());
+  const double sum = wavelet_detail::psi2Sum(
+      r.coef, omega0, r.lo, std::min(r.hi, a.low_bins - 1),
+      [y](long k) { return y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1]; });
+  return sum / (static_cast<double>(a.n) * static_cast<double>(a.low_n));
+}
+
+// The white-noise gain of row (f, omega0) on the grid its mean power is summed on (meanPowerOf):
+// the transform's, or the low band's grid padding in shared mode (MorletCwt::noiseGainAt's sum).
+double noiseGainOf(const Analysis& a, double f, double omega0) {
+  if (!a.shared || a.scal.fitsPadding(f, omega0)) return a.scal.noiseGainAt(f, omega0);
+  const LowRow r = lowRow(a, f, omega0);
+  return wavelet_detail::psi2Sum(r.coef, omega0, r.lo, r.hi, [](long) { return 1.0; }) /
+         static_cast<double>(a.low_n);
 }
 
 // The PSD of the loaded record (a->scal's spectrum) and the white-noise estimate sigma_n from
@@ -755,9 +800,35 @@ void psdAndNoise(Analysis* a) {
                             (static_cast<double>(a->n) * std::log(2.0)));
 }
 
+// Per-mode path, shared mode (sharedMode, docs/wavelet.md "Speed"): the record's one transform is
+// padded by n/kSharedPadDivisor samples (n >= kSharedPadDivisor * kMinSharedPad), enough for the
+// fit rows of modes above ~650 omega0 cycles per record (8 scales within n/512); rows needing more
+// padding take their Parseval sums from the low band, used while its bins are at most
+// 1/kLowBandMaxShare of the grid's padding. kPadScales: MorletCwt's padding in scales.
+constexpr long kSharedPadDivisor = 512;
+constexpr long kMinSharedPad = 64;
+constexpr long kLowBandMaxShare = 8;
+constexpr double kPadScales = 8.0;
+
+double highFrequencyLevel(const Analysis& an, MorletCwt* fit, RowScratch* rs);
+
+// The time-averaged scalogram of the grid's rows (per-mode path: the binned sums of *Y's K bins
+// built first; a->power, see BinnedPower).
+void scalogramPower(Analysis* a, const std::complex<double>* Y, long K, long N) {
+  if (!a->opt.full_scalogram) {
+    // Largest sigma_k of any row: f < fs/2, omega0 >= 3 (a > 6/N).
+    const double sigma_max = static_cast<double>(N) / (6.0 * std::sqrt(2.0));
+    a->power.build(Y, K, static_cast<int>(std::floor(std::log2(sigma_max / kBinnedSigmaPerGroup))));
+  }
+  a->res.scalogram_power.resize(a->grid.size());
+  for (size_t i = 0; i < a->grid.size(); ++i)
+    a->res.scalogram_power[i] = meanPowerOf(*a, a->grid[i], a->opt.omega0);
+}
+
 // One FFT of the record: the PSD, the white-noise estimate sigma_n (median of |Y_k|^2: white
 // noise makes it exponential with mean n*sigma_n^2, the median ignores the few peak bins) and
-// the time-averaged scalogram.
+// the time-averaged scalogram. Full path and the per-mode path's classic mode: on the grid's
+// padding (sharedSpectra: shared mode).
 Status spectraAndNoise(Analysis* a) {
   // The spectra need no inverse FFT: FFTW_ESTIMATE (the scalogram's rows are planned apart).
   if (!sameConfiguration(a->scal, a->n, a->fs, a->grid, {a->opt.omega0})) {
@@ -766,9 +837,7 @@ Status spectraAndNoise(Analysis* a) {
       return s;
   }
   if (Status s = a->scal.setCheckedSignal(a->y, a->mean); !s.ok()) return s;
-  const long N = a->scal.paddedSize(), kmax = N / 2;
-  const std::complex<double>* Y = a->scal.spectrum();
-  WaveletResult& res = a->res;
+  const long N = a->scal.paddedSize();
   // Per-mode path on several threads: the PSD and its median on a thread of their own while
   // this one sums the rows' power (they read Y and write apart; the same values as in turn).
   std::future<void> psd;
@@ -777,18 +846,84 @@ Status spectraAndNoise(Analysis* a) {
   } else {
     psdAndNoise(a);
   }
-  res.scalogram_power.resize(a->grid.size());
-  if (!a->opt.full_scalogram) {
-    // Largest sigma_k of any row: f < fs/2, omega0 >= 3 (a > 6/N).
-    const double sigma_max = static_cast<double>(N) / (6.0 * std::sqrt(2.0));
-    a->power.build(Y, kmax + 1,
-                   static_cast<int>(std::floor(std::log2(sigma_max / kBinnedSigmaPerGroup))));
-  }
-  for (int i = 0; i < a->scal.rows(); ++i) {
-    res.scalogram_power[size_t(i)] =
-        meanPowerOf(*a, a->grid[static_cast<size_t>(i)], a->opt.omega0);
-  }
+  scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
   if (psd.valid()) psd.get();
+  return {};
+}
+
+// Per-mode path, shared mode: whether one transform padded by n/kSharedPadDivisor serves the
+// spectra (rows within its padding; the low rows from the low band) and the fits. Sets a->shared,
+// a->low_n (the grid's padding) and a->low_bins (the bins the low rows' bands reach on it: the
+// band's top of the highest row beyond the shared padding, for omega0 and peak_omega0). Classic
+// mode (false) when the record is short (the low band would reach past 1/kLowBandMaxShare of the
+// grid's padding: no gain over its transform).
+bool sharedMode(Analysis* a) {
+  a->shared = false;
+  if (a->opt.full_scalogram) return false;
+  const long pad = a->n / kSharedPadDivisor;
+  if (pad < kMinSharedPad) return false;
+  a->low_n = MorletCwt::paddedLength(a->n, a->fs, a->grid, {a->opt.omega0});
+  if (a->low_n <= 0) return false;
+  double f_lowest = a->grid.front();
+  for (double f : a->opt.mode_frequencies) f_lowest = std::min(f_lowest, f);
+  long bins = 0;
+  for (double w : {a->opt.omega0, a->opt.peak_omega0}) {
+    // Rows below f_c need more than `pad` samples of padding (8 scales).
+    const double f_c = kPadScales * w * a->fs / (2.0 * kPi * static_cast<double>(pad));
+    if (!(f_c > f_lowest)) continue;
+    const double top =
+        (w + kPowerBandHalfWidth) * f_c * static_cast<double>(a->low_n) / (w * a->fs);
+    bins = std::max(bins, static_cast<long>(std::ceil(std::min(top, 0.5 * a->low_n))) + 2);
+  }
+  if (bins > a->low_n / kLowBandMaxShare) return false;
+  a->low_bins = bins;
+  a->shared = true;
+  return true;
+}
+
+// The frequency whose 8-scale padding at omega0 is `pad` samples (configures the shared
+// transform's length through MorletCwt::configure's padding rule).
+double paddingFrequency(double fs, double omega0, long pad) {
+  return kPadScales * omega0 * fs / (2.0 * kPi * static_cast<double>(pad));
+}
+
+// Shared mode: the low band (when some rows need it) and its binned sums.
+bool lowBandSpectra(Analysis* a) {
+  if (a->low_bins == 0) return true;
+  if (!a->low.compute(a->y, a->n, a->mean, a->low_n, a->low_bins)) return false;
+  const double sigma_max = static_cast<double>(a->low_n) / (6.0 * std::sqrt(2.0));
+  a->low_power.build(a->low.spectrum(), a->low_bins,
+                     static_cast<int>(std::floor(std::log2(sigma_max / kBinnedSigmaPerGroup))));
+  return true;
+}
+
+// Shared mode: the record's one transform (padded by n/kSharedPadDivisor) gives the PSD, the
+// white-noise estimate, the rows' power within its padding and, in fitModes, the fit rows and
+// the noise row; the low band gives the low rows' power. On several threads the low band runs on
+// a thread of its own while this one transforms the record and computes the PSD, its median, the
+// noise row's level and the binned sums (about the low band's work: the two threads balance).
+Status sharedSpectra(Analysis* a) {
+  const long pad = a->n / kSharedPadDivisor;
+  const std::vector<double> f_pad = {paddingFrequency(a->fs, a->opt.omega0, pad)};
+  const bool threads = a->opt.threads >= 2;
+  std::future<bool> low;
+  if (threads) low = gear_sim::startAsync([a] { return lowBandSpectra(a); });
+  Status s;
+  if (!sameConfiguration(a->scal, a->n, a->fs, f_pad, {a->opt.omega0}))
+    s = a->scal.configure(a->n, a->fs, f_pad, a->opt.omega0, FftPlanning::Estimate);
+  if (s.ok()) s = a->scal.setCheckedSignal(a->y, a->mean);
+  if (s.ok()) {
+    psdAndNoise(a);
+    if (threads) {
+      a->ahead_hf = highFrequencyLevel(*a, &a->scal, a->rows.front().get());
+      a->hf_ahead = true;
+    }
+  }
+  const bool low_ok = threads ? low.get() : s.ok() && lowBandSpectra(a);
+  if (!s.ok()) return s;
+  if (!low_ok) return Status::resourceLimit("analyzeWavelet: the low rows' spectrum failed");
+  const long N = a->scal.paddedSize();
+  scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
   return {};
 }
 
@@ -840,7 +975,7 @@ bool prominentEnough(const Analysis& a, const Peak& p, double highest) {
   if (a.opt.peak_prominence > 0.0) return p.prominence >= a.opt.peak_prominence * highest;
   if (p.prominence < kMinRelativeProminence * highest) return false;
   const double wp = a.opt.peak_omega0;
-  const double pn = a.scal.noiseGainAt(p.frequency, wp) * a.res.noise_std * a.res.noise_std;
+  const double pn = noiseGainOf(a, p.frequency, wp) * a.res.noise_std * a.res.noise_std;
   const double T = static_cast<double>(a.n) / a.fs;
   const double rel =
       std::min(1.0, std::sqrt(std::sqrt(2.0 * kPi) * morletScale(p.frequency, wp) / T));
@@ -885,7 +1020,7 @@ std::vector<ModeSeed> pickModes(Analysis* a) {
   const double wp = o.peak_omega0;
   for (size_t i = 0; i < o.mode_frequencies.size(); ++i) {
     const double f = o.mode_frequencies[i];
-    seeds.push_back({f, std::sqrt(std::max(0.0, a->scal.meanPowerAt(f, wp))), regionFor(o, i)});
+    seeds.push_back({f, std::sqrt(std::max(0.0, exactPowerOf(*a, f, wp))), regionFor(o, i)});
   }
   if (!seeds.empty()) return seeds;
   std::vector<double> amp(a->res.peak_freq.size());
@@ -1259,11 +1394,13 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   // (kFitSamplesPerScale), exact at those samples: one inverse FFT of length N/D of the row's
   // band folded modulo N/D (DecimatedRows) instead of the full or pruned inverse FFT.
   // The per-mode path's own transform may already hold the record (loadOwnAhead).
+  // Shared mode: the fit rows from the record's one transform when its padding holds them, and
+  // the noise row from it always (sharedSpectra).
   bool held = true;
   for (size_t i = 0; i < seeds.size(); ++i) held = held && a->scal.fitsPadding(fit_f[i], fit_w[i]);
   MorletCwt* fit = &a->scal;
   bool ahead = false;  // own and the noise row's level loaded with the spectra (loadOwnAhead)
-  if (!held || !a->opt.full_scalogram) {
+  if (!held || (!a->opt.full_scalogram && !a->shared)) {
     Status s;
     const bool same = sameConfiguration(a->own, a->n, a->fs, fit_f, fit_w) ||
                       (!a->opt.full_scalogram && sameLength(a->own, *a, fit_f, fit_w));
@@ -1273,7 +1410,9 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
     if (!s.ok()) return s;
     fit = &a->own;
   }
-  const double hf = ahead ? a->ahead_hf : highFrequencyLevel(*a, fit, a->rows.front().get());
+  MorletCwt* noise = a->shared ? &a->scal : fit;
+  const double hf =
+      ahead || a->hf_ahead ? a->ahead_hf : highFrequencyLevel(*a, noise, a->rows.front().get());
   highFrequencyNoise(a, seeds, hf);
   const std::vector<double> orders = resolvedOrders(a);
   std::vector<RowFit> fits(seeds.size());
@@ -1401,6 +1540,8 @@ struct WaveletAnalyzer::Workspace {
   std::vector<double> psd;
   BinnedPower power;
   std::vector<std::unique_ptr<RowScratch>> rows;
+  wavelet_detail::LowBand low;
+  BinnedPower low_power;
 };
 
 WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
@@ -1461,11 +1602,12 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
   if (w.rows.empty()) w.rows.push_back(std::make_unique<RowScratch>());
-  Analysis a{y, n, sample_rate, options, *result, {}, w.scal, w.own, w.psd, w.power, w.rows};
+  Analysis a{y,     n,     sample_rate, options, *result, {},         w.scal,
+             w.own, w.psd, w.power,     w.rows,  w.low,   w.low_power};
   if (Status s = checkInput(&a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
-  std::future<bool> own = loadOwnAhead(&a);
-  const Status spectra = spectraAndNoise(&a);
+  std::future<bool> own = sharedMode(&a) ? std::future<bool>{} : loadOwnAhead(&a);
+  const Status spectra = a.shared ? sharedSpectra(&a) : spectraAndNoise(&a);
   a.own_loaded = own.valid() && own.get();
   if (!spectra.ok()) return stop(spectra);
   if (options.full_scalogram)
