@@ -89,6 +89,11 @@ class ForwardModel {
   /// known stiffness when held, greybox mesh state; jump or kink of a smooth stiffness); 1 when
   /// the interval holds none.
   double heldSplit(Index j) const;
+  /// A copy whose switches of a held channel lie at u = th of their interval where the record has
+  /// no `mesh_phase` (there each is held from the sample where its new value is first seen, th =
+  /// 1): the refinement's switch timing check. With `mesh_phase`, and for a smooth stiffness's
+  /// jumps and kinks, the same breaks.
+  ForwardModel withUnlocatedSwitchesAt(double th) const;
   /// Every break (sorted by interval).
   const std::vector<QuadratureBreak>& breaks() const { return breaks_; }
   /// Intervals j whose smooth stiffness has a kink or jump (sorted).

@@ -169,6 +169,18 @@ struct SegmentEstimate {
   double shape_z = kNaN;  ///< [-]
   /// The change of C that fit with the ramp's coefficient free would make, relative to C.
   double shape_shift = kNaN;  ///< [-]
+  /// Without `mesh_phase` (held stiffness or mesh state, piecewise model, refined): the change of
+  /// C, relative to C, when every switch of the segment lies half a sample earlier, the mean
+  /// place of a switch that falls anywhere between samples (Refinement::switchTimingShift). The
+  /// switches held to the sample where the new value is first seen can bias C by about this.
+  double switch_timing_shift = kNaN;  ///< [-]
+  /// The data's score for that shift: the response change it makes, projected off the
+  /// unknowns' sensitivities, against the prewhitened residual (as shape_z): N(0, 1) when the
+  /// switches lie at the samples, E = |d| / sigma when they lie half a sample earlier.
+  double switch_timing_z = kNaN;  ///< [-]
+  /// That score's expected value when the switches lie half a sample earlier, |d| / sigma: the
+  /// run pools switch_timing_z weighted by it (QualityLimits::kSwitchTimingShare).
+  double switch_timing_power = kNaN;  ///< [-]
   /// C0 of that model, the damping at the segment's mean load [1/s], and its standard error:
   /// then also C and C_std (the time mean of a C(t) linear in the load, constant included).
   double C_mean_load = kNaN, C_mean_load_std = kNaN;

@@ -70,6 +70,7 @@ inline constexpr const char* kRefineDisagrees = "refine_disagrees";
 inline constexpr const char* kResidualsNotWhite = "residuals_not_white";
 inline constexpr const char* kDampingVaries = "damping_varies";
 inline constexpr const char* kShapeMismatch = "shape_mismatch";
+inline constexpr const char* kSwitchTiming = "switch_timing";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -147,6 +148,13 @@ struct QualityLimits {
   /// Table 1 records of 200-500 segments; docs/trust.md), while a ramp that scores 2-3 in every
   /// segment pools to 12-21 over 50 segments.
   static constexpr double kShapePooledZ = 4.0;
+  /// Without `mesh_phase` each switch is held to the sample where the new value is first seen,
+  /// delta half-samples late on average (1 where the switches fall anywhere between samples, 0
+  /// where they lie on the samples); the run's segments estimate delta together from their
+  /// switch_timing_z. A segment is flagged switch_timing where delta's upper bound (estimate + 2
+  /// standard errors) times its switch_timing_shift exceeds this many C_std (and kShapeShift of
+  /// C): the bias left in C; half a C_std keeps the coverage of +-1.96 C_std at 93 % or more.
+  static constexpr double kSwitchTimingShare = 0.5;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

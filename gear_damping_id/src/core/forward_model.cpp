@@ -151,6 +151,15 @@ bool ForwardModel::smoothStiffness(Index j) const {
   return it != ranges_.begin() && smooth_[std::prev(it) - ranges_.begin()];
 }
 
+ForwardModel ForwardModel::withUnlocatedSwitchesAt(double th) const {
+  ForwardModel m(*this);
+  if (signal_.mesh_phase != nullptr) return m;
+  for (auto& b : m.breaks_) {
+    if (!smoothStiffness(b.j)) b.th = th;
+  }
+  return m;
+}
+
 std::vector<Eigen::Index> ForwardModel::kinkIntervals() const {
   std::vector<Index> out;
   for (const auto& b : breaks_) {

@@ -2067,6 +2067,7 @@ class Refinement {
   struct ShapeScore {
     double z = kNaN;      // the score, N(0, 1) when the stiffness switches at once
     double shift = kNaN;  // the ramped fit's change of C, relative to C
+    double power = kNaN;  // switchTiming: z's mean with the switches half a sample earlier
   };
   ShapeScore shapeScore(size_t i, double variation_z) {
     const Index b = ranges_[i].first, e = ranges_[i].second;
@@ -2122,6 +2123,53 @@ class Refinement {
     // -beta g, C by -beta_C g (beta_C back in C's units).
     const double g = dp.dot(ep) / dp.squaredNorm();
     return {dp.dot(ep) / den, -beta[2] / c_norm * g / std::abs(loc_[i][2])};
+  }
+
+  // Switch timing (a held stiffness or mesh state without mesh_phase): a switch between samples
+  // is held from the sample where its new value is first seen, up to a sample late, half a
+  // sample on average where the switches fall anywhere between samples (most speeds). The
+  // response change d = yhat(switches at u = 0.5) - yhat at the solution (both by the same
+  // integration), the residual e and the sensitivities J, prewhitened: d regressed on J moves
+  // the unknowns by -beta, C by the returned shift (relative to C) with every switch half a
+  // sample earlier; with d and e projected off J, z = d'e / (sigma |d|) is the data's score for
+  // that shift (as shapeScore's, with the torque noise): N(0, 1) with the switches at the
+  // samples. NaN with mesh_phase, a smooth stiffness, or no switch in the segment.
+  ShapeScore switchTiming(size_t i) {
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    if (s_.mesh_phase != nullptr || fm_.smoothStiffness(b) || !(std::abs(loc_[i][2]) > 0.0))
+      return {};
+    const auto& brk = fm_.breaks();
+    const auto first = std::lower_bound(brk.begin(), brk.end(), b,
+                                        [](const QuadratureBreak& q, Index v) { return q.j < v; });
+    if (first == brk.end() || first->j + 1 >= e) return {};
+    const ForwardModel mid = fm_.withUnlocatedSwitchesAt(0.5);
+    const SegmentSimulator held_sim(fm_, !reference_, nullptr), mid_sim(mid, !reference_, nullptr);
+    Params p = makeParams(loc_[i], sh_);
+    p.m = 0;  // the state only
+    const Eigen::MatrixXd sol = solutionRows(i, true);
+    const Index m = sol.cols() - 1;
+    Eigen::MatrixXd rows(e - b, 2 + m);  // e, d, J
+    rows.col(0) = sol.col(0);
+    held_sim.run(b, e, p, substeps_, [&](Index n, const double* z) { rows(n - b, 1) = -z[0]; });
+    mid_sim.run(b, e, p, substeps_, [&](Index n, const double* z) { rows(n - b, 1) += z[0]; });
+    rows.rightCols(m) = sol.rightCols(m);
+    const Eigen::MatrixXd w = whiten(rows, noise_of_[i]);
+    Eigen::MatrixXd J = w.rightCols(m);
+    const double c_norm = J.col(2).norm();  // unknown 2: C
+    for (Index c = 0; c < J.cols(); ++c) {
+      const double norm = J.col(c).norm();
+      if (norm > 0.0) J.col(c) /= norm;
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+    const Eigen::VectorXd beta = qr.solve(w.col(1));
+    const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
+    const Eigen::VectorXd dp = w.col(1) - J * beta;
+    const double dof = static_cast<double>(w.rows() - qr.rank());
+    double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
+    if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)
+      den = std::sqrt(den * den + torqueProjectedVariance(i, dp, den * den));
+    if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
+    return {dp.dot(ep) / den, -beta[2] / c_norm / std::abs(loc_[i][2]), dp.squaredNorm() / den};
   }
 
   // Shape test of a greybox fourier:H / table:N curve (piecewise model, no STE): a score test
@@ -2782,6 +2830,11 @@ class Refinement {
                    !(e.C_torque_std > kCurveTorqueShare * std::sqrt(std::max(cov_ll(k, k), 0.0)))) {
           const ShapeScore sc = curveScore(i, e.variation_z);
           e.shape_z = sc.z, e.shape_shift = sc.shift;
+        }
+        if (!shape_ && ste_ == nullptr) {
+          const ShapeScore st = switchTiming(i);
+          e.switch_timing_z = st.z, e.switch_timing_shift = st.shift;
+          e.switch_timing_power = st.power;
         }
         if (std::isfinite(e.C_mean_load)) {
           const double t = std::isfinite(e.C_torque_std) ? e.C_torque_std : 0.0;

@@ -15,7 +15,7 @@ bool ownedCode(const std::string& c) {
   return c == quality_code::kNonpositiveDamping || c == quality_code::kOverdamped ||
          c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
          c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries ||
-         c == quality_code::kShapeMismatch;
+         c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming;
 }
 
 std::string num(double v) {
@@ -63,7 +63,8 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
     e->C_integral = e->C_integral_std = kNaN;
     e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = e->shape_shift = kNaN;
-    e->variation_spread = kNaN;
+    e->variation_spread = e->switch_timing_shift = e->switch_timing_z = kNaN;
+    e->switch_timing_power = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
     e->refined = false;
@@ -207,6 +208,69 @@ void flagPooledShape(IdentificationResult* r) {
                     num(100.0 * L::kShapeShift) + " % are flagged shape_mismatch: " + advice});
 }
 
+bool timingJudged(const SegmentEstimate& e) {
+  return e.identifiable && e.refined && std::isfinite(e.switch_timing_shift) &&
+         std::isfinite(e.switch_timing_z) && e.switch_timing_power > 0.0 && e.C_std > 0.0;
+}
+
+// Without mesh_phase each switch is held to the sample where the new value is first seen, late
+// by delta half-samples on average over a segment's switches: 1 where they fall anywhere between
+// samples, 0 where they lie on the samples, from 0 to 2 from segment to segment where the mesh
+// period is close to a whole number of samples (the lateness then drifts). A segment's score z
+// (switch_timing_z) has mean delta a (a = switch_timing_power), and its C is biased by about
+// delta times its switch_timing_shift. The run's segments estimate delta together, sum(a z) /
+// sum(a^2) with standard error 1 / sqrt(sum a^2); a segment is flagged where the bias at that
+// estimate's upper bound (+ 2 SE), or, where its own score shows late switches (z beyond
+// kShapeZ), at its own bound (z + 2) / a, exceeds kSwitchTimingShare C_std and kShapeShift of C.
+// The run says how many.
+void flagSwitchTiming(IdentificationResult* r) {
+  auto& rw = r->warnings;
+  rw.erase(
+      std::remove_if(rw.begin(), rw.end(),
+                     [](const QualityWarning& q) { return q.code == quality_code::kSwitchTiming; }),
+      rw.end());
+  double az = 0.0, aa = 0.0;
+  for (const auto& e : r->segments) {
+    if (!timingJudged(e)) continue;
+    az += e.switch_timing_power * e.switch_timing_z;
+    aa += e.switch_timing_power * e.switch_timing_power;
+  }
+  if (!(aa > 0.0)) return;
+  const double pooled = az / aa, pooled_se = 1.0 / std::sqrt(aa);
+  const std::string why =
+      "the record has no mesh_phase, so each stiffness switch is placed at the sample where the "
+      "new value is first seen, up to a sample late where it falls between samples; the run's "
+      "segments put the switches " +
+      num(pooled) + " +- " + num(pooled_se) +
+      " half-samples earlier (0: on the samples, 1: anywhere between them)";
+  const std::string advice =
+      ": give mesh_phase (cumulative mesh cycles, e.g. from the encoders) to locate the switches";
+  long flagged = 0;
+  for (auto& e : r->segments) {
+    if (!timingJudged(e)) continue;
+    const double a = e.switch_timing_power, z = e.switch_timing_z;
+    double up = std::max(0.0, pooled + 2.0 * pooled_se);
+    if (z > L::kShapeZ) up = std::max(up, (z + 2.0) / a);
+    const double shift = up * std::abs(e.switch_timing_shift);
+    if (!(shift * std::abs(e.C) > L::kSwitchTimingShare * e.C_std && shift > L::kShapeShift))
+      continue;
+    ++flagged;
+    e.warnings.push_back(
+        {quality_code::kSwitchTiming,
+         why + "; this segment's own residual puts them " + num(z / a) + " +- " + num(1.0 / a) +
+             " half-samples earlier, and with every switch half a sample earlier its C moves "
+             "by " +
+             num(100.0 * e.switch_timing_shift) + " %, so C can be biased by up to " +
+             num(shift * std::abs(e.C) / e.C_std) + " C_std" + advice});
+  }
+  if (flagged > 0) {
+    rw.push_back({quality_code::kSwitchTiming,
+                  why + "; " + std::to_string(flagged) +
+                      " segments whose C can be biased by more than " + num(L::kSwitchTimingShare) +
+                      " C_std by it are flagged switch_timing" + advice});
+  }
+}
+
 }  // namespace
 
 bool hasCode(const QualityWarnings& warnings, const std::string& code) {
@@ -227,6 +291,7 @@ void applyQualityFlags(const IdentificationOptions& /*options*/, IdentificationR
   for (auto& e : r->segments) flagEstimate(&e, false);
   if (r->constant) flagEstimate(&*r->constant, true);
   flagPooledShape(r);
+  flagSwitchTiming(r);
 }
 
 void flagIntegralStandardErrors(const IdentificationOptions& options, IdentificationResult* r) {
