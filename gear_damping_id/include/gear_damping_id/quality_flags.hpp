@@ -150,10 +150,12 @@ struct QualityLimits {
   static constexpr double kShapePooledZ = 4.0;
   /// Without `mesh_phase` each switch is held to the sample where the new value is first seen,
   /// delta half-samples late on average (1 where the switches fall anywhere between samples, 0
-  /// where they lie on the samples); the run's segments estimate delta together from their
-  /// switch_timing_z. A segment is flagged switch_timing where delta's upper bound (estimate + 2
-  /// standard errors) times its switch_timing_shift exceeds this many C_std (and kShapeShift of
-  /// C): the bias left in C; half a C_std keeps the coverage of +-1.96 C_std at 93 % or more.
+  /// where they lie on the samples, drifting between segments where the mesh period is close to
+  /// a whole number of samples); the run's segments estimate delta together from their
+  /// switch_timing_z, and a segment whose own score exceeds kShapeZ estimates its own. A segment
+  /// is flagged switch_timing where delta's upper bound (estimate + 2 standard errors) times its
+  /// switch_timing_shift exceeds this many C_std (and kShapeShift of C): the bias left in C; half
+  /// a C_std keeps the coverage of +-1.96 C_std at 93 % or more.
   static constexpr double kSwitchTimingShare = 0.5;
 };
 
