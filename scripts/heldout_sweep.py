@@ -40,6 +40,8 @@ runs; the analyze options after -- must ask for them):
 --extras also draws the simulator options the base draw leaves at their defaults (torsional
 dynamics, 1-4 RK4 substeps, a speed ramp, a periodic trapezoid load), from a stream of its own,
 so the base draw of a seed is the same with and without it.
+--drop-mesh-phase analyses each record without its mesh_phase column (the switch timing check,
+docs/trust.md "Switches between samples without `mesh_phase`").
 
 Used for docs/method.md section 4 (Refinement: clean data) and docs/trust.md (integral_std,
 "Held-out sweeps of the shared models, greybox shapes and simulator options").
@@ -160,6 +162,19 @@ def simulate(bin_dir, name, text, info, free=False):
         info['rate'] = 1e6
     print('simulate refused', name, p.stderr.strip()[:200], file=sys.stderr)
     return False
+
+
+def drop_column(path, name):
+    """Rewrites the CSV at PATH without its column NAME (if it has one)."""
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    if not rows or name not in rows[0]:
+        return
+    k = rows[0].index(name)
+    with open(path, 'w', newline='') as f:
+        w = csv.writer(f, lineterminator='\n')
+        for row in rows:
+            w.writerow(row[:k] + row[k + 1:])
 
 
 def read_truth(path, names=('time', 'damping')):
@@ -436,6 +451,8 @@ def analyze_case(a, seed):
     name = os.path.join(a.out, f'case{seed}')
     if not simulate(a.bin_dir, name, text, info, 'wavelet' in (a.check or [])):
         return None
+    if a.drop_mesh_phase:
+        drop_column(name + '.csv', 'mesh_phase')
     p = run([os.path.join(a.bin_dir, 'analyze'), '-q', '--input', name + '.csv', '--params',
              name + '.yaml', '--output', name + '.json'] + a.analyze_args)
     if p.returncode != 0:
@@ -458,6 +475,9 @@ def main():
                     'runs; default: the piecewise segments)')
     ap.add_argument('--extras', action='store_true',
                     help='also draw torsional dynamics, substeps, speed ramps, trapezoid loads')
+    ap.add_argument('--drop-mesh-phase', action='store_true',
+                    help='analyse the records without their mesh_phase column (the switches then '
+                    'held to the sample where the new value is first seen)')
     ap.add_argument('analyze_args', nargs='*', help='extra analyze options (after --)')
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)

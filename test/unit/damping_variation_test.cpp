@@ -318,6 +318,17 @@ SimConfig constantDamping(SimConfig c) {
   return c;
 }
 
+// The constant model's test on constant damping, judged on every record: the flag at most at the
+// binomial bound of its rate p, sum z^2 within the chi-square bound and the mean within
+// 4.5 / sqrt(n) (z N(0, 1)).
+void expectNominal(const ConstantScore& s, double p, const std::string& what) {
+  ASSERT_EQ(s.judged, s.runs) << what << ": noisy records are judged";
+  const double n = static_cast<double>(s.judged);
+  EXPECT_LE(s.flagged, binomialBound(s.runs, p)) << what;
+  EXPECT_NEAR(s.sum_z2, n, 4.5 * std::sqrt(2.0 * n)) << what;
+  EXPECT_NEAR(s.sum_z / n, 0.0, 4.5 / std::sqrt(n)) << what;
+}
+
 // Constant damping: the test statistic is N(0, 1) after the Wilson-Hilferty transform (sum z^2
 // within the chi-square bound of expectFalseAlarmsNominal, the mean within 4.5 / sqrt(n)), and
 // the flag (one-sided, z > kVariationZ: 0.135 %) fires at most at the binomial bound.
@@ -328,12 +339,8 @@ TEST(DampingVariation, ConstantModelOnConstantDampingIsFlaggedAtMostAtTheNominal
         {"trapezoid", constantDamping(table1Trapezoid())},
         {"held-out fourier", constantDamping(fourier(heldOutCase(), 2.6e8, {4.0e7, 0.0, 8.0e6},
                                                      {-3.0e7, 1.2e7, 0.0}))}}) {
-    const ConstantScore s = constantOverSeeds(c, label + " constant damping", 9400, kSeeds, kSnrDb);
-    ASSERT_EQ(s.judged, s.runs) << label << ": noisy records are judged";
-    const double n = static_cast<double>(s.judged);
-    EXPECT_LE(s.flagged, binomialBound(s.runs, p)) << label;
-    EXPECT_NEAR(s.sum_z2, n, 4.5 * std::sqrt(2.0 * n)) << label;
-    EXPECT_NEAR(s.sum_z / n, 0.0, 4.5 / std::sqrt(n)) << label;
+    expectNominal(constantOverSeeds(c, label + " constant damping", 9400, kSeeds, kSnrDb), p,
+                  label);
   }
 }
 
@@ -352,12 +359,7 @@ TEST(DampingVariation, ConstantModelWithTorqueNoiseIsFlaggedAtMostAtTheNominalRa
         {"constant load", constant_load}}) {
     for (const double torque_sd : {0.3, 1.0}) {
       const std::string what = label + " constant damping, " + std::to_string(torque_sd) + " N*m";
-      const ConstantScore s = constantOverSeeds(c, what, 9800, 2 * kSeeds, kSnrDb, torque_sd);
-      ASSERT_EQ(s.judged, s.runs) << what << ": noisy records are judged";
-      const double n = static_cast<double>(s.judged);
-      EXPECT_LE(s.flagged, binomialBound(s.runs, p)) << what;
-      EXPECT_NEAR(s.sum_z2, n, 4.5 * std::sqrt(2.0 * n)) << what;
-      EXPECT_NEAR(s.sum_z / n, 0.0, 4.5 / std::sqrt(n)) << what;
+      expectNominal(constantOverSeeds(c, what, 9800, 2 * kSeeds, kSnrDb, torque_sd), p, what);
     }
   }
 }
