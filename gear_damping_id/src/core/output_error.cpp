@@ -2013,13 +2013,16 @@ class Refinement {
   // The covariance at the refined estimate must give every reported variance (C, and the greybox
   // levels) a positive finite value. A response that diverges (C far below zero: the sensitivities
   // overflow) or a singular problem gives zero or NaN, which would be reported as C_std = 0, an
-  // exact number: the refinement has failed, and the caller keeps the integral estimate.
-  gear_sim::Status positiveVariances() const {
+  // exact number: the refinement has failed, and the caller keeps the integral estimate. The
+  // covariances into cov_ll_ and cov_ss_ (fillSegments).
+  gear_sim::Status positiveVariances() {
     auto bad = [](double v) { return !(v > 0.0) || !std::isfinite(v); };
+    cov_ll_.assign(nseg_, Eigen::MatrixXd());
+    cov_ss_.assign(nseg_, Eigen::MatrixXd());
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
-      const Eigen::MatrixXd ll = localCovariance(i);
-      const Eigen::MatrixXd ss = sigma2Of(i) * Ainv_of_[i];
+      const Eigen::MatrixXd& ll = cov_ll_[i] = localCovariance(i);
+      const Eigen::MatrixXd& ss = cov_ss_[i] = sigma2Of(i) * Ainv_of_[i];
       double v = cVariance(ll, ss);
       bool levels_bad = false;
       if (grey_ && !shape_) {
@@ -2762,8 +2765,8 @@ class Refinement {
       const Normal& nm = normals_[i];
       const double sigma2 = sigma2Of(i);
       // Covariance of this segment's unknowns [locals, shared], with the torque noise's.
-      const Eigen::MatrixXd cov_ll = localCovariance(i) + tcov_ll_[i];
-      const Eigen::MatrixXd cov_ss = sigma2 * Ainv_of_[i] + tcov_ss_[i];
+      const Eigen::MatrixXd cov_ll = cov_ll_[i] + tcov_ll_[i];
+      const Eigen::MatrixXd cov_ss = cov_ss_[i] + tcov_ss_[i];
       if (std::isfinite(e.torque_noise_std))
         e.C_torque_std = std::sqrt(std::max(cVariance(tcov_ll_[i], tcov_ss_[i]), 0.0));
       int k = 2;
@@ -2906,6 +2909,7 @@ class Refinement {
   std::vector<NoiseModel> noise_of_;
   int iterations_ = 0;
   std::vector<Eigen::MatrixXd> Nll_inv_, Ainv_of_;
+  std::vector<Eigen::MatrixXd> cov_ll_, cov_ss_;  // positiveVariances: locals, shared (no torque)
   double sigma2_pooled_ = 0.0;
   bool all_converged_ = true;
   // Per-segment scratch of solveStep and gaussNewton (sized once).
