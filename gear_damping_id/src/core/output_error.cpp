@@ -1170,6 +1170,23 @@ void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve
   }
 }
 
+// The mesh state's switches over samples [b, e) (meshSwitches), in order.
+struct MeshSwitch {
+  double at;             // instant [samples]: its interval j plus fm.heldSplit(j)
+  double u;              // the same from b: (j - b) plus fm.heldSplit(j)
+  double before, after;  // states either side
+};
+std::vector<MeshSwitch> meshSwitches(const ForwardModel& fm, Index b, Index e) {
+  const double* st = fm.signal().mesh_state;
+  std::vector<MeshSwitch> sw;
+  for (Index j = b; j + 1 < e; ++j) {
+    if (st[j] == st[j + 1]) continue;
+    const double split = fm.heldSplit(j);
+    sw.push_back({static_cast<double>(j) + split, double(j - b) + split, st[j], st[j + 1]});
+  }
+  return sw;
+}
+
 // The greybox square model's response over samples [b, e) with its mesh state s(t) (0/1,
 // switching at the breaks fm.heldSplit locates) and with s_w(t), the same state ramped linearly
 // over `hw` samples either side of each switch: yhat_w - yhat at every sample into column 0 of
@@ -1177,19 +1194,13 @@ void curveExtremes(const StiffnessShape& shape, const std::vector<double>& curve
 // (forcing -(T1 - t_ref) yhat', from rest) into column 1. RK4 over the pieces between the
 // sample instants, the switches and the ramps' corners (K is constant or linear on each piece);
 // x = [y0, v0, C, K0, dK] of the piecewise greybox problem; torque(j, u) the torque at u in
-// [0, 1] of interval j. These are directions of the shape test (Refinement::shapeScore), so
-// their accuracy is not critical.
+// [0, 1] of interval j; sw the switches over [b, e) (meshSwitches). These are directions of the
+// shape test (Refinement::shapeScore), so their accuracy is not critical.
 template <class Torque>
-void rampedResponseChange(const ForwardModel& fm, Index b, Index e, const Eigen::VectorXd& x,
-                          double hw, double t_ref, Torque&& torque, Eigen::MatrixXd* out) {
+void rampedResponseChange(const ForwardModel& fm, Index b, Index e,
+                          const std::vector<MeshSwitch>& sw, const Eigen::VectorXd& x, double hw,
+                          double t_ref, Torque&& torque, Eigen::MatrixXd* out) {
   const double* st = fm.signal().mesh_state;
-  struct Switch {
-    double u, before, after;  // instant [samples from b], states either side
-  };
-  std::vector<Switch> sw;
-  for (Index j = b; j + 1 < e; ++j) {
-    if (st[j] != st[j + 1]) sw.push_back({double(j - b) + fm.heldSplit(j), st[j], st[j + 1]});
-  }
   const double C = x[2], K0 = x[3], dK = x[4], h = fm.signal().dt;
   const double ff = fm.gear().force_factor;
   const bool c1 = std::isfinite(t_ref);
@@ -1229,7 +1240,7 @@ void rampedResponseChange(const ForwardModel& fm, Index b, Index e, const Eigen:
     };
     auto ramped = [&](double u) {
       for (size_t k = k0; k < k1; ++k) {
-        const Switch& q = sw[k];
+        const MeshSwitch& q = sw[k];
         if (std::abs(u - q.u) < hw)
           return q.before + (q.after - q.before) * (u - q.u + hw) / (2 * hw);
       }
@@ -2013,13 +2024,16 @@ class Refinement {
   // The covariance at the refined estimate must give every reported variance (C, and the greybox
   // levels) a positive finite value. A response that diverges (C far below zero: the sensitivities
   // overflow) or a singular problem gives zero or NaN, which would be reported as C_std = 0, an
-  // exact number: the refinement has failed, and the caller keeps the integral estimate.
-  gear_sim::Status positiveVariances() const {
+  // exact number: the refinement has failed, and the caller keeps the integral estimate. The
+  // covariances into cov_ll_ and cov_ss_ (fillSegments).
+  gear_sim::Status positiveVariances() {
     auto bad = [](double v) { return !(v > 0.0) || !std::isfinite(v); };
+    cov_ll_.assign(nseg_, Eigen::MatrixXd());
+    cov_ss_.assign(nseg_, Eigen::MatrixXd());
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
-      const Eigen::MatrixXd ll = localCovariance(i);
-      const Eigen::MatrixXd ss = sigma2Of(i) * Ainv_of_[i];
+      const Eigen::MatrixXd& ll = cov_ll_[i] = localCovariance(i);
+      const Eigen::MatrixXd& ss = cov_ss_[i] = sigma2Of(i) * Ainv_of_[i];
       double v = cVariance(ll, ss);
       bool levels_bad = false;
       if (grey_ && !shape_) {
@@ -2071,16 +2085,10 @@ class Refinement {
   };
   ShapeScore shapeScore(size_t i, double variation_z) {
     const Index b = ranges_[i].first, e = ranges_[i].second;
-    const double* st = s_.mesh_state;
-    double last = -1.0, spacing = INFINITY;
-    int switches = 0;
-    for (Index j = b; j + 1 < e; ++j) {
-      if (st[j] == st[j + 1]) continue;
-      const double u = static_cast<double>(j) + fm_.heldSplit(j);
-      if (switches++ > 0) spacing = std::min(spacing, u - last);
-      last = u;
-    }
-    if (switches == 0 || !(res_->omega0 > 0.0)) return {};
+    const std::vector<MeshSwitch> sw = meshSwitches(fm_, b, e);
+    double spacing = INFINITY;
+    for (size_t k = 1; k < sw.size(); ++k) spacing = std::min(spacing, sw[k].at - sw[k - 1].at);
+    if (sw.empty() || !(res_->omega0 > 0.0)) return {};
     const double period = 2.0 * M_PI / (res_->omega0 * s_.dt);  // samples
     const double hw = std::min(0.1 * period, 0.2 * spacing);
     if (!(hw > 0.0)) return {};
@@ -2096,7 +2104,7 @@ class Refinement {
       return t0 * (1.0 - u) * (1.0 - 2.0 * u) + tm * 4.0 * u * (1.0 - u) + t1 * u * (2.0 * u - 1.0);
     };
     Eigen::MatrixXd dc;
-    rampedResponseChange(fm_, b, e, loc_[i], hw, c1 ? mean_t : kNaN, torque, &dc);
+    rampedResponseChange(fm_, b, e, sw, loc_[i], hw, c1 ? mean_t : kNaN, torque, &dc);
     const Index m = sol.cols() - 1;
     Eigen::MatrixXd rows(e - b, 2 + m + (c1 ? 1 : 0));  // e, d, J, (C1)
     rows.col(0) = sol.col(0);
@@ -2287,15 +2295,29 @@ class Refinement {
   }
 
   // Segment i's sensitivities at p (p.m unknowns: the variation test's enlarged problem),
-  // prewhitened (rows x p.m).
+  // prewhitened (rows x p.m). The rows its enlarged evaluation at p kept would do by one pass
+  // fewer, but that fused pass's x86-64-v3 clone contracts FMA: up to 5e-12 relative off these.
   Eigen::MatrixXd whitenedSensitivitiesAt(size_t i, const Params& p) const {
+    switch (p.m) {  // the common sizes (known, greybox square: 3 and 5 unknowns plus C1)
+      case 4:
+        return whitenedSensitivitiesOf<4>(i, p);
+      case 6:
+        return whitenedSensitivitiesOf<6>(i, p);
+      default:
+        return whitenedSensitivitiesOf<0>(i, p);
+    }
+  }
+  // MT: p.m when fixed at compile time (0: p.m).
+  template <int MT>
+  Eigen::MatrixXd whitenedSensitivitiesOf(size_t i, const Params& p) const {
     const Index b = ranges_[i].first, e = ranges_[i].second;
-    Eigen::MatrixXd J(e - b, p.m);
+    const int m = MT > 0 ? MT : p.m;
+    Eigen::MatrixXd J(e - b, m);
     auto visit = [&](Index n, const double* z) {
-      for (int a = 0; a < p.m; ++a) J(n - b, a) = z[2 + 2 * a];
+      for (int a = 0; a < m; ++a) J(n - b, a) = z[2 + 2 * a];
     };
     if (sim_.tableApplies(substeps_)) {
-      sim_.runTable<0>(tableOf(i), p, visit);
+      sim_.runTable<MT>(tableOf(i), p, visit);
     } else {
       sim_.run(b, e, p, substeps_, visit);
     }
@@ -2812,8 +2834,8 @@ class Refinement {
       const Normal& nm = normals_[i];
       const double sigma2 = sigma2Of(i);
       // Covariance of this segment's unknowns [locals, shared], with the torque noise's.
-      const Eigen::MatrixXd cov_ll = localCovariance(i) + tcov_ll_[i];
-      const Eigen::MatrixXd cov_ss = sigma2 * Ainv_of_[i] + tcov_ss_[i];
+      const Eigen::MatrixXd cov_ll = cov_ll_[i] + tcov_ll_[i];
+      const Eigen::MatrixXd cov_ss = cov_ss_[i] + tcov_ss_[i];
       if (std::isfinite(e.torque_noise_std))
         e.C_torque_std = std::sqrt(std::max(cVariance(tcov_ll_[i], tcov_ss_[i]), 0.0));
       int k = 2;
@@ -2985,6 +3007,7 @@ class Refinement {
   std::vector<NoiseModel> noise_of_;
   int iterations_ = 0;
   std::vector<Eigen::MatrixXd> Nll_inv_, Ainv_of_;
+  std::vector<Eigen::MatrixXd> cov_ll_, cov_ss_;  // positiveVariances: locals, shared (no torque)
   double sigma2_pooled_ = 0.0;
   bool all_converged_ = true;
   // Per-segment scratch of solveStep and gaussNewton (sized once).

@@ -18,6 +18,19 @@ bool ownedCode(const std::string& c) {
          c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming;
 }
 
+// Removes the warnings whose code `drop` accepts, keeping the others' order.
+template <class Drop>
+void eraseWarnings(QualityWarnings* w, Drop&& drop) {
+  w->erase(
+      std::remove_if(w->begin(), w->end(), [&](const QualityWarning& q) { return drop(q.code); }),
+      w->end());
+}
+
+// Removes the warnings of `code` (hasCode finds them).
+void eraseCode(QualityWarnings* w, const std::string& code) {
+  eraseWarnings(w, [&](const std::string& c) { return c == code; });
+}
+
 std::string num(double v) {
   std::ostringstream s;
   s.precision(4);
@@ -46,9 +59,7 @@ bool curveShape(const SegmentEstimate& e) { return !e.stiffness_curve.empty(); }
 void flagEstimate(SegmentEstimate* e, bool shared) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
   auto& w = e->warnings;
-  w.erase(
-      std::remove_if(w.begin(), w.end(), [](const QualityWarning& q) { return ownedCode(q.code); }),
-      w.end());
+  eraseWarnings(&w, ownedCode);
   // Below the noise: C not significantly different from zero.
   const double max_rel = 1.0 / L::kSignificanceZ;
   if (std::isfinite(e->C_std) && !(e->C_std <= max_rel * std::abs(e->C))) {
@@ -165,10 +176,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
 // stiffness shape is the gear pair's, so the model is wrong for the whole record).
 void flagPooledShape(IdentificationResult* r) {
   auto& rw = r->warnings;
-  rw.erase(std::remove_if(
-               rw.begin(), rw.end(),
-               [](const QualityWarning& q) { return q.code == quality_code::kShapeMismatch; }),
-           rw.end());
+  eraseCode(&rw, quality_code::kShapeMismatch);
   double sum = 0.0;
   long n = 0;
   for (const auto& e : r->segments) {
@@ -296,10 +304,7 @@ void applyQualityFlags(const IdentificationOptions& /*options*/, IdentificationR
 
 void flagIntegralStandardErrors(const IdentificationOptions& options, IdentificationResult* r) {
   auto& w = r->warnings;
-  w.erase(
-      std::remove_if(w.begin(), w.end(),
-                     [](const QualityWarning& q) { return q.code == quality_code::kIntegralStd; }),
-      w.end());
+  eraseCode(&w, quality_code::kIntegralStd);
   if (r->estimator != "integral") return;
   std::vector<double> rel;
   auto add = [&](const SegmentEstimate& e) {
