@@ -2111,6 +2111,17 @@ class Refinement {
     rows.col(1) = dc.col(0);
     rows.middleCols(2, m) = sol.rightCols(m);
     if (c1) rows.col(2 + m) = dc.col(1);
+    return directionScore(i, rows, true);
+  }
+
+  // The score of a direction d against the residual e (rows = [e, d, J], J the sensitivities of
+  // the unknowns, C the third, and of any extra nuisance column), all prewhitened by segment i's
+  // noise model: with d and e projected off J, z = d'e / (sigma |d|), its variance with the
+  // torque noise's response on d. `fitted`: the shift is C's change, relative to C, of the fit
+  // enlarged by d's coefficient g = d'e / |d|^2 (Frisch-Waugh: the unknowns move by -beta g,
+  // beta = d regressed on J); else that of a full step along d (g = 1), with power |d| / sigma,
+  // z's mean where the data hold that step.
+  ShapeScore directionScore(size_t i, const Eigen::MatrixXd& rows, bool fitted) {
     const Eigen::MatrixXd w = whiten(rows, noise_of_[i]);
     Eigen::MatrixXd J = w.rightCols(w.cols() - 2);
     const double c_norm = J.col(2).norm();  // unknown 2: C
@@ -2127,10 +2138,10 @@ class Refinement {
     if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)  // the torque noise's response on dp
       den = std::sqrt(den * den + torqueProjectedVariance(i, dp, den * den));
     if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
-    // Frisch-Waugh: the enlarged fit's g = d'e / |d|^2 (both projected) moves the unknowns by
-    // -beta g, C by -beta_C g (beta_C back in C's units).
+    const double C = std::abs(loc_[i][2]);
+    if (!fitted) return {dp.dot(ep) / den, -beta[2] / c_norm / C, dp.squaredNorm() / den};
     const double g = dp.dot(ep) / dp.squaredNorm();
-    return {dp.dot(ep) / den, -beta[2] / c_norm * g / std::abs(loc_[i][2])};
+    return {dp.dot(ep) / den, -beta[2] / c_norm * g / C};
   }
 
   // Switch timing (a held stiffness or mesh state without mesh_phase): a switch between samples
@@ -2161,23 +2172,7 @@ class Refinement {
     held_sim.run(b, e, p, substeps_, [&](Index n, const double* z) { rows(n - b, 1) = -z[0]; });
     mid_sim.run(b, e, p, substeps_, [&](Index n, const double* z) { rows(n - b, 1) += z[0]; });
     rows.rightCols(m) = sol.rightCols(m);
-    const Eigen::MatrixXd w = whiten(rows, noise_of_[i]);
-    Eigen::MatrixXd J = w.rightCols(m);
-    const double c_norm = J.col(2).norm();  // unknown 2: C
-    for (Index c = 0; c < J.cols(); ++c) {
-      const double norm = J.col(c).norm();
-      if (norm > 0.0) J.col(c) /= norm;
-    }
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
-    const Eigen::VectorXd beta = qr.solve(w.col(1));
-    const Eigen::VectorXd ep = w.col(0) - J * qr.solve(w.col(0));
-    const Eigen::VectorXd dp = w.col(1) - J * beta;
-    const double dof = static_cast<double>(w.rows() - qr.rank());
-    double den = std::sqrt(ep.squaredNorm() / dof) * dp.norm();
-    if (!torque_sigma_.empty() && torque_sigma_[i] > 0.0)
-      den = std::sqrt(den * den + torqueProjectedVariance(i, dp, den * den));
-    if (!(dof > 0.0 && den > 0.0 && c_norm > 0.0)) return {};
-    return {dp.dot(ep) / den, -beta[2] / c_norm / std::abs(loc_[i][2]), dp.squaredNorm() / den};
+    return directionScore(i, rows, false);
   }
 
   // Shape test of a greybox fourier:H / table:N curve (piecewise model, no STE): a score test

@@ -233,10 +233,7 @@ bool timingJudged(const SegmentEstimate& e) {
 // The run says how many.
 void flagSwitchTiming(IdentificationResult* r) {
   auto& rw = r->warnings;
-  rw.erase(
-      std::remove_if(rw.begin(), rw.end(),
-                     [](const QualityWarning& q) { return q.code == quality_code::kSwitchTiming; }),
-      rw.end());
+  eraseCode(&rw, quality_code::kSwitchTiming);
   double az = 0.0, aa = 0.0;
   for (const auto& e : r->segments) {
     if (!timingJudged(e)) continue;
