@@ -769,7 +769,9 @@ TEST(QualityFlags, SwitchesBetweenSamplesWithoutMeshPhaseAreRightOrFlagged) {
         }
         t.mesh_phase.resize(0);
         const IdentificationResult r = identifyOrFail(t, c, o);
-        if (between) EXPECT_TRUE(gd::hasCode(r.warnings, qc::kSwitchTiming)) << seed;
+        if (between) {
+          EXPECT_TRUE(gd::hasCode(r.warnings, qc::kSwitchTiming)) << seed;
+        }
         for (const auto& s : r.segments) {
           if (!s.identifiable) continue;
           const double z = (s.C - trueC(t, c, s.t_start, s.t_end)) / s.C_std;
