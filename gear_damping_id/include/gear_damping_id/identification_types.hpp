@@ -171,7 +171,7 @@ struct SegmentEstimate {
   double shape_shift = kNaN;  ///< [-]
   /// Without `mesh_phase` (held stiffness or mesh state, piecewise model, refined): the change of
   /// C, relative to C, when every switch of the segment lies half a sample earlier, the mean
-  /// place of a switch that falls anywhere between samples (Refinement::switchTimingShift). The
+  /// place of a switch that falls anywhere between samples (Refinement::switchTiming). The
   /// switches held to the sample where the new value is first seen can bias C by about this.
   double switch_timing_shift = kNaN;  ///< [-]
   /// The data's score for that shift: the response change it makes, projected off the
@@ -179,7 +179,8 @@ struct SegmentEstimate {
   /// switches lie at the samples, E = |d| / sigma when they lie half a sample earlier.
   double switch_timing_z = kNaN;  ///< [-]
   /// That score's expected value when the switches lie half a sample earlier, |d| / sigma: the
-  /// run pools switch_timing_z weighted by it (QualityLimits::kSwitchTimingShare).
+  /// run pools switch_timing_z weighted by it, and a segment's own lateness is z over it
+  /// (QualityLimits::kSwitchTimingShare).
   double switch_timing_power = kNaN;  ///< [-]
   /// C0 of that model, the damping at the segment's mean load [1/s], and its standard error:
   /// then also C and C_std (the time mean of a C(t) linear in the load, constant included).
