@@ -451,6 +451,66 @@ TEST(MorletCwt, BlockedRowsEqualThePaddedRow) {
   EXPECT_FALSE(blocked.configure(y.data(), n, mean, 2.0, 6.0));
 }
 
+// The low band's two ways against FFTW's transform of the whole zero-padded record: a record
+// with an offset, white noise, a low line and a line 1e4 times stronger at 0.3 fs that the
+// decimation aliases onto the band. Bound of the decimation way: its stopband (10^(-200/20) of
+// the aliased bins, the strongest being the line's peak) plus rounding of the FIR's sums and of
+// the gains (a few 1e-13 of each bin); the polyphase way is exact to rounding.
+TEST(MorletCwt, LowBandWaysEqualTheTransformOfTheWholePaddedRecord) {
+  const long n = 200000, N = 352800;  // N = 2^5 3^2 5^2 7^2
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  std::vector<double> y(static_cast<size_t>(n));
+  for (long t = 0; t < n; ++t) {
+    const double tt = static_cast<double>(t);
+    y[size_t(t)] = 3.0 + noise(rng) + 5.0 * std::sin(2.0 * kPi * 0.004 * tt) +
+                   1e4 * std::sin(2.0 * kPi * 0.3 * tt + 0.4);
+  }
+  double mean = 0.0;
+  for (double v : y) mean += v;
+  mean /= static_cast<double>(n);
+  std::vector<double> padded(static_cast<size_t>(N), 0.0);
+  for (long t = 0; t < n; ++t) padded[size_t(t)] = y[size_t(t)] - mean;
+  std::vector<std::complex<double>> ref(static_cast<size_t>(N / 2 + 1));
+  fftw_plan p = fftw_plan_dft_r2c_1d(static_cast<int>(N), padded.data(),
+                                     reinterpret_cast<fftw_complex*>(ref.data()), FFTW_ESTIMATE);
+  ASSERT_NE(p, nullptr);
+  fftw_execute(p);
+  fftw_destroy_plan(p);
+  double peak = 0.0;
+  for (const auto& v : ref) peak = std::max(peak, std::abs(v));
+  const double stopband = std::pow(10.0, -wavelet_detail::LowBand::kStopbandDb / 20.0);
+  // FFT rounding: ~eps log2(N) times the record's 2-norm per bin (a margin of 64).
+  double norm2 = 0.0;
+  for (double v : padded) norm2 += v * v;
+  const double rounding = 64.0 * 2.2e-16 * std::log2(static_cast<double>(N)) * std::sqrt(norm2);
+  wavelet_detail::LowBand low;
+  for (long K : {N / 60, N / 200, 300L, N / 12}) {
+    for (bool exact : {false, true}) {
+      ASSERT_TRUE(low.compute(y.data(), n, mean, N, K, exact)) << K;
+      const long D = low.decimation();
+      if (exact || N / (6 * K) < 3) {
+        EXPECT_EQ(D, 0) << K;
+      } else {
+        EXPECT_GE(D, 3) << K;
+        EXPECT_EQ(N % D, 0) << K;
+      }
+      double worst = 0.0, worst_rel = 0.0;
+      for (long k = 0; k < K; ++k) {
+        const double err = std::abs(low.spectrum()[k] - ref[size_t(k)]);
+        const double bound = (D > 0 ? stopband * peak : 0.0) + rounding;
+        EXPECT_LE(err, bound) << "K " << K << " D " << D << " bin " << k;
+        worst = std::max(worst, err);
+        if (k > 0) worst_rel = std::max(worst_rel, err / std::abs(ref[size_t(k)]));
+      }
+      std::printf(
+          "[ measured ] low band K=%ld D=%ld: worst bin error %.2e (rounding bound %.1e, "
+          "alias bound %.1e), relative %.2e\n",
+          K, D, worst, rounding, stopband * peak, worst_rel);
+    }
+  }
+}
+
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
   MorletCwt cwt;
   std::string error;

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 
+#include "gear_sim/simd_clones.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -139,12 +140,163 @@ const std::complex<double>* DecimatedRows::row(const std::complex<double>* spect
 LowBand::~LowBand() {
   std::lock_guard<std::mutex> lock(fftwPlannerMutex());
   if (plan_) fftw_destroy_plan(plan_);
+  if (dplan_) fftw_destroy_plan(dplan_);
   if (in_) fftw_free(in_);
   if (out_) fftw_free(out_);
+  if (din_) fftw_free(din_);
+  if (dout_) fftw_free(dout_);
 }
 
-bool LowBand::compute(const double* y, long n, double mean, long N, long K) {
+bool LowBand::compute(const double* y, long n, double mean, long N, long K, bool exact) {
   if (K < 1 || K > N / 2 + 1) return false;
+  if (!exact && decimated(y, n, mean, N, K)) return true;
+  D_ = 0;
+  return polyphase(y, n, mean, N, K);
+}
+
+namespace {
+typedef double V4d __attribute__((vector_size(32)));  // a GCC vector: one AVX or two SSE2 registers
+
+// The FIR's outputs out[m] = sum_{q<T} taps[q] buf[mD + q], m < count (T a multiple of 4).
+GEAR_FMA_CLONES void firDots(const double* taps, long T, const double* buf, long D, long count,
+                             double* out) {
+  for (long m = 0; m < count; ++m) {
+    const double* b = buf + m * D;
+    V4d s0 = {0, 0, 0, 0}, s1 = s0;
+    long q = 0;
+    for (; q + 8 <= T; q += 8) {
+      V4d t0, t1, x0, x1;
+      std::memcpy(&t0, taps + q, sizeof(V4d));
+      std::memcpy(&t1, taps + q + 4, sizeof(V4d));
+      std::memcpy(&x0, b + q, sizeof(V4d));
+      std::memcpy(&x1, b + q + 4, sizeof(V4d));
+      s0 += t0 * x0;
+      s1 += t1 * x1;
+    }
+    if (q < T) {
+      V4d t0, x0;
+      std::memcpy(&t0, taps + q, sizeof(V4d));
+      std::memcpy(&x0, b + q, sizeof(V4d));
+      s0 += t0 * x0;
+    }
+    s0 += s1;
+    out[m] = (s0[0] + s0[1]) + (s0[2] + s0[3]);
+  }
+}
+
+// H(w_k) = c_0 + sum_{j=1..H} c_j cos(j w_k) (c_j = 2 h_j, j >= 1) for k < K, w_k = 2 pi k/N, by
+// Clenshaw's recurrence in x = cos(w_k), four bins in lanes.
+GEAR_FMA_CLONES void cosineSums(const double* c, long H, long N, long K, double* out) {
+  const double w = 2.0 * kPi / static_cast<double>(N);
+  for (long k0 = 0; k0 < K; k0 += 4) {
+    V4d x2, x;
+    for (int l = 0; l < 4; ++l) x[l] = std::cos(w * static_cast<double>(k0 + l));
+    x2 = x + x;
+    V4d b1 = {0, 0, 0, 0}, b2 = b1;
+    for (long j = H; j >= 1; --j) {
+      const V4d b = c[j] + x2 * b1 - b2;
+      b2 = b1;
+      b1 = b;
+    }
+    const V4d sum = c[0] + x * b1 - b2;
+    for (int l = 0; l < 4 && k0 + l < K; ++l) out[k0 + l] = sum[l];
+  }
+}
+}  // namespace
+
+// The decimation way's factor, filter, gains and transform for (n, N, K), kept between calls.
+bool LowBand::designDecimation(long n, long N, long K) {
+  if (dplan_ && N == dN_ && K == dK_ && n == dn_) return true;
+  long D = 0;
+  for (long d = std::min(kMaxDecimation, N / (6 * K)); d >= 3 && D == 0; --d) {
+    if (N % d == 0) D = d;
+  }
+  if (D == 0) return false;
+  // Kaiser's rules: transition width delta (the passband edge w_{K-1} to the stopband edge
+  // 2 pi/D - w_{K-1}), length (A - 8)/(2.285 delta) + 1, beta = 0.1102 (A - 8.7).
+  const double w_p = 2.0 * kPi * static_cast<double>(K - 1) / static_cast<double>(N);
+  const double delta = 2.0 * kPi / static_cast<double>(D) - 2.0 * w_p;
+  const long H = static_cast<long>(std::ceil((kStopbandDb - 8.0) / (2.285 * delta) / 2.0)) + 1;
+  const long Nd = N / D, m_lo = -(H / D), m_hi = (n - 1 + H) / D;
+  if (m_hi - m_lo + 1 > Nd) return false;
+  const double beta = 0.1102 * (kStopbandDb - 8.7), i0 = std::cyl_bessel_i(0.0, beta);
+  std::vector<double> h(static_cast<size_t>(H + 1)), c(static_cast<size_t>(H + 1));
+  for (long j = 0; j <= H; ++j) {
+    const double r = static_cast<double>(j) / static_cast<double>(H);
+    const double win = std::cyl_bessel_i(0.0, beta * std::sqrt(std::max(0.0, 1.0 - r * r))) / i0;
+    const double x = kPi * static_cast<double>(j) / static_cast<double>(D);
+    h[static_cast<size_t>(j)] =
+        (j == 0 ? 1.0 / static_cast<double>(D) : std::sin(x) / (kPi * static_cast<double>(j))) *
+        win;
+    c[static_cast<size_t>(j)] = (j == 0 ? 1.0 : 2.0) * h[static_cast<size_t>(j)];
+  }
+  const long T = (2 * H + 1 + 3) / 4 * 4;
+  taps_.assign(static_cast<size_t>(T), 0.0);
+  for (long q = 0; q <= 2 * H; ++q)
+    taps_[static_cast<size_t>(q)] = h[static_cast<size_t>(std::labs(q - H))];
+  gain_.resize(static_cast<size_t>(K + 3));
+  cosineSums(c.data(), H, N, K, gain_.data());
+  for (long k = 0; k < K; ++k)
+    gain_[static_cast<size_t>(k)] = static_cast<double>(D) / gain_[static_cast<size_t>(k)];
+  buf_.resize(static_cast<size_t>(kFirBlock * D + T));
+  {
+    std::lock_guard<std::mutex> lock(fftwPlannerMutex());
+    if (dplan_) fftw_destroy_plan(dplan_);
+    if (din_) fftw_free(din_);
+    if (dout_) fftw_free(dout_);
+    dplan_ = nullptr;
+    dN_ = 0;
+    din_ = fftw_alloc_real(static_cast<size_t>(Nd));
+    dout_ = fftw_alloc_complex(static_cast<size_t>(Nd / 2 + 1));
+    if (!din_ || !dout_) return false;
+    dplan_ = fftw_plan_dft_r2c_1d(static_cast<int>(Nd), din_, dout_, FFTW_ESTIMATE);
+    if (!dplan_) return false;
+  }
+  D_ = D, H_ = H, dN_ = N, dK_ = K, dn_ = n;
+  return true;
+}
+
+// Outputs m0..m1-1 of the FIR (z_m = sum_j h_j x_{mD-j}, x = y - mean on [0, n), zero outside)
+// into din_ (m < 0 at dN_/D_ + m).
+void LowBand::filterBlock(const double* y, long n, double mean, long m0, long m1) {
+  const long T = static_cast<long>(taps_.size()), t0 = m0 * D_ - H_;
+  const long len = (m1 - 1 - m0) * D_ + T;
+  double* b = buf_.data();
+  for (long i = 0; i < len; ++i) {
+    const long t = t0 + i;
+    b[i] = t >= 0 && t < n ? y[t] - mean : 0.0;
+  }
+  const long Nd = dN_ / D_;
+  if (m0 >= 0) {
+    firDots(taps_.data(), T, b, D_, m1 - m0, din_ + m0);
+  } else {
+    double out[kFirBlock];
+    firDots(taps_.data(), T, b, D_, m1 - m0, out);
+    for (long m = m0; m < m1; ++m) din_[m < 0 ? Nd + m : m] = out[m - m0];
+  }
+}
+
+bool LowBand::decimated(const double* y, long n, double mean, long N, long K) {
+  if (!designDecimation(n, N, K)) return false;
+  const long Nd = N / D_, m_lo = -(H_ / D_), m_hi = (n - 1 + H_) / D_;
+  if (m_hi + 1 < Nd + m_lo) {
+    std::memset(din_ + m_hi + 1, 0, sizeof(double) * static_cast<size_t>(Nd + m_lo - m_hi - 1));
+  }
+  // Blocks never straddle m = 0 except the first, which filterBlock stores in two parts.
+  for (long m0 = m_lo; m0 <= m_hi; m0 += kFirBlock) {
+    filterBlock(y, n, mean, m0, std::min(m_hi + 1, m0 + kFirBlock));
+  }
+  fftw_execute(dplan_);
+  Y_.resize(static_cast<size_t>(K));
+  const double* z = reinterpret_cast<const double*>(dout_);
+  for (long k = 0; k < K; ++k) {
+    const double g = gain_[static_cast<size_t>(k)];
+    Y_[static_cast<size_t>(k)] = std::complex<double>(g * z[2 * k], g * z[2 * k + 1]);
+  }
+  return true;
+}
+
+bool LowBand::polyphase(const double* y, long n, double mean, long N, long K) {
   // The divisor of N in [2K, 3K] with the most factors of 2 (FFTW's cheapest per point here:
   // 28 instructions per point at 70560 = 2^5 3^2 5 7^2 against 33 at 63000 = 2^3 3^2 5^3 7),
   // else the smallest divisor >= 2K.

@@ -116,7 +116,20 @@ class BlockedRow {
 
 // Per-mode path: the first K bins Y_0..Y_{K-1} of the length-N r2c DFT of the mean-removed
 // record zero-padded to N (the grid's padding), for the low rows whose 8-scale padding exceeds
-// the shared transform's (docs/wavelet.md "Speed"). With the record's R = N/M polyphase
+// the shared transform's (docs/wavelet.md "Speed"). Two ways, the first where it applies:
+//
+// Decimation (D >= 3 a divisor of N with 6 D K <= N): the record through a linear-phase
+// lowpass FIR h (Kaiser-windowed sinc, cutoff pi/D, stopband attenuation kStopbandDb, centred:
+// zero phase), kept at every D-th sample (z_m = sum_j h_j x_{mD-j}, m < 0 wrapped to the end of
+// its length-N/D buffer), and one r2c DFT of length N/D:
+//   Z_k = (1/D) sum_{r<D} H(w_k - 2 pi r/D) X(w_k - 2 pi r/D),  w_k = 2 pi k/N,
+// so Y_k = X(w_k) = D Z_k / H(w_k) up to the aliases r != 0, which lie in the stopband (the
+// passband edge w_{K-1} <= 2 pi/(6D), the stopband from 2 pi/D - w_{K-1}): their share is below
+// 10^(-kStopbandDb/20) of the aliased bins' amplitude. H(w_k) is real (the taps are symmetric),
+// evaluated per bin by Clenshaw's recurrence. About 20 multiply-adds per sample and one
+// transform of N/D points instead of transforms of N points in all.
+//
+// Polyphase (otherwise; exact to rounding). With the record's R = N/M polyphase
 // components x_v[a] = y[aR + v] (a = 0..M-1, zero beyond the record),
 //   Y_k = sum_{v<R} e^{-2 pi i k v/N} X_v[k],  X_v the length-M r2c DFT of x_v (k <= M/2):
 // R transforms of length M (in cache) and K*R products instead of one memory-bound transform of
@@ -131,14 +144,32 @@ class LowBand {
   ~LowBand();
 
   // Y_0..Y_{K-1} of y[0..n) - mean zero-padded to N (K <= N/2 + 1). False when FFTW cannot plan
-  // or no memory.
-  bool compute(const double* y, long n, double mean, long N, long K);
+  // or no memory. `exact`: the polyphase way always (tests compare the two).
+  bool compute(const double* y, long n, double mean, long N, long K, bool exact = false);
   const std::complex<double>* spectrum() const { return Y_.data(); }
+  // The decimation factor of the last compute (0: the polyphase way).
+  long decimation() const { return D_; }
+
+  static constexpr double kStopbandDb = 200.0;
 
  private:
   static constexpr long kChunk = 8;  // components per batch of transforms
   static constexpr long kTwiddleBlock = 64;
+  static constexpr long kMaxDecimation = 64;
+  static constexpr long kFirBlock = 2048;  // outputs per block of the FIR
+  bool polyphase(const double* y, long n, double mean, long N, long K);
   void accumulate(long v0, long c, long K, long N);
+  // The decimation way: false (nothing changed) when no factor applies.
+  bool decimated(const double* y, long n, double mean, long N, long K);
+  bool designDecimation(long n, long N, long K);
+  void filterBlock(const double* y, long n, double mean, long m0, long m1);
+  // Decimation: D_, the half length H_ (taps -H_..H_, stored from -H_ and zero-padded to a
+  // multiple of 4), the per-bin gains D/H(w_k) and the length-N/D transform.
+  long D_ = 0, H_ = 0, dN_ = 0, dn_ = 0, dK_ = 0;
+  std::vector<double> taps_, gain_, buf_;
+  fftw_plan dplan_ = nullptr;
+  double* din_ = nullptr;
+  fftw_complex* dout_ = nullptr;
   fftw_plan plan_ = nullptr;
   long M_ = 0, R_ = 0, N_ = 0, K_ = 0;  // K_, N_: the last call's (M_ chosen for them)
   double* in_ = nullptr;                // kChunk components of M samples
