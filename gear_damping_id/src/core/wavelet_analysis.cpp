@@ -900,25 +900,38 @@ bool lowBandSpectra(Analysis* a) {
 // Shared mode: the record's one transform (padded by n/kSharedPadDivisor) gives the PSD, the
 // white-noise estimate, the rows' power within its padding and, in fitModes, the fit rows and
 // the noise row; the low band gives the low rows' power. On several threads the low band runs on
-// a thread of its own while this one transforms the record and computes the PSD, its median, the
-// noise row's level and the binned sums (about the low band's work: the two threads balance).
+// a thread of its own while this one transforms the record; that thread then computes the noise
+// row's level (it reads the transform and writes the first RowScratch only) while this one
+// computes the PSD and its median. The promise is kept on every path (else the helper would wait
+// for ever): `loaded` says whether the transform is there.
 Status sharedSpectra(Analysis* a) {
   const long pad = a->n / kSharedPadDivisor;
   const std::vector<double> f_pad = {paddingFrequency(a->fs, a->opt.omega0, pad)};
   const bool threads = a->opt.threads >= 2;
+  std::promise<bool> loaded;
+  std::shared_future<bool> ready = loaded.get_future().share();
   std::future<bool> low;
-  if (threads) low = gear_sim::startAsync([a] { return lowBandSpectra(a); });
-  Status s;
-  if (!sameConfiguration(a->scal, a->n, a->fs, f_pad, {a->opt.omega0}))
-    s = a->scal.configure(a->n, a->fs, f_pad, a->opt.omega0, FftPlanning::Estimate);
-  if (s.ok()) s = a->scal.setCheckedSignal(a->y, a->mean);
-  if (s.ok()) {
-    psdAndNoise(a);
-    if (threads) {
-      a->ahead_hf = highFrequencyLevel(*a, &a->scal, a->rows.front().get());
-      a->hf_ahead = true;
-    }
+  if (threads) {
+    low = gear_sim::startAsync([a, ready] {
+      const bool ok = lowBandSpectra(a);
+      if (ready.get()) {
+        a->ahead_hf = highFrequencyLevel(*a, &a->scal, a->rows.front().get());
+        a->hf_ahead = true;
+      }
+      return ok;
+    });
   }
+  Status s;
+  try {
+    if (!sameConfiguration(a->scal, a->n, a->fs, f_pad, {a->opt.omega0}))
+      s = a->scal.configure(a->n, a->fs, f_pad, a->opt.omega0, FftPlanning::Estimate);
+    if (s.ok()) s = a->scal.setCheckedSignal(a->y, a->mean);
+  } catch (...) {
+    loaded.set_value(false);
+    throw;
+  }
+  loaded.set_value(s.ok());
+  if (s.ok()) psdAndNoise(a);
   const bool low_ok = threads ? low.get() : s.ok() && lowBandSpectra(a);
   if (!s.ok()) return s;
   if (!low_ok) return Status::resourceLimit("analyzeWavelet: the low rows' spectrum failed");
