@@ -509,6 +509,13 @@ TEST(MorletCwt, LowBandWaysEqualTheTransformOfTheWholePaddedRecord) {
           K, D, worst, rounding, stopband * peak, worst_rel);
     }
   }
+  // A record filling the padding: the filter's outputs (n + 2H samples / D) no longer fit in
+  // N/D, so the polyphase way answers.
+  const long n_full = N - 4;
+  std::vector<double> y_full(static_cast<size_t>(n_full), 0.0);
+  for (long t = 0; t < n_full; ++t) y_full[size_t(t)] = y[size_t(t % n)];
+  ASSERT_TRUE(low.compute(y_full.data(), n_full, mean, N, 300));
+  EXPECT_EQ(low.decimation(), 0);
 }
 
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
