@@ -97,6 +97,13 @@ double noiseStdFor(const std::vector<double>& clean, double snr_db) {
 
 double relErr(double value, double truth) { return std::abs(value / truth - 1.0); }
 
+// The record's mean, summed in index order (as MorletCwt::setSignal takes it).
+double meanOf(const std::vector<double>& y) {
+  double mean = 0.0;
+  for (double v : y) mean += v;
+  return mean / static_cast<double>(y.size());
+}
+
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
@@ -174,9 +181,7 @@ std::complex<double> analyticMorlet(double u, double omega0) {
 std::vector<std::complex<double>> directCwt(const std::vector<double>& y, double fs, double f,
                                             double omega0) {
   const long n = static_cast<long>(y.size());
-  double mean = 0.0;
-  for (double v : y) mean += v;
-  mean /= static_cast<double>(n);
+  const double mean = meanOf(y);
   const double s = omega0 / (2.0 * kPi * f) * fs;  // scale [samples]
   std::vector<std::complex<double>> kernel(static_cast<size_t>(2 * n - 1));
   for (long d = -(n - 1); d <= n - 1; ++d) {  // conj(psi_a(d/s)) / s
@@ -422,9 +427,7 @@ TEST(MorletCwt, BlockedRowsEqualThePaddedRow) {
   MorletCwt cwt;
   ASSERT_NO_FATAL_FAILURE(loadToneBursts(&cwt, n, fs));
   const std::vector<double> y = toneBursts(n, fs, true);
-  double mean = 0.0;
-  for (double v : y) mean += v;
-  mean /= static_cast<double>(n);
+  const double mean = meanOf(y);
   wavelet_detail::BlockedRow blocked;
   double worst = 0.0;
   for (double s_fs : {4.7, 5.0, 12.0, 31.0}) {
@@ -466,9 +469,7 @@ TEST(MorletCwt, LowBandWaysEqualTheTransformOfTheWholePaddedRecord) {
     y[size_t(t)] = 3.0 + noise(rng) + 5.0 * std::sin(2.0 * kPi * 0.004 * tt) +
                    1e4 * std::sin(2.0 * kPi * 0.3 * tt + 0.4);
   }
-  double mean = 0.0;
-  for (double v : y) mean += v;
-  mean /= static_cast<double>(n);
+  const double mean = meanOf(y);
   std::vector<double> padded(static_cast<size_t>(N), 0.0);
   for (long t = 0; t < n; ++t) padded[size_t(t)] = y[size_t(t)] - mean;
   std::vector<std::complex<double>> ref(static_cast<size_t>(N / 2 + 1));
