@@ -7,6 +7,13 @@ target_include_directories(gear_damping_id_core PUBLIC ${CMAKE_CURRENT_SOURCE_DI
 target_link_libraries(gear_damping_id_core PUBLIC gear_sim_core Eigen3::Eigen PkgConfig::FFTW3
                       PkgConfig::FFTW3F)
 target_compile_options(gear_damping_id_core PRIVATE ${GEAR_WARNINGS})
+# glibc's vector math library (libmvec: the wavelet fits' log and atan2 four at a time on AVX2
+# processors, src/core/vector_math.cpp); without it the fits take libm's scalar functions.
+find_library(GEAR_LIBMVEC NAMES mvec libmvec.so.1)
+if(GEAR_LIBMVEC AND CMAKE_SYSTEM_PROCESSOR MATCHES "x86_64|AMD64")
+  target_link_libraries(gear_damping_id_core PRIVATE ${GEAR_LIBMVEC})
+  target_compile_definitions(gear_damping_id_core PRIVATE GEAR_HAVE_LIBMVEC)
+endif()
 
 # Analysis outputs (JSON, tables, CSV): no ROS either, shared by the tools and the tests.
 file(GLOB GEAR_ID_IO_SOURCES CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/gear_damping_id/src/io/*.cpp)

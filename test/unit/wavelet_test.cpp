@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <random>
 #include <sstream>
 #include <string>
@@ -17,6 +18,8 @@
 #include <vector>
 
 #include "../../gear_damping_id/src/core/decimated_row.hpp"
+#include "../../gear_damping_id/src/core/halved_forward.hpp"
+#include "../../gear_damping_id/src/core/vector_math.hpp"
 #include "per_mode_agreement.hpp"
 #include "scratch_dir.hpp"
 #include "status_support.hpp"
@@ -517,6 +520,92 @@ TEST(MorletCwt, LowBandWaysEqualTheTransformOfTheWholePaddedRecord) {
   for (long t = 0; t < n_full; ++t) y_full[size_t(t)] = y[size_t(t % n)];
   ASSERT_TRUE(low.compute(y_full.data(), n_full, mean, N, 300));
   EXPECT_EQ(low.decimation(), 0);
+  // FFTW_MEASURE planning overwrites the arrays it plans on: the polyphase way's rows that stay
+  // zero are zeroed after planning, so both ways still give the transform.
+  for (bool exact : {true, false}) {
+    wavelet_detail::LowBand measured;
+    measured.setPlanning(FftPlanning::Measure);
+    ASSERT_TRUE(measured.compute(y.data(), n, mean, N, N / 200, exact));
+    const double alias = measured.decimation() > 0 ? stopband * peak : 0.0;
+    for (long k = 0; k < N / 200; ++k)
+      ASSERT_LE(std::abs(measured.spectrum()[k] - ref[size_t(k)]), alias + rounding)
+          << "measured planning, exact " << exact << ", bin " << k;
+  }
+}
+
+// The record's transform in two halves (even and odd samples) and one joining pass equals
+// FFTW's transform of the whole zero-padded record to its rounding, for records shorter than,
+// one sample shorter than and as long as the padded length, either planning; odd or tiny
+// lengths are refused (the caller then takes the whole transform).
+TEST(MorletCwt, HalvedForwardEqualsTheTransformOfTheWholePaddedRecord) {
+  const long N = 352800;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  std::vector<double> y(static_cast<size_t>(N));
+  for (long t = 0; t < N; ++t)
+    y[size_t(t)] = 2.0 + noise(rng) + 1e3 * std::sin(2.0 * kPi * 0.21 * static_cast<double>(t));
+  for (const FftPlanning planning : {FftPlanning::Estimate, FftPlanning::Measure}) {
+    wavelet_detail::HalvedForward halves;
+    ASSERT_TRUE(halves.configure(N, planning));
+    for (const long n : {200000L, 200001L, N - 1, N}) {
+      std::vector<double> rec(y.begin(), y.begin() + n);
+      const double mean = meanOf(rec);
+      std::vector<double> padded(static_cast<size_t>(N), 0.0);
+      for (long t = 0; t < n; ++t) padded[size_t(t)] = rec[size_t(t)] - mean;
+      std::vector<std::complex<double>> ref(static_cast<size_t>(N / 2 + 1)), got(ref.size());
+      fftw_plan p =
+          fftw_plan_dft_r2c_1d(static_cast<int>(N), padded.data(),
+                               reinterpret_cast<fftw_complex*>(ref.data()), FFTW_ESTIMATE);
+      ASSERT_NE(p, nullptr);
+      fftw_execute(p);
+      fftw_destroy_plan(p);
+      halves.transformHalf(1, rec.data(), n, mean);
+      halves.transformHalf(0, rec.data(), n, mean);
+      halves.join(got.data());
+      // Both are FFTs of the same record: each within ~eps log2(N) of the record's 2-norm per
+      // bin of the exact transform (a margin of 64, as for the low band).
+      double norm2 = 0.0, worst = 0.0;
+      for (double v : padded) norm2 += v * v;
+      const double rounding = 64.0 * 2.2e-16 * std::log2(static_cast<double>(N)) * std::sqrt(norm2);
+      for (size_t k = 0; k < ref.size(); ++k) worst = std::max(worst, std::abs(got[k] - ref[k]));
+      EXPECT_LE(worst, rounding) << "n " << n;
+      EXPECT_EQ(got[0].imag(), 0.0);
+      EXPECT_EQ(got.back().imag(), 0.0);
+      std::printf(
+          "[ measured ] halved transform, n %ld of N %ld: worst bin error %.2e (bound %.1e, "
+          "largest bin %.1e)\n",
+          n, N, worst, rounding, std::abs(ref[size_t(std::lround(0.21 * N))]));
+    }
+  }
+  wavelet_detail::HalvedForward odd;
+  EXPECT_FALSE(odd.configure(N + 1));
+  EXPECT_FALSE(odd.configure(2));
+  EXPECT_EQ(odd.size(), 0);
+}
+
+// MorletCwt::checkedMean names the first sample that is not finite, wherever it lies in the
+// partial sums, and gives a finite mean of finite samples whose plain sum overflows.
+TEST(MorletCwt, CheckedMeanNamesTheFirstBadSampleAndSurvivesAnOverflowingSum) {
+  std::vector<double> y(1001, 1.0);
+  double mean = 0.0;
+  ASSERT_TRUE(MorletCwt::checkedMean(y.data(), 1001, &mean).ok());
+  EXPECT_EQ(mean, 1.0);
+  for (const long bad : {0L, 5L, 997L, 1000L}) {
+    std::vector<double> z = y;
+    z[size_t(bad)] = std::numeric_limits<double>::quiet_NaN();
+    if (bad == 5) z[900] = std::numeric_limits<double>::infinity();
+    const gear_sim::Status s = MorletCwt::checkedMean(z.data(), 1001, &mean, "probe");
+    EXPECT_EQ(s.code(), gear_sim::StatusCode::InvalidInput);
+    EXPECT_NE(s.message().find("probe: sample " + std::to_string(bad) + " is not finite"),
+              std::string::npos)
+        << s.message();
+  }
+  std::vector<double> huge(1000, 1.5e308);
+  huge[3] = -1e308;
+  ASSERT_TRUE(MorletCwt::checkedMean(huge.data(), 1000, &mean).ok());
+  const double expected = (999.0 * 1.5e308 / 1000.0) + (-1e308 / 1000.0);
+  EXPECT_TRUE(std::isfinite(mean));
+  EXPECT_NEAR(mean, expected, 1e-12 * expected);
 }
 
 TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
@@ -552,6 +641,43 @@ TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
   EXPECT_EQ(cwt.row(1), nullptr);
   EXPECT_EQ(cwt.rowAt(2.0, 6.0), nullptr) << "a 2 Hz wavelet is wider than the padding";
   EXPECT_EQ(cwt.rowAt(600.0, 6.0), nullptr) << "above Nyquist";
+}
+
+// The fits' logarithm and phase, four at a time where libmvec and AVX2 are there, agree with
+// libm's one at a time (libmvec: within 4 ulp), including the clamp of a point below the floor,
+// zeros, NaN and a length that is not a multiple of four.
+TEST(WaveletHelpers, VectorLogAndPhaseAgreeWithLibm) {
+  const long n = 1003;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<std::complex<double>> w(static_cast<size_t>(n));
+  std::vector<double> env(static_cast<size_t>(n)), ly(env.size()), arg(env.size());
+  for (long i = 0; i < n; ++i) {
+    const double scale = std::pow(10.0, 40.0 * u(rng));
+    w[size_t(i)] = {scale * u(rng), scale * u(rng)};
+    env[size_t(i)] = std::abs(w[size_t(i)]);
+  }
+  w[7] = {0.0, 0.0}, env[7] = 0.0;
+  w[8] = {-1.0, 0.0}, env[8] = 1.0;
+  w[9] = {-1.0, -0.0}, env[9] = 1.0;
+  env[1001] = std::numeric_limits<double>::quiet_NaN();
+  const double floor2 = 1e-30;
+  wavelet_detail::logEnvelopeAndPhase(env.data(), w.data(), n, floor2, ly.data(), arg.data());
+  for (long i = 0; i < n; ++i) {
+    const double e = env[size_t(i)];
+    const double ly_ref = 0.5 * std::log(std::max(e * e - floor2, 1e-300));
+    const double arg_ref = std::arg(w[size_t(i)]);
+    if (std::isnan(ly_ref)) {
+      EXPECT_TRUE(std::isnan(ly[size_t(i)])) << i;
+    } else {
+      EXPECT_NEAR(ly[size_t(i)], ly_ref, 8.9e-16 * std::max(1.0, std::abs(ly_ref))) << i;
+    }
+    EXPECT_NEAR(arg[size_t(i)], arg_ref, 8.9e-16 * std::max(1.0, std::abs(arg_ref))) << i;
+  }
+  EXPECT_GT(arg[8], 3.14);  // the sign of a zero imaginary part picks the side of the cut
+  EXPECT_LT(arg[9], -3.14);
+  std::printf("[ measured ] vector log and atan2 on this machine: %s\n",
+              wavelet_detail::vectorMathAvailable() ? "libmvec (AVX2)" : "libm");
 }
 
 TEST(WaveletHelpers, FollowTheDocumentedConventions) {
@@ -1042,6 +1168,47 @@ TEST(WaveletAnalyzer, PerModePathOnSeveralThreadsGivesTheOneThreadResult) {
       const std::string what = std::to_string(threads) + " threads, case " + std::to_string(c);
       expectIdentical(serial, fresh, what);
       expectIdentical(serial, reused, what + ", reused");
+    }
+  }
+}
+
+// Shared mode (a long record): on several threads the record's transform is taken in two halves
+// at once, then a helper computes the low band and the rows' power while the calling thread
+// computes the PSD and the noise row; the one-thread result in every bit, with either planning
+// (FFTW_MEASURE's plans are FFTW's wisdom for their size once made, so every thread's row
+// transforms take the same algorithm).
+TEST(WaveletAnalyzer, SharedModeOnSeveralThreadsGivesTheOneThreadResult) {
+  const std::vector<Mode> modes = {
+      {6000.0, 1.5e-4, 1.0, 0.1}, {16000.0, 1e-4, 0.5, 1.0}, {38000.0, 5e-5, 0.3, 2.0}};
+  constexpr double kFs = 200000.0;
+  std::string error;
+  for (const FftPlanning planning : {FftPlanning::Estimate, FftPlanning::Measure}) {
+    // An odd length too (Measure planning of a length takes seconds: one length for it).
+    for (const long n : planning == FftPlanning::Measure ? std::vector<long>{200000}
+                                                         : std::vector<long>{200000, 200001}) {
+      const std::vector<double> y =
+          freeDecay(modes, kFs, n, 30.0, static_cast<unsigned>(3 + n % 97));
+      WaveletOptions opt = perModeOptions();
+      opt.fft_planning = planning;
+      WaveletResult full, serial;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kFs, WaveletOptions{}, &full), &error)) << error;
+      ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kFs, opt, &serial), &error)) << error;
+      ASSERT_LT(serial.spectrum_power.size(), full.spectrum_power.size()) << "not the shared mode";
+      EXPECT_EQ(serial.modes.size(), 3u) << n;
+      WaveletAnalyzer analyzer;
+      for (const int threads : {2, 3}) {
+        opt.threads = threads;
+        WaveletResult fresh, reused;
+        ASSERT_TRUE(gear_test::ok(analyzeWavelet(y, kFs, opt, &fresh), &error)) << error;
+        for (int call = 0; call < 2; ++call)
+          ASSERT_TRUE(gear_test::ok(
+              analyzer.analyze(y.data(), static_cast<long>(y.size()), kFs, opt, &reused), &error))
+              << error;
+        const std::string what = std::to_string(threads) + " threads, n " + std::to_string(n) +
+                                 (planning == FftPlanning::Measure ? ", measured plans" : "");
+        expectIdentical(serial, fresh, what);
+        expectIdentical(serial, reused, what + ", reused");
+      }
     }
   }
 }

@@ -130,13 +130,20 @@ class MorletCwt {
   /// Loads a signal of size() samples: removes its mean and computes its FFT. InvalidInput naming
   /// the first non-finite sample's index if y has a NaN/Inf; Internal if not configured.
   gear_sim::Status setSignal(const double* y);
-  /// setSignal for a caller that has checked every sample finite and summed them in index
-  /// order (mean = that sum / size(), as setSignal computes it): the same spectrum without a
+  /// setSignal for a caller that has checked every sample finite and computed their mean as
+  /// checkedMean does (as setSignal computes it): the same spectrum without a
   /// second pass over the samples. Internal if not configured.
   gear_sim::Status setCheckedSignal(const double* y, double mean);
+  /// setCheckedSignal for a caller that computes the spectrum itself: fill(Y) writes bins
+  /// 0..paddedSize()/2 of the r2c transform of the samples minus `mean`, zero-padded to
+  /// paddedSize() (what setCheckedSignal's FFT would give, to rounding; the per-mode path's
+  /// transform in two halves). Internal if not configured.
+  gear_sim::Status setCheckedSpectrum(double mean,
+                                      const std::function<void(std::complex<double>*)>& fill);
   /// setSignal's check of n samples: all finite (InvalidInput "<who>: sample j is not finite
-  /// (v)" naming the first that is not; Internal if y is null) and their mean, summed in index
-  /// order. The mean setCheckedSignal expects.
+  /// (v)" naming the first that is not; Internal if y is null) and their mean: sample j goes to
+  /// partial sum j mod 8, and the eight are added in a fixed order. The mean setCheckedSignal
+  /// expects.
   static gear_sim::Status checkedMean(const double* y, long n, double* mean,
                                       const char* who = "MorletCwt");
 

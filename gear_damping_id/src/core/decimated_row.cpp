@@ -20,6 +20,11 @@ std::mutex& fftwPlannerMutex() {
   return m;
 }
 
+unsigned fftwFlags(FftPlanning planning) {
+  fftw_set_timelimit(planning == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
+  return planning == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE;
+}
+
 void adviseHugePages(void* p, size_t bytes) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
   constexpr uintptr_t kPage = 4096, kHuge = uintptr_t(1) << 21;
@@ -89,7 +94,7 @@ const std::complex<double>* DecimatedRows::row(const std::complex<double>* spect
   fftw_plan& plan = plans_[L];
   if (!plan) {
     std::lock_guard<std::mutex> lock(fftwPlannerMutex());
-    plan = fftw_plan_dft_1d(static_cast<int>(L), in_, out_, FFTW_BACKWARD, FFTW_ESTIMATE);
+    plan = fftw_plan_dft_1d(static_cast<int>(L), in_, out_, FFTW_BACKWARD, fftwFlags(planning_));
     if (!plan) {
       plans_.erase(L);
       return nullptr;
@@ -249,7 +254,7 @@ bool LowBand::designDecimation(long n, long N, long K) {
     din_ = fftw_alloc_real(static_cast<size_t>(Nd));
     dout_ = fftw_alloc_complex(static_cast<size_t>(Nd / 2 + 1));
     if (!din_ || !dout_) return false;
-    dplan_ = fftw_plan_dft_r2c_1d(static_cast<int>(Nd), din_, dout_, FFTW_ESTIMATE);
+    dplan_ = fftw_plan_dft_r2c_1d(static_cast<int>(Nd), din_, dout_, fftwFlags(planning_));
     if (!dplan_) return false;
   }
   D_ = D, H_ = H, dN_ = N, dK_ = K, dn_ = n;
@@ -323,13 +328,14 @@ bool LowBand::polyphase(const double* y, long n, double mean, long N, long K) {
     in_ = fftw_alloc_real(static_cast<size_t>(kChunk * M));
     out_ = fftw_alloc_complex(static_cast<size_t>(kChunk * bins));
     if (!in_ || !out_) return false;
-    // Rows a >= ceil(n/R) stay zero: only rows below are written (per chunk), and the r2c is
-    // out of place (FFTW preserves its input).
-    std::memset(in_, 0, sizeof(double) * static_cast<size_t>(kChunk * M));
     const int m = static_cast<int>(M);
     plan_ = fftw_plan_many_dft_r2c(1, &m, static_cast<int>(kChunk), in_, nullptr, 1, m, out_,
-                                   nullptr, 1, static_cast<int>(bins), FFTW_ESTIMATE);
+                                   nullptr, 1, static_cast<int>(bins), fftwFlags(planning_));
     if (!plan_) return false;
+    // Rows a >= ceil(n/R) stay zero: only rows below are written (per chunk), and the r2c is
+    // out of place (FFTW preserves its input). Zeroed after planning: FFTW_MEASURE planning
+    // overwrites the arrays.
+    std::memset(in_, 0, sizeof(double) * static_cast<size_t>(kChunk * M));
     M_ = M;
     R_ = R;
   }
@@ -412,9 +418,11 @@ bool BlockedRow::configure(const double* y, long n, double mean, double s_sample
   Plans& p = plans_[L];
   if (!p.r2c || !p.c2c) {
     std::lock_guard<std::mutex> lock(fftwPlannerMutex());
-    if (!p.r2c) p.r2c = fftw_plan_dft_r2c_1d(static_cast<int>(L), seg_, spec_, FFTW_ESTIMATE);
+    if (!p.r2c)
+      p.r2c = fftw_plan_dft_r2c_1d(static_cast<int>(L), seg_, spec_, fftwFlags(planning_));
     if (!p.c2c)
-      p.c2c = fftw_plan_dft_1d(static_cast<int>(L), band_, out_, FFTW_BACKWARD, FFTW_ESTIMATE);
+      p.c2c =
+          fftw_plan_dft_1d(static_cast<int>(L), band_, out_, FFTW_BACKWARD, fftwFlags(planning_));
     if (!p.r2c || !p.c2c) return false;
   }
   if (n > w_cap_) {

@@ -11,11 +11,22 @@
 #include <mutex>
 #include <vector>
 
+#include "gear_damping_id/morlet_cwt.hpp"
+
 namespace gear_damping_id {
 namespace wavelet_detail {
 
 // The mutex that serialises FFTW planning (and plan destruction) for every wavelet object.
 std::mutex& fftwPlannerMutex();
+
+// FFTW_MEASURE planning cap per plan [s] (an unlimited FFTW_MEASURE search for N = 1764000 =
+// 2^5 3^2 5^3 7^2 takes > 5 minutes on the reference machine; capped at 5 s its plan is within
+// 7 % of the estimate's speed or better).
+constexpr double kMeasureTimeLimitS = 5.0;
+
+// FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
+// so call it with fftwPlannerMutex() held: Measure planning is capped at kMeasureTimeLimitS.
+unsigned fftwFlags(FftPlanning planning);
 
 // Asks the kernel for transparent huge pages on a large buffer (where THP is in `madvise`
 // mode): its first touch then faults once per 2 MiB instead of once per 4 KiB page (fresh
@@ -52,6 +63,10 @@ class DecimatedRows {
   // Gaussian's spacing per bin: 1e-5 for a 1e6-sample record), O(1) instead of one term per bin.
   static double noiseGain(double a, double omega0, long n_fft);
 
+  // The planning of the transforms planned from here on (Estimate until set; a length already
+  // planned keeps its plan).
+  void setPlanning(FftPlanning planning) { planning_ = planning; }
+
   // W at samples 0, D, 2D, ... (the first ceil(n/D) values of the result), D dividing n_fft.
   // nullptr if FFTW cannot plan or no memory. Valid until the next call.
   const std::complex<double>* row(const std::complex<double>* spectrum, long n_fft, double a,
@@ -59,6 +74,7 @@ class DecimatedRows {
 
  private:
   std::map<long, fftw_plan> plans_;
+  FftPlanning planning_ = FftPlanning::Estimate;
   fftw_complex* in_ = nullptr;   // the folded band C
   fftw_complex* out_ = nullptr;  // the decimated row
   long capacity_ = 0;
@@ -84,6 +100,8 @@ class BlockedRow {
   // False (and nothing computed) when its band reaches the Nyquist frequency or its block would
   // exceed kMaxBlock, or FFTW cannot plan: the caller computes the full row instead.
   bool configure(const double* y, long n, double mean, double s_samples, double omega0);
+  // As DecimatedRows::setPlanning.
+  void setPlanning(FftPlanning planning) { planning_ = planning; }
   // Makes w()[j] and env()[j] = |w()[j]| valid for j in [j0, j1] (clipped to [0, n)).
   void ensure(long j0, long j1);
   const std::complex<double>* w() const { return w_; }
@@ -98,6 +116,7 @@ class BlockedRow {
     fftw_plan r2c = nullptr, c2c = nullptr;
   };
   std::map<long, Plans> plans_;
+  FftPlanning planning_ = FftPlanning::Estimate;
   Plans plan_;
   double* seg_ = nullptr;              // one block's samples (L doubles)
   fftw_complex* spec_ = nullptr;       // their r2c spectrum (L/2 + 1)
@@ -146,6 +165,8 @@ class LowBand {
   // Y_0..Y_{K-1} of y[0..n) - mean zero-padded to N (K <= N/2 + 1). False when FFTW cannot plan
   // or no memory. `exact`: the polyphase way always (tests compare the two).
   bool compute(const double* y, long n, double mean, long N, long K, bool exact = false);
+  // As DecimatedRows::setPlanning.
+  void setPlanning(FftPlanning planning) { planning_ = planning; }
   const std::complex<double>* spectrum() const { return Y_.data(); }
   // The decimation factor of the last compute (0: the polyphase way).
   long decimation() const { return D_; }
@@ -165,6 +186,7 @@ class LowBand {
   void filterBlock(const double* y, long n, double mean, long m0, long m1);
   // Decimation: D_, the half length H_ (taps -H_..H_, stored from -H_ and zero-padded to a
   // multiple of 4), the per-bin gains D/H(w_k) and the length-N/D transform.
+  FftPlanning planning_ = FftPlanning::Estimate;
   long D_ = 0, H_ = 0, dN_ = 0, dn_ = 0, dK_ = 0;
   std::vector<double> taps_, gain_, buf_;
   fftw_plan dplan_ = nullptr;

@@ -49,8 +49,7 @@ constexpr double kMinOmega0 = 1.0, kMaxOmega0 = 1000.0;
 // bins (at least 16 batched transforms: measured, wider bands gain nothing over the full
 // inverse FFT, whose size-M transforms then no longer fit in cache); they take the full path.
 constexpr long kMinPrunedBatches = 16;
-constexpr long kPrunedChunk = 8192;         // complex values per chunk of batches (128 KiB, in L2)
-constexpr double kMeasureTimeLimitS = 5.0;  // FFTW_MEASURE planning cap per plan [s]
+constexpr long kPrunedChunk = 8192;  // complex values per chunk of batches (128 KiB, in L2)
 // Blocked rows (MorletScalogram::Blocks): a row whose wavelet spans K = ceil(8 s) samples either
 // side is computed in blocks of L samples, L the smallest power of two >= kMinBlock and >=
 // kBlockOverlap * (2K + 1) (at least 7/8 of each block kept), when L <= kMaxBlock and L is at
@@ -68,14 +67,8 @@ P* hugePages(P* p, size_t bytes) {
 
 std::mutex& plannerMutex() { return wavelet_detail::fftwPlannerMutex(); }
 
-// FFTW flags of a planning choice. Sets FFTW's (global) planner time limit for the next plan,
-// so call it with plannerMutex() held: Measure planning is capped at kMeasureTimeLimitS
-// (an unlimited FFTW_MEASURE search for N = 1764000 = 2^5 3^2 5^3 7^2 takes > 5 minutes on the
-// reference machine; capped at 5 s its plan is within 7 % of the estimate's speed or better).
-unsigned fftwFlags(FftPlanning planning) {
-  fftw_set_timelimit(planning == FftPlanning::Measure ? kMeasureTimeLimitS : FFTW_NO_TIMELIMIT);
-  return planning == FftPlanning::Measure ? FFTW_MEASURE : FFTW_ESTIMATE;
-}
+using wavelet_detail::fftwFlags;
+using wavelet_detail::kMeasureTimeLimitS;
 
 // |w| of n complex floats (interleaved re, im) into out, four per SSE instruction (computed in
 // float: relative error ~1e-7, the precision of the single-precision path).
@@ -617,17 +610,42 @@ Status MorletCwt::setCheckedSignal(const double* y, double mean) {
   return {};
 }
 
+Status MorletCwt::setCheckedSpectrum(double mean,
+                                     const std::function<void(std::complex<double>*)>& fill) {
+  has_signal_ = false;
+  if (!configured()) return Status::internal("MorletCwt: not configured");
+  mean_ = mean;
+  fill(reinterpret_cast<std::complex<double>*>(fftw_->buf->spec));
+  has_signal_ = true;
+  return {};
+}
+
+// Eight partial sums (independent chains: the loop runs at the adder's throughput, not its
+// latency) with no test per sample: a sum that is finite had no sample that is not (a NaN or an
+// infinity stays in the sum). Otherwise the first non-finite sample is named, or, when every
+// sample is finite and only the sum overflowed, the mean is summed from y/n instead.
 Status MorletCwt::checkedMean(const double* y, long n, double* mean, const char* who) {
   if (!y) return Status::internal(std::string(who) + ": null signal");
-  double sum = 0.0;
-  for (long j = 0; j < n; ++j) {
+  double s[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  long j = 0;
+  for (; j + 8 <= n; j += 8) {
+    for (int q = 0; q < 8; ++q) s[q] += y[j + q];
+  }
+  for (int q = 0; j < n; ++j, ++q) s[q] += y[j];
+  const double sum = ((s[0] + s[4]) + (s[1] + s[5])) + ((s[2] + s[6]) + (s[3] + s[7]));
+  if (std::isfinite(sum)) {
+    *mean = sum / static_cast<double>(n);
+    return {};
+  }
+  double scaled = 0.0;
+  for (j = 0; j < n; ++j) {
     if (!std::isfinite(y[j])) {
       return Status::invalidInput(std::string(who) + ": sample " + std::to_string(j) +
                                   " is not finite (" + num(y[j]) + ")");
     }
-    sum += y[j];
+    scaled += y[j] / static_cast<double>(n);
   }
-  *mean = sum / static_cast<double>(n);
+  *mean = scaled;
   return {};
 }
 

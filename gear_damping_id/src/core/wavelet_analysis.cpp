@@ -15,6 +15,8 @@
 
 #include "decimated_row.hpp"
 #include "gear_sim/async.hpp"
+#include "halved_forward.hpp"
+#include "vector_math.hpp"
 #include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
@@ -103,32 +105,57 @@ std::vector<Peak> findPeaks(const std::vector<double>& f, const std::vector<doub
   return peaks;
 }
 
-// Weighted least-squares line y = a + b*x; returns slope b and weighted R^2.
-struct LineFit {
-  double slope = kNaN, intercept = kNaN, r2 = kNaN;
+// Sums over i < n in four partial sums (lane i mod 4), added in a fixed order: independent
+// chains, so a loop runs at the adders' throughput instead of their latency. add(i, lanes, q)
+// adds term i into lane q of each of its C sums; the blocks of four unrolled, so the lanes
+// stay in registers. total(c) is sum c.
+template <int C>
+struct Lanes4 {
+  double s[C][4] = {};
+  template <typename Add>
+  void run(long n, Add add) {
+    long i = 0;
+    for (; i + 4 <= n; i += 4) {
+#pragma GCC unroll 4
+      for (int q = 0; q < 4; ++q) add(i + q, s, q);
+    }
+    for (; i < n; ++i) add(i, s, static_cast<int>(i & 3));
+  }
+  double total(int c) const { return (s[c][0] + s[c][2]) + (s[c][1] + s[c][3]); }
 };
-LineFit fitLine(const double* x, const double* y, const double* w, long n) {
-  LineFit out;
-  double sw = 0, sx = 0, sy = 0;
-  for (long i = 0; i < n; ++i) sw += w[i], sx += w[i] * x[i], sy += w[i] * y[i];
-  if (!(sw > 0.0)) return out;
-  const double mx = sx / sw, my = sy / sw;
-  double sxx = 0, sxy = 0, syy = 0;
-  for (long i = 0; i < n; ++i) {
-    const double dx = x[i] - mx, dy = y[i] - my;
-    sxx += w[i] * dx * dx;
-    sxy += w[i] * dx * dy;
-    syy += w[i] * dy * dy;
-  }
-  if (!(sxx > 0.0)) return out;
-  out.slope = sxy / sxx;
-  out.intercept = my - out.slope * mx;
-  double sres = 0;
-  for (long i = 0; i < n; ++i) {
-    const double r = y[i] - out.intercept - out.slope * x[i];
-    sres += w[i] * r * r;
-  }
-  out.r2 = syy > 0.0 ? 1.0 - sres / syy : 1.0;
+
+// Weighted least-squares lines through (x_i, a_i) and (x_i, p_i), weights w_i: both slopes, and
+// the weighted R^2 of the first (NaN where the weights or the spread of x vanish).
+struct DecayLines {
+  double amp_slope = kNaN, amp_r2 = kNaN, phase_slope = kNaN;
+};
+DecayLines fitDecayLines(const double* x, const double* a, const double* p, const double* w,
+                         long n) {
+  DecayLines out;
+  Lanes4<4> m;  // sums of w, w x, w a, w p
+  m.run(n, [&](long i, double(*s)[4], int q) {
+    s[0][q] += w[i], s[1][q] += w[i] * x[i], s[2][q] += w[i] * a[i], s[3][q] += w[i] * p[i];
+  });
+  const double W = m.total(0);
+  if (!(W > 0.0)) return out;
+  const double mx = m.total(1) / W, ma = m.total(2) / W, mp = m.total(3) / W;
+  Lanes4<4> c;  // sums of w dx dx, w dx da, w da da, w dx dp
+  c.run(n, [&](long i, double(*s)[4], int q) {
+    const double dx = x[i] - mx, da = a[i] - ma, wdx = w[i] * dx;
+    s[0][q] += wdx * dx, s[1][q] += wdx * da, s[2][q] += w[i] * da * da;
+    s[3][q] += wdx * (p[i] - mp);
+  });
+  const double Sxx = c.total(0), Saa = c.total(2);
+  if (!(Sxx > 0.0)) return out;
+  out.amp_slope = c.total(1) / Sxx;
+  out.phase_slope = c.total(3) / Sxx;
+  const double b0 = ma - out.amp_slope * mx, b1 = out.amp_slope;
+  Lanes4<1> res;
+  res.run(n, [&](long i, double(*s)[4], int q) {
+    const double r = a[i] - b0 - b1 * x[i];
+    s[0][q] += w[i] * r * r;
+  });
+  out.amp_r2 = Saa > 0.0 ? 1.0 - res.total(0) / Saa : 1.0;
   return out;
 }
 
@@ -358,8 +385,11 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
   double* x = work->data();
   double* ph = x + np;
   double* wt = ph + np;
-  double emax = 0.0;
-  for (long i = 0; i < np; ++i) emax = std::max(emax, env[static_cast<size_t>(pts.m0 + i)]);
+  Lanes4<1> lane_max;  // in lanes: no chain through one register (the same maximum)
+  const double* e_reg = env.data() + pts.m0;
+  lane_max.run(np, [&](long i, double(*s)[4], int q) { s[0][q] = std::max(s[0][q], e_reg[i]); });
+  const double(&lm)[4] = lane_max.s[0];
+  const double emax = std::max(std::max(lm[0], lm[1]), std::max(lm[2], lm[3]));
   if (!(emax > 0.0)) {
     out->why = "envelope is zero in the decay region";
     return;
@@ -374,28 +404,27 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
     cache->c1 = pts.m0 + np - 1;
     cache->ly.resize(static_cast<size_t>(np));
     cache->arg.resize(static_cast<size_t>(np));
-    for (long i = 0; i < np; ++i) {
-      const long g = pts.m0 + i;
-      const double e = env[static_cast<size_t>(g)];
-      cache->ly[static_cast<size_t>(i)] = 0.5 * std::log(std::max(e * e - floor2, 1e-300));
-      cache->arg[static_cast<size_t>(i)] = std::arg(r.w[g]);
-    }
+    wavelet_detail::logEnvelopeAndPhase(env.data() + pts.m0, r.w + pts.m0, np, floor2,
+                                        cache->ly.data(), cache->arg.data());
   }
   const double* ly = cache->ly.data() + (pts.m0 - cache->c0);
   const double* arg = cache->arg.data() + (pts.m0 - cache->c0);
+  // x in samples from the region's first (exact integers; the slopes are per sample, scaled
+  // to seconds below), the weights relative to the largest.
   double prev = 0.0, offset = 0.0;
+  const double inv_e2max = 1.0 / (emax * emax), inv_turn = 1.0 / (2.0 * kPi);
   for (long i = 0; i < np; ++i) {
     const long g = pts.m0 + i, j = g * D;  // grid point, sample
     const double e = env[static_cast<size_t>(g)];
     const double e2 = std::max(e * e - floor2, 1e-300);
-    x[i] = static_cast<double>(j) / r.fs;
-    wt[i] = e2 / (emax * emax) * (D > 1 ? pts.weight(i) : 1.0);
+    x[i] = static_cast<double>(j - j0);
+    wt[i] = e2 * inv_e2max * (D > 1 ? pts.weight(i) : 1.0);
     const double p = arg[i];
     if (D > 1) {
       if (i > 0) {
         const double pred = turn * static_cast<double>(D);
         double d = p - prev - pred;
-        d -= 2.0 * kPi * std::round(d / (2.0 * kPi));
+        d -= 2.0 * kPi * std::round(d * inv_turn);
         ph[i] = ph[i - 1] + pred + d;
       } else {
         ph[i] = p;
@@ -411,11 +440,10 @@ void envelopeFit(const RowEnvelope& r, const std::vector<double>& env, long j0, 
     prev = p;
     ph[i] = p + offset;
   }
-  const LineFit amp = fitLine(x, ly, wt, np);
-  const LineFit phase = fitLine(x, ph, wt, np);
-  out->sigma = -amp.slope;
-  out->r2 = amp.r2;
-  out->fd = phase.slope / (2.0 * kPi);
+  const DecayLines lines = fitDecayLines(x, ly, ph, wt, np);
+  out->sigma = -lines.amp_slope * r.fs;
+  out->r2 = lines.amp_r2;
+  out->fd = lines.phase_slope * r.fs / (2.0 * kPi);
   if (!std::isfinite(out->sigma)) {
     out->why = "the envelope line fit failed in [" + num(out->t0) + ", " + num(out->t1) + "] s";
     return;
@@ -515,14 +543,19 @@ class BinnedPower {
       std::vector<Moments>& m = levels_[l];
       m.assign(static_cast<size_t>((K + h - 1) / h), Moments{});
       if (l == 0) {
+        // Group by group, bins in order (no division per bin; the same sums in the same order).
         const double c0 = 0.5 * static_cast<double>(h - 1);
-        for (long k = 1; k < K; ++k) {
-          const double w = weight(k);
-          const double d = static_cast<double>(k % h) - c0;
-          Moments& g = m[static_cast<size_t>(k / h)];
-          g.s0 += w;
-          g.s1 += w * d;
-          g.s2 += w * d * d;
+        for (size_t gi = 0; gi < m.size(); ++gi) {
+          const long k0 = static_cast<long>(gi) * h, k1 = std::min(K, k0 + h);
+          Moments g;
+          for (long k = std::max(1L, k0); k < k1; ++k) {
+            const double w = weight(k);
+            const double d = static_cast<double>(k - k0) - c0;
+            g.s0 += w;
+            g.s1 += w * d;
+            g.s2 += w * d * d;
+          }
+          m[gi] = g;
         }
       } else {
         // Children of half the width, centred at c -+ h/4.
@@ -623,11 +656,12 @@ struct Analysis {
   std::vector<double>& psd;  // scratch: |Y_k|^2 for the noise median (keeps its size)
   BinnedPower& power;        // per-mode path: the Parseval sums of the wide rows (see above)
   std::vector<std::unique_ptr<RowScratch>>& rows;  // one per fitting thread (at least one)
-  wavelet_detail::LowBand& low;  // shared mode: the low rows' bins on the grid's padding
-  BinnedPower& low_power;        // and their Parseval sums
-  double mean = 0.0;             // of the samples (checkInput)
-  bool own_loaded = false;       // `own` holds this record's spectrum already (loadOwnAhead)
-  double ahead_hf = kNaN;        // and the noise row's level from it (highFrequencyLevel)
+  wavelet_detail::LowBand& low;           // shared mode: the low rows' bins on the grid's padding
+  BinnedPower& low_power;                 // and their Parseval sums
+  wavelet_detail::HalvedForward& halves;  // shared mode: the record's transform in two halves
+  double mean = 0.0;                      // of the samples (checkInput)
+  bool own_loaded = false;  // `own` holds this record's spectrum already (loadOwnAhead)
+  double ahead_hf = kNaN;   // and the noise row's level from it (highFrequencyLevel)
   // Per-mode path, shared mode (sharedMode): `scal` is the one transform of the record, padded
   // by n/kSharedPadDivisor; rows whose 8 scales exceed that padding take their Parseval sums
   // from `low`, the first low_bins bins of the grid's padding low_n (0: none needed).
@@ -648,6 +682,7 @@ double gainOf(const Analysis& a, const MorletCwt& fit, double f, double omega) {
 const std::complex<double>* decimatedRow(const Analysis& a, const MorletCwt& fit, double f,
                                          double omega, long D, RowScratch* rs) {
   const double coef = omega * a.fs / (f * static_cast<double>(fit.paddedSize()));  // s*w_k
+  rs->decimated.setPlanning(a.opt.fft_planning);
   return rs->decimated.row(fit.spectrum(), fit.paddedSize(), coef, omega, D);
 }
 
@@ -789,13 +824,17 @@ void psdAndNoise(Analysis* a) {
   res.spectrum_power.resize(static_cast<size_t>(kmax + 1));
   std::vector<double>& p2 = a->psd;
   p2.resize(static_cast<size_t>(kmax));
-  for (long k = 0; k <= kmax; ++k) {
-    const double p = std::norm(Y[k]);
-    const bool edge = k == 0 || (N % 2 == 0 && k == kmax);
-    res.spectrum_freq[static_cast<size_t>(k)] = static_cast<double>(k) * a->fs / N;
-    res.spectrum_power[static_cast<size_t>(k)] = (edge ? 1.0 : 2.0) * p / (a->n * a->fs);
-    if (k >= 1) p2[static_cast<size_t>(k - 1)] = p;
-  }
+  // Loops without branches or calls (each vectorises; the same values as bin by bin).
+  const double fs = a->fs, nfs = static_cast<double>(a->n) * a->fs, dN = static_cast<double>(N);
+  double* freq = res.spectrum_freq.data();
+  for (long k = 0; k <= kmax; ++k) freq[k] = static_cast<double>(k) * fs / dN;
+  const double* y = reinterpret_cast<const double*>(Y);
+  double* power = res.spectrum_power.data();
+  for (long k = 0; k <= kmax; ++k) power[k] = y[2 * k] * y[2 * k] + y[2 * k + 1] * y[2 * k + 1];
+  for (long k = 1; k <= kmax; ++k) p2[static_cast<size_t>(k - 1)] = power[k];
+  for (long k = 0; k <= kmax; ++k) power[k] = 2.0 * power[k] / nfs;
+  power[0] = 0.5 * power[0];  // the edge bins count once: (1 p) / nfs = (2 p / nfs) / 2 exactly
+  if (N % 2 == 0) power[kmax] = 0.5 * power[kmax];
   res.noise_std = std::sqrt(medianOfNonNegative(p2.data(), kmax, 1) /
                             (static_cast<double>(a->n) * std::log(2.0)));
 }
@@ -890,6 +929,7 @@ double paddingFrequency(double fs, double omega0, long pad) {
 // Shared mode: the low band (when some rows need it) and its binned sums.
 bool lowBandSpectra(Analysis* a) {
   if (a->low_bins == 0) return true;
+  a->low.setPlanning(a->opt.fft_planning);
   if (!a->low.compute(a->y, a->n, a->mean, a->low_n, a->low_bins)) return false;
   const double sigma_max = static_cast<double>(a->low_n) / (6.0 * std::sqrt(2.0));
   a->low_power.build(a->low.spectrum(), a->low_bins,
@@ -897,46 +937,54 @@ bool lowBandSpectra(Analysis* a) {
   return true;
 }
 
+// Shared mode: the record's transform, in two halves where its length is even (HalvedForward),
+// on two threads when asked (the same arithmetic, so the same bits, as on one).
+Status loadShared(Analysis* a) {
+  const bool halved = a->halves.configure(a->scal.paddedSize(), a->opt.fft_planning);
+  if (!halved) return a->scal.setCheckedSignal(a->y, a->mean);
+  std::future<void> odd;
+  auto transform = [a](int p) { a->halves.transformHalf(p, a->y, a->n, a->mean); };
+  if (a->opt.threads >= 2) odd = gear_sim::startAsync([transform] { transform(1); });
+  transform(0);
+  if (odd.valid()) {
+    odd.get();
+  } else {
+    transform(1);
+  }
+  return a->scal.setCheckedSpectrum(a->mean, [a](std::complex<double>* Y) { a->halves.join(Y); });
+}
+
 // Shared mode: the record's one transform (padded by n/kSharedPadDivisor) gives the PSD, the
 // white-noise estimate, the rows' power within its padding and, in fitModes, the fit rows and
-// the noise row; the low band gives the low rows' power. On several threads the low band runs on
-// a thread of its own while this one transforms the record; that thread then computes the noise
-// row's level (it reads the transform and writes the first RowScratch only) while this one
-// computes the PSD and its median. The promise is kept on every path (else the helper would wait
-// for ever): `loaded` says whether the transform is there.
+// the noise row; the low band gives the low rows' power. On several threads, once the transform
+// is there, a helper computes the low band and the rows' power while this thread computes the
+// PSD, its median and the noise row's level (its own RowScratch, which nothing else uses before
+// the fits); on one, the noise row's level waits for fitModes.
 Status sharedSpectra(Analysis* a) {
   const long pad = a->n / kSharedPadDivisor;
   const std::vector<double> f_pad = {paddingFrequency(a->fs, a->opt.omega0, pad)};
-  const bool threads = a->opt.threads >= 2;
-  std::promise<bool> loaded;
-  std::shared_future<bool> ready = loaded.get_future().share();
-  std::future<bool> low;
-  if (threads) {
-    low = gear_sim::startAsync([a, ready] {
-      const bool ok = lowBandSpectra(a);
-      if (ready.get()) {
-        a->ahead_hf = highFrequencyLevel(*a, &a->scal, a->rows.front().get());
-        a->hf_ahead = true;
-      }
-      return ok;
-    });
-  }
   Status s;
-  try {
-    if (!sameConfiguration(a->scal, a->n, a->fs, f_pad, {a->opt.omega0}))
-      s = a->scal.configure(a->n, a->fs, f_pad, a->opt.omega0, FftPlanning::Estimate);
-    if (s.ok()) s = a->scal.setCheckedSignal(a->y, a->mean);
-  } catch (...) {
-    loaded.set_value(false);
-    throw;
-  }
-  loaded.set_value(s.ok());
-  if (s.ok()) psdAndNoise(a);
-  const bool low_ok = threads ? low.get() : s.ok() && lowBandSpectra(a);
+  if (!sameConfiguration(a->scal, a->n, a->fs, f_pad, {a->opt.omega0}))
+    s = a->scal.configure(a->n, a->fs, f_pad, a->opt.omega0, FftPlanning::Estimate);
+  if (s.ok()) s = loadShared(a);
   if (!s.ok()) return s;
-  if (!low_ok) return Status::resourceLimit("analyzeWavelet: the low rows' spectrum failed");
   const long N = a->scal.paddedSize();
-  scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
+  auto lowAndPower = [a, N] {
+    if (!lowBandSpectra(a)) return false;
+    scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
+    return true;
+  };
+  if (a->opt.threads < 2) {
+    psdAndNoise(a);
+    if (!lowAndPower())
+      return Status::resourceLimit("analyzeWavelet: the low rows' spectrum failed");
+    return {};
+  }
+  std::future<bool> helper = gear_sim::startAsync(lowAndPower);
+  psdAndNoise(a);
+  a->ahead_hf = highFrequencyLevel(*a, &a->scal, a->rows.front().get());
+  a->hf_ahead = true;
+  if (!helper.get()) return Status::resourceLimit("analyzeWavelet: the low rows' spectrum failed");
   return {};
 }
 
@@ -1190,6 +1238,7 @@ RowFit fitAt(const Analysis* a, MorletCwt* fit, const ModeSeed& seed, double ome
     row.D = wavelet_detail::DecimatedRows::divisorAtMost(
         fit->paddedSize(), static_cast<long>(row.s * a->fs / kFitSamplesPerScale));
     row.points = (a->n + row.D - 1) / row.D;
+    rs->blocked.setPlanning(a->opt.fft_planning);
     blocked = row.D == 1 && fit->fitsPadding(f, omega) &&
               rs->blocked.configure(a->y, a->n, a->mean, row.s * a->fs, omega);
     if (!blocked && fit->fitsPadding(f, omega)) row.w = decimatedRow(*a, *fit, f, omega, row.D, rs);
@@ -1560,6 +1609,7 @@ struct WaveletAnalyzer::Workspace {
   std::vector<std::unique_ptr<RowScratch>> rows;
   wavelet_detail::LowBand low;
   BinnedPower low_power;
+  wavelet_detail::HalvedForward halves;
 };
 
 WaveletAnalyzer::WaveletAnalyzer() : ws_(std::make_unique<Workspace>()) {}
@@ -1620,8 +1670,8 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   if (Status s = options.check(); !s.ok()) return stop(s);
   Workspace& w = *ws_;
   if (w.rows.empty()) w.rows.push_back(std::make_unique<RowScratch>());
-  Analysis a{y,     n,     sample_rate, options, *result, {},         w.scal,
-             w.own, w.psd, w.power,     w.rows,  w.low,   w.low_power};
+  Analysis a{y,     n,     sample_rate, options, *result, {},          w.scal,
+             w.own, w.psd, w.power,     w.rows,  w.low,   w.low_power, w.halves};
   if (Status s = checkInput(&a); !s.ok()) return stop(s);
   if (Status s = frequencyGrid(&a); !s.ok()) return stop(s);
   std::future<bool> own = sharedMode(&a) ? std::future<bool>{} : loadOwnAhead(&a);
