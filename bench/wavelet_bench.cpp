@@ -191,14 +191,17 @@ void BM_ScalogramSingle(benchmark::State& state) {
 // on 1e6 samples of three decaying modes, default options otherwise, on state.range(1) threads
 // (WaveletOptions::threads; wall time, and the process's CPU time per analysis in
 // process_cpu_ms); analyze(y, n, o, &r) is one analysis. With warm_up, one untimed call first
-// (like BM_Cwt's).
+// (like BM_Cwt's). planning: WaveletOptions::fft_planning.
 template <typename Analyze>
-void modeDamping(benchmark::State& state, Analyze analyze, bool warm_up) {
+void modeDamping(benchmark::State& state, Analyze analyze, bool warm_up,
+                 FftPlanning planning = FftPlanning::Estimate) {
   const long n = state.range(0);
   const std::vector<double> y = signalOf(n);
   gear_damping_id::WaveletOptions o;
   o.full_scalogram = false;
   o.threads = static_cast<int>(state.range(1));
+  o.fft_planning = planning;
+  state.SetLabel(planning == FftPlanning::Measure ? "FFTW_MEASURE" : "FFTW_ESTIMATE");
   gear_damping_id::WaveletResult r;
   std::string error;
   if (warm_up && !gear_test::ok(analyze(y.data(), n, o, &r), &error)) {
@@ -232,7 +235,9 @@ void BM_ModeDamping(benchmark::State& state) {
 
 // One WaveletAnalyzer and one result reused across iterations (a node analysing record after
 // record): FFTW plans, FFT buffers and scratch vectors are kept, so no iteration re-plans or
-// faults in fresh pages. Results are bit-identical to BM_ModeDamping's.
+// faults in fresh pages. Results are bit-identical to BM_ModeDamping's. state.range(2) = 1:
+// the per-mode path's transforms planned by FFTW_MEASURE (g_planning; the untimed first call
+// plans them, or FFTW's wisdom from --wisdom serves), 0: by FFTW_ESTIMATE (the default).
 void BM_ModeDampingReused(benchmark::State& state) {
   gear_damping_id::WaveletAnalyzer analyzer;
   modeDamping(
@@ -241,7 +246,7 @@ void BM_ModeDampingReused(benchmark::State& state) {
                   gear_damping_id::WaveletResult* r) {
         return analyzer.analyze(y, n, kSampleRate, o, r);
       },
-      true);
+      true, state.range(2) == 1 ? g_planning : FftPlanning::Estimate);
 }
 
 BENCHMARK(BM_Cwt)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -256,8 +261,10 @@ BENCHMARK(BM_Scalogram)->Apply(scalogramCases);
 BENCHMARK(BM_ScalogramSingle)->Apply(scalogramCases);
 BENCHMARK(BM_ModeDamping)->Args({1000000, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ModeDampingReused)
-    ->Args({1000000, 1})
-    ->Args({1000000, 2})
+    ->Args({1000000, 1, 0})
+    ->Args({1000000, 2, 0})
+    ->Args({1000000, 1, 1})
+    ->Args({1000000, 2, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_FftBound)->Arg(100000)->Arg(1000000)->Unit(benchmark::kMillisecond)->UseRealTime();
