@@ -667,7 +667,8 @@ struct Analysis {
   // from `low`, the first low_bins bins of the grid's padding low_n (0: none needed).
   bool shared = false;
   long low_n = 0, low_bins = 0;
-  bool hf_ahead = false;  // ahead_hf is the noise row's level from `scal` (shared mode)
+  bool hf_ahead = false;    // ahead_hf is the noise row's level from `scal` (shared mode)
+  bool peaks_done = false;  // the peak spectrum is computed (shared mode: with the rows' power)
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -850,6 +851,7 @@ constexpr long kLowBandMaxShare = 8;
 constexpr double kPadScales = 8.0;
 
 double highFrequencyLevel(const Analysis& an, MorletCwt* fit, RowScratch* rs);
+void peakSpectrum(Analysis* a);
 
 // The time-averaged scalogram of the grid's rows (per-mode path: the binned sums of *Y's K bins
 // built first; a->power, see BinnedPower).
@@ -959,7 +961,8 @@ Status loadShared(Analysis* a) {
 // the noise row; the low band gives the low rows' power. On several threads, once the transform
 // is there, a helper computes the low band and the rows' power while this thread computes the
 // PSD, its median and the noise row's level (its own RowScratch, which nothing else uses before
-// the fits); on one, the noise row's level waits for fitModes.
+// the fits); on one, the noise row's level waits for fitModes. The peak spectrum follows the
+// rows' power (it needs their sums only).
 Status sharedSpectra(Analysis* a) {
   const long pad = a->n / kSharedPadDivisor;
   const std::vector<double> f_pad = {paddingFrequency(a->fs, a->opt.omega0, pad)};
@@ -972,6 +975,8 @@ Status sharedSpectra(Analysis* a) {
   auto lowAndPower = [a, N] {
     if (!lowBandSpectra(a)) return false;
     scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
+    peakSpectrum(a);
+    a->peaks_done = true;
     return true;
   };
   if (a->opt.threads < 2) {
@@ -1680,7 +1685,7 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   if (!spectra.ok()) return stop(spectra);
   if (options.full_scalogram)
     if (Status s = fullScalogram(&a); !s.ok()) return s;
-  peakSpectrum(&a);
+  if (!a.peaks_done) peakSpectrum(&a);
   const std::vector<ModeSeed> seeds = pickModes(&a);
   if (seeds.empty()) return {};
   return fitModes(&a, seeds);
