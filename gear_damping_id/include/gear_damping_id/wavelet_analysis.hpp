@@ -79,10 +79,15 @@ struct WaveletOptions {
   /// Time columns kept in WaveletResult::modulus: block means of at most this many columns
   /// (0 = every sample). Rule: >= 0.
   long max_scalogram_columns = 2000;
-  /// FFTW planning of the scalogram's transforms. Estimate (default) plans instantly; Measure
-  /// costs ~0.1-3 s of planning once per FFT size and process and pays off for repeated
-  /// full scalograms of long records (the benchmark uses it). The damping fits' few rows
-  /// always use Estimate.
+  /// FFTW planning of the transforms. Estimate (default) plans instantly; Measure times FFTW's
+  /// candidate algorithms once per FFT size and process (~0.1-5 s per size; instant from FFTW's
+  /// wisdom, fftw_import_wisdom_from_filename) and pays off where the plans serve many
+  /// transforms: repeated full scalograms of long records, and a WaveletAnalyzer reused on the
+  /// per-mode path (its record transform's halves, decimated and blocked rows and low band;
+  /// docs/wavelet.md "Speed"). A size keeps the plan it was first given in an analyzer. The
+  /// results differ from Estimate's by FFT rounding (~1e-16 relative), and, as FFTW chooses by
+  /// timing, from one process to the next unless its wisdom is shared; within a process they
+  /// do not depend on the thread count.
   FftPlanning fft_planning = FftPlanning::Estimate;
   /// Threads of the full scalogram (rows in parallel, MorletScalogram; results identical to
   /// one thread). Rule: in [1, 256].
