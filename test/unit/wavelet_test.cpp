@@ -1268,6 +1268,30 @@ TEST(AnalyzeWavelet, RejectsInvalidInputWithAnErrorNamingTheProblem) {
   EXPECT_NE(analyzeError(bad, 20000.0, ok).find("sample 1234"), std::string::npos);
   bad[1234] = INFINITY;
   EXPECT_NE(analyzeError(bad, 20000.0, ok).find("sample 1234"), std::string::npos);
+  // Samples so large that the spectrum's power would overflow: an error, not NaN numbers
+  // (both paths; the per-mode path on the shared mode's long records too).
+  for (const double scale : {1e147, -1e300}) {
+    for (const bool full : {true, false}) {
+      for (const long n : {4000L, 300000L}) {
+        std::vector<double> huge(static_cast<size_t>(n));
+        for (long j = 0; j < n; ++j)
+          huge[size_t(j)] = scale * std::sin(0.3 * static_cast<double>(j));
+        WaveletOptions o = ok;
+        o.full_scalogram = full;
+        EXPECT_NE(analyzeError(huge, 20000.0, o).find("rescale the record"), std::string::npos)
+            << scale << " " << full << " " << n;
+      }
+    }
+  }
+  std::vector<double> large = y;  // 2 n max|y| = 5e149, just below the limit: still analysed
+  double peak = 0.0;
+  for (double v : y) peak = std::max(peak, std::abs(v));
+  for (double& v : large) v *= 5e149 / (2.0 * static_cast<double>(y.size()) * peak);
+  WaveletResult fine;
+  std::string error;
+  ASSERT_TRUE(gear_test::ok(analyzeWavelet(large, 20000.0, ok, &fine), &error)) << error;
+  EXPECT_TRUE(std::isfinite(fine.noise_std));
+  EXPECT_EQ(fine.modes.size(), 1u);
   EXPECT_NE(analyzeError(y, 0.0, ok).find("sample_rate"), std::string::npos);
   EXPECT_NE(analyzeError(y, NAN, ok).find("sample_rate"), std::string::npos);
   // Each row: one option broken (the rest default) and what the error must name.

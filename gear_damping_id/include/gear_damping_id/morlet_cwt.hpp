@@ -143,9 +143,9 @@ class MorletCwt {
   /// setSignal's check of n samples: all finite (InvalidInput "<who>: sample j is not finite
   /// (v)" naming the first that is not; Internal if y is null) and their mean: sample j goes to
   /// partial sum j mod 8, and the eight are added in a fixed order. The mean setCheckedSignal
-  /// expects.
+  /// expects. max_abs (optional): the largest |y_j|, from the same pass.
   static gear_sim::Status checkedMean(const double* y, long n, double* mean,
-                                      const char* who = "MorletCwt");
+                                      const char* who = "MorletCwt", double* max_abs = nullptr);
 
   /// Coefficients W of row i (0 <= i < rows()) for the current signal: returns a pointer to
   /// size() complex values (time order, sample j at t = j/fs), owned by the object and valid

@@ -624,15 +624,17 @@ Status MorletCwt::setCheckedSpectrum(double mean,
 // latency) with no test per sample: a sum that is finite had no sample that is not (a NaN or an
 // infinity stays in the sum). Otherwise the first non-finite sample is named, or, when every
 // sample is finite and only the sum overflowed, the mean is summed from y/n instead.
-Status MorletCwt::checkedMean(const double* y, long n, double* mean, const char* who) {
+Status MorletCwt::checkedMean(const double* y, long n, double* mean, const char* who,
+                              double* max_abs) {
   if (!y) return Status::internal(std::string(who) + ": null signal");
-  double s[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  double s[8] = {0, 0, 0, 0, 0, 0, 0, 0}, m[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   long j = 0;
   for (; j + 8 <= n; j += 8) {
-    for (int q = 0; q < 8; ++q) s[q] += y[j + q];
+    for (int q = 0; q < 8; ++q) s[q] += y[j + q], m[q] = std::max(m[q], std::fabs(y[j + q]));
   }
-  for (int q = 0; j < n; ++j, ++q) s[q] += y[j];
+  for (int q = 0; j < n; ++j, ++q) s[q] += y[j], m[q] = std::max(m[q], std::fabs(y[j]));
   const double sum = ((s[0] + s[4]) + (s[1] + s[5])) + ((s[2] + s[6]) + (s[3] + s[7]));
+  if (max_abs) *max_abs = *std::max_element(m, m + 8);
   if (std::isfinite(sum)) {
     *mean = sum / static_cast<double>(n);
     return {};

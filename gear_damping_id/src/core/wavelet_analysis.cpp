@@ -711,6 +711,10 @@ bool sameConfiguration(const MorletCwt& cwt, long n, double fs, const std::vecto
 
 // The input's sizes, rate and samples; a->mean is the samples' mean (summed in index order, as
 // MorletCwt::setSignal sums them: both transforms load the record with it, setCheckedSignal).
+// Largest 2 n max|y| the transform takes (its square, the PSD's bound, stays far below the
+// largest double, 1.8e308, with room for the gains and normalisations applied to it).
+constexpr double kMaxSampleSum = 1e150;
+
 Status checkInput(Analysis* an) {
   const Analysis& a = *an;
   if (!a.y) return Status::internal("analyzeWavelet: null signal");
@@ -724,7 +728,19 @@ Status checkInput(Analysis* an) {
     return Status::invalidArgument(
         "analyzeWavelet: sample_rate = " + num(a.fs) + " Hz must be finite and > 0", "sample_rate");
   }
-  return MorletCwt::checkedMean(a.y, a.n, &an->mean, "analyzeWavelet");
+  double max_abs = 0.0;
+  if (Status s = MorletCwt::checkedMean(a.y, a.n, &an->mean, "analyzeWavelet", &max_abs); !s.ok())
+    return s;
+  // The transform's bins are bounded by sum |y_j - mean| <= 2 n max|y| and the PSD by its
+  // square: beyond kMaxSampleSum they could overflow to infinity and every number after them
+  // would be NaN with no error (a record in the wrong unit, or a corrupt file).
+  if (!(2.0 * static_cast<double>(a.n) * max_abs <= kMaxSampleSum)) {
+    return Status::invalidInput("analyzeWavelet: samples reach |y| = " + num(max_abs) +
+                                ": 2 n max|y| = " + num(2.0 * static_cast<double>(a.n) * max_abs) +
+                                " exceeds " + num(kMaxSampleSum) +
+                                ", where the spectrum's power would overflow; rescale the record");
+  }
+  return {};
 }
 
 // The frequency grid (explicit, or log-spaced from f_min to f_max) and the mode frequencies,
