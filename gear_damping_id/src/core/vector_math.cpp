@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
-#if defined(GEAR_HAVE_LIBMVEC) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// GCC only: it passes the 256-bit arguments of these declarations in ymm registers, as the
+// vector function ABI wants, from a function compiled for AVX2. Clang (the sanitizer build) does
+// not always: its UBSan build passed them on the stack, and atan2 read garbage.
+#if defined(GEAR_HAVE_LIBMVEC) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #include <immintrin.h>
 #define GEAR_VECTOR_MATH 1
 // glibc's libmvec, AVX2 variants (the vector function ABI's names: 'd' = AVX2, N4 = 4 lanes).
