@@ -627,6 +627,11 @@ TEST(MorletCwt, RefusesRowsItCannotComputeAndInvalidConfigurations) {
                                   FftPlanning::Estimate),
                     &error));
   EXPECT_NE(error.find("omega0s"), std::string::npos) << error;
+  // A row whose 8 scales need ~7.6e9 samples of padding: more than FFTW's int lengths hold,
+  // refused before any allocation (it was planned with a truncated int length before).
+  EXPECT_FALSE(gear_test::ok(cwt.configure(1000, 1e9, {0.76}, 6.0, FftPlanning::Estimate), &error));
+  EXPECT_NE(error.find("too large"), std::string::npos) << error;
+  EXPECT_FALSE(cwt.configured());
   ASSERT_TRUE(
       gear_test::ok(cwt.configure(100, 1000.0, {100.0}, 6.0, FftPlanning::Estimate), &error))
       << error;

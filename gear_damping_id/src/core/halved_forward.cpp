@@ -1,6 +1,7 @@
 #include "halved_forward.hpp"
 
 #include <cmath>
+#include <limits>
 #include <mutex>
 
 #include "decimated_row.hpp"
@@ -28,7 +29,7 @@ void HalvedForward::release() {
 bool HalvedForward::configure(long n_fft, FftPlanning planning) {
   if (n_fft == n_fft_ && n_fft_ > 0) return true;
   release();
-  if (n_fft < 4 || n_fft % 2 != 0 || n_fft > (1L << 40)) return false;
+  if (n_fft < 4 || n_fft % 2 != 0 || n_fft / 2 > std::numeric_limits<int>::max()) return false;
   const long M = n_fft / 2;
   const size_t doubles = 2 * static_cast<size_t>(M / 2 + 1);
   {

@@ -550,9 +550,11 @@ Status MorletCwt::configureOn(std::shared_ptr<Buffers>* shared, long n, double s
   const double padded = paddedExtent(n, sample_rate, frequencies_hz, omega0s);
   long n_fft = fftLengthFor(padded);
   if (n_fft > 0 && fft_length > static_cast<long>(padded)) n_fft = fft_length;
-  if (n_fft < 0 || n_fft > (1L << 40)) {
+  // FFTW's one-dimensional plans take an int length.
+  if (n_fft < 0 || n_fft > std::numeric_limits<int>::max()) {
     return Status::resourceLimit("MorletCwt: padded length for n = " + std::to_string(n) +
-                                 " and the lowest frequency is too large");
+                                 " and the lowest frequency is too large (" + num(padded) +
+                                 " samples; FFTW's transforms take at most 2^31 - 1)");
   }
   auto f = std::make_unique<Fftw>();
   // Shared buffers large enough, or new ones (then shared from here on).
