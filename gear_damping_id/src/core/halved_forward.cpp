@@ -5,13 +5,10 @@
 #include <mutex>
 
 #include "decimated_row.hpp"
+#include "wavelet_detail.hpp"
 
 namespace gear_damping_id {
 namespace wavelet_detail {
-
-namespace {
-constexpr double kTwoPi = 6.283185307179586476925286766559;
-}  // namespace
 
 HalvedForward::~HalvedForward() { release(); }
 
@@ -49,7 +46,7 @@ bool HalvedForward::configure(long n_fft, FftPlanning planning) {
   }
   step_.resize(static_cast<size_t>(kTwiddleBlock));
   for (long j = 0; j < kTwiddleBlock; ++j) {
-    const double t = -kTwoPi * static_cast<double>(j) / static_cast<double>(n_fft);
+    const double t = -2.0 * kPi * static_cast<double>(j) / static_cast<double>(n_fft);
     step_[static_cast<size_t>(j)] = {std::cos(t), std::sin(t)};
   }
   n_fft_ = n_fft;
@@ -71,7 +68,7 @@ void HalvedForward::join(std::complex<double>* X) const {
   const double* O = half_[1];
   double* x = reinterpret_cast<double*>(X);
   for (long b = 0; b <= last; b += kTwiddleBlock) {
-    const double t = -kTwoPi * static_cast<double>(b) / static_cast<double>(n_fft_);
+    const double t = -2.0 * kPi * static_cast<double>(b) / static_cast<double>(n_fft_);
     const double cr = std::cos(t), ci = std::sin(t);
     const long e = std::min(last + 1, b + kTwiddleBlock);
     for (long k = b; k < e; ++k) {

@@ -667,8 +667,7 @@ struct Analysis {
   // from `low`, the first low_bins bins of the grid's padding low_n (0: none needed).
   bool shared = false;
   long low_n = 0, low_bins = 0;
-  bool hf_ahead = false;    // ahead_hf is the noise row's level from `scal` (shared mode)
-  bool peaks_done = false;  // the peak spectrum is computed (shared mode: with the rows' power)
+  bool hf_ahead = false;  // ahead_hf is the noise row's level from `scal` (shared mode)
 };
 
 // Noise gain of row (f, omega): MorletCwt's sum, or its erf form on the per-mode path (within
@@ -709,12 +708,12 @@ bool sameConfiguration(const MorletCwt& cwt, long n, double fs, const std::vecto
   return std::all_of(have.begin(), have.end(), [&](double x) { return x == w[0]; });
 }
 
-// The input's sizes, rate and samples; a->mean is the samples' mean (summed in index order, as
-// MorletCwt::setSignal sums them: both transforms load the record with it, setCheckedSignal).
 // Largest 2 n max|y| the transform takes (its square, the PSD's bound, stays far below the
 // largest double, 1.8e308, with room for the gains and normalisations applied to it).
 constexpr double kMaxSampleSum = 1e150;
 
+// The input's sizes, rate and samples; a->mean is the samples' mean (MorletCwt::checkedMean's,
+// as MorletCwt::setSignal computes it: both transforms load the record with it).
 Status checkInput(Analysis* an) {
   const Analysis& a = *an;
   if (!a.y) return Status::internal("analyzeWavelet: null signal");
@@ -992,7 +991,6 @@ Status sharedSpectra(Analysis* a) {
     if (!lowBandSpectra(a)) return false;
     scalogramPower(a, a->scal.spectrum(), N / 2 + 1, N);
     peakSpectrum(a);
-    a->peaks_done = true;
     return true;
   };
   if (a->opt.threads < 2) {
@@ -1701,7 +1699,7 @@ Status WaveletAnalyzer::analyze(const double* y, long n, double sample_rate,
   if (!spectra.ok()) return stop(spectra);
   if (options.full_scalogram)
     if (Status s = fullScalogram(&a); !s.ok()) return s;
-  if (!a.peaks_done) peakSpectrum(&a);
+  if (!a.shared) peakSpectrum(&a);  // shared mode computed it with the rows' power
   const std::vector<ModeSeed> seeds = pickModes(&a);
   if (seeds.empty()) return {};
   return fitModes(&a, seeds);
