@@ -302,6 +302,75 @@ TEST(WaveletTrust, HarmonicsOfAKnownOrderFrequencyAreForcedLines) {
   EXPECT_TRUE(r.modes[0].free_decay) << describe(r);
 }
 
+// A modulated mode is also seen at side lines k order frequencies from its main line; a side
+// line's own fit can decay faster or slower than the main line's (here 30 % faster, beyond the
+// 15 % of the decay-rate rule), and sigma / omega there is no modal damping ratio: with the order
+// frequency known it is flagged `shared_decay` by its position, without a damping ratio. The same
+// weaker decay half-way between the first and second side-line positions is an independent mode:
+// it keeps its xi. Held-out variants: two order frequencies, side lines below and above the main
+// line.
+TEST(WaveletTrust, SideLinesOfAStrongerLineAreFlaggedWhateverTheirOwnDecay) {
+  const double fs = 5000.0, f_main = 1000.0, xi_main = 0.01;
+  const double sigma_main = xi_main * 2.0 * kPi * f_main / std::sqrt(1.0 - xi_main * xi_main);
+  for (const double f_order : {230.0, 310.0}) {
+    for (const double side : {-1.0, 1.0}) {
+      for (const bool at_side_line : {true, false}) {
+        SCOPED_TRACE("order " + std::to_string(f_order) + " Hz, side " + std::to_string(side) +
+                     (at_side_line ? ", at the side line" : ", between side lines"));
+        const double f_weak = f_main + side * (at_side_line ? 1.0 : 1.5) * f_order;
+        const double sigma_weak = 1.3 * sigma_main;  // outside the decay-rate rule's 15 %
+        const double xi_weak = sigma_weak / std::hypot(sigma_weak, 2.0 * kPi * f_weak);
+        const std::vector<double> y =
+            freeDecay({{f_main, xi_main, 1.0, 0.3}, {f_weak, xi_weak, 0.5, 1.1}}, fs, 5000);
+        WaveletOptions o;
+        o.order_frequencies = {f_order};
+        const WaveletResult r = validateWavelet(y, fs, o);
+        ASSERT_TRUE(r.ok()) << r.status.message();
+        const WaveletMode* main = nearestMode(r, f_main);
+        const WaveletMode* weak = nearestMode(r, f_weak);
+        ASSERT_TRUE(main && weak && main != weak) << describe(r);
+        EXPECT_TRUE(main->warnings.empty()) << describe(r);
+        EXPECT_NEAR(main->damping_ratio, xi_main, kMultiSineXiTol * xi_main) << describe(r);
+        EXPECT_NEAR(weak->sigma, sigma_weak, kMultiSineXiTol * sigma_weak) << describe(r);
+        EXPECT_EQ(hasCode(*weak, "shared_decay"), at_side_line) << describe(r);
+        if (at_side_line) {
+          EXPECT_TRUE(std::isnan(weak->damping_ratio)) << describe(r);
+        } else {
+          EXPECT_NEAR(weak->damping_ratio, xi_weak, kMultiSineXiTol * xi_weak) << describe(r);
+        }
+      }
+    }
+  }
+}
+
+// Under known order frequencies a decay region shorter than two periods of the highest of them
+// (the mesh frequency: fewer than four switches of a square stiffness) keeps its xi with
+// `slow_modulation`; the same decay with a faster order frequency (a region of many periods)
+// carries no warning. At 60 dB below the initial amplitude the region is about 6 envelope time
+// constants (1 / sigma = 8 ms here): 0.7 and 1.4 periods of 15 and 30 Hz, 20 of 430 Hz.
+TEST(WaveletTrust, DecaysShorterThanTwoModulationPeriodsAreFlaggedButKept) {
+  const double fs = 5000.0, f = 1000.0, xi = 0.02;
+  const std::vector<double> y = freeDecay({{f, xi, 1.0, 0.2}}, fs, 2500, 1e-3, 5);
+  for (const double f_order : {15.0, 30.0, 430.0}) {
+    SCOPED_TRACE("order " + std::to_string(f_order) + " Hz");
+    WaveletOptions o;
+    o.order_frequencies = {f_order};
+    const WaveletResult r = validateWavelet(y, fs, o);
+    ASSERT_TRUE(r.ok()) << r.status.message();
+    ASSERT_EQ(r.modes.size(), 1u) << describe(r);
+    const WaveletMode& m = r.modes[0];
+    EXPECT_NEAR(m.damping_ratio, xi, kMultiSineXiTol * xi) << describe(r);
+    const double periods = f_order * (m.t_end - m.t_start);
+    EXPECT_EQ(hasCode(m, "slow_modulation"), periods < 2.0) << periods << "\n" << describe(r);
+    EXPECT_EQ(m.warnings.size(), periods < 2.0 ? 1u : 0u) << describe(r);
+    if (f_order < 100.0) {
+      EXPECT_LT(periods, 2.0) << describe(r);
+    } else {
+      EXPECT_GT(periods, 2.0) << describe(r);
+    }
+  }
+}
+
 // A decaying envelope that a line does not describe (two unresolved modes beating through zero:
 // the analysis is forced to one row with a wavelet too short to separate them) fits with R^2
 // below min_r2: no damping ratio, `low_r2`, and `close_modes` names the neighbour.

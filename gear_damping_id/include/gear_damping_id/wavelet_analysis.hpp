@@ -112,8 +112,12 @@ struct WaveletOptions {
   /// noise within the record is a transient and keeps its xi with `near_order_harmonic`. A base
   /// frequency whose harmonics are closer than 4 bins is not resolved by the record and is
   /// skipped with a global warning. When order frequencies are given, a mode decaying at the
-  /// rate of a stronger mode (within 15 %) is flagged `shared_decay` with damping_ratio NaN (a
-  /// parametrically modulated mode appears at several frequencies with one decay rate).
+  /// rate of a stronger mode (within 15 %), or lying k order frequencies (k != 0) from a stronger
+  /// free decay (within one bin plus a quarter of the two lines' half-power half-widths: a side
+  /// line of it), is flagged `shared_decay` with damping_ratio NaN (a parametrically modulated
+  /// mode appears at several frequencies with one decay rate); a damping ratio whose decay
+  /// region spans fewer than 2 periods of the highest order frequency keeps its value with
+  /// `slow_modulation` (the envelope's jumps at the stiffness changes are not averaged).
   /// Rule: each finite and > 0.
   std::vector<double> order_frequencies;
 
@@ -130,11 +134,13 @@ struct WaveletOptions {
 /// including the apparent xi of a forced line).
 /// Warning codes: `fit_failed` (no usable decay region, too short, phase not advancing),
 /// `not_free_decay` (envelope decays by < min_decay_nepers), `order_harmonic` (a line at a
-/// harmonic of an order frequency that persists), `shared_decay` (decays like a stronger mode
-/// under known parametric excitation), `low_r2` (R^2 < min_r2), `overlapping_modes` (modal
-/// overlap (sigma_i + sigma_j)/(2 pi |f_i - f_j|) > 0.3 with another mode: the envelope mixes
-/// both decays); flagged but kept: `close_modes` (a neighbour leaks > 1 % into the row at the
-/// omega0 used), `near_order_harmonic` (a decaying line at an order harmonic).
+/// harmonic of an order frequency that persists), `shared_decay` (decays like a stronger mode,
+/// or lies at a side-line position of one, under known parametric excitation), `low_r2`
+/// (R^2 < min_r2), `overlapping_modes` (modal overlap (sigma_i + sigma_j)/(2 pi |f_i - f_j|) >
+/// 0.3 with another mode: the envelope mixes both decays); flagged but kept: `close_modes` (a
+/// neighbour leaks > 1 % into the row at the omega0 used), `near_order_harmonic` (a decaying
+/// line at an order harmonic), `slow_modulation` (a decay region shorter than 2 periods of the
+/// highest order frequency).
 struct WaveletMode {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   double frequency_hz = kNaN;           ///< [Hz] damped frequency f_d from the ridge phase slope
