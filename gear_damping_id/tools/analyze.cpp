@@ -63,6 +63,7 @@
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
+#include "gear_sim/simulator.hpp"
 #include "gear_sim/status.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
@@ -1307,6 +1308,12 @@ int Analysis::waveletStep() {
       wopt.order_frequencies =
           gd::gearOrderFrequencies(f_mesh, identification ? model.gears.pinion.teeth : 0,
                                    identification ? model.gears.gear.teeth : 0);
+    // A parametric instability of the gear's stiffness at this mesh frequency (the wavelet's
+    // `parametric_resonance`): needs the stiffness model, hence the gear parameters.
+    if (identification && f_mesh > 0.0) {
+      const double lambda = gear_sim::parametricGrowthRate(model.gears, model.mesh, f_mesh);
+      if (std::isfinite(lambda)) wopt.parametric_growth_rate = lambda;
+    }
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");

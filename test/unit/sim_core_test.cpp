@@ -379,4 +379,67 @@ TEST(Simulator, BlockAffineMapsAgreeWithTheStageWiseIntegratorForEveryModel) {
     }
 }
 
+// The Floquet growth rate of the undamped mesh equation (parametricGrowthRate, the wavelet's
+// `parametric_resonance` check). Square stiffness: the monodromy matrix is the product of two
+// rotations, with the closed-form trace 2 cos a cos b - (r + 1/r) sin a sin b (a = w1 t1,
+// b = w2 t2, r = w1 / w2): equal to rounding over a scan of mesh frequencies that crosses
+// several instability regions (lambda > 0) and the stable bands between them (lambda = 0).
+TEST(ParametricGrowthRate, SquareStiffnessMatchesTheClosedFormTrace) {
+  gear_sim::GearPair g;
+  gear_sim::MeshOptions m;  // square, k 2e8 / 4e8 N/m, contact ratio 1.6
+  const double me = g.equivalentMass();
+  const double w_hi = std::sqrt(m.k_max / me), w_lo = std::sqrt(m.k_min / me);
+  int unstable = 0, stable = 0;
+  for (double f = 200.0; f < 8000.0; f *= 1.01) {
+    const double t_hi = (m.contact_ratio - 1.0) / f, t_lo = (2.0 - m.contact_ratio) / f;
+    const double a = w_hi * t_hi, b = w_lo * t_lo, r = w_hi / w_lo;
+    const double tr = 2.0 * std::cos(a) * std::cos(b) - (r + 1.0 / r) * std::sin(a) * std::sin(b);
+    const double expected = std::abs(tr) > 2.0 ? std::acosh(0.5 * std::abs(tr)) * f : 0.0;
+    const double lambda = gear_sim::parametricGrowthRate(g, m, f);
+    ASSERT_NEAR(lambda, expected, 1e-6 * f + 1e-9 * expected) << f << " Hz";
+    if (expected > 1e-3 * f) {
+      ++unstable;
+    } else if (expected == 0.0) {
+      ++stable;
+    }
+  }
+  EXPECT_GT(unstable, 10);
+  EXPECT_GT(stable, 10);
+  // A constant stiffness has no instability; nonsense frequencies give NaN.
+  m.model = gear_sim::StiffnessModel::Constant;
+  EXPECT_EQ(gear_sim::parametricGrowthRate(g, m, 1234.0), 0.0);
+  EXPECT_TRUE(std::isnan(gear_sim::parametricGrowthRate(g, m, 0.0)));
+  EXPECT_TRUE(std::isnan(gear_sim::parametricGrowthRate(g, m, NAN)));
+}
+
+// Smooth stiffness (the RK4 path): k = k0 (1 + eps cos 2 pi u) is Mathieu's equation, whose
+// first instability region is centred at f_mesh = 2 f0 with growth rate eps w0 / 4 there (to
+// first order in eps: the second-order term changes it by O(eps^2), 4e-4 here); between the first
+// and second regions (f_mesh = 1.5 f0) it is stable. A trapezoid whose ramps shrink to 1e-4 of
+// the cycle approaches the square wave's rate (the ramps shift the switches by 5e-5 cycles).
+TEST(ParametricGrowthRate, SmoothStiffnessGivesMathieusRateAndTheTrapezoidTendsToTheSquare) {
+  gear_sim::GearPair g;
+  gear_sim::MeshOptions m;
+  m.model = gear_sim::StiffnessModel::Fourier;
+  m.k_mean = 3e8;
+  const double eps = 0.02;
+  m.fourier_cos = {eps * m.k_mean};
+  m.fourier_sin = {0.0};
+  const double w0 = std::sqrt(m.k_mean / g.equivalentMass()), f0 = w0 / (2.0 * M_PI);
+  EXPECT_NEAR(gear_sim::parametricGrowthRate(g, m, 2.0 * f0), eps * w0 / 4.0,
+              0.02 * eps * w0 / 4.0);
+  EXPECT_EQ(gear_sim::parametricGrowthRate(g, m, 1.5 * f0), 0.0);
+  gear_sim::MeshOptions sq, tz;  // square defaults; the trapezoid with short ramps
+  tz.model = gear_sim::StiffnessModel::Trapezoid;
+  tz.transition_fraction = 1e-4;
+  int compared = 0;
+  for (double f = 300.0; f < 6000.0; f *= 1.03) {
+    const double ls = gear_sim::parametricGrowthRate(g, sq, f);
+    if (!(ls > 1e-2 * f)) continue;  // well inside an instability region
+    EXPECT_NEAR(gear_sim::parametricGrowthRate(g, tz, f), ls, 0.01 * ls) << f << " Hz";
+    ++compared;
+  }
+  EXPECT_GT(compared, 5);
+}
+
 }  // namespace

@@ -260,12 +260,15 @@ TEST(WaveletGearCase, RawForcedResponseIsFlaggedAsForcedLinesNotDamping) {
 }
 
 // Held-out gear free responses (random gears of scripts/heldout_sweep.py, `--check wavelet`,
-// seeds 8033, 9109 and 9007; `simulate --free-response`: the difference of two runs from two
+// seeds 8033, 9109, 9007 and 10020; `simulate --free-response`: the difference of two runs from two
 // initial states plus the configured noise) on which the analysis once reported wrong damping
 // ratios without a warning: a side line at f0 - f_mesh whose own fit decays 16 % faster than the
 // main line (xi 0.078 against the true 0.044; 8033), two lines of a slow mesh (417 Hz) whose
 // decay region spans a quarter of a mesh period (xi 0.043 and 0.045 against 0.029; 9109), and a
-// side line in a region of one mesh period (0.056 against 0.028; 9007). Right or flagged: every
+// side line in a region of one mesh period (0.056 against 0.028; 9007), and the main line of a
+// noise-free record whose mesh stiffness is parametrically unstable at its speed (10020: Floquet
+// growth 363 1/s, so the response decays at C/2 - 363 = 477 1/s: xi 0.0058 against 0.0103,
+// -44 %). Right or flagged: every
 // mode with a damping ratio and no warning is within the 10 % bar of its true ratio (C over its
 // region, weighted like the fit, over 2 omega0), and those lines now carry their warnings.
 TEST(WaveletGearCase, HeldOutFreeResponsesAreRightOrFlagged) {
@@ -273,7 +276,8 @@ TEST(WaveletGearCase, HeldOutFreeResponsesAreRightOrFlagged) {
   // and SNR [dB], the simulator's noise seed.
   struct HeldOut {
     std::string name, yaml;
-    double rate, snr;
+    double rate;
+    const char* snr;  // (YAML: .inf for none)
     long seed;
   };
   const std::vector<HeldOut> cases = {
@@ -304,7 +308,7 @@ damping:
   ratios: [0.043462126806109905, 0.03531790635299718, 0.05591691775703924]
   times: [0.0, 0.01073374998094656, 0.0308954746883053]
 )",
-       500000.0, 30, 46349},
+       500000.0, "30", 46349},
       {"9109", R"(pinion:
   teeth: 24
   inertia: 0.00034553136046871667
@@ -330,7 +334,7 @@ damping:
   c0: 363.07653382017594
   c1: 0.0025626686253434894
 )",
-       250000.0, 20, 348313},
+       250000.0, "20", 348313},
       {"9007", R"(pinion:
   teeth: 27
   inertia: 0.0006625237811226723
@@ -358,7 +362,36 @@ damping:
   c0: 121.30443119211556
   c1: 0.48924494381241146
 )",
-       250000.0, 20, 79776},
+       250000.0, "20", 79776},
+      {"10020", R"(pinion:
+  teeth: 40
+  inertia: 0.00012367457233873483
+  base_radius: 0.03315866482089838
+gear:
+  teeth: 52
+  inertia: 0.01009962546208145
+  base_radius: 0.04310626426716789
+mesh:
+  stiffness_model: square
+  k_max: 783492128.6062533
+  k_min: 362924239.6361788
+  contact_ratio: 1.8858860556591517
+  initial_phase: 0.6350397562361249
+speed:
+  profile: constant
+  pinion_rpm: 1843.195075481594
+load:
+  profile: ramp
+  initial: 36.34788899723196
+  final: 41.99772996917685
+  ramp_start: 0.0
+  ramp_end: 0.05
+damping:
+  model: load_linear
+  c0: 159.7089908847342
+  c1: 0.6979642225513204
+)",
+       1000000.0, ".inf", 849604},
   };
   for (const HeldOut& c : cases) {
     const std::string& name = c.name;
@@ -388,6 +421,8 @@ damping:
     WaveletOptions o;  // analyze's: default options, the gear's order frequencies
     o.order_frequencies = gear_damping_id::gearOrderFrequencies(f_mesh, g.config.gears.pinion.teeth,
                                                                 g.config.gears.gear.teeth);
+    o.parametric_growth_rate =
+        gear_sim::parametricGrowthRate(g.config.gears, g.config.mesh, f_mesh);
     const WaveletResult r =
         gear_damping_id::validateWavelet(y.data(), static_cast<size_t>(y.size()), fs, o);
     ASSERT_TRUE(r.ok()) << r.status.message();
@@ -405,6 +440,15 @@ damping:
       }
     }
     EXPECT_GT(reported, 0);
+    if (name == "10020") {  // inside an instability region: lambda 363 1/s, sigma 470 1/s
+      EXPECT_GT(o.parametric_growth_rate, 300.0);
+      for (const WaveletMode& m : r.modes) {
+        if (!std::isfinite(m.damping_ratio)) continue;
+        bool flagged = false;
+        for (const auto& w : m.warnings) flagged = flagged || w.code == "parametric_resonance";
+        EXPECT_TRUE(flagged) << m.frequency_hz << " Hz";
+      }
+    }
     if (name == "8033") {  // the side line at f0 - f_mesh: no damping ratio
       const double f_side = g.f0 - f_mesh;
       const WaveletMode* side = nullptr;

@@ -120,6 +120,14 @@ struct WaveletOptions {
   /// `slow_modulation` (the envelope's jumps at the stiffness changes are not averaged).
   /// Rule: each finite and > 0.
   std::vector<double> order_frequencies;
+  /// Floquet growth rate lambda [1/s] of the undamped mesh equation at the record's mesh
+  /// frequency (gear_sim::parametricGrowthRate; `analyze` sets it from the gear parameters at
+  /// constant speed), 0 when not known or stable. Inside a parametric instability region the
+  /// free response decays as exp(-(C/2 -+ lambda) t), not at the damping's C/2: a reported
+  /// damping ratio whose sigma lambda exceeds 5 % of keeps its value with `parametric_resonance`
+  /// (the text gives (sigma + lambda) / omega, the damping's ratio if the slower solution
+  /// dominates). Rule: finite and >= 0.
+  double parametric_growth_rate = 0.0;
 
   /// Status of these options: ok, or the first rule broken (field, value, rule; option_status.hpp).
   gear_sim::OptionStatus check() const;
@@ -140,7 +148,8 @@ struct WaveletOptions {
 /// 0.3 with another mode: the envelope mixes both decays); flagged but kept: `close_modes` (a
 /// neighbour leaks > 1 % into the row at the omega0 used), `near_order_harmonic` (a decaying
 /// line at an order harmonic), `slow_modulation` (a decay region shorter than 2 periods of the
-/// highest order frequency).
+/// highest order frequency), `parametric_resonance` (the mesh stiffness is parametrically
+/// unstable at this speed: WaveletOptions::parametric_growth_rate above 5 % of sigma).
 struct WaveletMode {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   double frequency_hz = kNaN;           ///< [Hz] damped frequency f_d from the ridge phase slope

@@ -86,6 +86,10 @@ constexpr double kSideLineWidthShare = 0.25;
 // lines with such a region were off the truth by 14 % rms (7 of 38 beyond the 10 % bar), those
 // with a longer one by 5.5 % (3 of 46).
 constexpr double kMinModulationPeriods = 2.0;
+// A parametric instability's growth rate lambda (WaveletOptions::parametric_growth_rate) above
+// this share of a mode's sigma: its decay is C/2 -+ lambda, off the damping's by more than half
+// the gear case's 10 % bar (`parametric_resonance`, damping ratio kept).
+constexpr double kParametricShare = 0.05;
 // Modal overlap (sigma_i + sigma_j) / (2 pi |f_i - f_j|): the sum of the two lines' half-power
 // half-widths over their spacing. Above kMaxModalOverlap the Lorentzian skirts of a heavily
 // damped neighbour reach the mode's row far beyond the wavelet's Gaussian leakage estimate
@@ -1472,6 +1476,24 @@ void slowModulationWarnings(const std::vector<double>& orders, std::vector<Wavel
   }
 }
 
+// A parametric instability at the record's mesh frequency: `parametric_resonance` (kept) on each
+// reported damping ratio whose sigma the growth rate exceeds kParametricShare of.
+void parametricWarnings(double lambda, std::vector<WaveletMode>* modes) {
+  if (!(lambda > 0.0)) return;
+  for (WaveletMode& m : *modes) {
+    if (!std::isfinite(m.damping_ratio) || !(lambda > kParametricShare * m.sigma)) continue;
+    const double w = 2.0 * kPi * m.frequency_hz;
+    addWarning(&m, "parametric_resonance",
+               "the mesh stiffness is parametrically unstable at this speed: the undamped "
+               "equation grows at lambda = " +
+                   num(lambda) +
+                   " 1/s (Floquet), so the free response decays at C/2 -+ lambda, "
+                   "not at the damping's C/2; sigma = " +
+                   num(m.sigma) + " 1/s here may be C/2 - lambda (xi would then be " +
+                   num((m.sigma + lambda) / std::hypot(m.sigma + lambda, w)) + ")");
+  }
+}
+
 // Modal overlap with any other fitted mode above kMaxModalOverlap: `overlapping_modes`.
 void overlapWarnings(std::vector<WaveletMode>* modes) {
   for (WaveletMode& m : *modes) {
@@ -1578,6 +1600,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   sharedDecayWarnings(orders, a->fs / static_cast<double>(a->n), &a->res.modes);
   overlapWarnings(&a->res.modes);
   slowModulationWarnings(orders, &a->res.modes);
+  parametricWarnings(a->opt.parametric_growth_rate, &a->res.modes);
   return {};
 }
 
@@ -1646,6 +1669,9 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
     if (!std::isfinite(f) || f <= 0.0) {
       return violated("order_frequencies[" + std::to_string(i) + "]", f, "must be finite and > 0");
     }
+  }
+  if (!(parametric_growth_rate >= 0.0) || !std::isfinite(parametric_growth_rate)) {
+    return violated("parametric_growth_rate", parametric_growth_rate, "must be finite and >= 0");
   }
   if (!(peak_prominence >= 0.0 && peak_prominence < 1.0)) {
     return violated("peak_prominence", peak_prominence, "must be 0 (noise-adaptive) or in (0, 1)");
