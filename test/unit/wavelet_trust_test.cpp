@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -407,6 +408,11 @@ TEST(WaveletTrust, NewOptionsAreCheckedWithTheFieldNamed) {
   o = WaveletOptions{};
   o.order_frequencies = {100.0, -1.0};
   EXPECT_EQ(o.check().field, "order_frequencies[1]");
+  for (const double bad : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    o = WaveletOptions{};
+    o.parametric_growth_rate = bad;
+    EXPECT_EQ(o.check().field, "parametric_growth_rate") << bad;
+  }
   EXPECT_EQ(o.check().message(), o.check().message());
   o = WaveletOptions{};
   o.peak_prominence = 0.0;  // noise-adaptive (the default)

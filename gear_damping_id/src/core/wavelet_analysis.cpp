@@ -70,7 +70,7 @@ constexpr double kOrderMinSpacingBins = 4.0;
 constexpr double kSharedDecayTol = 0.15;
 // The same modulated mode is also seen as side lines at k order frequencies (k != 0) from its
 // main line, whatever decay rate the side line's own fit finds (its envelope is the weaker one,
-// mixed with its neighbours' skirts: 16-100 % off the main line's sigma in held-out free
+// mixed with its neighbours' skirts: 16-45 % off the main line's sigma in held-out free
 // responses). A weaker line within kOrderToleranceBins bins plus kSideLineWidthShare of the two
 // lines' half-power half-widths (sigma_i + sigma_j)/(2 pi) of such a position (ridge frequencies)
 // is flagged `shared_decay` too; order frequencies below kOrderMinSpacingBins times that
