@@ -429,6 +429,8 @@ TEST(ParametricGrowthRate, SmoothStiffnessGivesMathieusRateAndTheTrapezoidTendsT
   EXPECT_NEAR(gear_sim::parametricGrowthRate(g, m, 2.0 * f0), eps * w0 / 4.0,
               0.02 * eps * w0 / 4.0);
   EXPECT_EQ(gear_sim::parametricGrowthRate(g, m, 1.5 * f0), 0.0);
+  // A cycle that would need more than 1e7 RK4 steps is not computed (bounded work).
+  EXPECT_TRUE(std::isnan(gear_sim::parametricGrowthRate(g, m, 1e-6 * f0)));
   gear_sim::MeshOptions sq, tz;  // square defaults; the trapezoid with short ramps
   tz.model = gear_sim::StiffnessModel::Trapezoid;
   tz.transition_fraction = 1e-4;

@@ -18,6 +18,10 @@ double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh) {
 
 namespace {
 
+// RK4 steps of one smooth piece of parametricGrowthRate's cycle at most (~0.1 s): beyond, a mesh
+// frequency below ~6e-5 of the natural frequency, the rate is not computed (NaN).
+constexpr double kMaxFloquetSteps = 1e7;
+
 // Phi <- M Phi for the 2x2 state transition matrices (row-major) of y'' = -w2 y.
 void leftMultiply(const double M[4], double Phi[4]) {
   const double a = M[0] * Phi[0] + M[1] * Phi[2], b = M[0] * Phi[1] + M[1] * Phi[3];
@@ -50,7 +54,9 @@ double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, doub
       const double w_max =
           std::sqrt(std::max({k.at(u0, um), k.at(um, um), k.at(u1, um), 0.0}) / me) *
           1.25;  // (a margin for the piece's maximum)
-      const long steps = std::max(4L, static_cast<long>(std::ceil(w_max * dt / 0.01)));
+      const double want = std::ceil(w_max * dt / 0.01);
+      if (!(want <= kMaxFloquetSteps)) return std::numeric_limits<double>::quiet_NaN();
+      const long steps = std::max(4L, static_cast<long>(want));
       const double h = dt / static_cast<double>(steps);
       for (long j = 0; j < steps; ++j) {
         const double ua = u0 + (u1 - u0) * static_cast<double>(j) / static_cast<double>(steps);
