@@ -643,6 +643,7 @@ class Analysis {
   int readGearParameters();
   int checkRecord();
   int checkAnalysedRange();
+  void parametricGrowth(Eigen::Index first_sample, size_t n, double rate, double f_mesh);
   // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
@@ -1258,6 +1259,33 @@ int Analysis::identify() {
   return kContinue;
 }
 
+// The wavelet's parametric_resonance input (WaveletOptions::parametric_growth_rate): the
+// Floquet growth rate of the gear's stiffness at the mesh frequency of each of kBlocks blocks
+// of the wavelet's n samples from the record's mesh_phase (a speed ramp can cross instability
+// regions), else at f_mesh for the whole record; a rate that cannot be computed counts as 0.
+void Analysis::parametricGrowth(Eigen::Index first_sample, size_t n, double rate, double f_mesh) {
+  auto growth = [&](double f) {
+    const double lambda = gear_sim::parametricGrowthRate(model.gears, model.mesh, f);
+    return std::isfinite(lambda) ? lambda : 0.0;
+  };
+  constexpr size_t kBlocks = 32;
+  if (!wavelet_on_record || streaming || table.mesh_phase.size() == 0 || n < 4 * kBlocks) {
+    if (f_mesh > 0.0) wopt.parametric_growth_rate = {growth(f_mesh)};
+    return;
+  }
+  const size_t b = n / kBlocks;
+  wopt.parametric_growth_rate.assign(kBlocks, 0.0);
+  wopt.parametric_growth_block = static_cast<double>(b) / rate;
+  for (size_t k = 0; k < kBlocks; ++k) {
+    const Eigen::Index i0 = first_sample + static_cast<Eigen::Index>(k * b);
+    const Eigen::Index i1 =
+        first_sample + static_cast<Eigen::Index>(k + 1 == kBlocks ? n - 1 : (k + 1) * b);
+    const double f =
+        (table.mesh_phase[i1] - table.mesh_phase[i0]) * rate / static_cast<double>(i1 - i0);
+    wopt.parametric_growth_rate[k] = growth(f);
+  }
+}
+
 int Analysis::waveletStep() {
   // Wavelet validation of the analysed record's first wavelet_n samples (or of --wavelet-input).
   t_first = whole.t0 + static_cast<double>(first) * whole.dt;
@@ -1308,12 +1336,7 @@ int Analysis::waveletStep() {
       wopt.order_frequencies =
           gd::gearOrderFrequencies(f_mesh, identification ? model.gears.pinion.teeth : 0,
                                    identification ? model.gears.gear.teeth : 0);
-    // A parametric instability of the gear's stiffness at this mesh frequency (the wavelet's
-    // `parametric_resonance`): needs the stiffness model, hence the gear parameters.
-    if (identification && f_mesh > 0.0) {
-      const double lambda = gear_sim::parametricGrowthRate(model.gears, model.mesh, f_mesh);
-      if (std::isfinite(lambda)) wopt.parametric_growth_rate = lambda;
-    }
+    if (identification) parametricGrowth(first, wavelet_n, wavelet_rate, f_mesh);
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");

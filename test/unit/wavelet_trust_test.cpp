@@ -372,6 +372,39 @@ TEST(WaveletTrust, DecaysShorterThanTwoModulationPeriodsAreFlaggedButKept) {
   }
 }
 
+// A parametric instability's growth rate lambda (the gear's Floquet exponent at the mesh
+// frequency) flags a reported xi with `parametric_resonance`, kept, when it exceeds 5 % of the
+// mode's sigma over its decay region: sigma = 125.7 1/s here, so 8 1/s flags and 5 does not; with
+// one rate per block of the record, only the blocks the decay region overlaps count (the region
+// lies in the first 0.1 s).
+TEST(WaveletTrust, AParametricInstabilityOverTheDecayRegionIsFlaggedButKept) {
+  const double fs = 5000.0, f = 1000.0, xi = 0.02;
+  const double sigma = xi * 2.0 * kPi * f / std::sqrt(1.0 - xi * xi);
+  const std::vector<double> y = freeDecay({{f, xi, 1.0, 0.2}}, fs, 2500, 1e-3, 5);
+  struct Case {
+    std::vector<double> rates;
+    bool flagged;
+  };
+  for (const Case& c : std::vector<Case>{{{5.0}, false},
+                                         {{8.0}, true},
+                                         {{0.0, 0.0, 0.0, 0.0, 1000.0}, false},
+                                         {{1000.0, 0.0, 0.0, 0.0, 0.0}, true}}) {
+    SCOPED_TRACE("rates " + std::to_string(c.rates.size()) + ", first " +
+                 std::to_string(c.rates.front()));
+    WaveletOptions o;
+    o.parametric_growth_rate = c.rates;
+    o.parametric_growth_block = 0.1;
+    const WaveletResult r = validateWavelet(y, fs, o);
+    ASSERT_TRUE(r.ok()) << r.status.message();
+    ASSERT_EQ(r.modes.size(), 1u) << describe(r);
+    const WaveletMode& m = r.modes[0];
+    EXPECT_LT(m.t_end, 0.1) << describe(r);
+    EXPECT_NEAR(m.sigma, sigma, kMultiSineXiTol * sigma) << describe(r);
+    EXPECT_NEAR(m.damping_ratio, xi, kMultiSineXiTol * xi) << describe(r);
+    EXPECT_EQ(hasCode(m, "parametric_resonance"), c.flagged) << describe(r);
+  }
+}
+
 // A decaying envelope that a line does not describe (two unresolved modes beating through zero:
 // the analysis is forced to one row with a wavelet too short to separate them) fits with R^2
 // below min_r2: no damping ratio, `low_r2`, and `close_modes` names the neighbour.
@@ -410,9 +443,15 @@ TEST(WaveletTrust, NewOptionsAreCheckedWithTheFieldNamed) {
   EXPECT_EQ(o.check().field, "order_frequencies[1]");
   for (const double bad : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
     o = WaveletOptions{};
-    o.parametric_growth_rate = bad;
-    EXPECT_EQ(o.check().field, "parametric_growth_rate") << bad;
+    o.parametric_growth_rate = {0.0, bad};
+    o.parametric_growth_block = 0.1;
+    EXPECT_EQ(o.check().field, "parametric_growth_rate[1]") << bad;
   }
+  o = WaveletOptions{};
+  o.parametric_growth_rate = {1.0};  // one value: no block length needed
+  EXPECT_TRUE(o.check().ok());
+  o.parametric_growth_rate = {1.0, 2.0};
+  EXPECT_EQ(o.check().field, "parametric_growth_block");
   EXPECT_EQ(o.check().message(), o.check().message());
   o = WaveletOptions{};
   o.peak_prominence = 0.0;  // noise-adaptive (the default)

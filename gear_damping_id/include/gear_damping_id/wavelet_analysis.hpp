@@ -120,14 +120,18 @@ struct WaveletOptions {
   /// `slow_modulation` (the envelope's jumps at the stiffness changes are not averaged).
   /// Rule: each finite and > 0.
   std::vector<double> order_frequencies;
-  /// Floquet growth rate lambda [1/s] of the undamped mesh equation at the record's mesh
-  /// frequency (gear_sim::parametricGrowthRate; `analyze` sets it from the gear parameters at
-  /// constant speed), 0 when not known or stable. Inside a parametric instability region the
+  /// Floquet growth rates lambda [1/s] of the undamped mesh equation at the record's mesh
+  /// frequency (gear_sim::parametricGrowthRate; `analyze` sets them from the gear parameters):
+  /// one value for the whole record, or one per block of parametric_growth_block seconds from
+  /// the record's first sample (the last block to the end; a speed ramp can cross an instability
+  /// region); empty or 0 when not known or stable. Inside a parametric instability region the
   /// free response decays as exp(-(C/2 -+ lambda) t), not at the damping's C/2: a reported
-  /// damping ratio whose sigma lambda exceeds 5 % of keeps its value with `parametric_resonance`
-  /// (the text gives (sigma + lambda) / omega, the damping's ratio if the slower solution
-  /// dominates). Rule: finite and >= 0.
-  double parametric_growth_rate = 0.0;
+  /// damping ratio whose sigma the largest lambda over its decay region exceeds 5 % of keeps its
+  /// value with `parametric_resonance` (the text gives (sigma + lambda) / omega, the damping's
+  /// ratio if the slower solution dominates). Rule: each finite and >= 0; with more than one
+  /// value parametric_growth_block finite and > 0.
+  std::vector<double> parametric_growth_rate;
+  double parametric_growth_block = 0.0;  ///< [s] see parametric_growth_rate
 
   /// Status of these options: ok, or the first rule broken (field, value, rule; option_status.hpp).
   gear_sim::OptionStatus check() const;

@@ -1477,18 +1477,30 @@ void slowModulationWarnings(const std::vector<double>& orders, std::vector<Wavel
 }
 
 // A parametric instability at the record's mesh frequency: `parametric_resonance` (kept) on each
-// reported damping ratio whose sigma the growth rate exceeds kParametricShare of.
-void parametricWarnings(double lambda, std::vector<WaveletMode>* modes) {
-  if (!(lambda > 0.0)) return;
+// reported damping ratio whose sigma the largest growth rate over its decay region (the blocks
+// of WaveletOptions::parametric_growth_rate it overlaps) exceeds kParametricShare of.
+void parametricWarnings(const WaveletOptions& o, std::vector<WaveletMode>* modes) {
+  const std::vector<double>& rates = o.parametric_growth_rate;
+  if (rates.empty()) return;
+  const long last = static_cast<long>(rates.size()) - 1;
+  auto block = [&](double t) {
+    if (last == 0 || !(t > 0.0)) return 0L;
+    const double b = std::floor(t / o.parametric_growth_block);
+    return b >= static_cast<double>(last) ? last : static_cast<long>(b);
+  };
   for (WaveletMode& m : *modes) {
-    if (!std::isfinite(m.damping_ratio) || !(lambda > kParametricShare * m.sigma)) continue;
+    if (!std::isfinite(m.damping_ratio)) continue;
+    double lambda = 0.0;
+    for (long b = block(m.t_start); b <= block(m.t_end); ++b)
+      lambda = std::max(lambda, rates[static_cast<size_t>(b)]);
+    if (!(lambda > kParametricShare * m.sigma)) continue;
     const double w = 2.0 * kPi * m.frequency_hz;
     addWarning(&m, "parametric_resonance",
                "the mesh stiffness is parametrically unstable at this speed: the undamped "
                "equation grows at lambda = " +
                    num(lambda) +
-                   " 1/s (Floquet), so the free response decays at C/2 -+ lambda, "
-                   "not at the damping's C/2; sigma = " +
+                   " 1/s (Floquet) over the decay region, so the free response decays at "
+                   "C/2 -+ lambda, not at the damping's C/2; sigma = " +
                    num(m.sigma) + " 1/s here may be C/2 - lambda (xi would then be " +
                    num((m.sigma + lambda) / std::hypot(m.sigma + lambda, w)) + ")");
   }
@@ -1600,7 +1612,7 @@ Status fitModes(Analysis* a, const std::vector<ModeSeed>& seeds) {
   sharedDecayWarnings(orders, a->fs / static_cast<double>(a->n), &a->res.modes);
   overlapWarnings(&a->res.modes);
   slowModulationWarnings(orders, &a->res.modes);
-  parametricWarnings(a->opt.parametric_growth_rate, &a->res.modes);
+  parametricWarnings(a->opt, &a->res.modes);
   return {};
 }
 
@@ -1670,8 +1682,17 @@ gear_sim::OptionStatus WaveletOptions::checkModesAndRules() const {
       return violated("order_frequencies[" + std::to_string(i) + "]", f, "must be finite and > 0");
     }
   }
-  if (!(parametric_growth_rate >= 0.0) || !std::isfinite(parametric_growth_rate)) {
-    return violated("parametric_growth_rate", parametric_growth_rate, "must be finite and >= 0");
+  for (size_t i = 0; i < parametric_growth_rate.size(); ++i) {
+    const double v = parametric_growth_rate[i];
+    if (!(v >= 0.0) || !std::isfinite(v)) {
+      return violated("parametric_growth_rate[" + std::to_string(i) + "]", v,
+                      "must be finite and >= 0");
+    }
+  }
+  if (parametric_growth_rate.size() > 1 &&
+      !(parametric_growth_block > 0.0 && std::isfinite(parametric_growth_block))) {
+    return violated("parametric_growth_block", parametric_growth_block,
+                    "must be finite and > 0 with more than one growth rate");
   }
   if (!(peak_prominence >= 0.0 && peak_prominence < 1.0)) {
     return violated("peak_prominence", peak_prominence, "must be 0 (noise-adaptive) or in (0, 1)");
