@@ -61,6 +61,7 @@
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/message_text.hpp"
+#include "gear_sim/models.hpp"
 #include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
 #include "gear_sim/simulator.hpp"
@@ -643,7 +644,17 @@ class Analysis {
   int readGearParameters();
   int checkRecord();
   int checkAnalysedRange();
-  void parametricGrowth(Eigen::Index first_sample, size_t n, double rate, double f_mesh);
+  void parametricGrowth(size_t n, double rate, double f_mesh);
+  // The mesh phase [cycles] at the wavelet record's sample k: the record's mesh_phase when it
+  // has one (recordMeshPhase), else the gear parameters' speed profile at the sample's time.
+  bool recordMeshPhase() const {
+    return wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
+  }
+  double meshPhaseAt(size_t k) const {
+    if (recordMeshPhase()) return table.mesh_phase[first + static_cast<Eigen::Index>(k)];
+    const gear_sim::MeshTiming timing(model.speed, model.gears.pinion.teeth, 0.0);
+    return timing.phase(t_first + static_cast<double>(k) / wavelet_rate);
+  }
   // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
   std::vector<std::string> formulations{"known"}, models{"piecewise"};
@@ -1261,15 +1272,15 @@ int Analysis::identify() {
 
 // The wavelet's parametric_resonance input (WaveletOptions::parametric_growth_rate): the
 // Floquet growth rate of the gear's stiffness at the mesh frequency of each of kBlocks blocks
-// of the wavelet's n samples from the record's mesh_phase (a speed ramp can cross instability
-// regions), else at f_mesh for the whole record; a rate that cannot be computed counts as 0.
-void Analysis::parametricGrowth(Eigen::Index first_sample, size_t n, double rate, double f_mesh) {
+// of the wavelet's n samples (meshPhaseAt: a speed ramp can cross instability regions), else at
+// f_mesh for the whole record; a rate that cannot be computed counts as 0.
+void Analysis::parametricGrowth(size_t n, double rate, double f_mesh) {
   auto growth = [&](double f) {
     const double lambda = gear_sim::parametricGrowthRate(model.gears, model.mesh, f);
     return std::isfinite(lambda) ? lambda : 0.0;
   };
   constexpr size_t kBlocks = 32;
-  if (!wavelet_on_record || streaming || table.mesh_phase.size() == 0 || n < 4 * kBlocks) {
+  if (n < 4 * kBlocks) {
     if (f_mesh > 0.0) wopt.parametric_growth_rate = {growth(f_mesh)};
     return;
   }
@@ -1277,11 +1288,8 @@ void Analysis::parametricGrowth(Eigen::Index first_sample, size_t n, double rate
   wopt.parametric_growth_rate.assign(kBlocks, 0.0);
   wopt.parametric_growth_block = static_cast<double>(b) / rate;
   for (size_t k = 0; k < kBlocks; ++k) {
-    const Eigen::Index i0 = first_sample + static_cast<Eigen::Index>(k * b);
-    const Eigen::Index i1 =
-        first_sample + static_cast<Eigen::Index>(k + 1 == kBlocks ? n - 1 : (k + 1) * b);
-    const double f =
-        (table.mesh_phase[i1] - table.mesh_phase[i0]) * rate / static_cast<double>(i1 - i0);
+    const size_t i0 = k * b, i1 = k + 1 == kBlocks ? n - 1 : (k + 1) * b;
+    const double f = (meshPhaseAt(i1) - meshPhaseAt(i0)) * rate / static_cast<double>(i1 - i0);
     wopt.parametric_growth_rate[k] = growth(f);
   }
 }
@@ -1326,17 +1334,15 @@ int Analysis::waveletStep() {
            " samples of the analysed record (--wavelet-max-samples)");
     // Forced lines: mesh frequency from the record's mesh_phase, else the gear parameters.
     double f_mesh = 0.0;
-    if (wavelet_on_record && !streaming && table.mesh_phase.size() > 0 && wavelet_n > 1)
-      f_mesh = (table.mesh_phase[first + static_cast<Eigen::Index>(wavelet_n) - 1] -
-                table.mesh_phase[first]) *
-               wavelet_rate / static_cast<double>(wavelet_n - 1);
-    else if (identification && model.speed.profile == gear_sim::SpeedProfile::Constant)
-      f_mesh = model.speed.pinion_rpm / 60.0 * model.gears.pinion.teeth;
+    if (wavelet_n > 1 && (recordMeshPhase() || identification))
+      f_mesh = (meshPhaseAt(wavelet_n - 1) - meshPhaseAt(0)) * wavelet_rate /
+               static_cast<double>(wavelet_n - 1);
+    if (!std::isfinite(f_mesh) || !(f_mesh > 0.0)) f_mesh = 0.0;
     if (wopt.order_frequencies.empty())
       wopt.order_frequencies =
           gd::gearOrderFrequencies(f_mesh, identification ? model.gears.pinion.teeth : 0,
                                    identification ? model.gears.gear.teeth : 0);
-    if (identification) parametricGrowth(first, wavelet_n, wavelet_rate, f_mesh);
+    if (identification) parametricGrowth(wavelet_n, wavelet_rate, f_mesh);
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");
