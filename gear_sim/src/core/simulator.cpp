@@ -9,6 +9,7 @@
 
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/models.hpp"
+#include "gear_sim/sdof_integrator.hpp"
 
 namespace gear_sim {
 
@@ -22,13 +23,6 @@ namespace {
 // frequency below ~6e-5 of the natural frequency, the rate is not computed (NaN).
 constexpr double kMaxFloquetSteps = 1e7;
 
-// Phi <- M Phi for the 2x2 state transition matrices (row-major) of y'' = -w2 y.
-void leftMultiply(const double M[4], double Phi[4]) {
-  const double a = M[0] * Phi[0] + M[1] * Phi[2], b = M[0] * Phi[1] + M[1] * Phi[3];
-  const double c = M[2] * Phi[0] + M[3] * Phi[2], d = M[2] * Phi[1] + M[3] * Phi[3];
-  Phi[0] = a, Phi[1] = b, Phi[2] = c, Phi[3] = d;
-}
-
 }  // namespace
 
 double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, double f_mesh) {
@@ -38,7 +32,7 @@ double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, doub
   const MeshStiffness k(mesh);
   std::vector<double> edges = k.cycleBreakpoints();
   edges.push_back(1.0);
-  double Phi[4] = {1.0, 0.0, 0.0, 1.0};
+  Eigen::Matrix2d Phi = Eigen::Matrix2d::Identity();  // columns: (y, v) of two solutions
   double u0 = 0.0;
   for (const double u1 : edges) {
     if (!(u1 > u0)) continue;
@@ -47,36 +41,31 @@ double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, doub
     if (k.constantOnPiece(um, &kc)) {
       const double w = std::sqrt(std::max(kc, 0.0) / me);
       const double c = std::cos(w * dt), s = std::sin(w * dt);
-      const double M[4] = {c, w > 0.0 ? s / w : dt, -w * s, c};
-      leftMultiply(M, Phi);
+      Eigen::Matrix2d M;
+      M << c, w > 0.0 ? s / w : dt, -w * s, c;
+      Phi = (M * Phi).eval();
     } else {
-      // RK4 of x' = [[0, 1], [-k(u)/Me, 0]] x for both columns of Phi at w_max h <= 0.01.
+      // RK4 (rk4Step, C = F = 0) of both columns of Phi at w_max h <= 0.01.
       const double w_max =
           std::sqrt(std::max({k.at(u0, um), k.at(um, um), k.at(u1, um), 0.0}) / me) *
           1.25;  // (a margin for the piece's maximum)
       const double want = std::ceil(w_max * dt / 0.01);
       if (!(want <= kMaxFloquetSteps)) return std::numeric_limits<double>::quiet_NaN();
       const long steps = std::max(4L, static_cast<long>(want));
-      const double h = dt / static_cast<double>(steps);
+      const double h = dt / static_cast<double>(steps), du = (u1 - u0) / static_cast<double>(steps);
       for (long j = 0; j < steps; ++j) {
         const double ua = u0 + (u1 - u0) * static_cast<double>(j) / static_cast<double>(steps);
-        const double du = (u1 - u0) / static_cast<double>(steps);
-        const double ka = k.at(ua, um) / me, kb = k.at(ua + 0.5 * du, um) / me,
-                     kd = k.at(ua + du, um) / me;
+        const SdofCoefficients c0{0.0, k.at(ua, um) / me, 0.0},
+            cm{0.0, k.at(ua + 0.5 * du, um) / me, 0.0}, c1{0.0, k.at(ua + du, um) / me, 0.0};
         for (int col = 0; col < 2; ++col) {
-          const double y = Phi[col], v = Phi[2 + col];
-          const double k1y = v, k1v = -ka * y;
-          const double k2y = v + 0.5 * h * k1v, k2v = -kb * (y + 0.5 * h * k1y);
-          const double k3y = v + 0.5 * h * k2v, k3v = -kb * (y + 0.5 * h * k2y);
-          const double k4y = v + h * k3v, k4v = -kd * (y + h * k3y);
-          Phi[col] = y + h / 6.0 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y);
-          Phi[2 + col] = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+          const SdofState x = rk4Step({Phi(0, col), Phi(1, col)}, h, c0, cm, c1);
+          Phi(0, col) = x.y, Phi(1, col) = x.v;
         }
       }
     }
     u0 = u1;
   }
-  const double half_trace = 0.5 * std::abs(Phi[0] + Phi[3]);
+  const double half_trace = 0.5 * std::abs(Phi.trace());
   if (!std::isfinite(half_trace)) return std::numeric_limits<double>::quiet_NaN();
   return half_trace > 1.0 ? std::acosh(half_trace) * f_mesh : 0.0;
 }
