@@ -645,13 +645,14 @@ class Analysis {
   int checkRecord();
   int checkAnalysedRange();
   void parametricGrowth(size_t n, double rate, double f_mesh);
-  // The mesh phase [cycles] at the wavelet record's sample k: the record's mesh_phase when it
-  // has one (recordMeshPhase), else the gear parameters' speed profile at the sample's time.
-  bool recordMeshPhase() const {
-    return wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
-  }
+  // Whether the wavelet's samples take their mesh phase from the record (waveletMeshPhase).
+  bool wavelet_phase_from_record = false;
+  void waveletMeshPhase();
+  // The mesh phase [cycles] at the wavelet record's sample k: the record's mesh_phase when
+  // usable (wavelet_phase_from_record), else the gear parameters' speed profile at the sample's
+  // time.
   double meshPhaseAt(size_t k) const {
-    if (recordMeshPhase()) return table.mesh_phase[first + static_cast<Eigen::Index>(k)];
+    if (wavelet_phase_from_record) return table.mesh_phase[first + static_cast<Eigen::Index>(k)];
     const gear_sim::MeshTiming timing(model.speed, model.gears.pinion.teeth, 0.0);
     return timing.phase(t_first + static_cast<double>(k) / wavelet_rate);
   }
@@ -1270,6 +1271,26 @@ int Analysis::identify() {
   return kContinue;
 }
 
+// The record's mesh_phase serves the wavelet (order frequencies, growth rates) where it is
+// finite and increasing over the wavelet's samples; otherwise it is set aside with a warning
+// (before, a column that did not advance left every parametric check off without a word) and
+// the gear parameters' speed profile, when given, takes its place.
+void Analysis::waveletMeshPhase() {
+  wavelet_phase_from_record = wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
+  if (!wavelet_phase_from_record || wavelet_n < 2) return;
+  const double* p = table.mesh_phase.data() + first;
+  const double* end = p + wavelet_n;
+  if (std::all_of(p, end, [](double v) { return std::isfinite(v); }) && std::is_sorted(p, end) &&
+      end[-1] > p[0])
+    return;
+  wavelet_phase_from_record = false;
+  warn("mesh_phase is not finite and increasing over the wavelet's samples: " +
+       std::string(identification ? "the wavelet's mesh frequency is taken from the gear "
+                                    "parameters' speed profile instead"
+                                  : "no mesh frequency, so forced and modulated lines are not "
+                                    "flagged"));
+}
+
 // The wavelet's parametric_resonance input (WaveletOptions::parametric_growth_rate): the
 // Floquet growth rate of the gear's stiffness at the mesh frequency of each of kBlocks blocks
 // of the wavelet's n samples (meshPhaseAt: a speed ramp can cross instability regions), else at
@@ -1334,7 +1355,8 @@ int Analysis::waveletStep() {
            " samples of the analysed record (--wavelet-max-samples)");
     // Forced lines: mesh frequency from the record's mesh_phase, else the gear parameters.
     double f_mesh = 0.0;
-    if (wavelet_n > 1 && (recordMeshPhase() || identification))
+    waveletMeshPhase();
+    if (wavelet_n > 1 && (wavelet_phase_from_record || identification))
       f_mesh = (meshPhaseAt(wavelet_n - 1) - meshPhaseAt(0)) * wavelet_rate /
                static_cast<double>(wavelet_n - 1);
     if (!std::isfinite(f_mesh) || !(f_mesh > 0.0)) f_mesh = 0.0;

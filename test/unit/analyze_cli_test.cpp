@@ -280,15 +280,30 @@ simulation:
   const fs::path bare = dir.path() / "bare.csv";
   const std::string text = readText(csv);
   ASSERT_NE(text.substr(0, text.find('\n')).find("mesh_phase"), std::string::npos);
-  writeText(bare,
-            selectColumns(text, [](size_t, const std::string& h) { return h != "mesh_phase"; }));
-  for (const fs::path& input : {csv, bare}) {
+  const std::string bare_text =
+      selectColumns(text, [](size_t, const std::string& h) { return h != "mesh_phase"; });
+  writeText(bare, bare_text);
+  // And with a mesh_phase column that does not advance (all zero): set aside with a warning,
+  // the parameters' speed profile in its place (before, it silently turned the checks off).
+  const fs::path flat = dir.path() / "flat.csv";
+  {
+    std::istringstream in(bare_text);
+    std::ostringstream out;
+    std::string l;
+    for (bool header = true; std::getline(in, l); header = false)
+      out << l << (header ? ",mesh_phase" : ",0") << "\n";
+    writeText(flat, out.str());
+  }
+  for (const fs::path& input : {csv, bare, flat}) {
     SCOPED_TRACE(input.filename().string());
     const fs::path json = dir.path() / (input.stem().string() + ".json");
     r = analyze("--input " + input.string() + " --params " + yaml.string() +
                     " --wavelet --refine never --output " + json.string(),
                 dir.path());
     ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.err.find("mesh_phase is not finite and increasing") != std::string::npos,
+              input == flat)
+        << r.err;
     const auto modes = nlohmann::json::parse(readText(json)).at("wavelet").at("modes");
     int reported = 0;
     for (const auto& m : modes) {
