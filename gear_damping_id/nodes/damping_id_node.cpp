@@ -121,12 +121,8 @@ class DampingIdNode {
   // Gear constants from ~gear_config (if set); false after ROS_FATAL when it cannot be used.
   bool loadGearConfig() {
     if (o_.gear_config.empty()) return true;
-    gear_sim::SimConfig cfg;
-    if (const gear_sim::Status s = gear_sim::loadSimConfigFile(o_.gear_config, &cfg); !s.ok()) {
-      ROS_FATAL("~gear_config = '%s': %s", o_.gear_config.c_str(), s.message().c_str());
-      return false;
-    }
-    const gear_sim::GearModel model = cfg.gearModel();
+    gear_sim::GearModel model;
+    if (!nodes::loadGearConfig(o_.gear_config, &model)) return false;
     return setGear(gd::gearConstants(model), model.gears.pinion.teeth, model.gears.gear.teeth);
   }
 
@@ -159,10 +155,7 @@ class DampingIdNode {
 
   void onParams(const gear_damping::GearParams::ConstPtr& msg) {
     gear_sim::GearModel model;
-    if (const gear_sim::Status s = gear_sim_ros::fromMsg(*msg, &model); !s.ok()) {
-      ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", s.message().c_str());
-      return;
-    }
+    if (!nodes::gearModelOf(*msg, &model)) return;
     setGear(gd::gearConstants(model), model.gears.pinion.teeth, model.gears.gear.teeth);
   }
 

@@ -21,10 +21,13 @@
 #include <string>
 #include <vector>
 
+#include "gear_damping/GearParams.h"
 #include "gear_damping/SignalChunk.h"
 #include "gear_damping_id/stream_assembler.hpp"
 #include "gear_damping_ros/live_conversions.hpp"
+#include "gear_sim/config_yaml.hpp"
 #include "gear_sim/option_status.hpp"
+#include "gear_sim_ros/conversions.hpp"
 #include "load_governor.hpp"
 #include "param_error.hpp"
 
@@ -203,6 +206,28 @@ ros::Subscriber subscribeChunks(ros::NodeHandle& nh, const std::string& topic,
   ros::TransportHints hints;
   if (o.tcp_nodelay) hints = hints.tcpNoDelay();
   return nh.subscribe(topic, static_cast<uint32_t>(o.queue_size), callback, obj, hints);
+}
+
+/// The gear model of the YAML file ~gear_config = `path` (config/table1.yaml layout) into *out;
+/// false after ROS_FATAL naming the parameter and the reason.
+inline bool loadGearConfig(const std::string& path, gear_sim::GearModel* out) {
+  gear_sim::SimConfig cfg;
+  if (const gear_sim::Status s = gear_sim::loadSimConfigFile(path, &cfg); !s.ok()) {
+    ROS_FATAL("~gear_config = '%s': %s", path.c_str(), s.message().c_str());
+    return false;
+  }
+  *out = cfg.gearModel();
+  return true;
+}
+
+/// The gear model of a GearParams message (gear/params) into *out; false after a throttled
+/// ROS_ERROR when the message is not a valid gear pair (the message is then ignored).
+inline bool gearModelOf(const gear_damping::GearParams& msg, gear_sim::GearModel* out) {
+  if (const gear_sim::Status s = gear_sim_ros::fromMsg(msg, out); !s.ok()) {
+    ROS_ERROR_THROTTLE(5.0, "/gear/params ignored: %s", s.message().c_str());
+    return false;
+  }
+  return true;
 }
 
 /// Resident set size of this process [MiB] (/proc/self/statm), NaN if unreadable.

@@ -19,6 +19,15 @@
 // second of wall time, see LoadGovernor), only every k-th window is analysed (k = ceil(load /
 // budget)), the others
 // are counted as skipped and the status is WARN.
+// Gear context (docs/live.md "Wavelet node"): when ~order_frequencies is empty, each window's
+// order frequencies come from the chunks' mesh_phase over that window (its mean mesh frequency,
+// with the shaft orders once the tooth counts are known), so that forced lines, side lines at
+// f0 +- k f_mesh and decays shorter than two mesh periods are flagged as in `analyze --wavelet`;
+// with the gear parameters (~gear_config, a YAML file, or the latched gear/params) also the
+// parametric growth rate of the mesh stiffness per 1/32 of the window (parametric_resonance).
+// A window without mesh_phase has none of these checks; one whose mesh_phase is not usable
+// (not finite, decreasing, not advancing, a corrupt jump) is analysed without them, counted and
+// named in /diagnostics.
 // Threading: one thread; the analysis (only the rows the fits need, no full scalogram) runs in
 // the callback that completes a window, the subscriber queue absorbs chunks meanwhile.
 #include <dynamic_reconfigure/server.h>
@@ -34,6 +43,7 @@
 
 #include "gear_damping_id/result_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_id/wavelet_context.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim_ros/topics.hpp"
 #include "node_common.hpp"
@@ -66,6 +76,8 @@ class WaveletNode {
     signal_sub_ = nodes::subscribeChunks(nh, gear_sim_ros::kSignalTopic, o_.intake,
                                          &WaveletNode::onChunk, this);
     damping_sub_ = nh.subscribe(gear_sim_ros::kDampingTopic, 1, &WaveletNode::onDamping, this);
+    if (o_.gear_config.empty())
+      params_sub_ = nh.subscribe(gear_sim_ros::kParamsTopic, 1, &WaveletNode::onParams, this);
     timer_ = nh.createWallTimer(ros::WallDuration(0.05), &WaveletNode::onTimer, this);
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<gear_damping::WaveletConfig>>(
         reconfigure_mutex_, pnh);
@@ -79,7 +91,21 @@ class WaveletNode {
         [this](gear_damping::WaveletConfig& cfg, uint32_t) { onReconfigure(cfg); });
   }
 
+  // The gear model from ~gear_config (if set); false after ROS_FATAL when it cannot be used.
+  bool loadGearConfig() {
+    if (o_.gear_config.empty()) return true;
+    gear_sim::GearModel model;
+    if (!nodes::loadGearConfig(o_.gear_config, &model)) return false;
+    gear_ = model;
+    return true;
+  }
+
  private:
+  void onParams(const gear_damping::GearParams::ConstPtr& msg) {
+    gear_sim::GearModel model;
+    if (nodes::gearModelOf(*msg, &model)) gear_ = model;
+  }
+
   void onChunk(const gear_damping::SignalChunk::ConstPtr& msg) {
     intake_.push(*msg);
     processReady();
@@ -201,9 +227,10 @@ class WaveletNode {
     const double cpu0 = nodes::busySeconds();
     // The analyzer keeps its FFTW plans and buffers from window to window (same results as
     // validateWavelet; 1e6 samples: ~0.14 s instead of ~0.65 s per window).
+    const gd::WaveletOptions options = withGearContext(s, n);
     gd::WaveletResult r;
     const gear_sim::Status st =
-        analyzer_.analyze(s.dte.data() + s.begin, n, s.sample_rate, o_.wavelet, &r);
+        analyzer_.analyze(s.dte.data() + s.begin, n, s.sample_rate, options, &r);
     last_ms_ = (ros::WallTime::now() - t0).toSec() * 1e3;
     load_.record(nodes::busySeconds() - cpu0, false);
     if (!st.ok()) {
@@ -227,6 +254,26 @@ class WaveletNode {
     }
   }
 
+  // The window's options with the gear's context from its mesh_phase (order frequencies, growth
+  // rates; gd::applyGearContext), or as they are without a usable mesh_phase.
+  gd::WaveletOptions withGearContext(const gd::StreamSegment& s, long n) {
+    gd::WaveletOptions options = o_.wavelet;
+    last_mesh_hz_ = gd::kNaN;
+    if (s.mesh_phase.empty()) return options;
+    const std::string problem =
+        gd::applyGearContext(s.mesh_phase.data() + s.begin, static_cast<size_t>(n), s.sample_rate,
+                             gear_ ? &*gear_ : nullptr, &options, &last_mesh_hz_);
+    if (!problem.empty()) {
+      ++windows_phase_unusable_;
+      last_phase_problem_ = problem;
+      ROS_WARN_THROTTLE(2.0,
+                        "mesh_phase of the window not usable (%s): analysed without the "
+                        "gear's order frequencies",
+                        problem.c_str());
+    }
+    return options;
+  }
+
   void diagnoseStream(diagnostic_updater::DiagnosticStatusWrapper& s) {
     s.summary(diagnostic_msgs::DiagnosticStatus::OK, "receiving");
     intake_.report(s);
@@ -243,6 +290,11 @@ class WaveletNode {
           diagnostic_msgs::DiagnosticStatus::WARN,
           "analysis cannot keep up: analysing 1 window in " + std::to_string(load_.stride()));
     }
+    if (windows_phase_unusable_ != reported_phase_unusable_) {
+      s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                     "mesh_phase not usable: window analysed without the gear's order frequencies");
+    }
+    reported_phase_unusable_ = windows_phase_unusable_;
     s.add("analysis load [core fraction]", load_.load());
     s.add("analysis stride [windows]", load_.stride());
     s.add("analysis budget [core fraction]", load_.budget());
@@ -255,6 +307,11 @@ class WaveletNode {
     s.add("modes in last window", last_modes_);
     s.add("lowest mode frequency [Hz]", last_frequency_);
     s.add("lowest mode damping ratio", last_xi_);
+    s.add("mesh frequency last window [Hz]", last_mesh_hz_);
+    s.add("gear parameters",
+          gear_ ? (o_.gear_config.empty() ? "gear/params" : o_.gear_config) : std::string("none"));
+    s.add("windows with unusable mesh_phase", windows_phase_unusable_);
+    s.add("last mesh_phase problem", last_phase_problem_);
   }
 
   NodeOptions o_;
@@ -268,7 +325,11 @@ class WaveletNode {
   std::optional<Pending> pending_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<gear_damping::WaveletConfig>> reconfigure_;
-  ros::Subscriber signal_sub_, damping_sub_;
+  ros::Subscriber signal_sub_, damping_sub_, params_sub_;
+  std::optional<gear_sim::GearModel> gear_;  // ~gear_config or gear/params
+  double last_mesh_hz_ = gd::kNaN;
+  unsigned long windows_phase_unusable_ = 0, reported_phase_unusable_ = 0;
+  std::string last_phase_problem_;
   ros::ServiceServer analyze_srv_, reset_srv_;
   ros::WallTimer timer_;
   double xi_integral_ = gd::kNaN, last_ms_ = 0, last_frequency_ = gd::kNaN, last_xi_ = gd::kNaN;
@@ -288,6 +349,7 @@ int main(int argc, char** argv) {
   NodeOptions options;
   if (!loadParameters(pnh, &options)) return 1;
   WaveletNode node(nh, pnh, std::move(options));
+  if (!node.loadGearConfig()) return 1;
   ros::spin();
   return 0;
 }

@@ -23,6 +23,7 @@ struct WaveletNodeOptions {
   double analysis_budget = 0.8;  // [fraction of one core] above it, windows are skipped
   int min_window_samples = 256;  // [samples]
   IntakeOptions intake;
+  std::string gear_config;  // gear YAML for the parametric checks; empty: gear/params if published
 };
 
 /// Reads and validates every private parameter of wavelet_node from `p`; false after ROS_FATAL
@@ -44,7 +45,7 @@ inline bool readWaveletParameters(ParamReader& p, WaveletNodeOptions* o) {
       !p.getDouble("min_decay_nepers", &w.min_decay_nepers) ||
       !p.get("order_frequencies", &w.order_frequencies, "Hz") ||
       !p.get("mode_frequencies", &w.mode_frequencies, "Hz") || !p.get("threads", &w.threads) ||
-      !readIntakeParams(p, &o->intake)) {
+      !p.get("gear_config", &o->gear_config) || !readIntakeParams(p, &o->intake)) {
     return false;
   }
   p.allow("diagnostic_period");

@@ -58,6 +58,7 @@
 #include "gear_damping_id/segment_driver.hpp"
 #include "gear_damping_id/ste_io.hpp"
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_id/wavelet_context.hpp"
 #include "gear_damping_ros/id_conversions.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/message_text.hpp"
@@ -644,9 +645,9 @@ class Analysis {
   int readGearParameters();
   int checkRecord();
   int checkAnalysedRange();
-  void parametricGrowth(size_t n, double rate, double f_mesh);
   // Whether the wavelet's samples take their mesh phase from the record (waveletMeshPhase).
   bool wavelet_phase_from_record = false;
+  std::string wavelet_context_warning;  // waveletMeshPhase's, also in the JSON
   void waveletMeshPhase();
   // The mesh phase [cycles] at the wavelet record's sample k: the record's mesh_phase when
   // usable (wavelet_phase_from_record), else the gear parameters' speed profile at the sample's
@@ -1271,48 +1272,24 @@ int Analysis::identify() {
   return kContinue;
 }
 
-// The record's mesh_phase serves the wavelet (order frequencies, growth rates) where it is
-// finite and increasing over the wavelet's samples; otherwise it is set aside with a warning
-// (before, a column that did not advance left every parametric check off without a word) and
-// the gear parameters' speed profile, when given, takes its place.
+// The record's mesh_phase serves the wavelet (order frequencies, growth rates) where
+// meshPhaseProblem finds nothing wrong with it over the wavelet's samples; otherwise it is set
+// aside with a warning, on stderr and in the JSON's wavelet.warnings (before, a column that did
+// not advance left every parametric check off without a word), and the gear parameters' speed
+// profile, when given, takes its place.
 void Analysis::waveletMeshPhase() {
   wavelet_phase_from_record = wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
   if (!wavelet_phase_from_record || wavelet_n < 2) return;
-  const double* p = table.mesh_phase.data() + first;
-  const double* end = p + wavelet_n;
-  if (std::all_of(p, end, [](double v) { return std::isfinite(v); }) && std::is_sorted(p, end) &&
-      end[-1] > p[0])
-    return;
+  const std::string problem = gd::meshPhaseProblem(table.mesh_phase.data() + first, wavelet_n);
+  if (problem.empty()) return;
   wavelet_phase_from_record = false;
-  warn("mesh_phase is not finite and increasing over the wavelet's samples: " +
-       std::string(identification ? "the wavelet's mesh frequency is taken from the gear "
-                                    "parameters' speed profile instead"
-                                  : "no mesh frequency, so forced and modulated lines are not "
-                                    "flagged"));
-}
-
-// The wavelet's parametric_resonance input (WaveletOptions::parametric_growth_rate): the
-// Floquet growth rate of the gear's stiffness at the mesh frequency of each of kBlocks blocks
-// of the wavelet's n samples (meshPhaseAt: a speed ramp can cross instability regions), else at
-// f_mesh for the whole record; a rate that cannot be computed counts as 0.
-void Analysis::parametricGrowth(size_t n, double rate, double f_mesh) {
-  auto growth = [&](double f) {
-    const double lambda = gear_sim::parametricGrowthRate(model.gears, model.mesh, f);
-    return std::isfinite(lambda) ? lambda : 0.0;
-  };
-  constexpr size_t kBlocks = 32;
-  if (n < 4 * kBlocks) {
-    if (f_mesh > 0.0) wopt.parametric_growth_rate = {growth(f_mesh)};
-    return;
-  }
-  const size_t b = n / kBlocks;
-  wopt.parametric_growth_rate.assign(kBlocks, 0.0);
-  wopt.parametric_growth_block = static_cast<double>(b) / rate;
-  for (size_t k = 0; k < kBlocks; ++k) {
-    const size_t i0 = k * b, i1 = k + 1 == kBlocks ? n - 1 : (k + 1) * b;
-    const double f = (meshPhaseAt(i1) - meshPhaseAt(i0)) * rate / static_cast<double>(i1 - i0);
-    wopt.parametric_growth_rate[k] = growth(f);
-  }
+  wavelet_context_warning =
+      "mesh_phase not usable over the wavelet's samples (" + problem + "): " +
+      std::string(identification ? "the wavelet's mesh frequency is taken from the gear "
+                                   "parameters' speed profile instead"
+                                 : "no mesh frequency, so forced and modulated lines are not "
+                                   "flagged");
+  warn(wavelet_context_warning);
 }
 
 int Analysis::waveletStep() {
@@ -1354,17 +1331,10 @@ int Analysis::waveletStep() {
       warn("wavelet validation on the first " + std::to_string(wavelet_n) +
            " samples of the analysed record (--wavelet-max-samples)");
     // Forced lines: mesh frequency from the record's mesh_phase, else the gear parameters.
-    double f_mesh = 0.0;
     waveletMeshPhase();
-    if (wavelet_n > 1 && (wavelet_phase_from_record || identification))
-      f_mesh = (meshPhaseAt(wavelet_n - 1) - meshPhaseAt(0)) * wavelet_rate /
-               static_cast<double>(wavelet_n - 1);
-    if (!std::isfinite(f_mesh) || !(f_mesh > 0.0)) f_mesh = 0.0;
-    if (wopt.order_frequencies.empty())
-      wopt.order_frequencies =
-          gd::gearOrderFrequencies(f_mesh, identification ? model.gears.pinion.teeth : 0,
-                                   identification ? model.gears.gear.teeth : 0);
-    if (identification) parametricGrowth(wavelet_n, wavelet_rate, f_mesh);
+    if (wavelet_phase_from_record || identification)
+      gd::applyGearContext([this](size_t k) { return meshPhaseAt(k); }, wavelet_n, wavelet_rate,
+                           identification ? &model : nullptr, &wopt);
     gear_sim::ProgressBar wavelet_progress("analyze", 0.0, !quiet);
     wavelet_progress.set(
         0.0, "wavelet validation of " + std::to_string(wavelet_dte.size()) + " samples");
@@ -1375,6 +1345,7 @@ int Analysis::waveletStep() {
       warn("wavelet validation not possible: " + wres.status.message());
     } else {
       gd::shiftWaveletTimes(&wres, t_first);  // onto the record's time axis
+      if (!wavelet_context_warning.empty()) wres.warnings.push_back(wavelet_context_warning);
       if (identification && !runs.empty())
         for (auto& m : wres.modes) m.integral_xi = integralXiOver(runs.front().result, m);
       gd::printWaveletTable(std::cout, wres);

@@ -222,6 +222,25 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
       " %zu wavelet windows (%zu modes)\n",
       col.per_segment.size(), col.responses.size(), min_fit, col.modes.size(),
       col.modes.empty() ? size_t{0} : col.modes.back().modes.size());
+  // wavelet_node: each window's order frequencies from the chunks' mesh_phase (the simulator's
+  // constant mesh frequency), the shaft orders and growth rates from the latched gear/params; so
+  // the forced DTE's lines at mesh harmonics are flagged order_harmonic (measured: 6 of 6 modes;
+  // before 2026-11-28's second session the node had no order frequencies by default, so none).
+  const double f_mesh = cfg.speed.pinion_rpm / 60.0 * cfg.gears.pinion.teeth;
+  const char* const kMeshHz = "mesh frequency last window [Hz]";
+  EXPECT_TRUE(waitFor(
+      [&] { return std::abs(col.value("wavelet: wavelet", kMeshHz) / f_mesh - 1.0) < 1e-9; }, 30.0))
+      << col.value("wavelet: wavelet", kMeshHz) << " Hz against " << f_mesh;
+  EXPECT_EQ(col.value("wavelet: wavelet", "windows with unusable mesh_phase"), 0.0);
+  size_t forced = 0, modes = 0;
+  for (const auto& w : col.modes) {
+    for (const auto& m : w.modes) {
+      ++modes;
+      for (const auto& q : m.warnings) forced += q.code == "order_harmonic" ? 1 : 0;
+    }
+  }
+  EXPECT_GE(forced, 1u) << "of " << modes << " modes";
+  std::printf("[pipeline] wavelet: %zu of %zu modes flagged order_harmonic\n", forced, modes);
   // Diagnostics: everything received, nothing lost.
   EXPECT_EQ(col.value("damping_id: stream", "samples received"), static_cast<double>(t.size()));
   EXPECT_EQ(col.value("damping_id: stream", "gaps"), 0.0);
@@ -431,6 +450,7 @@ TEST(BadParams, InvalidParametersStopTheNodesNamingTheParameter) {
   expectFatal("wavelet_node", "_window:=-1.0", "~window = -1");
   expectFatal("wavelet_node", "_omega0:=1.0", "~omega0 = 1");
   expectFatal("wavelet_node", "_n_scales:=many", "~n_scales: wrong type");
+  expectFatal("wavelet_node", "_gear_config:=/nonexistent.yaml", "~gear_config");
 }
 
 // ------------------------------------------------------------------------------------------

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "gear_damping_id/wavelet.hpp"
+#include "gear_damping_id/wavelet_context.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/models.hpp"
 #include "gear_sim/simulator.hpp"
@@ -259,28 +260,18 @@ TEST(WaveletGearCase, RawForcedResponseIsFlaggedAsForcedLinesNotDamping) {
   }
 }
 
-// Held-out gear free responses (random gears of scripts/heldout_sweep.py, `--check wavelet`,
-// seeds 8033, 9109, 9007 and 10020; `simulate --free-response`: the difference of two runs from two
-// initial states plus the configured noise) on which the analysis once reported wrong damping
-// ratios without a warning: a side line at f0 - f_mesh whose own fit decays 16 % faster than the
-// main line (xi 0.078 against the true 0.044; 8033), two lines of a slow mesh (417 Hz) whose
-// decay region spans a quarter of a mesh period (xi 0.043 and 0.045 against 0.029; 9109), and a
-// side line in a region of one mesh period (0.056 against 0.028; 9007), and the main line of a
-// noise-free record whose mesh stiffness is parametrically unstable at its speed (10020: Floquet
-// growth 363 1/s, so the response decays at C/2 - 363 = 477 1/s: xi 0.0058 against 0.0103,
-// -44 %). Right or flagged: every
-// mode with a damping ratio and no warning is within the 10 % bar of its true ratio (C over its
-// region, weighted like the fit, over 2 omega0), and those lines now carry their warnings.
-TEST(WaveletGearCase, HeldOutFreeResponsesAreRightOrFlagged) {
-  // The drawn gear, mesh, speed, load and damping; the simulation: 50 ms at the given rate
-  // and SNR [dB], the simulator's noise seed.
-  struct HeldOut {
-    std::string name, yaml;
-    double rate;
-    const char* snr;  // (YAML: .inf for none)
-    long seed;
-  };
-  const std::vector<HeldOut> cases = {
+// The drawn gear, mesh, speed, load and damping; the simulation: 50 ms at the given rate
+// and SNR [dB], the simulator's noise seed.
+struct HeldOut {
+  std::string name, yaml;
+  double rate;
+  const char* snr;  // (YAML: .inf for none)
+  long seed;
+};
+
+// The held-out cases (scripts/heldout_sweep.py --check wavelet draws).
+const std::vector<HeldOut>& heldOutCases() {
+  static const std::vector<HeldOut> cases = {
       {"8033", R"(pinion:
   teeth: 36
   inertia: 0.0009225690706884249
@@ -393,29 +384,53 @@ damping:
 )",
        1000000.0, ".inf", 849604},
   };
-  for (const HeldOut& c : cases) {
+  return cases;
+}
+
+// Case c simulated: *g with its config, the noise-free forced run and the run from the static
+// deflection under the mean load; *y their difference (the free response) plus the noise of the
+// case's SNR.
+void buildHeldOut(const HeldOut& c, GearCase* g, Eigen::VectorXd* y) {
+  std::ostringstream yaml;
+  yaml << c.yaml << "simulation:\n  duration: 0.05\n  sample_rate: " << c.rate
+       << "\n  integrator: rk4\n  substeps: 1\n  dynamics: reduced\n  noise_snr_db: " << c.snr
+       << "\n  seed: " << c.seed << "\n";
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfig(YAML::Load(yaml.str()), &g->config), &e)) << e;
+  g->me = g->config.gears.equivalentMass();
+  g->f0 = gear_sim::naturalFrequencyHz(g->config.gears, g->config.mesh);
+  g->omega0 = 2.0 * kPi * g->f0;
+  gear_sim::SignalTable noisy;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(g->config, &noisy), &e)) << e;
+  gear_sim::SimConfig quiet = g->config;
+  quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
+  gear_sim::SimConfig shifted = quiet;
+  shifted.simulation.initial_dte +=
+      g->config.gears.forceFactor() * noisy.torque.mean() / (g->omega0 * g->omega0);
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(quiet, &g->forced), &e)) << e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(shifted, &g->shifted), &e)) << e;
+  *y = g->shifted.dte - g->forced.dte + (noisy.dte - g->forced.dte);
+}
+
+// Held-out gear free responses (random gears of scripts/heldout_sweep.py, `--check wavelet`,
+// seeds 8033, 9109, 9007 and 10020; `simulate --free-response`: the difference of two runs from two
+// initial states plus the configured noise) on which the analysis once reported wrong damping
+// ratios without a warning: a side line at f0 - f_mesh whose own fit decays 16 % faster than the
+// main line (xi 0.078 against the true 0.044; 8033), two lines of a slow mesh (417 Hz) whose
+// decay region spans a quarter of a mesh period (xi 0.043 and 0.045 against 0.029; 9109), and a
+// side line in a region of one mesh period (0.056 against 0.028; 9007), and the main line of a
+// noise-free record whose mesh stiffness is parametrically unstable at its speed (10020: Floquet
+// growth 363 1/s, so the response decays at C/2 - 363 = 477 1/s: xi 0.0058 against 0.0103,
+// -44 %). Right or flagged: every
+// mode with a damping ratio and no warning is within the 10 % bar of its true ratio (C over its
+// region, weighted like the fit, over 2 omega0), and those lines now carry their warnings.
+TEST(WaveletGearCase, HeldOutFreeResponsesAreRightOrFlagged) {
+  for (const HeldOut& c : heldOutCases()) {
     const std::string& name = c.name;
     SCOPED_TRACE("held-out case " + name);
-    std::ostringstream yaml;
-    yaml << c.yaml << "simulation:\n  duration: 0.05\n  sample_rate: " << c.rate
-         << "\n  integrator: rk4\n  substeps: 1\n  dynamics: reduced\n  noise_snr_db: " << c.snr
-         << "\n  seed: " << c.seed << "\n";
     GearCase g;
-    std::string e;
-    ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfig(YAML::Load(yaml.str()), &g.config), &e)) << e;
-    g.me = g.config.gears.equivalentMass();
-    g.f0 = gear_sim::naturalFrequencyHz(g.config.gears, g.config.mesh);
-    g.omega0 = 2.0 * kPi * g.f0;
-    gear_sim::SignalTable noisy;
-    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(g.config, &noisy), &e)) << e;
-    gear_sim::SimConfig quiet = g.config;
-    quiet.simulation.noise_snr_db = std::numeric_limits<double>::infinity();
-    gear_sim::SimConfig shifted = quiet;
-    shifted.simulation.initial_dte +=
-        g.config.gears.forceFactor() * noisy.torque.mean() / (g.omega0 * g.omega0);
-    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(quiet, &g.forced), &e)) << e;
-    ASSERT_TRUE(gear_test::ok(gear_sim::simulate(shifted, &g.shifted), &e)) << e;
-    const Eigen::VectorXd y = g.shifted.dte - g.forced.dte + (noisy.dte - g.forced.dte);
+    Eigen::VectorXd y;
+    ASSERT_NO_FATAL_FAILURE(buildHeldOut(c, &g, &y));
     const double fs = g.config.simulation.sample_rate;
     const double f_mesh = g.config.speed.pinion_rpm / 60.0 * g.config.gears.pinion.teeth;
     WaveletOptions o;  // analyze's: default options, the gear's order frequencies
@@ -464,6 +479,162 @@ damping:
       EXPECT_TRUE(shared) << gear_damping_id::warningText(side->warnings);
     }
   }
+}
+
+// The warning codes of each mode, in order.
+std::vector<std::string> codesOf(const WaveletResult& r) {
+  std::vector<std::string> out;
+  for (const WaveletMode& m : r.modes) {
+    std::string codes;
+    for (const auto& w : m.warnings) codes += w.code + " ";
+    out.push_back(codes);
+  }
+  return out;
+}
+
+// The live wavelet_node (and analyze on a record with mesh_phase) derives the gear's context
+// from the samples' own mesh_phase (gear_damping_id::applyGearContext): with the gear parameters
+// it must give the options, and so the flags and numbers, that the known speed gives (the
+// held-out test above); without them (no gear/params on a rig) the order frequencies alone,
+// which still flag the side line of 8033 but not the instability of 10020 (that needs the
+// stiffness: docs/live.md). Before, the node analysed every window with ~order_frequencies
+// (empty by default): 8033's side line at 4001 Hz was reported with xi 0.078 against a true
+// 0.043 (+80 %) and no warning (printed below as "without a context").
+TEST(WaveletGearCase, ALiveWindowsMeshPhaseGivesTheKnownSpeedsFlags) {
+  for (const HeldOut& c : heldOutCases()) {
+    SCOPED_TRACE("held-out case " + c.name);
+    GearCase g;
+    Eigen::VectorXd y;
+    ASSERT_NO_FATAL_FAILURE(buildHeldOut(c, &g, &y));
+    const double fs = g.config.simulation.sample_rate;
+    const size_t n = static_cast<size_t>(y.size());
+    const double f_mesh = g.config.speed.pinion_rpm / 60.0 * g.config.gears.pinion.teeth;
+    ASSERT_EQ(g.forced.mesh_phase.size(), y.size());
+    const gear_sim::GearModel model = g.config.gearModel();
+    WaveletOptions known;  // from the known constant speed
+    known.order_frequencies = gear_damping_id::gearOrderFrequencies(
+        f_mesh, g.config.gears.pinion.teeth, g.config.gears.gear.teeth);
+    known.parametric_growth_rate = {
+        gear_sim::parametricGrowthRate(g.config.gears, g.config.mesh, f_mesh)};
+    WaveletOptions live, bare;
+    double f_live = 0.0, f_bare = 0.0;
+    EXPECT_EQ(gear_damping_id::applyGearContext(g.forced.mesh_phase.data(), n, fs, &model, &live,
+                                                &f_live),
+              "");
+    EXPECT_EQ(gear_damping_id::applyGearContext(g.forced.mesh_phase.data(), n, fs, nullptr, &bare,
+                                                &f_bare),
+              "");
+    EXPECT_NEAR(f_live / f_mesh, 1.0, 1e-9);
+    EXPECT_EQ(f_bare, f_live);
+    ASSERT_EQ(live.order_frequencies.size(), 3u);
+    for (size_t k = 0; k < 3; ++k)
+      EXPECT_NEAR(live.order_frequencies[k] / known.order_frequencies[k], 1.0, 1e-9);
+    ASSERT_EQ(bare.order_frequencies.size(), 1u);  // the mesh frequency alone
+    EXPECT_TRUE(bare.parametric_growth_rate.empty());
+    ASSERT_EQ(live.parametric_growth_rate.size(), gear_damping_id::kGrowthBlocks);
+    EXPECT_NEAR(live.parametric_growth_rate[0], known.parametric_growth_rate[0],
+                1e-6 * std::max(1.0, known.parametric_growth_rate[0]));
+    for (double rate : live.parametric_growth_rate)  // constant speed: one evaluation for all
+      EXPECT_EQ(rate, live.parametric_growth_rate[0]);
+    const auto analyse = [&](const WaveletOptions& o) {
+      return gear_damping_id::validateWavelet(y.data(), n, fs, o);
+    };
+    const WaveletResult rk = analyse(known), rl = analyse(live), rb = analyse(bare);
+    ASSERT_TRUE(rk.ok() && rl.ok() && rb.ok());
+    EXPECT_EQ(codesOf(rl), codesOf(rk));
+    ASSERT_EQ(rl.modes.size(), rk.modes.size());
+    for (size_t k = 0; k < rk.modes.size(); ++k) {
+      const double a = rl.modes[k].damping_ratio, b = rk.modes[k].damping_ratio;
+      EXPECT_TRUE(std::isnan(a) ? std::isnan(b) : std::abs(a - b) <= 1e-9 * std::abs(b))
+          << rk.modes[k].frequency_hz << " Hz: " << a << " vs " << b;
+    }
+    if (c.name == "8033") {  // the side line at f0 - f_mesh, from the mesh frequency alone
+      const WaveletResult none = analyse(WaveletOptions{});  // the node before: no context
+      const WaveletMode* before = nearest(none, g.f0 - f_mesh);
+      ASSERT_NE(before, nullptr);
+      std::printf("[ measured ] 8033 side line %.0f Hz without a context: xi %.4g, warnings '%s'\n",
+                  before->frequency_hz, before->damping_ratio,
+                  gear_damping_id::warningText(before->warnings).c_str());
+      const WaveletMode* side = nearest(rb, g.f0 - f_mesh);
+      ASSERT_NE(side, nullptr);
+      EXPECT_TRUE(std::isnan(side->damping_ratio)) << side->frequency_hz;
+      EXPECT_NE(codesOf(rb)[static_cast<size_t>(side - rb.modes.data())].find("shared_decay"),
+                std::string::npos);
+    }
+  }
+}
+
+// meshPhaseProblem: a phase that gives a mesh frequency, and each way one does not.
+TEST(WaveletContext, AMeshPhaseIsUsableOnlyWhenItAdvancesPlausibly) {
+  using gear_damping_id::meshPhaseProblem;
+  const size_t n = 1000;
+  std::vector<double> constant(n), ramp(n);
+  for (size_t k = 0; k < n; ++k) {
+    constant[k] = 3.0 + 0.02 * static_cast<double>(k);
+    ramp[k] = 1e-3 * static_cast<double>(k * k);  // from standstill: largest step 2x the mean
+  }
+  EXPECT_EQ(meshPhaseProblem(constant.data(), n), "");
+  EXPECT_EQ(meshPhaseProblem(ramp.data(), n), "");
+  auto with = [&](size_t k, double v) {
+    std::vector<double> p = constant;
+    p[k] = v;
+    return p;
+  };
+  EXPECT_NE(meshPhaseProblem(with(7, std::nan("")).data(), n).find("not finite"),
+            std::string::npos);
+  EXPECT_NE(meshPhaseProblem(with(7, INFINITY).data(), n).find("not finite"), std::string::npos);
+  EXPECT_NE(meshPhaseProblem(with(7, 0.0).data(), n).find("decreases"), std::string::npos);
+  const std::vector<double> flat(n, 5.0);
+  EXPECT_NE(meshPhaseProblem(flat.data(), n).find("does not advance"), std::string::npos);
+  // A jump to 1e308 (or by 1e6 cycles) half-way: finite and increasing, but no rotation.
+  std::vector<double> huge = constant, jump = constant;
+  for (size_t k = n / 2; k < n; ++k) huge[k] = 1e308, jump[k] += 1e6;
+  EXPECT_NE(meshPhaseProblem(huge.data(), n).find("corrupt"), std::string::npos);
+  EXPECT_NE(meshPhaseProblem(jump.data(), n).find("corrupt"), std::string::npos);
+  EXPECT_NE(meshPhaseProblem(constant.data(), 1), "");
+}
+
+// applyGearContext: the mean mesh frequency, one growth rate per block at that block's own mesh
+// frequency over a speed ramp, explicit order frequencies kept, and nothing set without a
+// rotation.
+TEST(WaveletContext, GrowthRatesFollowTheBlocksMeshFrequencyAndExplicitOrdersAreKept) {
+  const std::string path = std::string(GEAR_SOURCE_DIR) + "/config/table1.yaml";
+  gear_sim::SimConfig cfg;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(path, &cfg), &e)) << e;
+  const gear_sim::GearModel model = cfg.gearModel();
+  const double fs = 1e5;
+  const size_t n = 32 * 100;
+  // Mesh frequency rising linearly from 500 to 1500 Hz over the record.
+  auto phase = [&](size_t k) {
+    const double t = static_cast<double>(k) / fs, T = static_cast<double>(n - 1) / fs;
+    return 500.0 * t + 0.5 * (1000.0 / T) * t * t;
+  };
+  WaveletOptions o;
+  const double f = gear_damping_id::applyGearContext(phase, n, fs, &model, &o);
+  EXPECT_NEAR(f, 1000.0, 1e-9 * 1000.0);
+  ASSERT_EQ(o.order_frequencies.size(), 3u);
+  EXPECT_NEAR(o.order_frequencies[1], f / cfg.gears.pinion.teeth, 1e-9);
+  ASSERT_EQ(o.parametric_growth_rate.size(), 32u);
+  EXPECT_NEAR(o.parametric_growth_block, 100.0 / fs, 1e-15);
+  for (size_t b = 0; b < 32; ++b) {
+    const size_t i0 = b * 100, i1 = b == 31 ? n - 1 : (b + 1) * 100;
+    const double fb = (phase(i1) - phase(i0)) * fs / static_cast<double>(i1 - i0);
+    const double expect = gear_sim::parametricGrowthRate(model.gears, model.mesh, fb);
+    EXPECT_EQ(o.parametric_growth_rate[b], std::isfinite(expect) ? expect : 0.0) << b;
+  }
+  WaveletOptions given;
+  given.order_frequencies = {123.0};
+  gear_damping_id::applyGearContext(phase, n, fs, nullptr, &given);
+  EXPECT_EQ(given.order_frequencies, std::vector<double>{123.0});
+  WaveletOptions still;
+  EXPECT_EQ(gear_damping_id::applyGearContext([](size_t) { return 2.0; }, n, fs, &model, &still),
+            0.0);
+  EXPECT_TRUE(still.order_frequencies.empty());
+  EXPECT_TRUE(still.parametric_growth_rate.empty());
+  WaveletOptions short_record;  // fewer than 4 samples per block: one rate at the mean
+  gear_damping_id::applyGearContext(phase, 100, fs, &model, &short_record);
+  EXPECT_EQ(short_record.parametric_growth_rate.size(), 1u);
 }
 
 }  // namespace
