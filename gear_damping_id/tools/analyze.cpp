@@ -848,6 +848,11 @@ void Analysis::declareWaveletOptions(CLI::App& app) {
   app.add_option("--mode-freq", wopt.mode_frequencies,
                  "wavelet: explicit mode frequency [Hz] (repeat; default: picked peaks)")
       ->take_all();
+  app.add_option("--order-freq", wopt.order_frequencies,
+                 "wavelet: known forcing base frequency [Hz] (mesh, shafts; repeat): lines at its "
+                 "harmonics are forced, weaker lines k of it from a free decay its side lines "
+                 "(default: from mesh_phase, else the gear parameters' speed)")
+      ->take_all();
   app.add_option("--decay-region", regions,
                  "wavelet: decay region T0,T1 [s from the analysed record's start] (once for all "
                  "modes, or once per --mode-freq)")
