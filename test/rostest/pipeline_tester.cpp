@@ -451,6 +451,7 @@ TEST(BadParams, InvalidParametersStopTheNodesNamingTheParameter) {
   expectFatal("wavelet_node", "_omega0:=1.0", "~omega0 = 1");
   expectFatal("wavelet_node", "_n_scales:=many", "~n_scales: wrong type");
   expectFatal("wavelet_node", "_gear_config:=/nonexistent.yaml", "~gear_config");
+  expectFatal("wavelet_node", "_gear_config:=/tmp", "is a directory");  // aborted (134) before
 }
 
 // ------------------------------------------------------------------------------------------

@@ -65,6 +65,19 @@ TEST(ConfigYaml, Table1FileIsTheDefaultCase) {
   EXPECT_TRUE(std::isinf(c.simulation.noise_snr_db));
 }
 
+// A directory given as a configuration file is an I/O error naming it, not an exception: it
+// opens as a stream whose first read throws (a hostile test of wavelet_node's ~gear_config: the
+// node aborted with exit 134 instead of a fatal message naming the parameter).
+TEST(ConfigYaml, ADirectoryIsAnIoErrorNotAnException) {
+  const std::string dir = std::string(GEAR_SOURCE_DIR) + "/config";
+  gear_sim::SimConfig c;
+  gear_sim::GearModel m;
+  const gear_sim::Status s = gear_sim::loadSimConfigFile(dir, &c);
+  EXPECT_EQ(s.code(), gear_sim::StatusCode::IoError) << s.message();
+  EXPECT_NE(s.message().find("is a directory"), std::string::npos) << s.message();
+  EXPECT_EQ(gear_sim::loadGearModelFile(dir, &m).code(), gear_sim::StatusCode::IoError);
+}
+
 TEST(ConfigYaml, MisspeltKeysWrongTypesAndUnknownNamesAreErrorsNamingTheKey) {
   EXPECT_NE(loadError("mesh: {k_maxx: 1}").find("mesh.k_maxx: unknown key"), std::string::npos);
   EXPECT_NE(loadError("loads: {mean: 1}").find("loads: unknown section"), std::string::npos);

@@ -445,7 +445,7 @@ TEST(WaveletContext, AMeshPhaseIsUsableOnlyWhenItAdvancesPlausibly) {
   std::vector<double> constant(n), ramp(n);
   for (size_t k = 0; k < n; ++k) {
     constant[k] = 3.0 + 0.02 * static_cast<double>(k);
-    ramp[k] = 1e-3 * static_cast<double>(k * k);  // from standstill: largest step 2x the mean
+    ramp[k] = 1e-4 * static_cast<double>(k * k);  // from standstill: largest step 2x the mean
   }
   EXPECT_EQ(meshPhaseProblem(constant.data(), n), "");
   EXPECT_EQ(meshPhaseProblem(ramp.data(), n), "");
@@ -460,12 +460,23 @@ TEST(WaveletContext, AMeshPhaseIsUsableOnlyWhenItAdvancesPlausibly) {
   EXPECT_NE(meshPhaseProblem(with(7, 0.0).data(), n).find("decreases"), std::string::npos);
   const std::vector<double> flat(n, 5.0);
   EXPECT_NE(meshPhaseProblem(flat.data(), n).find("does not advance"), std::string::npos);
-  // A jump to 1e308 (or by 1e6 cycles) half-way: finite and increasing, but no rotation.
-  std::vector<double> huge = constant, jump = constant;
-  for (size_t k = n / 2; k < n; ++k) huge[k] = 1e308, jump[k] += 1e6;
-  EXPECT_NE(meshPhaseProblem(huge.data(), n).find("corrupt"), std::string::npos);
-  EXPECT_NE(meshPhaseProblem(jump.data(), n).find("corrupt"), std::string::npos);
+  // A jump half-way, finite and increasing, but no rotation: to 1e308 or by 1e6 cycles (the mean
+  // step then above half a cycle), by 5 cycles (250 mean steps: a corrupt value).
+  std::vector<double> huge = constant, jump = constant, small_jump = constant;
+  for (size_t k = n / 2; k < n; ++k) huge[k] = 1e308, jump[k] += 1e6, small_jump[k] += 5.0;
+  EXPECT_NE(meshPhaseProblem(huge.data(), n), "");
+  EXPECT_NE(meshPhaseProblem(jump.data(), n), "");
+  EXPECT_NE(meshPhaseProblem(small_jump.data(), n).find("corrupt"), std::string::npos);
   EXPECT_NE(meshPhaseProblem(constant.data(), 1), "");
+  // Uniform steps of 1e300 cycles (the frequency would overflow to inf, and the context was
+  // dropped without a word: hostile test), or above half a cycle per sample (above Nyquist);
+  // a 64-sample record whose last value jumps to 1e308 (the step ratio cannot exceed 63 there).
+  std::vector<double> vast(n), fast(n), short64(64);
+  for (size_t k = 0; k < n; ++k) vast[k] = 1e300 * static_cast<double>(k), fast[k] = 0.6 * k;
+  for (size_t k = 0; k < 64; ++k) short64[k] = 0.02 * static_cast<double>(k);
+  short64[63] = 1e308;
+  for (const auto* p : {&vast, &fast, &short64})
+    EXPECT_NE(meshPhaseProblem(p->data(), p->size()).find("half a cycle"), std::string::npos);
 }
 
 // applyGearContext: the mean mesh frequency, one growth rate per block at that block's own mesh

@@ -21,7 +21,9 @@ constexpr double kMaxMeshPhaseStepRatio = 64.0;
 
 /// Why the cumulative mesh phase phase[0..n) [mesh cycles] cannot give the mesh frequency, or ""
 /// when it can: every value finite, never decreasing, advancing over the samples
-/// (phase[n-1] > phase[0]), and no step above kMaxMeshPhaseStepRatio times the mean step.
+/// (phase[n-1] > phase[0]) by at most half a cycle per sample on average (a mesh frequency up to
+/// half the sample rate; more is no rotation the samples resolve, and a step of 1e300 cycles
+/// would overflow the frequency), and no step above kMaxMeshPhaseStepRatio times the mean step.
 std::string meshPhaseProblem(const double* phase, size_t n);
 
 /// The mesh phase [mesh cycles] at sample k of the analysed samples.

@@ -25,7 +25,11 @@ std::string meshPhaseProblem(const double* phase, size_t n) {
   const double span = phase[n - 1] - phase[0];
   if (!(span > 0.0)) return "it does not advance";
   const double mean = span / static_cast<double>(n - 1);
-  if (!std::isfinite(span) || largest > kMaxMeshPhaseStepRatio * mean)
+  if (!(mean <= 0.5))  // (an overflowing span too: a step of 1e300 cycles)
+    return "its mean step of " + gear_sim::formatNumber(mean) +
+           " cycles per sample is above half a cycle (a mesh frequency above half the sample "
+           "rate: not a rotation the samples resolve)";
+  if (largest > kMaxMeshPhaseStepRatio * mean)
     return "a step of " + gear_sim::formatNumber(largest) + " cycles against a mean step of " +
            gear_sim::formatNumber(mean) + " (a corrupt value)";
   return "";

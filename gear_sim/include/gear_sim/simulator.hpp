@@ -31,9 +31,11 @@ double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh);
 /// average at C/2 exactly where lambda = 0, and as exp(-(C/2 -+ lambda) t) (two Floquet
 /// solutions) inside a region: a decay rate measured from the response (the wavelet) is off the
 /// damping's by up to lambda. Exact rotations on the pieces where k is constant, RK4 at
-/// omega h <= 0.01 elsewhere (relative error of tr Phi ~1e-11). NaN for f_mesh <= 0, a
-/// non-finite value, or a smooth piece needing more than 1e7 RK4 steps (a mesh frequency below
-/// ~6e-5 of the natural frequency).
+/// omega h <= 0.01 elsewhere (relative error of tr Phi ~1e-11); 0 for a Fourier stiffness
+/// without harmonics. NaN for f_mesh <= 0, a non-finite value, or a cycle needing more than 6e4
+/// units of work (RK4 steps times 1 + the Fourier harmonics, about 3 ms: a mesh frequency below
+/// 1/38 of the natural frequency for one harmonic, 1/380 for a trapezoid with 5 % ramps, where
+/// the resonance orders are above 76 and their regions negligibly narrow).
 double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, double f_mesh);
 
 /// Adds white Gaussian noise to `y` at the given SNR [dB] (SNR = 20 log10(std(y - mean)/sigma));
