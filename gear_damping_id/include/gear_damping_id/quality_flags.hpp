@@ -46,6 +46,9 @@
 //                        stamps (rig_frontend_node with a std_msgs/Float64 torque marks its
 //                        chunks): C can be biased by the pairing's lag (measured up to 10 %)
 // Run codes (IdentificationResult::warnings): shape_mismatch (the pooled shape score above),
+// model_mismatch (a shared damping, the constant model's C or the load law, fitted over segments
+// of which some are flagged model_mismatch: one segment the model does not reproduce biases the
+// shared estimate of all; also on the constant estimate),
 // refine_not_converged (the output-error refinement
 // stopped without converging), refine_failed (it diverged: integral estimates reported),
 // refine_skipped (a streamed shared-damping run is not refined), switches_unlocated (stiffness
