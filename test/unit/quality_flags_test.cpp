@@ -887,4 +887,22 @@ TEST(QualityFlags, SharedMismatchRuleAppliesToSharedModelsOnly) {
       << r.warnings.front().text;
 }
 
+// The load law under a constant load: c1 is not identifiable; the reason says why (before, only
+// "rank deficient or ill-conditioned (condition inf)", 5 of 40 held-out load_law records), and
+// there is no refine_failed: nothing was there to refine.
+TEST(QualityFlags, ALoadLawUnderAConstantLoadSaysWhyItIsNotIdentifiable) {
+  SimConfig c = table1Config();
+  c.load.profile = gear_sim::LoadProfile::Constant;
+  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
+  const SignalTable t = simulateOrFail(c);
+  IdentificationOptions o;
+  o.model = gd::DampingModel::LoadLaw;
+  IdentificationResult r;
+  gd::identify(t, gd::gearConstants(c.gearModel()), o, &r);
+  ASSERT_TRUE(r.load_law);
+  EXPECT_FALSE(r.load_law->identifiable);
+  EXPECT_NE(r.load_law->reason.find("a load that varies"), std::string::npos) << r.load_law->reason;
+  EXPECT_FALSE(gd::hasCode(r.warnings, qc::kRefineFailed));
+}
+
 }  // namespace

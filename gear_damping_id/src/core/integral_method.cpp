@@ -1536,6 +1536,20 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
       sh.ok = false;
       std::ostringstream m;
       m << "rank deficient or ill-conditioned (condition " << sh.cond << ")";
+      if (options_.model == DampingModel::LoadLaw) {
+        // The usual cause: a constant load leaves c1 undetermined (held-out sweeps: 5 of 40
+        // load_law records, which said only the condition number).
+        double lo = kNaN, hi = kNaN;
+        for (size_t i = s_begin; i < s_end; ++i) {
+          const SegmentEstimate& e = segments_[i].estimate;
+          if (!e.identifiable || !std::isfinite(e.mean_torque)) continue;
+          lo = std::isnan(lo) ? e.mean_torque : std::min(lo, e.mean_torque);
+          hi = std::isnan(hi) ? e.mean_torque : std::max(hi, e.mean_torque);
+        }
+        m << ": the load law needs a load that varies over the analysed range (the segments' "
+             "mean torques span "
+          << lo << " to " << hi << " N*m); with a constant load use --model constant";
+      }
       sh.reason = m.str();
     } else {
       rss_total -= rhs.dot(sh.g);

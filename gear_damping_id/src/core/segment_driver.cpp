@@ -453,6 +453,10 @@ IdentificationResult SegmentDriver::finish(const SignalView* record,
     flagIntegralStandardErrors(options_, &r);
     return r;
   };
+  // Nothing to refine when the integral method could not identify the shared estimate (its
+  // `reason` says why, e.g. a constant load for the load law): no refine_failed then.
+  if ((r.load_law && !r.load_law->identifiable) || (r.constant && !r.constant->identifiable))
+    return integral();
   if (!options_.refinable()) {
     r.warnings.push_back(
         {quality_code::kRefineSkipped,
