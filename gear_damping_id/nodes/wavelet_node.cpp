@@ -266,12 +266,17 @@ class WaveletNode {
     if (!problem.empty()) {
       ++windows_phase_unusable_;
       last_phase_problem_ = problem;
-      ROS_WARN_THROTTLE(2.0,
-                        "mesh_phase of the window not usable (%s): analysed without the "
-                        "gear's order frequencies",
-                        problem.c_str());
+      ROS_WARN_THROTTLE(2.0, "mesh_phase of the window not usable (%s): analysed %s",
+                        problem.c_str(), contextLoss());
     }
     return options;
+  }
+
+  // What a window without a usable mesh_phase is analysed without.
+  const char* contextLoss() const {
+    return o_.wavelet.order_frequencies.empty()
+               ? "without the gear's order frequencies"
+               : "with ~order_frequencies only (no parametric growth rates)";
   }
 
   void diagnoseStream(diagnostic_updater::DiagnosticStatusWrapper& s) {
@@ -292,7 +297,7 @@ class WaveletNode {
     }
     if (windows_phase_unusable_ != reported_phase_unusable_) {
       s.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "mesh_phase not usable: window analysed without the gear's order frequencies");
+                     std::string("mesh_phase not usable: window analysed ") + contextLoss());
     }
     reported_phase_unusable_ = windows_phase_unusable_;
     s.add("analysis load [core fraction]", load_.load());

@@ -1285,15 +1285,20 @@ int Analysis::identify() {
 void Analysis::waveletMeshPhase() {
   wavelet_phase_from_record = wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
   if (!wavelet_phase_from_record || wavelet_n < 2) return;
-  const std::string problem = gd::meshPhaseProblem(table.mesh_phase.data() + first, wavelet_n);
+  const std::string problem =
+      gd::meshPhaseProblem(table.mesh_phase.data() + first, wavelet_n, wavelet_rate);
   if (problem.empty()) return;
   wavelet_phase_from_record = false;
+  const bool given = !wopt.order_frequencies.empty();  // --order-freq
   wavelet_context_warning =
       "mesh_phase not usable over the wavelet's samples (" + problem + "): " +
-      std::string(identification ? "the wavelet's mesh frequency is taken from the gear "
-                                   "parameters' speed profile instead"
-                                 : "no mesh frequency, so forced and modulated lines are not "
-                                   "flagged");
+      std::string(identification ? (given ? "the growth rates are taken from the gear parameters' "
+                                            "speed profile instead (order frequencies: "
+                                            "--order-freq)"
+                                          : "the wavelet's mesh frequency is taken from the gear "
+                                            "parameters' speed profile instead")
+                  : given ? "the order frequencies of --order-freq are used, without growth rates"
+                          : "no mesh frequency, so forced and modulated lines are not flagged");
   warn(wavelet_context_warning);
 }
 

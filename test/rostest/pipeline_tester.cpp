@@ -239,7 +239,7 @@ TEST(Pipeline, LiveDampingEqualsTheOfflineIdentificationAndTheTruth) {
       for (const auto& q : m.warnings) forced += q.code == "order_harmonic" ? 1 : 0;
     }
   }
-  EXPECT_GE(forced, 1u) << "of " << modes << " modes";
+  EXPECT_GT(2 * forced, modes) << forced << " of " << modes << " modes";  // measured: 6 of 6
   std::printf("[pipeline] wavelet: %zu of %zu modes flagged order_harmonic\n", forced, modes);
   // Diagnostics: everything received, nothing lost.
   EXPECT_EQ(col.value("damping_id: stream", "samples received"), static_cast<double>(t.size()));

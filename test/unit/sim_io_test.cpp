@@ -65,9 +65,10 @@ TEST(ConfigYaml, Table1FileIsTheDefaultCase) {
   EXPECT_TRUE(std::isinf(c.simulation.noise_snr_db));
 }
 
-// A directory given as a configuration file is an I/O error naming it, not an exception: it
-// opens as a stream whose first read throws (a hostile test of wavelet_node's ~gear_config: the
-// node aborted with exit 134 instead of a fatal message naming the parameter).
+// A directory (or a device) given as a configuration file is an I/O error naming it, not an
+// exception or a hang: a directory opens as a stream whose first read throws (a hostile test of
+// wavelet_node's ~gear_config: the node aborted with exit 134 instead of a fatal message naming
+// the parameter), /dev/zero was read until memory ran out.
 TEST(ConfigYaml, ADirectoryIsAnIoErrorNotAnException) {
   const std::string dir = std::string(GEAR_SOURCE_DIR) + "/config";
   gear_sim::SimConfig c;
@@ -76,6 +77,10 @@ TEST(ConfigYaml, ADirectoryIsAnIoErrorNotAnException) {
   EXPECT_EQ(s.code(), gear_sim::StatusCode::IoError) << s.message();
   EXPECT_NE(s.message().find("is a directory"), std::string::npos) << s.message();
   EXPECT_EQ(gear_sim::loadGearModelFile(dir, &m).code(), gear_sim::StatusCode::IoError);
+  // Nor a device (read until memory runs out) or a FIFO (blocks).
+  const gear_sim::Status z = gear_sim::loadSimConfigFile("/dev/zero", &c);
+  EXPECT_EQ(z.code(), gear_sim::StatusCode::IoError) << z.message();
+  EXPECT_NE(z.message().find("not a regular file"), std::string::npos) << z.message();
 }
 
 TEST(ConfigYaml, MisspeltKeysWrongTypesAndUnknownNamesAreErrorsNamingTheKey) {

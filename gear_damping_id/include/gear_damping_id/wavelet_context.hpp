@@ -13,18 +13,17 @@
 
 namespace gear_damping_id {
 
-/// A mesh phase step above this multiple of the mean step over the samples is not a rotation: a
-/// corrupt value (a jump to 1e308 is finite and increasing). A speed ramp from standstill over
-/// the whole record has a largest step twice the mean; an encoder's interpolation ripple a few
-/// per cent.
+/// A mesh phase step above this multiple of the typical step (the median of the steps where the
+/// phase advances) is not a rotation: a corrupt value (a jump to 1e308 is finite and
+/// increasing). A speed ramp, a start or a stop inside the samples, and an encoder's staircase
+/// stay well below it.
 constexpr double kMaxMeshPhaseStepRatio = 64.0;
 
-/// Why the cumulative mesh phase phase[0..n) [mesh cycles] cannot give the mesh frequency, or ""
-/// when it can: every value finite, never decreasing, advancing over the samples
-/// (phase[n-1] > phase[0]) by at most half a cycle per sample on average (a mesh frequency up to
-/// half the sample rate; more is no rotation the samples resolve, and a step of 1e300 cycles
-/// would overflow the frequency), and no step above kMaxMeshPhaseStepRatio times the mean step.
-std::string meshPhaseProblem(const double* phase, size_t n);
+/// Why the cumulative mesh phase phase[0..n) [mesh cycles] at sample_rate [Hz] cannot give the
+/// mesh frequency, or "" when it can: every value finite, never decreasing, advancing
+/// (phase[n-1] > phase[0]) with a finite mean frequency, and no step above
+/// kMaxMeshPhaseStepRatio times the typical step.
+std::string meshPhaseProblem(const double* phase, size_t n, double sample_rate);
 
 /// The mesh phase [mesh cycles] at sample k of the analysed samples.
 using MeshPhaseAt = std::function<double(size_t k)>;

@@ -1546,9 +1546,10 @@ IntegralMethod::SharedSolution IntegralMethod::solveShared(size_t s_begin, size_
           lo = std::isnan(lo) ? e.mean_torque : std::min(lo, e.mean_torque);
           hi = std::isnan(hi) ? e.mean_torque : std::max(hi, e.mean_torque);
         }
-        m << ": the load law needs a load that varies over the analysed range (the segments' "
-             "mean torques span "
-          << lo << " to " << hi << " N*m); with a constant load use --model constant";
+        if (std::isfinite(lo) && !(hi - lo > 1e-6 * std::max(std::abs(lo), std::abs(hi))))
+          m << ": the load law needs a load that varies over the analysed range (the segments' "
+               "mean torques are all "
+            << lo << " N*m); with a constant load use the constant model";
       }
       sh.reason = m.str();
     } else {

@@ -12,26 +12,31 @@
 
 namespace gear_damping_id {
 
-std::string meshPhaseProblem(const double* phase, size_t n) {
+std::string meshPhaseProblem(const double* phase, size_t n, double sample_rate) {
   if (n < 2) return "fewer than 2 samples";
-  double largest = 0.0;
+  std::vector<double> moving;  // the steps where the phase advances
   for (size_t k = 0; k < n; ++k) {
     if (!std::isfinite(phase[k])) return "a value is not finite (sample " + std::to_string(k) + ")";
     if (k == 0) continue;
     const double step = phase[k] - phase[k - 1];
     if (step < 0.0) return "it decreases (sample " + std::to_string(k) + ")";
-    largest = std::max(largest, step);
+    if (step > 0.0) moving.push_back(step);
   }
   const double span = phase[n - 1] - phase[0];
-  if (!(span > 0.0)) return "it does not advance";
-  const double mean = span / static_cast<double>(n - 1);
-  if (!(mean <= 0.5))  // (an overflowing span too: a step of 1e300 cycles)
-    return "its mean step of " + gear_sim::formatNumber(mean) +
-           " cycles per sample is above half a cycle (a mesh frequency above half the sample "
-           "rate: not a rotation the samples resolve)";
-  if (largest > kMaxMeshPhaseStepRatio * mean)
-    return "a step of " + gear_sim::formatNumber(largest) + " cycles against a mean step of " +
-           gear_sim::formatNumber(mean) + " (a corrupt value)";
+  if (!(span > 0.0) || moving.empty()) return "it does not advance";
+  if (!std::isfinite(span * sample_rate / static_cast<double>(n - 1)))
+    return "its mesh frequency overflows (a span of " + gear_sim::formatNumber(span) +
+           " cycles over " + std::to_string(n) + " samples)";
+  // Against the typical step while the gear moves (the median of the advancing steps): a
+  // start or stop inside the samples, or an encoder's staircase, keeps it; a corrupt value does
+  // not (before: against the mean step, which a start late in a window makes small).
+  const auto mid = moving.begin() + static_cast<std::ptrdiff_t>(moving.size() / 2);
+  std::nth_element(moving.begin(), mid, moving.end());
+  const double typical = *mid;
+  const double largest = *std::max_element(moving.begin(), moving.end());
+  if (largest > kMaxMeshPhaseStepRatio * typical)
+    return "a step of " + gear_sim::formatNumber(largest) + " cycles against a typical step of " +
+           gear_sim::formatNumber(typical) + " (a corrupt value)";
   return "";
 }
 
@@ -75,7 +80,7 @@ double applyGearContext(const MeshPhaseAt& phase, size_t n, double sample_rate,
 std::string applyGearContext(const double* phase, size_t n, double sample_rate,
                              const gear_sim::GearModel* model, WaveletOptions* options,
                              double* f_mesh) {
-  std::string problem = meshPhaseProblem(phase, n);
+  std::string problem = meshPhaseProblem(phase, n, sample_rate);
   *f_mesh = std::numeric_limits<double>::quiet_NaN();
   if (problem.empty())
     *f_mesh =

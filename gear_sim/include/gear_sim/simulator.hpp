@@ -33,9 +33,9 @@ double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh);
 /// damping's by up to lambda. Exact rotations on the pieces where k is constant, RK4 at
 /// omega h <= 0.01 elsewhere (relative error of tr Phi ~1e-11); 0 for a Fourier stiffness
 /// without harmonics. NaN for f_mesh <= 0, a non-finite value, or a cycle needing more than 6e4
-/// units of work (RK4 steps times 1 + the Fourier harmonics, about 3 ms: a mesh frequency below
-/// 1/38 of the natural frequency for one harmonic, 1/380 for a trapezoid with 5 % ramps, where
-/// the resonance orders are above 76 and their regions negligibly narrow).
+/// RK4 steps (2 ms, 6 ms with 100 Fourier harmonics: a mesh frequency below 1/76 of the natural
+/// frequency at the stiffness maximum for a Fourier stiffness, 1/760 for a trapezoid with 5 %
+/// ramps, where the resonance orders are above ~150 and their regions negligibly narrow).
 double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, double f_mesh);
 
 /// Adds white Gaussian noise to `y` at the given SNR [dB] (SNR = 20 log10(std(y - mean)/sigma));

@@ -19,14 +19,16 @@ double naturalFrequencyHz(const GearPair& gears, const MeshOptions& mesh) {
 
 namespace {
 
-// Work of parametricGrowthRate's cycle at most, in RK4 steps times (1 + the Fourier harmonics a
-// stiffness look-up sums): 6e4, about 3 ms; beyond it the rate is not computed (NaN). Before
-// (a bound of 1e7 steps per piece, whatever a look-up cost) a hostile test made analyze --wavelet
-// take 64 s and wavelet_node 24 s per window on Fourier stiffnesses at a mesh frequency of 1 Hz.
-// The bound is reached at mesh frequencies below 1/38 of the natural frequency for a one-harmonic
-// stiffness (parametric resonances of order above 76, whose instability regions are narrower
-// than any speed is steady), below 1/380 for a trapezoid with 5 % ramps.
-constexpr double kMaxFloquetWork = 6e4;
+// RK4 steps of parametricGrowthRate's cycle at most: 2 ms, 6 ms with 100 Fourier harmonics
+// (the stiffness on each smooth piece's grid from MeshStiffness::fillPiece, whose Fourier series
+// rotates exact anchors instead of a cos/sin per harmonic and stage); beyond, the rate is not
+// computed (NaN). Before 2026-11-28's second session the bound was 1e7 steps per piece with a
+// cos/sin per harmonic and stage, and a hostile test made analyze --wavelet take 64 s and
+// wavelet_node 24 s per window on Fourier stiffnesses at a 1 Hz mesh frequency. The bound is
+// reached at mesh frequencies below 1/76 of the natural frequency at the stiffness maximum for a
+// Fourier stiffness (all smooth), below 1/760 for a trapezoid with 5 % ramps: parametric
+// resonances of order above ~150, whose regions are narrower than any speed is steady.
+constexpr double kMaxFloquetSteps = 6e4;
 
 }  // namespace
 
@@ -39,12 +41,10 @@ double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, doub
                   [](double a) { return a == 0.0; }) &&
       std::all_of(mesh.fourier_sin.begin(), mesh.fourier_sin.end(),
                   [](double b) { return b == 0.0; }))
-    return 0.0;  // a constant stiffness: no parametric excitation
-  const double harmonics =
-      mesh.model == StiffnessModel::Fourier
-          ? static_cast<double>(std::max(mesh.fourier_cos.size(), mesh.fourier_sin.size()))
-          : 0.0;
-  double work = 0.0;
+    return 0.0;                  // a constant stiffness: no parametric excitation
+  double work = 0.0;             // RK4 steps so far
+  std::vector<double> grid, kg;  // a smooth piece's phases (half steps) and stiffness there
+  RotationTable rotations;
   const MeshStiffness k(mesh);
   std::vector<double> edges = k.cycleBreakpoints();
   edges.push_back(1.0);
@@ -66,14 +66,19 @@ double parametricGrowthRate(const GearPair& gears, const MeshOptions& mesh, doub
           std::sqrt(std::max({k.at(u0, um), k.at(um, um), k.at(u1, um), 0.0}) / me) *
           1.25;  // (a margin for the piece's maximum)
       const double want = std::max(4.0, std::ceil(w_max * dt / 0.01));
-      work += want * (1.0 + harmonics);
-      if (!(work <= kMaxFloquetWork)) return std::numeric_limits<double>::quiet_NaN();
+      work += want;
+      if (!(work <= kMaxFloquetSteps)) return std::numeric_limits<double>::quiet_NaN();
       const long steps = static_cast<long>(want);
       const double h = dt / static_cast<double>(steps), du = (u1 - u0) / static_cast<double>(steps);
+      // k at the step ends and midpoints: a uniform grid of half steps.
+      grid.resize(static_cast<size_t>(2 * steps + 1));
+      kg.resize(grid.size());
+      for (size_t i = 0; i < grid.size(); ++i) grid[i] = u0 + 0.5 * du * static_cast<double>(i);
+      k.fillPiece(um, grid.data(), static_cast<long>(grid.size()), 0.5 * du, kg.data(), &rotations);
       for (long j = 0; j < steps; ++j) {
-        const double ua = u0 + (u1 - u0) * static_cast<double>(j) / static_cast<double>(steps);
-        const SdofCoefficients c0{0.0, k.at(ua, um) / me, 0.0},
-            cm{0.0, k.at(ua + 0.5 * du, um) / me, 0.0}, c1{0.0, k.at(ua + du, um) / me, 0.0};
+        const size_t g = static_cast<size_t>(2 * j);
+        const SdofCoefficients c0{0.0, kg[g] / me, 0.0}, cm{0.0, kg[g + 1] / me, 0.0},
+            c1{0.0, kg[g + 2] / me, 0.0};
         for (int col = 0; col < 2; ++col) {
           const SdofState x = rk4Step({Phi(0, col), Phi(1, col)}, h, c0, cm, c1);
           Phi(0, col) = x.y, Phi(1, col) = x.v;

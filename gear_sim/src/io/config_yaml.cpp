@@ -388,10 +388,13 @@ Status loadSimConfig(const YAML::Node& root, SimConfig* out, const std::string& 
 
 namespace {
 Result<YAML::Node> loadFile(const std::string& path) {
-  // A directory opens as a stream whose first read throws (found by a hostile test of
-  // wavelet_node's ~gear_config: the node aborted instead of naming the parameter).
+  // A regular file only: a directory opens as a stream whose first read throws (a hostile test
+  // of wavelet_node's ~gear_config: the node aborted instead of naming the parameter), a FIFO
+  // blocks, /dev/zero is read until memory runs out.
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) return Status::ioError(path + ": is a directory");
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
+    return Status::ioError(path + ": not a regular file");
   std::ifstream f(path);
   if (!f) return Status::ioError(path + ": cannot open");
   try {
