@@ -31,8 +31,10 @@
 //                        constant-C fit, a weighted mean of C(t), need not be); on the constant
 //                        model's C: the damping differs between the segments (variation_z
 //                        beyond kVariationZ, variation_spread beyond kVariationSpread)
-//   shape_mismatch       greybox square levels: a stiffness ramped around the mesh switches fits
-//                        better than one switching at once, by more than kShapeZ standard
+//   shape_mismatch       greybox square levels (any damping model: the segments of a shared
+//                        damping are scored at the shared C or load law): a stiffness ramped
+//                        around the mesh switches fits better than one switching at once,
+//                        by more than kShapeZ standard
 //                        errors (SegmentEstimate::shape_z) and moving C by more than kShapeShift
 //                        (SegmentEstimate::shape_shift): C can be biased by several C_std;
 //                        or, for the run's segments together, by more than kShapePooledZ
