@@ -278,7 +278,9 @@ TEST(QualityFlags, GreyboxOnTrapezoidStiffnessIsFlagged) {
 // segments that were clean and > 4 C_std off before it. Here: of 3 seeds x 12 segments, the
 // segments that only shape_mismatch flags and that are > 4 C_std off (what was reported clean
 // before) must be many, those left clean and > 4 C_std off at most 1.
-TEST(QualityFlags, GreyboxOnSlowTrapezoidIsFlaggedByTheShapeTest) {
+// A slow mesh on a trapezoid stiffness with 6 % ramps (the shape tests' case; constant damping
+// ratio 0.0612, 500 kHz, 12 ms).
+SimConfig slowTrapezoidCase() {
   SimConfig c = table1Config();
   c.gears.pinion = {34, 9.44e-4, 0.0585};
   c.gears.gear = {74, 9.49e-3, 0.1273};
@@ -289,14 +291,19 @@ TEST(QualityFlags, GreyboxOnSlowTrapezoidIsFlaggedByTheShapeTest) {
   c.mesh.initial_phase = 0.356;
   c.mesh.transition_fraction = 0.0611;
   c.speed.pinion_rpm = 1360.0;
-  c.load.profile = gear_sim::LoadProfile::Step;
-  c.load.initial = 83.5;
-  c.load.final_value = 66.6;
-  c.load.step_time = 0.0197;
   c.damping.model = gear_sim::DampingProfile::ConstantRatio;
   c.damping.ratio = 0.0612;
   c.simulation.sample_rate = 5e5;
   c.simulation.duration = 0.012;
+  return c;
+}
+
+TEST(QualityFlags, GreyboxOnSlowTrapezoidIsFlaggedByTheShapeTest) {
+  SimConfig c = slowTrapezoidCase();
+  c.load.profile = gear_sim::LoadProfile::Step;
+  c.load.initial = 83.5;
+  c.load.final_value = 66.6;
+  c.load.step_time = 0.0197;
   const SignalTable clean = simulateOrFail(c);
   IdentificationOptions o;
   o.formulation = Formulation::Greybox;
@@ -912,20 +919,7 @@ TEST(QualityFlags, ALoadLawUnderAConstantLoadSaysWhyItIsNotIdentifiable) {
 // (square stiffness, the same noise) neither does, and the scores are N(0, 1) (pooled over the
 // segments within 3 / sqrt(n) of 0 in mean).
 TEST(QualityFlags, GreyboxSharedDampingOnATrapezoidIsFlaggedByTheShapeTest) {
-  SimConfig trap = table1Config();
-  trap.gears.pinion = {34, 9.44e-4, 0.0585};
-  trap.gears.gear = {74, 9.49e-3, 0.1273};
-  trap.mesh.model = gear_sim::StiffnessModel::Trapezoid;
-  trap.mesh.k_max = 6.465e8;
-  trap.mesh.k_min = 3.796e8;
-  trap.mesh.contact_ratio = 1.3385;
-  trap.mesh.initial_phase = 0.356;
-  trap.mesh.transition_fraction = 0.0611;
-  trap.speed.pinion_rpm = 1360.0;
-  trap.damping.model = gear_sim::DampingProfile::ConstantRatio;
-  trap.damping.ratio = 0.0612;
-  trap.simulation.sample_rate = 5e5;
-  trap.simulation.duration = 0.012;
+  SimConfig trap = slowTrapezoidCase();  // (the Table 1 case's sine load)
   SimConfig square = table1Config();
   square.damping.model = gear_sim::DampingProfile::ConstantRatio;
   for (const auto model : {gd::DampingModel::Constant, gd::DampingModel::LoadLaw}) {
