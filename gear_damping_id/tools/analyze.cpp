@@ -65,7 +65,6 @@
 #include "gear_sim/models.hpp"
 #include "gear_sim/progress.hpp"
 #include "gear_sim/signal_csv.hpp"
-#include "gear_sim/simulator.hpp"
 #include "gear_sim/status.hpp"
 #include "gear_sim/tool_main.hpp"
 #include "gear_sim_ros/bag_io.hpp"
