@@ -14,6 +14,7 @@
 #include <string>
 
 #include "gear_damping_id/integral_method.hpp"
+#include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/models.hpp"
@@ -141,6 +142,40 @@ TEST_F(AnalyzeTool, WritesTheDesignJsonAndAgreesWithTheLibrary) {
   for (size_t i = 0; i < segs.size(); ++i) {
     EXPECT_NEAR(segs[i].at("C").get<double>(), lib.segments[i].C, 1e-12 * lib.segments[i].C);
   }
+}
+
+// The load law's own test reaches the JSON and the text: on a noisy record (40 dB) whose damping
+// changes in time under the shipped sine load, which no line in the load describes,
+// load_law.variation_z and variation_spread are beyond the flag's limits and the run carries the
+// code damping_varies (docs/trust.md "The load law on damping that is not linear in the load").
+TEST_F(AnalyzeTool, TheLoadLawsLinearityTestReachesTheJsonAndTheText) {
+  gear_sim::SimConfig c;
+  std::string e;
+  ASSERT_TRUE(gear_test::ok(gear_sim::loadSimConfigFile(kParams, &c), &e)) << e;
+  c.damping.model = gear_sim::DampingProfile::Piecewise;
+  c.damping.times = {0.0, 2e-3, 4e-3, 6e-3, 8e-3};
+  c.damping.ratios = {0.03, 0.06, 0.04, 0.07, 0.05};
+  c.simulation.noise_snr_db = 40.0;
+  gear_sim::SignalTable t;
+  ASSERT_TRUE(gear_test::ok(gear_sim::simulate(c, &t), &e)) << e;
+  const fs::path csv = dir_ / "piecewise_law.csv", json_path = dir_ / "piecewise_law.json";
+  ASSERT_TRUE(gear_test::ok(gear_sim::writeSignalCsv(csv.string(), t), &e)) << e;
+  const ToolRun r = analyze("--input " + csv.string() + " --params " + kParams + " --output " +
+                                json_path.string() + " --model load_law",
+                            dir_);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(readText(json_path));
+  const auto& law = j.at("identification").at("load_law");
+  EXPECT_GT(law.at("variation_z").get<double>(), gear_damping_id::QualityLimits::kVariationZ);
+  EXPECT_GT(law.at("variation_spread").get<double>(),
+            gear_damping_id::QualityLimits::kVariationSpread);
+  bool coded = false;
+  for (const auto& w : j.at("runs").at(0).at("warnings"))
+    coded = coded || w.at("code") == "damping_varies";
+  EXPECT_TRUE(coded) << j.at("runs").at(0).at("warnings").dump();
+  EXPECT_NE(r.out.find("warning [damping_varies]: the damping is not linear in the load"),
+            std::string::npos)
+      << r.out;
 }
 
 TEST_F(AnalyzeTool, ReportsANonFiniteSegmentAsNotIdentifiableAndKeepsTheOthers) {

@@ -201,6 +201,12 @@ struct SegmentEstimate {
 struct LoadLawEstimate {
   double c0 = kNaN, c0_std = kNaN;  ///< [N*s/m]
   double c1 = kNaN, c1_std = kNaN;  ///< [N*s/m per N*m]
+  /// The refined law's test of one damping per segment against the law (the constant model's
+  /// variation_z, variation_spread about a line in the load): N(0, 1) when the damping is linear
+  /// in the load; the segments' rms spread about the law beyond the noise, relative to C. NaN
+  /// where not judged (integral estimate, fewer than two segments, noise-free residuals).
+  double variation_z = kNaN;       ///< [-]
+  double variation_spread = kNaN;  ///< [-]
   bool identifiable = false;
   std::string reason;
 };

@@ -30,7 +30,9 @@
 //                        (C is then the damping at the segment's mean load, which the
 //                        constant-C fit, a weighted mean of C(t), need not be); on the constant
 //                        model's C: the damping differs between the segments (variation_z
-//                        beyond kVariationZ, variation_spread beyond kVariationSpread)
+//                        beyond kVariationZ, variation_spread beyond kVariationSpread); on the
+//                        run of a load law (LoadLawEstimate::variation_z, variation_spread, the
+//                        same limits): the segments' damping departs from the law
 //   shape_mismatch       greybox square levels (any damping model: the segments of a shared
 //                        damping are scored at the shared C or load law): a stiffness ramped
 //                        around the mesh switches fits better than one switching at once,
