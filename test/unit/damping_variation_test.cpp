@@ -21,6 +21,7 @@
 
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/config_yaml.hpp"
+#include "heldout_cases.hpp"
 #include "id_test_support.hpp"
 
 namespace {
@@ -466,49 +467,13 @@ TEST(DampingVariation, LoadLawOnDampingLinearInTheLoadIsFlaggedAtMostAtTheNomina
   }
 }
 
-// A held-out gear (scripts/heldout_sweep.py seed 13607: torsional dynamics, 2 RK4 substeps,
-// 250 kHz, a load ramp, damping piecewise in time): its load law was 5.8 standard errors off
-// with the greybox formulation and carried no warning before the test.
-constexpr const char* kHeldOut13607 = R"(pinion:
-  teeth: 27
-  inertia: 0.0005297642855541246
-  base_radius: 0.055926471414727445
-gear:
-  teeth: 30
-  inertia: 0.009713963706186803
-  base_radius: 0.06214052379414161
-mesh:
-  stiffness_model: square
-  k_max: 757245881.7639595
-  k_min: 352961928.29247624
-  contact_ratio: 1.4974307784625651
-  initial_phase: 0.9142346407712882
-speed:
-  profile: constant
-  pinion_rpm: 2274.1279394791795
-load:
-  profile: ramp
-  initial: 205.64582931086903
-  final: 136.61252101280468
-  ramp_start: 0.0
-  ramp_end: 0.05
-damping:
-  model: piecewise
-  ratios: [0.07524898853146422, 0.06573065143268687, 0.06972724875414933]
-  times: [0.0, 0.010080297279840117, 0.03770436633170777]
-simulation:
-  duration: 0.05
-  sample_rate: 250000.0
-  integrator: rk4
-  substeps: 2
-  dynamics: torsional
-  noise_snr_db: .inf
-)";
-
+// The held-out gear 13607 (heldout_cases.hpp), noise added by the test.
 SimConfig heldOut13607() {
   SimConfig c;
   std::string e;
-  EXPECT_TRUE(gear_test::ok(gear_sim::loadSimConfig(YAML::Load(kHeldOut13607), &c), &e)) << e;
+  EXPECT_TRUE(
+      gear_test::ok(gear_sim::loadSimConfig(YAML::Load(gear_test::heldOutConfig("13607")), &c), &e))
+      << e;
   return c;
 }
 
