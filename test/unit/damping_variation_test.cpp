@@ -12,7 +12,6 @@
 //   (+-2 SE covers the time-mean truth in >= 90 % of the unflagged segments, none beyond
 //   kCleanSE) or flagged.
 #include <gtest/gtest.h>
-#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <iostream>
@@ -21,7 +20,6 @@
 
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/config_yaml.hpp"
-#include "heldout_cases.hpp"
 #include "id_test_support.hpp"
 
 namespace {
@@ -467,12 +465,14 @@ TEST(DampingVariation, LoadLawOnDampingLinearInTheLoadIsFlaggedAtMostAtTheNomina
   }
 }
 
-// The held-out gear 13607 (heldout_cases.hpp), noise added by the test.
+// The held-out gear 13607 (test/unit/data/heldout_13607.yaml), noise added by the test.
 SimConfig heldOut13607() {
   SimConfig c;
   std::string e;
   EXPECT_TRUE(
-      gear_test::ok(gear_sim::loadSimConfig(YAML::Load(gear_test::heldOutConfig("13607")), &c), &e))
+      gear_test::ok(gear_sim::loadSimConfigFile(
+                        std::string(GEAR_SOURCE_DIR) + "/test/unit/data/heldout_13607.yaml", &c),
+                    &e))
       << e;
   return c;
 }

@@ -1,6 +1,5 @@
-// Held-out gear cases (scripts/heldout_sweep.py draws) of the wavelet validation, shared by the
-// core tests (wavelet_gear_case_test) and the CLI tests (analyze_cli_test), and of the
-// identification (damping_variation_test).
+// Held-out gear cases of the wavelet validation (scripts/heldout_sweep.py --check wavelet draws),
+// shared by the core tests (wavelet_gear_case_test) and the CLI tests (analyze_cli_test).
 #pragma once
 
 #include <sstream>
@@ -16,8 +15,6 @@ struct HeldOut {
   double rate;
   const char* snr;  // (YAML: .inf for none)
   long seed;
-  int substeps = 1;
-  const char* dynamics = "reduced";
 };
 
 // The held-out cases (scripts/heldout_sweep.py --check wavelet draws).
@@ -138,60 +135,20 @@ damping:
   return cases;
 }
 
-// Held-out cases of the identification (scripts/heldout_sweep.py --extras draws), by seed:
-// 13607 (--check load_law, greybox): torsional dynamics, 2 RK4 substeps, 250 kHz, a load ramp,
-// damping piecewise in time; its load law was 5.8 standard errors off without a warning.
-inline const std::vector<HeldOut>& heldOutIdentificationCases() {
-  static const std::vector<HeldOut> cases = {
-      {"13607", R"(pinion:
-  teeth: 27
-  inertia: 0.0005297642855541246
-  base_radius: 0.055926471414727445
-gear:
-  teeth: 30
-  inertia: 0.009713963706186803
-  base_radius: 0.06214052379414161
-mesh:
-  stiffness_model: square
-  k_max: 757245881.7639595
-  k_min: 352961928.29247624
-  contact_ratio: 1.4974307784625651
-  initial_phase: 0.9142346407712882
-speed:
-  profile: constant
-  pinion_rpm: 2274.1279394791795
-load:
-  profile: ramp
-  initial: 205.64582931086903
-  final: 136.61252101280468
-  ramp_start: 0.0
-  ramp_end: 0.05
-damping:
-  model: piecewise
-  ratios: [0.07524898853146422, 0.06573065143268687, 0.06972724875414933]
-  times: [0.0, 0.010080297279840117, 0.03770436633170777]
-)",
-       250000.0, ".inf", 67317, 2, "torsional"},
-  };
-  return cases;
-}
-
 // Case c's simulator configuration (YAML): its gear, speed, load and damping, 50 ms at its rate
 // and SNR with its noise seed.
 inline std::string heldOutConfig(const HeldOut& c) {
   std::ostringstream yaml;
   yaml << c.yaml << "simulation:\n  duration: 0.05\n  sample_rate: " << c.rate
-       << "\n  integrator: rk4\n  substeps: " << c.substeps << "\n  dynamics: " << c.dynamics
-       << "\n  noise_snr_db: " << c.snr << "\n  seed: " << c.seed << "\n";
+       << "\n  integrator: rk4\n  substeps: 1\n  dynamics: reduced\n  noise_snr_db: " << c.snr
+       << "\n  seed: " << c.seed << "\n";
   return yaml.str();
 }
 
 // The case named `name` (its config's YAML), or "" when there is none.
 inline std::string heldOutConfig(const std::string& name) {
-  for (const auto* list : {&heldOutCases(), &heldOutIdentificationCases()}) {
-    for (const HeldOut& c : *list)
-      if (c.name == name) return heldOutConfig(c);
-  }
+  for (const HeldOut& c : heldOutCases())
+    if (c.name == name) return heldOutConfig(c);
   return "";
 }
 
