@@ -195,6 +195,14 @@ struct SegmentEstimate {
   /// stiffness and STE standard errors) as C_std^2 = C_std_dte^2 + C_torque_std^2.
   double torque_noise_std = kNaN;
   double C_torque_std = kNaN;
+  /// A step of the torque between two samples inside the segment (refined segments; NaN where
+  /// none stands out of the torque noise): its size [N*m] (the largest jump of an increment over
+  /// the mean of its neighbours), the time it lies at (between two samples) [s], and the free
+  /// vibration the step's unknown place inside its sample interval can leave unmodelled,
+  /// force_factor |dT| dt / (2 omega0) [m] (Refinement::loadSteps; flag load_step).
+  double torque_step = kNaN;
+  double torque_step_time = kNaN;
+  double torque_step_response = kNaN;
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).

@@ -42,6 +42,11 @@
 //                        or, for the run's segments together, by more than kShapePooledZ
 //                        (the pooled score; then every such segment whose ramp moves C by
 //                        more than kShapeShift is flagged, and the run too)
+//   load_step            the torque steps between two samples inside the (refined) segment:
+//                        the model interpolates the torque across the sample interval, so the
+//                        free vibration the step's unknown place leaves unmodelled
+//                        (SegmentEstimate::torque_step_response) can move C by more than
+//                        kLoadStepSE standard errors
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike; the pooled shape score depends on the result's segments
 // (the whole record in batch and streamed analysis, the kept history in live identification).
@@ -78,6 +83,7 @@ inline constexpr const char* kResidualsNotWhite = "residuals_not_white";
 inline constexpr const char* kDampingVaries = "damping_varies";
 inline constexpr const char* kShapeMismatch = "shape_mismatch";
 inline constexpr const char* kSwitchTiming = "switch_timing";
+inline constexpr const char* kLoadStep = "load_step";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -164,6 +170,12 @@ struct QualityLimits {
   /// switch_timing_shift exceeds this many C_std (and kShapeShift of C): the bias left in C; half
   /// a C_std keeps the coverage of +-1.96 C_std at 93 % or more.
   static constexpr double kSwitchTimingShare = 0.5;
+  /// A torque step inside a segment (SegmentEstimate::torque_step_response, a): the unmodelled
+  /// free vibration a e^(-C t / 2) sin(omega0 t + phi) after it has the energy
+  /// E = a^2 / 2 sum_k e^(-C k dt) over the samples after the step, and can move C by up to
+  /// sqrt(E) / sigma standard errors (sigma the noise, not below kWhitenessFloor of the DTE's
+  /// standard deviation). Flagged beyond this many.
+  static constexpr double kLoadStepSE = 1.0;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -15,7 +15,22 @@ bool ownedCode(const std::string& c) {
   return c == quality_code::kNonpositiveDamping || c == quality_code::kOverdamped ||
          c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
          c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries ||
-         c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming;
+         c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming ||
+         c == quality_code::kLoadStep;
+}
+
+// How many standard errors of C the free vibration a torque step leaves unmodelled can move C
+// by at most (QualityLimits::kLoadStepSE); NaN without a step.
+double loadStepSE(const SegmentEstimate& e) {
+  if (!std::isfinite(e.torque_step_response) || e.samples <= 0 || !std::isfinite(e.C)) return kNaN;
+  const double dt = (e.t_end - e.t_start) / static_cast<double>(e.samples);
+  const double after = std::max(e.t_end - e.torque_step_time, 0.0);
+  const double rate = std::max(e.C, 0.0);  // the energy's decay rate, C
+  const double sum =
+      rate * dt > 0.0 ? std::expm1(-rate * after) / std::expm1(-rate * dt) : after / dt;
+  const double noise = std::isfinite(e.noise_std) ? e.noise_std : 0.0;
+  const double sigma = std::max(noise, L::kWhitenessFloor * e.signal_std);
+  return e.torque_step_response * std::sqrt(0.5 * sum) / sigma;
 }
 
 // Removes the warnings whose code `drop` accepts, keeping the others' order.
@@ -78,6 +93,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->switch_timing_power = kNaN;
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
+    e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
     return;
@@ -103,6 +119,18 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                      " % of the DTE's standard deviation; it can move C by up to " +
                      num(100.0 * bias_bound / std::abs(e->C)) +
                      " % (wrong stiffness shape, forcing or damping model?)"});
+  }
+  if (const double se = loadStepSE(*e); se > L::kLoadStepSE) {
+    w.push_back(
+        {quality_code::kLoadStep,
+         "the torque steps by " + num(e->torque_step) +
+             " N*m between two samples inside the segment (at t = " + num(e->torque_step_time) +
+             " s): the model interpolates the torque across the sample interval, so the "
+             "step's impulse is placed within +-1/2 of it and the response can miss a "
+             "free vibration of up to " +
+             num(e->torque_step_response) + " m, which can move C by up to " + num(se) +
+             " standard errors (> " + num(L::kLoadStepSE) +
+             "): treat C as biased, or start a segment at the step (--t-start)"});
   }
   if (e->refined && std::isfinite(e->residuals.whitened_lag1) && e->samples > 0 &&
       e->residuals.rms > L::kWhitenessFloor * e->signal_std &&

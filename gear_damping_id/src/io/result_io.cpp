@@ -121,6 +121,11 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   emit("t_end", s.t_end);
   emit("t_start", s.t_start);
   if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
+  if (std::isfinite(s.torque_step)) {
+    emit("torque_step", s.torque_step);
+    emit("torque_step_response", s.torque_step_response);
+    emit("torque_step_time", s.torque_step_time);
+  }
   if (std::isfinite(s.variation_spread)) emit("variation_spread", s.variation_spread);
   if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
   emit("warnings", s.warnings);
