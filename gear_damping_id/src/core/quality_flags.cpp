@@ -70,6 +70,22 @@ const char* const kCurveAdvice =
 // A fourier/table curve's shape test (curveScore) rather than the square levels' (shapeScore).
 bool curveShape(const SegmentEstimate& e) { return !e.stiffness_curve.empty(); }
 
+// load_step (QualityLimits::kLoadStepSE): the torque step's unmodelled vibration can move C.
+void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
+  if (const double se = loadStepSE(e); se > L::kLoadStepSE) {
+    w->push_back(
+        {quality_code::kLoadStep,
+         "the torque steps by " + num(e.torque_step) +
+             " N*m between two samples inside the segment (at t = " + num(e.torque_step_time) +
+             " s): the model interpolates the torque across the sample interval, so the "
+             "step's impulse is placed within +-1/2 of it and the response can miss a "
+             "free vibration of up to " +
+             num(e.torque_step_response) + " m, which can move C by up to " + num(se) +
+             " standard errors (> " + num(L::kLoadStepSE) +
+             "): treat C as biased, or start a segment at the step (--t-start)"});
+  }
+}
+
 // Flags one identifiable estimate in place; `shared`: the constant model's C.
 void flagEstimate(SegmentEstimate* e, bool shared) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
@@ -120,18 +136,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                      num(100.0 * bias_bound / std::abs(e->C)) +
                      " % (wrong stiffness shape, forcing or damping model?)"});
   }
-  if (const double se = loadStepSE(*e); se > L::kLoadStepSE) {
-    w.push_back(
-        {quality_code::kLoadStep,
-         "the torque steps by " + num(e->torque_step) +
-             " N*m between two samples inside the segment (at t = " + num(e->torque_step_time) +
-             " s): the model interpolates the torque across the sample interval, so the "
-             "step's impulse is placed within +-1/2 of it and the response can miss a "
-             "free vibration of up to " +
-             num(e->torque_step_response) + " m, which can move C by up to " + num(se) +
-             " standard errors (> " + num(L::kLoadStepSE) +
-             "): treat C as biased, or start a segment at the step (--t-start)"});
-  }
+  flagLoadStep(*e, &w);
   if (e->refined && std::isfinite(e->residuals.whitened_lag1) && e->samples > 0 &&
       e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
       std::abs(e->residuals.whitened_lag1) >
