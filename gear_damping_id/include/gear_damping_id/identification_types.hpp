@@ -203,6 +203,10 @@ struct SegmentEstimate {
   double torque_step = kNaN;
   double torque_step_time = kNaN;
   double torque_step_response = kNaN;
+  /// The constant model's C (refined): the largest share one segment has in the information
+  /// about C [-], and that segment's span [s] (flag information_concentrated).
+  double information_share = kNaN;
+  double information_t_start = kNaN, information_t_end = kNaN;
 };
 
 /// c(t) = c0 + c1 * T1(t) (DampingModel::LoadLaw).

@@ -47,6 +47,8 @@
 //                        free vibration the step's unknown place leaves unmodelled
 //                        (SegmentEstimate::torque_step_response) can move C by more than
 //                        kLoadStepSE standard errors
+//   information_concentrated  the constant model's C: one segment holds more than
+//                        kInformationShare of the information about C (information_share)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
 // identification flag a segment alike; the pooled shape score depends on the result's segments
 // (the whole record in batch and streamed analysis, the kept history in live identification).
@@ -84,6 +86,7 @@ inline constexpr const char* kDampingVaries = "damping_varies";
 inline constexpr const char* kShapeMismatch = "shape_mismatch";
 inline constexpr const char* kSwitchTiming = "switch_timing";
 inline constexpr const char* kLoadStep = "load_step";
+inline constexpr const char* kInformationConcentrated = "information_concentrated";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
 inline constexpr const char* kRefineSkipped = "refine_skipped";
@@ -176,6 +179,11 @@ struct QualityLimits {
   /// sqrt(E) / sigma standard errors (sigma the noise, not below kWhitenessFloor of the DTE's
   /// standard deviation). Flagged beyond this many.
   static constexpr double kLoadStepSE = 1.0;
+  /// The constant model's C most of whose information comes from one segment
+  /// (SegmentEstimate::information_share beyond this) is in effect that segment's damping, and
+  /// its test of one damping for every segment has little power elsewhere (flag
+  /// information_concentrated).
+  static constexpr double kInformationShare = 0.5;
 };
 
 /// Flags every segment of `result` (and the shared constant estimate): adds the segment codes

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <sstream>
 
 namespace gear_damping_id {
@@ -16,7 +17,7 @@ bool ownedCode(const std::string& c) {
          c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
          c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries ||
          c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming ||
-         c == quality_code::kLoadStep;
+         c == quality_code::kLoadStep || c == quality_code::kInformationConcentrated;
 }
 
 // How many standard errors of C the free vibration a torque step leaves unmodelled can move C
@@ -86,6 +87,21 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
   }
 }
 
+// information_concentrated: one segment holds most of the constant model's information about C
+// (QualityLimits::kInformationShare).
+std::optional<QualityWarning> informationWarning(const SegmentEstimate& e) {
+  if (!(e.information_share > L::kInformationShare)) return std::nullopt;
+  return QualityWarning{
+      quality_code::kInformationConcentrated,
+      "the segment from t = " + num(e.information_t_start) + " to " + num(e.information_t_end) +
+          " s holds " + num(100.0 * e.information_share) + " % of the information about C (> " +
+          num(100.0 * L::kInformationShare) +
+          " %): C is in effect that segment's damping (a start-up transient or a resonance "
+          "crossing), and the test of one damping for every segment (variation_z) has little "
+          "power elsewhere, so a damping that varies over the record need not show: --model "
+          "piecewise gives each segment's C with its own standard error"};
+}
+
 // Flags one identifiable estimate in place; `shared`: the constant model's C.
 void flagEstimate(SegmentEstimate* e, bool shared) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
@@ -110,6 +126,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
     e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
+    e->information_share = e->information_t_start = e->information_t_end = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
     return;
@@ -146,6 +163,9 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                      num(e->residuals.whitened_lag1) + " (white: within +-" +
                      num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
                      "): the model leaves structure in the data, C_std understates the error"});
+  }
+  if (shared && e->refined) {
+    if (auto iw = informationWarning(*e)) w.push_back(*iw);
   }
   if (shared && e->refined && e->variation_z > L::kVariationZ &&
       e->variation_spread > L::kVariationSpread) {

@@ -100,6 +100,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   emit("condition", s.condition);
   if (std::isfinite(s.forcing)) emit("forcing", s.forcing);
   emit("identifiable", s.identifiable);
+  if (std::isfinite(s.information_share)) emit("information_share", s.information_share);
   if (levels) {
     emit("k_max", s.k_max);
     emit("k_max_std", s.k_max_std);
