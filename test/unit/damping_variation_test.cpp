@@ -467,14 +467,14 @@ TEST(DampingVariation, LoadLawOnDampingLinearInTheLoadIsFlaggedAtMostAtTheNomina
   }
 }
 
-// The held-out gear 13607 (test/unit/data/heldout_13607.yaml), noise added by the test.
-SimConfig heldOut13607() {
+// A held-out gear of test/unit/data/heldout_SEED.yaml (noise-free: the tests add their own).
+SimConfig heldOutFile(const std::string& seed) {
   SimConfig c;
   std::string e;
-  EXPECT_TRUE(
-      gear_test::ok(gear_sim::loadSimConfigFile(
-                        std::string(GEAR_SOURCE_DIR) + "/test/unit/data/heldout_13607.yaml", &c),
-                    &e))
+  EXPECT_TRUE(gear_test::ok(
+      gear_sim::loadSimConfigFile(
+          std::string(GEAR_SOURCE_DIR) + "/test/unit/data/heldout_" + seed + ".yaml", &c),
+      &e))
       << e;
   return c;
 }
@@ -487,7 +487,7 @@ TEST(DampingVariation, LoadLawIsFlaggedWhereTheDampingIsNotLinearInTheLoad) {
   SimConfig piecewise = table1Config();
   setPiecewiseTruth(&piecewise, 2e-3);
   for (const auto& [label, c] : {std::pair<std::string, SimConfig>{"piecewise in time", piecewise},
-                                 {"held-out 13607", heldOut13607()}}) {
+                                 {"held-out 13607", heldOutFile("13607")}}) {
     for (const double snr : {kSnrDb, static_cast<double>(INFINITY)}) {
       const int seeds = std::isfinite(snr) ? 5 : 1;
       const std::string what = label + " " + std::to_string(snr) + " dB";
@@ -510,13 +510,7 @@ TEST(DampingVariation, LoadLawIsFlaggedWhereTheDampingIsNotLinearInTheLoad) {
 // weakly excited steady state, are flagged: their constants are their start-up transients'
 // damping too, right here because the damping is constant.)
 TEST(DampingVariation, AConstantFromOneSegmentsTransientIsFlaggedInformationConcentrated) {
-  SimConfig c;
-  std::string e;
-  ASSERT_TRUE(
-      gear_test::ok(gear_sim::loadSimConfigFile(
-                        std::string(GEAR_SOURCE_DIR) + "/test/unit/data/heldout_15714.yaml", &c),
-                    &e))
-      << e;
+  const SimConfig c = heldOutFile("15714");
   const SignalTable clean = simulateOrFail(c);
   IdentificationOptions o;
   o.model = DampingModel::Constant;
