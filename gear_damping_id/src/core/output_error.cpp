@@ -2461,7 +2461,9 @@ class Refinement {
         const double around = std::max(std::abs(inc(n - 1)), std::abs(inc(n + 1)));
         if (std::abs(j) > std::abs(best) && std::abs(j) > kStepRatio * around) best = j, at = n;
       }
-      const double sd = torqueNoiseEstimate(t + b, e - b);
+      // (torqueLevels' estimate where it made one: the load law's model has none)
+      const double sd =
+          std::isfinite(torque_sd_[i]) ? torque_sd_[i] : torqueNoiseEstimate(t + b, e - b);
       if (at < 0 || !std::isfinite(best) ||
           !(std::abs(best) > kStepSigmas * std::sqrt(5.0) * (std::isfinite(sd) ? sd : 0.0)))
         continue;
