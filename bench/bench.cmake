@@ -17,6 +17,6 @@ endif()
 
 # The bag-read floor of bench/compare_peers (a plain executable, not a Google Benchmark suite).
 add_executable(bag_read_floor bench/bag_read_floor.cpp)
-target_link_libraries(bag_read_floor ${catkin_LIBRARIES})
+target_link_libraries(bag_read_floor gear_sim_core ${catkin_LIBRARIES})
 add_dependencies(bag_read_floor ${PROJECT_NAME}_generate_messages_cpp)
 target_compile_options(bag_read_floor PRIVATE ${GEAR_WARNINGS})
