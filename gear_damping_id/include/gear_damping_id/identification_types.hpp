@@ -219,6 +219,11 @@ struct LoadLawEstimate {
   /// where not judged (integral estimate, fewer than two segments, noise-free residuals).
   double variation_z = kNaN;       ///< [-]
   double variation_spread = kNaN;  ///< [-]
+  /// The directed test of curvature in the load (refined, at least three segments whose torques
+  /// spread): the score of a term in T^2, N(0, 1) when the damping is linear in the load, and
+  /// the curvature's largest departure from the line, relative to C.
+  double curvature_z = kNaN;       ///< [-]
+  double curvature_spread = kNaN;  ///< [-]
   bool identifiable = false;
   std::string reason;
 };

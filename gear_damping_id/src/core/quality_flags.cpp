@@ -372,6 +372,18 @@ void flagLoadLawVaries(IdentificationResult* r) {
   eraseCode(&rw, quality_code::kDampingVaries);
   if (!r->load_law || !r->load_law->identifiable) return;
   const LoadLawEstimate& l = *r->load_law;
+  if (std::abs(l.curvature_z) > L::kVariationZ && l.curvature_spread > L::kVariationSpread &&
+      !(l.variation_z > L::kVariationZ && l.variation_spread > L::kVariationSpread)) {
+    rw.push_back({quality_code::kDampingVaries,
+                  "the damping is curved in the load: a term in T1^2 added to the load law is " +
+                      num(l.curvature_z) + " standard errors from zero (> " + num(L::kVariationZ) +
+                      "), departing from the line by up to about " +
+                      num(100.0 * l.curvature_spread) +
+                      " %: c0 and c1 are a weighted fit of a line to a curve, and their standard "
+                      "errors leave that out: --model piecewise gives each segment's C (the "
+                      "damping at its mean load)"});
+    return;
+  }
   if (!(l.variation_z > L::kVariationZ && l.variation_spread > L::kVariationSpread)) return;
   rw.push_back({quality_code::kDampingVaries,
                 "the damping is not linear in the load: the test of one C per segment against the "

@@ -163,6 +163,8 @@ json loadLawJson(const LoadLawEstimate& l) {
             {"c1", num(l.c1)},
             {"c1_std", num(l.c1_std)},
             {"identifiable", l.identifiable}};
+  if (std::isfinite(l.curvature_z)) j["curvature_z"] = num(l.curvature_z);
+  if (std::isfinite(l.curvature_spread)) j["curvature_spread"] = num(l.curvature_spread);
   if (std::isfinite(l.variation_z)) j["variation_z"] = num(l.variation_z);
   if (std::isfinite(l.variation_spread)) j["variation_spread"] = num(l.variation_spread);
   if (!l.identifiable) j["reason"] = l.reason;
