@@ -541,11 +541,7 @@ TEST(DampingVariation, AConstantFromOneSegmentsTransientIsFlaggedInformationConc
 // (LoadLawEstimate::curvature_z) flags them. Measured on 20 seeds at 40 dB: 20 flagged.
 TEST(DampingVariation, LoadLawCurvedInTheLoadIsFlagged) {
   SimConfig c = table1Config();
-  c.load.profile = gear_sim::LoadProfile::Ramp;
-  c.load.initial = 50.0;
-  c.load.final_value = 150.0;
-  c.load.ramp_start = 0.0;
-  c.load.ramp_end = 0.01;
+  setRampLoad(&c, 50.0, 150.0, 0.01);
   c.damping.model = gear_sim::DampingProfile::Piecewise;
   c.damping.times.clear();
   c.damping.ratios.clear();

@@ -533,11 +533,7 @@ TEST(QualityFlags, DivergingRefinementKeepsPositiveStandardErrors) {
   c.mesh.fourier_cos = {2.92e7, 1.14e7};
   c.mesh.fourier_sin = {5.1e6, 0.0};
   c.speed.pinion_rpm = 3696.0;
-  c.load.profile = gear_sim::LoadProfile::Ramp;
-  c.load.initial = 213.3;
-  c.load.final_value = 161.6;
-  c.load.ramp_start = 0.0;
-  c.load.ramp_end = 0.05;
+  setRampLoad(&c, 213.3, 161.6, 0.05);
   c.damping.ratio = 0.0532;
   c.damping.load_sensitivity = 0.80;
   c.simulation.sample_rate = 2.5e5;

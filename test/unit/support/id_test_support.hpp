@@ -49,6 +49,15 @@ inline std::vector<double> piecewiseRatios(int segments) {
 }
 
 /// Makes `c`'s true damping piecewise constant on segments of `segment_length` [s] from t = 0.
+/// A load ramp from `from` to `to` [N*m] over [0, end] [s], constant after.
+inline void setRampLoad(SimConfig* c, double from, double to, double end) {
+  c->load.profile = gear_sim::LoadProfile::Ramp;
+  c->load.initial = from;
+  c->load.final_value = to;
+  c->load.ramp_start = 0.0;
+  c->load.ramp_end = end;
+}
+
 inline void setPiecewiseTruth(SimConfig* c, double segment_length) {
   const int n = static_cast<int>(std::lround(c->simulation.duration / segment_length));
   c->damping.model = gear_sim::DampingProfile::Piecewise;
