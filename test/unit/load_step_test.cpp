@@ -29,10 +29,7 @@ constexpr double kSnrDb = 40.0;
 // The Table 1 gear under a load stepping from 100 to 150 N*m at `step_time`, constant damping.
 SimConfig stepped(double step_time) {
   SimConfig c = table1Config();
-  c.load.profile = gear_sim::LoadProfile::Step;
-  c.load.initial = 100.0;
-  c.load.final_value = 150.0;
-  c.load.step_time = step_time;
+  setStepLoad(&c, 100.0, 150.0, step_time);
   c.damping.model = gear_sim::DampingProfile::ConstantRatio;
   c.damping.ratio = 0.05;
   return c;

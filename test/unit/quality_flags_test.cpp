@@ -300,10 +300,7 @@ SimConfig slowTrapezoidCase() {
 
 TEST(QualityFlags, GreyboxOnSlowTrapezoidIsFlaggedByTheShapeTest) {
   SimConfig c = slowTrapezoidCase();
-  c.load.profile = gear_sim::LoadProfile::Step;
-  c.load.initial = 83.5;
-  c.load.final_value = 66.6;
-  c.load.step_time = 0.0197;
+  setStepLoad(&c, 83.5, 66.6, 0.0197);
   const SignalTable clean = simulateOrFail(c);
   IdentificationOptions o;
   o.formulation = Formulation::Greybox;

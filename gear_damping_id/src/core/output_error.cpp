@@ -2457,8 +2457,9 @@ class Refinement {
       double best = 0.0;
       Index at = -1;
       for (Index n = b + 1; n < e; ++n) {  // the interval (n - 1, n)
-        const double j = inc(n) - 0.5 * (inc(n - 1) + inc(n + 1));
-        const double around = std::max(std::abs(inc(n - 1)), std::abs(inc(n + 1)));
+        const double before = inc(n - 1), after = inc(n + 1);
+        const double j = inc(n) - 0.5 * (before + after);
+        const double around = std::max(std::abs(before), std::abs(after));
         if (std::abs(j) > std::abs(best) && std::abs(j) > kStepRatio * around) best = j, at = n;
       }
       // (torqueLevels' estimate where it made one: the load law's model has none)
@@ -2960,6 +2961,17 @@ class Refinement {
     }
   }
 
+  // The load law's directed test of curvature in the load (curvatureTest).
+  struct Curvature {
+    double z = kNaN, spread = kNaN;  // curvature_z, curvature_spread
+  };
+  // sharedDampingTest's results.
+  struct SharedTest {
+    double z = kNaN, spread = kNaN;                     // variation_z, variation_spread
+    double share = kNaN, t_start = kNaN, t_end = kNaN;  // information_share, its segment
+    Curvature curvature;                                // the load law's
+  };
+
   // The shared damping's test of one damping per segment (flag damping_varies), at the refined
   // estimate. Constant model: the score test of one C_i per segment against the shared C,
   //   S = (sum u_i^2 / I_i - (sum u_i)^2 / sum I_i) / sigma^2 ~ chi-square(n - 1)
@@ -2989,28 +3001,19 @@ class Refinement {
   // gave a confidently wrong law (held-out seed 13607: 5.8 standard errors, no warning).
   //
   // Also the largest share one segment has in the information about C (theta0), and its span
-  // (info->share, t_start, t_end; flag information_concentrated): where one segment holds most
-  // of it (a start-up transient, a resonance crossing) the shared C is in effect that segment's
-  // damping and the test above has little power elsewhere. Measured (held-out --check constant,
-  // seeds 15400-15799): all 11 records whose damping varied and whose constant was clean and more
-  // than 4 C_std from the time mean (up to 76 C_std, 16 %) had a share of 0.75-0.999.
-  struct InformationShare {
-    double share = kNaN, t_start = kNaN, t_end = kNaN;
-  };
+  // (share, t_start, t_end; flag information_concentrated, the constant model's): where one
+  // segment holds most of it (a start-up transient, a resonance crossing) the shared C is in
+  // effect that segment's damping and the test above has little power elsewhere. Measured
+  // (held-out --check constant, seeds 15400-15799): all 11 records whose damping varied and whose
+  // constant was clean and more than 4 C_std from the time mean (up to 76 C_std, 16 %) had a
+  // share of 0.75-0.999.
   //
-  // Load law, also a directed test of curvature in the load (curvature_z): the one-step deviations
-  // d_i = u_i / I_i against r_i, the residual of t_i^2 (t_i = J_i / I_i) after its weighted fit on
-  // [1, t_i], z = sum u_i r_i / (sigma sqrt(sum I_i r_i^2)), N(0, 1) when the damping is linear in
-  // the load; and the curvature's departure from the line at its largest, |beta| max |r_i|
-  // (beta = sum u_i r_i / sum I_i r_i^2), relative to the law's C (curvature_spread). The
-  // chi-square spreads its power over n - 1 directions: a damping curved in the load by +-0.2-0.3 %
-  // had laws 4-5 SE off with variation_z 2.8-2.95 (hostile review, 2026-11-28).
-  struct Curvature {
-    double z = kNaN, spread = kNaN;
-  };
-  void sharedDampingTest(double* z, double* spread, InformationShare* info_share,
-                         Curvature* curvature = nullptr) {
-    if (piecewise_ || ns_ != (load_ ? 2 : 1) || !(sigma2_pooled_ > 0.0)) return;
+  // Load law, also a directed test of curvature in the load (curvatureTest). The chi-square
+  // spreads its power over n - 1 directions: a damping curved in the load by +-0.2-0.3 % had laws
+  // 4-5 SE off with variation_z 2.8-2.95 (hostile review, 2026-11-28).
+  SharedTest sharedDampingTest() {
+    SharedTest out;
+    if (piecewise_ || ns_ != (load_ ? 2 : 1) || !(sigma2_pooled_ > 0.0)) return out;
     double info_max = 0.0;
     size_t i_max = 0;
     std::vector<double> us, is, ts;  // load law: u_i, I_i, t_i (the curvature test)
@@ -3025,7 +3028,7 @@ class Refinement {
       const Eigen::VectorXd ncl = nm.N.block(nl_, 0, 1, nl_).transpose();
       const double u = nm.rhs[nl_] - ncl.dot(Nll_inv_[i] * nm.rhs.head(nl_));
       const double info = nm.N(nl_, nl_) - ncl.dot(Nll_inv_[i] * ncl);
-      if (!(info > 0.0) || !std::isfinite(u)) return;
+      if (!(info > 0.0) || !std::isfinite(u)) return out;
       su2 += u * u / info, su += u, si += info, ++n;
       if (info > info_max) info_max = info, i_max = i;
       if (load_) {
@@ -3047,12 +3050,12 @@ class Refinement {
       for (Index k = b; k < end; ++k) dev2 += (s_.dte[k] - mean) * (s_.dte[k] - mean);
     }
     if (n >= 2) {
-      info_share->share = info_max / si;
-      info_share->t_start = res_->segments[i_max].t_start;
-      info_share->t_end = res_->segments[i_max].t_end;
+      out.share = info_max / si;
+      out.t_start = res_->segments[i_max].t_start;
+      out.t_end = res_->segments[i_max].t_end;
     }
     constexpr double kFloor2 = QualityLimits::kWhitenessFloor * QualityLimits::kWhitenessFloor;
-    if (n < 2 || !(raw > kFloor2 * dev2)) return;
+    if (n < 2 || !(raw > kFloor2 * dev2)) return out;
     double df = n - 1.0, S = 0.0, c_ref = sh_[0];
     if (!load_) {
       S = torque ? swd2 - swd * swd / sw : (su2 - su * su / si) / sigma2_pooled_;
@@ -3062,17 +3065,22 @@ class Refinement {
       if (slope_info > kSlopeWithin * sk && std::isfinite(q))
         S += q * q / slope_info / sigma2_pooled_;
       else if (--df < 1.0)
-        return;
+        return out;
       c_ref = sh_[0] + sh_[1] * sj / si;
-      if (curvature != nullptr && n >= 3) *curvature = curvatureTest(us, is, ts, c_ref);
+      if (n >= 3) out.curvature = curvatureTest(us, is, ts, c_ref);
     }
     const double v = 2.0 / (9.0 * df);
     const double c_var = torque ? 1.0 / sw : sigma2_pooled_ / si;  // the weighted mean's
-    *z = (std::cbrt(std::max(S, 0.0) / df) - (1.0 - v)) / std::sqrt(v);
-    *spread = std::sqrt(std::max(S - df, 0.0) * c_var) / std::abs(c_ref);
+    out.z = (std::cbrt(std::max(S, 0.0) / df) - (1.0 - v)) / std::sqrt(v);
+    out.spread = std::sqrt(std::max(S - df, 0.0) * c_var) / std::abs(c_ref);
+    return out;
   }
 
-  // sharedDampingTest's curvature test of the load law (u_i, I_i, t_i per judged segment).
+  // sharedDampingTest's curvature test of the load law, from u_i, I_i, t_i per judged segment:
+  // the one-step deviations d_i = u_i / I_i against r_i, the residual of t_i^2 (t_i = J_i / I_i)
+  // after its weighted fit on [1, t_i], z = sum u_i r_i / (sigma sqrt(sum I_i r_i^2)), N(0, 1)
+  // when the damping is linear in the load; and the curvature's departure from the line at its
+  // largest, |beta| max |r_i| (beta = sum u_i r_i / sum I_i r_i^2), relative to the law's C.
   Curvature curvatureTest(const std::vector<double>& u, const std::vector<double>& info,
                           const std::vector<double>& t, double c_ref) const {
     const size_t n = u.size();
@@ -3097,7 +3105,11 @@ class Refinement {
     return c;
   }
 
-  // The load law leaves the torque noise out of its standard errors (torqueNoise), so its test too.
+  // The variance the torque-meter noise adds to segment i's profiled score of C in the constant
+  // model, u_i = a' Jw' e with a = [-N_ll^-1 N_lc; 1] (ncl = N_lc): a' Q_i a with Q_i the
+  // right-hand side's covariance where torqueNoiseExact kept it, else torqueProjectedVariance of
+  // the direction Jw a (`base`: the score's variance without it). Zero without a known level, and
+  // for the load law, whose standard errors leave the torque noise out (torqueNoise).
   double constancyTorqueVariance(size_t i, const Eigen::VectorXd& ncl, double base) {
     if (load_ || torque_sigma_.empty() || !(torque_sigma_[i] > 0.0)) return 0.0;
     Eigen::VectorXd a(nl_ + 1);
@@ -3113,11 +3125,11 @@ class Refinement {
     const Eigen::MatrixXd& tcov = tcov_ss_[problems_[0][0]];  // torque noise (zero: none)
     if (res_->constant && !piecewise_ && !load_) {
       fillC(&*res_->constant, sh_[0], sigma2_pooled_ * Ainv(0, 0) + tcov(0, 0));
-      InformationShare is;
-      sharedDampingTest(&res_->constant->variation_z, &res_->constant->variation_spread, &is);
-      res_->constant->information_share = is.share;
-      res_->constant->information_t_start = is.t_start;
-      res_->constant->information_t_end = is.t_end;
+      const SharedTest st = sharedDampingTest();
+      SegmentEstimate& e = *res_->constant;
+      e.variation_z = st.z, e.variation_spread = st.spread;
+      e.information_share = st.share, e.information_t_start = st.t_start;
+      e.information_t_end = st.t_end;
       if (!all_converged_)
         res_->constant->warnings.push_back({quality_code::kRefineNotConverged, notConverged()});
     }
@@ -3126,11 +3138,11 @@ class Refinement {
       res_->load_law->c1 = me_ * sh_[1];
       res_->load_law->c0_std = me_ * std::sqrt(std::max(sigma2_pooled_ * Ainv(0, 0), 0.0));
       res_->load_law->c1_std = me_ * std::sqrt(std::max(sigma2_pooled_ * Ainv(1, 1), 0.0));
-      InformationShare is;  // (the constant model's flag only: for the law it added nothing)
-      Curvature cv;
-      sharedDampingTest(&res_->load_law->variation_z, &res_->load_law->variation_spread, &is, &cv);
-      res_->load_law->curvature_z = cv.z;
-      res_->load_law->curvature_spread = cv.spread;
+      // (The information share is the constant model's flag only: for the law it added nothing.)
+      const SharedTest st = sharedDampingTest();
+      LoadLawEstimate& l = *res_->load_law;
+      l.variation_z = st.z, l.variation_spread = st.spread;
+      l.curvature_z = st.curvature.z, l.curvature_spread = st.curvature.spread;
     }
     if (ste_ != nullptr) {
       ste_->theta.resize(nste_);

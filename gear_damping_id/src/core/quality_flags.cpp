@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <optional>
 #include <sstream>
 
 namespace gear_damping_id {
@@ -89,17 +88,17 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
 
 // information_concentrated: one segment holds most of the constant model's information about C
 // (QualityLimits::kInformationShare).
-std::optional<QualityWarning> informationWarning(const SegmentEstimate& e) {
-  if (!(e.information_share > L::kInformationShare)) return std::nullopt;
-  return QualityWarning{
-      quality_code::kInformationConcentrated,
-      "the segment from t = " + num(e.information_t_start) + " to " + num(e.information_t_end) +
-          " s holds " + num(100.0 * e.information_share) + " % of the information about C (> " +
-          num(100.0 * L::kInformationShare) +
-          " %): C is in effect that segment's damping (a start-up transient or a resonance "
-          "crossing), and the test of one damping for every segment (variation_z) has little "
-          "power elsewhere, so a damping that varies over the record need not show: --model "
-          "piecewise gives each segment's C with its own standard error"};
+void flagInformationConcentrated(const SegmentEstimate& e, QualityWarnings* w) {
+  if (!(e.information_share > L::kInformationShare)) return;
+  w->push_back(
+      {quality_code::kInformationConcentrated,
+       "the segment from t = " + num(e.information_t_start) + " to " + num(e.information_t_end) +
+           " s holds " + num(100.0 * e.information_share) + " % of the information about C (> " +
+           num(100.0 * L::kInformationShare) +
+           " %): C is in effect that segment's damping (a start-up transient or a resonance "
+           "crossing), and the test of one damping for every segment (variation_z) has little "
+           "power elsewhere, so a damping that varies over the record need not show: --model "
+           "piecewise gives each segment's C with its own standard error"});
 }
 
 // Flags one identifiable estimate in place; `shared`: the constant model's C.
@@ -164,9 +163,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                      num(L::kWhitenessZ / std::sqrt(static_cast<double>(e->samples))) +
                      "): the model leaves structure in the data, C_std understates the error"});
   }
-  if (shared && e->refined) {
-    if (auto iw = informationWarning(*e)) w.push_back(*iw);
-  }
+  if (shared && e->refined) flagInformationConcentrated(*e, &w);
   if (shared && e->refined && e->variation_z > L::kVariationZ &&
       e->variation_spread > L::kVariationSpread) {
     w.push_back({quality_code::kDampingVaries,
@@ -372,8 +369,10 @@ void flagLoadLawVaries(IdentificationResult* r) {
   eraseCode(&rw, quality_code::kDampingVaries);
   if (!r->load_law || !r->load_law->identifiable) return;
   const LoadLawEstimate& l = *r->load_law;
-  if (std::abs(l.curvature_z) > L::kVariationZ && l.curvature_spread > L::kVariationSpread &&
-      !(l.variation_z > L::kVariationZ && l.variation_spread > L::kVariationSpread)) {
+  const bool varies = l.variation_z > L::kVariationZ && l.variation_spread > L::kVariationSpread;
+  const bool curved =
+      std::abs(l.curvature_z) > L::kVariationZ && l.curvature_spread > L::kVariationSpread;
+  if (curved && !varies) {  // one warning: the general test's when both fire
     rw.push_back({quality_code::kDampingVaries,
                   "the damping is curved in the load: a term in T1^2 added to the load law is " +
                       num(l.curvature_z) + " standard errors from zero (> " + num(L::kVariationZ) +
@@ -384,7 +383,7 @@ void flagLoadLawVaries(IdentificationResult* r) {
                       "damping at its mean load)"});
     return;
   }
-  if (!(l.variation_z > L::kVariationZ && l.variation_spread > L::kVariationSpread)) return;
+  if (!varies) return;
   rw.push_back({quality_code::kDampingVaries,
                 "the damping is not linear in the load: the test of one C per segment against the "
                 "load law is " +

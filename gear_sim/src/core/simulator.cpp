@@ -688,14 +688,17 @@ class Simulation {
   // run (held-out seed 14308: trapezoid stiffness, 5575 rpm) was blamed on the time step, and
   // raising the substeps 1 -> 16 diverged at the same instant.
   std::string unstableGear(Eigen::Index n) const {
-    const MeshTiming timing(cfg_.speed, cfg_.gears.pinion.teeth, cfg_.mesh.initial_phase);
-    const double me = cfg_.gears.equivalentMass();
+    if (!model_) return "";
+    const Model& model = *model_;
     constexpr int kProbes = 16;  // instants up to n (a speed ramp moves the mesh frequency)
+    // One growth rate per distinct mesh frequency (a constant speed: one evaluation).
+    constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+    double f_last = kNone, lambda = kNone;
     for (int q = kProbes; q >= 1; --q) {
       const Eigen::Index m = n * q / kProbes;
-      const double t = o_.time[m], f = timing.meshFrequency(t);
-      const double lambda = parametricGrowthRate(cfg_.gears, cfg_.mesh, f);
-      const double c = o_.damping.size() > m ? o_.damping[m] / me : 0.0;
+      const double t = o_.time[m], f = model.timing.meshFrequency(t);
+      if (!(f == f_last)) lambda = parametricGrowthRate(cfg_.gears, cfg_.mesh, f), f_last = f;
+      const double c = o_.damping.size() > m ? o_.damping[m] / model.me : 0.0;
       if (!(lambda > 0.5 * c)) continue;
       return "the gear pair is parametrically unstable: at t = " + formatNumber(t) +
              " s its mesh frequency " + formatNumber(f) +

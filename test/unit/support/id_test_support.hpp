@@ -49,6 +49,14 @@ inline std::vector<double> piecewiseRatios(int segments) {
 }
 
 /// Makes `c`'s true damping piecewise constant on segments of `segment_length` [s] from t = 0.
+/// A load step from `from` to `to` [N*m] at `at` [s].
+inline void setStepLoad(SimConfig* c, double from, double to, double at) {
+  c->load.profile = gear_sim::LoadProfile::Step;
+  c->load.initial = from;
+  c->load.final_value = to;
+  c->load.step_time = at;
+}
+
 /// A load ramp from `from` to `to` [N*m] over [0, end] [s], constant after.
 inline void setRampLoad(SimConfig* c, double from, double to, double end) {
   c->load.profile = gear_sim::LoadProfile::Ramp;
