@@ -10,16 +10,19 @@
 // are independent accumulators, combined in a fixed order, computes the same bits in either
 // clone. A function that should vectorise must still be written so (branch-free, no aliasing).
 //
-// GEAR_FMA_CLONES: the same for x86-64-v3 (AVX2 + FMA) and the baseline. GCC contracts
-// multiply-adds into FMA in the v3 clone, so the two clones agree to rounding, not in every bit:
-// only for loops under a numeric contract that allows it (docs/method.md). On one machine every
-// run and every thread takes the same clone, so results do not depend on the run or the thread
-// count.
+// GEAR_FMA_CLONES: the same for x86-64-v4 (AVX-512), x86-64-v3 (AVX2 + FMA) and the baseline. GCC
+// contracts multiply-adds into FMA in the v3 and v4 clones, so they agree with the baseline to
+// rounding, not in every bit: only for loops under a numeric contract that allows it
+// (docs/method.md). The v4 clone runs the same code with the same 4-lane vectors and the same
+// contractions as v3 (the same bits, checked on held-out records); it gains AVX-512's 32 vector
+// registers, so the refinement's fused passes and the greybox Gram keep their accumulators in
+// registers (docs/performance.md). On one machine every run and every thread takes the same
+// clone, so results do not depend on the run or the thread count.
 #pragma once
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define GEAR_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#define GEAR_FMA_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#define GEAR_FMA_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
 #else
 #define GEAR_AVX2_CLONES
 #define GEAR_FMA_CLONES
