@@ -22,7 +22,8 @@
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define GEAR_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#define GEAR_FMA_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#define GEAR_FMA_CLONES \
+  __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
 #else
 #define GEAR_AVX2_CLONES
 #define GEAR_FMA_CLONES
