@@ -177,6 +177,23 @@ def drop_column(path, name):
             w.writerow(row[:k] + row[k + 1:])
 
 
+def add_torque_glitches(path, r, count):
+    """Adds COUNT one-sample glitches of 20-200 N*m (random sign) to the torque column of the
+    CSV at PATH, at random samples; returns their (time, size)."""
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    k = rows[0].index('torque')
+    out = []
+    for _ in range(count):
+        i = r.randrange(2, len(rows) - 1)
+        g = r.choice((-1, 1)) * r.uniform(20.0, 200.0)
+        rows[i][k] = repr(float(rows[i][k]) + g)
+        out.append((float(rows[i][0]), g))
+    with open(path, 'w', newline='') as f:
+        csv.writer(f, lineterminator='\n').writerows(rows)
+    return out
+
+
 def read_truth(path, names=('time', 'damping')):
     """The named columns of a simulated CSV (time and damping [N*s/m] by default)."""
     with open(path) as f:
@@ -453,6 +470,9 @@ def analyze_case(a, seed):
         return None
     if a.drop_mesh_phase:
         drop_column(name + '.csv', 'mesh_phase')
+    if a.torque_glitches:
+        info['glitches'] = add_torque_glitches(name + '.csv', random.Random(seed + 9_000_011),
+                                               a.torque_glitches)
     p = run([os.path.join(a.bin_dir, 'analyze'), '-q', '--input', name + '.csv', '--params',
              name + '.yaml', '--output', name + '.json'] + a.analyze_args)
     if p.returncode != 0:
@@ -478,6 +498,9 @@ def main():
     ap.add_argument('--drop-mesh-phase', action='store_true',
                     help='analyse the records without their mesh_phase column (the switches then '
                     'held to the sample where the new value is first seen)')
+    ap.add_argument('--torque-glitches', type=int, default=0, metavar='N',
+                    help='add N one-sample glitches of 20-200 N*m to the torque column (a meter '
+                    'or transmission spike the gear never felt) before the analysis')
     ap.add_argument('analyze_args', nargs='*', help='extra analyze options (after --)')
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)

@@ -203,6 +203,17 @@ struct SegmentEstimate {
   double torque_step = kNaN;
   double torque_step_time = kNaN;
   double torque_step_response = kNaN;
+  /// A single torque sample that departs from both neighbours (a glitch: a spike of one sample,
+  /// refined segments; NaN where none stands out of the torque noise): its size [N*m] (the
+  /// sample minus the mean of its neighbours), its time [s], and the free vibration the spurious
+  /// impulse force_factor g dt of the model's interpolated torque leaves in the response,
+  /// force_factor |g| dt / omega0 [m] (Refinement::loadSteps; flag torque_glitch).
+  double torque_glitch = kNaN;
+  double torque_glitch_time = kNaN;
+  double torque_glitch_response = kNaN;
+  /// How far the glitch moved C [1/s] (piecewise refined segments: the first-order effect of the
+  /// glitch's response through the segment's fit; NaN otherwise, where the flag uses the bound).
+  double torque_glitch_shift = kNaN;
   /// The constant model's C (refined): the largest share one segment has in the information
   /// about C [-], and that segment's span [s] (flag information_concentrated).
   double information_share = kNaN;

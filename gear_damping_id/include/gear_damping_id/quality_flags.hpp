@@ -47,6 +47,11 @@
 //                        free vibration the step's unknown place leaves unmodelled
 //                        (SegmentEstimate::torque_step_response) can move C by more than
 //                        kLoadStepSE standard errors
+//   torque_glitch        one torque sample inside the (refined) segment departs from both its
+//                        neighbours (a spike): the model's interpolated torque turns it into an
+//                        impulse whose free vibration moved C by more than kTorqueGlitchShare
+//                        standard errors (torque_glitch_shift, piecewise), or can move it by more
+//                        than kLoadStepSE (torque_glitch_response's bound, shared models)
 //   information_concentrated  the constant model's C: one segment holds more than
 //                        kInformationShare of the information about C (information_share)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
@@ -86,6 +91,7 @@ inline constexpr const char* kDampingVaries = "damping_varies";
 inline constexpr const char* kShapeMismatch = "shape_mismatch";
 inline constexpr const char* kSwitchTiming = "switch_timing";
 inline constexpr const char* kLoadStep = "load_step";
+inline constexpr const char* kTorqueGlitch = "torque_glitch";
 inline constexpr const char* kInformationConcentrated = "information_concentrated";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
@@ -179,6 +185,11 @@ struct QualityLimits {
   /// sqrt(E) / sigma standard errors (sigma the noise, not below kWhitenessFloor of the DTE's
   /// standard deviation). Flagged beyond this many.
   static constexpr double kLoadStepSE = 1.0;
+  /// A torque glitch (one sample off both neighbours) on a piecewise refined segment moved C by
+  /// SegmentEstimate::torque_glitch_shift (computed, not bounded): flagged torque_glitch beyond
+  /// this many C_std (half a C_std keeps the coverage of +-1.96 C_std at 93 % or more). Other
+  /// segments are flagged by the free vibration's bound (kLoadStepSE).
+  static constexpr double kTorqueGlitchShare = 0.5;
   /// The constant model's C most of whose information comes from one segment
   /// (SegmentEstimate::information_share beyond this) is in effect that segment's damping, and
   /// its test of one damping for every segment has little power elsewhere (flag

@@ -16,21 +16,23 @@ bool ownedCode(const std::string& c) {
          c == quality_code::kModelMismatch || c == quality_code::kRefineDisagrees ||
          c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries ||
          c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming ||
-         c == quality_code::kLoadStep || c == quality_code::kInformationConcentrated;
+         c == quality_code::kLoadStep || c == quality_code::kTorqueGlitch ||
+         c == quality_code::kInformationConcentrated;
 }
 
-// How many standard errors of C the free vibration a torque step leaves unmodelled can move C
-// by at most (QualityLimits::kLoadStepSE); NaN without a step.
-double loadStepSE(const SegmentEstimate& e) {
-  if (!std::isfinite(e.torque_step_response) || e.samples <= 0 || !std::isfinite(e.C)) return kNaN;
+// How many standard errors of C an unmodelled free vibration of amplitude `response` starting at
+// `time` (a torque step's, a torque glitch's) can move C by at most (QualityLimits::kLoadStepSE);
+// NaN without one.
+double freeVibrationSE(const SegmentEstimate& e, double response, double time) {
+  if (!std::isfinite(response) || e.samples <= 0 || !std::isfinite(e.C)) return kNaN;
   const double dt = (e.t_end - e.t_start) / static_cast<double>(e.samples);
-  const double after = std::max(e.t_end - e.torque_step_time, 0.0);
+  const double after = std::max(e.t_end - time, 0.0);
   const double rate = std::max(e.C, 0.0);  // the energy's decay rate, C
   const double sum =
       rate * dt > 0.0 ? std::expm1(-rate * after) / std::expm1(-rate * dt) : after / dt;
   const double noise = std::isfinite(e.noise_std) ? e.noise_std : 0.0;
   const double sigma = std::max(noise, L::kWhitenessFloor * e.signal_std);
-  return e.torque_step_response * std::sqrt(0.5 * sum) / sigma;
+  return response * std::sqrt(0.5 * sum) / sigma;
 }
 
 // Removes the warnings whose code `drop` accepts, keeping the others' order.
@@ -72,7 +74,8 @@ bool curveShape(const SegmentEstimate& e) { return !e.stiffness_curve.empty(); }
 
 // load_step (QualityLimits::kLoadStepSE): the torque step's unmodelled vibration can move C.
 void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
-  if (const double se = loadStepSE(e); se > L::kLoadStepSE) {
+  if (const double se = freeVibrationSE(e, e.torque_step_response, e.torque_step_time);
+      se > L::kLoadStepSE) {
     w->push_back(
         {quality_code::kLoadStep,
          "the torque steps by " + num(e.torque_step) +
@@ -84,6 +87,32 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
              " standard errors (> " + num(L::kLoadStepSE) +
              "): treat C as biased, or start a segment at the step (--t-start)"});
   }
+}
+
+// torque_glitch: the glitch's spurious impulse moved C by more than kTorqueGlitchShare C_std
+// (its computed shift), or can move it by more than kLoadStepSE (the bound, without a shift).
+void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
+  if (!std::isfinite(e.torque_glitch)) return;
+  std::string effect;
+  if (std::isfinite(e.torque_glitch_shift)) {
+    const double se = std::abs(e.torque_glitch_shift) / e.C_std;
+    if (!(se > L::kTorqueGlitchShare)) return;
+    effect = "moved C by " + num(e.torque_glitch_shift) + " 1/s (" + num(se) +
+             " standard errors, > " + num(L::kTorqueGlitchShare) + ")";
+  } else {
+    const double se = freeVibrationSE(e, e.torque_glitch_response, e.torque_glitch_time);
+    if (!(se > L::kLoadStepSE)) return;
+    effect = "can move C by up to " + num(se) + " standard errors (> " + num(L::kLoadStepSE) + ")";
+  }
+  w->push_back({quality_code::kTorqueGlitch,
+                "one torque sample (at t = " + num(e.torque_glitch_time) + " s) departs by " +
+                    num(e.torque_glitch) +
+                    " N*m from both its neighbours, a spike the torque cannot make in one "
+                    "sample: the model's interpolated torque turns it into an impulse whose free "
+                    "vibration (up to " +
+                    num(e.torque_glitch_response) + " m) " + effect +
+                    ": treat C as biased, or repair the torque sample (a meter or transmission "
+                    "glitch)"});
 }
 
 // information_concentrated: one segment holds most of the constant model's information about C
@@ -125,6 +154,8 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->C_weighted = e->C_weighted_std = kNaN;
     e->C_torque_std = kNaN;
     e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
+    e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
+    e->torque_glitch_shift = kNaN;
     e->information_share = e->information_t_start = e->information_t_end = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
@@ -153,6 +184,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                      " % (wrong stiffness shape, forcing or damping model?)"});
   }
   flagLoadStep(*e, &w);
+  flagTorqueGlitch(*e, &w);
   if (e->refined && std::isfinite(e->residuals.whitened_lag1) && e->samples > 0 &&
       e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
       std::abs(e->residuals.whitened_lag1) >

@@ -127,6 +127,12 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
     emit("torque_step_response", s.torque_step_response);
     emit("torque_step_time", s.torque_step_time);
   }
+  if (std::isfinite(s.torque_glitch)) {
+    emit("torque_glitch", s.torque_glitch);
+    emit("torque_glitch_response", s.torque_glitch_response);
+    if (std::isfinite(s.torque_glitch_shift)) emit("torque_glitch_shift", s.torque_glitch_shift);
+    emit("torque_glitch_time", s.torque_glitch_time);
+  }
   if (std::isfinite(s.variation_spread)) emit("variation_spread", s.variation_spread);
   if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
   emit("warnings", s.warnings);
