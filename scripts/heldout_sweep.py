@@ -194,6 +194,17 @@ def add_torque_glitches(path, r, count):
     return out
 
 
+def quantise_torque(path, q):
+    """Rounds the torque column of the CSV at PATH to multiples of Q N*m (no dither)."""
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    k = rows[0].index('torque')
+    for row in rows[1:]:
+        row[k] = repr(round(float(row[k]) / q) * q)
+    with open(path, 'w', newline='') as f:
+        csv.writer(f, lineterminator='\n').writerows(rows)
+
+
 def read_truth(path, names=('time', 'damping')):
     """The named columns of a simulated CSV (time and damping [N*s/m] by default)."""
     with open(path) as f:
@@ -470,6 +481,8 @@ def analyze_case(a, seed):
         return None
     if a.drop_mesh_phase:
         drop_column(name + '.csv', 'mesh_phase')
+    if a.torque_quantum:
+        quantise_torque(name + '.csv', a.torque_quantum)
     if a.torque_glitches:
         info['glitches'] = add_torque_glitches(name + '.csv', random.Random(seed + 9_000_011),
                                                a.torque_glitches)
@@ -501,6 +514,9 @@ def main():
     ap.add_argument('--torque-glitches', type=int, default=0, metavar='N',
                     help='add N one-sample glitches of 20-200 N*m to the torque column (a meter '
                     'or transmission spike the gear never felt) before the analysis')
+    ap.add_argument('--torque-quantum', type=float, default=0.0, metavar='Q',
+                    help='round the torque column to multiples of Q N*m (a quantiser without '
+                    'dither) before the analysis')
     ap.add_argument('analyze_args', nargs='*', help='extra analyze options (after --)')
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)

@@ -34,10 +34,8 @@ constexpr double kSnrDb = 40.0;
 
 // The Table 1 gear under a load stepping from 100 to 150 N*m at `step_time`, constant damping.
 SimConfig stepped(double step_time) {
-  SimConfig c = table1Config();
+  SimConfig c = table1ConstantRatio(0.05);
   setStepLoad(&c, 100.0, 150.0, step_time);
-  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
-  c.damping.ratio = 0.05;
   return c;
 }
 
@@ -66,9 +64,7 @@ StepTally overSeeds(const SimConfig& c, double step_time, double snr_db, double 
   const SignalTable clean = simulateOrFail(c);
   StepTally s;
   for (int seed = 1; seed <= kSeeds; ++seed) {
-    SignalTable t = clean;
-    addWhiteNoise(&t.dte, snr_db, 5100 + seed);
-    if (torque_sd > 0.0) addTorqueNoise(&t.torque, torque_sd, 5200 + seed);
+    const SignalTable t = noisyCopy(clean, snr_db, 5100 + seed, torque_sd, 5200 + seed);
     const IdentificationResult r = identifyOrFail(t, c, IdentificationOptions{});
     ++s.records;
     for (const SegmentEstimate& e : r.segments) {
@@ -140,9 +136,7 @@ GlitchTally glitchesOverSeeds(const SimConfig& c, double at, double glitch, doub
           ? std::abs(clean.torque[k] - 0.5 * (clean.torque[k - 1] + clean.torque[k + 1]))
           : 0.0;
   for (int seed = 1; seed <= kSeeds; ++seed) {
-    SignalTable t = clean;
-    addWhiteNoise(&t.dte, kSnrDb, 5300 + seed);
-    if (torque_sd > 0.0) addTorqueNoise(&t.torque, torque_sd, 5400 + seed);
+    SignalTable t = noisyCopy(clean, kSnrDb, 5300 + seed, torque_sd, 5400 + seed);
     if (glitch != 0.0) t.torque[k] += glitch;
     const IdentificationResult r = identifyOrFail(t, c, IdentificationOptions{});
     ++g.records;
@@ -182,17 +176,10 @@ GlitchTally glitchesOverSeeds(const SimConfig& c, double at, double glitch, doub
   return g;
 }
 
-SimConfig constantDamping() {
-  SimConfig c = table1Config();
-  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
-  c.damping.ratio = 0.05;
-  return c;
-}
-
 // Glitches of 20-200 N*m in one sample inside the fourth segment: right or flagged; the largest
 // flagged on every record.
 TEST(TorqueGlitch, AGlitchedSampleIsRightOrFlagged) {
-  const SimConfig c = constantDamping();
+  const SimConfig c = table1ConstantRatio(0.05);
   for (const double glitch : {2.0, 5.0, 20.0, -50.0, 100.0, 200.0}) {
     const GlitchTally g =
         glitchesOverSeeds(c, 3.4567e-3, glitch, 0.0, "glitch " + std::to_string(glitch) + " N*m");

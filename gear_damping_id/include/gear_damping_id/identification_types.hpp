@@ -214,6 +214,13 @@ struct SegmentEstimate {
   /// How far the glitch moved C [1/s] (piecewise refined segments: the first-order effect of the
   /// glitch's response through the segment's fit; NaN otherwise, where the flag uses the bound).
   double torque_glitch_shift = kNaN;
+  /// A torque channel quantised without dither in the segment (refined piecewise segments; NaN
+  /// otherwise): its level step q [N*m] (the staircase's common increment), and how far the
+  /// rounding error moved C [1/s] (the first-order effect of the difference between the torque
+  /// reconstructed through the staircase's level crossings and the samples; flag
+  /// torque_quantised).
+  double torque_quantum = kNaN;
+  double torque_quantisation_shift = kNaN;
   /// The constant model's C (refined): the largest share one segment has in the information
   /// about C [-], and that segment's span [s] (flag information_concentrated).
   double information_share = kNaN;

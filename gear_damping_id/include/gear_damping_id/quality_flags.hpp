@@ -49,9 +49,13 @@
 //                        kLoadStepSE standard errors
 //   torque_glitch        one torque sample inside the (refined) segment departs from both its
 //                        neighbours (a spike): the model's interpolated torque turns it into an
-//                        impulse whose free vibration moved C by more than kTorqueGlitchShare
+//                        impulse whose free vibration moved C by more than kTorqueErrorShare
 //                        standard errors (torque_glitch_shift, piecewise), or can move it by more
 //                        than kLoadStepSE (torque_glitch_response's bound, shared models)
+//   torque_quantised     the torque is a staircase of levels torque_quantum apart (quantised
+//                        without dither; piecewise refined segments), and its rounding error moved
+//                        C by more than kTorqueErrorShare standard errors
+//                        (torque_quantisation_shift)
 //   information_concentrated  the constant model's C: one segment holds more than
 //                        kInformationShare of the information about C (information_share)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
@@ -92,6 +96,7 @@ inline constexpr const char* kShapeMismatch = "shape_mismatch";
 inline constexpr const char* kSwitchTiming = "switch_timing";
 inline constexpr const char* kLoadStep = "load_step";
 inline constexpr const char* kTorqueGlitch = "torque_glitch";
+inline constexpr const char* kTorqueQuantised = "torque_quantised";
 inline constexpr const char* kInformationConcentrated = "information_concentrated";
 inline constexpr const char* kRefineNotConverged = "refine_not_converged";
 inline constexpr const char* kRefineFailed = "refine_failed";
@@ -185,11 +190,12 @@ struct QualityLimits {
   /// sqrt(E) / sigma standard errors (sigma the noise, not below kWhitenessFloor of the DTE's
   /// standard deviation). Flagged beyond this many.
   static constexpr double kLoadStepSE = 1.0;
-  /// A torque glitch (one sample off both neighbours) on a piecewise refined segment moved C by
-  /// SegmentEstimate::torque_glitch_shift (computed, not bounded): flagged torque_glitch beyond
-  /// this many C_std (half a C_std keeps the coverage of +-1.96 C_std at 93 % or more). Other
-  /// segments are flagged by the free vibration's bound (kLoadStepSE).
-  static constexpr double kTorqueGlitchShare = 0.5;
+  /// A torque glitch (one sample off both neighbours) or a torque quantised without dither
+  /// moved a piecewise refined segment's C by SegmentEstimate::torque_glitch_shift /
+  /// torque_quantisation_shift (computed, not bounded): flagged torque_glitch / torque_quantised
+  /// beyond this many C_std (half a C_std keeps the coverage of +-1.96 C_std at 93 % or more).
+  /// Other segments' glitches are flagged by the free vibration's bound (kLoadStepSE).
+  static constexpr double kTorqueErrorShare = 0.5;
   /// The constant model's C most of whose information comes from one segment
   /// (SegmentEstimate::information_share beyond this) is in effect that segment's damping, and
   /// its test of one damping for every segment has little power elsewhere (flag

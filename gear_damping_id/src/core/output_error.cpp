@@ -1338,6 +1338,7 @@ class Refinement {
     if (gear_sim::Status s = positiveVariances(); !s.ok()) return s;
     torqueNoise();
     glitchShifts();
+    quantisationShifts();
     fillSegments();
     fillShared();
     return {};
@@ -2457,15 +2458,21 @@ class Refinement {
   // g stands out of the torque noise (sd sqrt(3/2)) by kStepSigmas and of the net change across
   // it and of the increments next to it by kStepRatio (a step has |g| = |T_{n+1} - T_{n-1}| / 2,
   // a smooth load |g| ~ curvature dt^2).
+  //
+  // A staircase (torqueQuantum: the torque on a lattice of levels q apart, exact to rounding
+  // otherwise; quantisationShifts) steps by q at every level change: its largest is judged as a
+  // load step too (the load crosses the level somewhere inside the interval).
   void loadSteps() {
     constexpr double kStepSigmas = 8.0, kStepRatio = 4.0;
     glitch_at_.assign(nseg_, -1);
+    quantum_.assign(nseg_, 0.0);
     if (s_.torque == nullptr) return;
     const double* t = s_.torque;
     auto inc = [&](Index n) { return n >= 1 && n < s_.n ? t[n] - t[n - 1] : 0.0; };
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i]) continue;
       const Index b = ranges_[i].first, e = ranges_[i].second;
+      if (piecewise_ && torque_sigma_[i] == 0.0) quantum_[i] = torqueQuantum(t, b, e);
       double best = 0.0, spike = 0.0;
       Index at = -1, spike_at = -1;
       for (Index n = b + 1; n < e; ++n) {  // the interval (n - 1, n)
@@ -2500,6 +2507,69 @@ class Refinement {
     }
   }
 
+  // The level step q of a torque quantised without dither over samples [b, e) (0: none): most
+  // increments zero, the others whole multiples of the smallest, and at least kMinChanges level
+  // changes (a load stepping once or twice is a load, not a quantiser).
+  static double torqueQuantum(const double* t, Index b, Index e) {
+    constexpr long kMinChanges = 3;
+    constexpr double kLattice = 1e-6;  // of q: the increments' distance from whole multiples
+    double q = std::numeric_limits<double>::infinity();
+    long changes = 0;
+    for (Index n = b + 1; n < e; ++n) {
+      const double d = std::abs(t[n] - t[n - 1]);
+      if (d > 0.0) q = std::min(q, d), ++changes;
+    }
+    if (changes < kMinChanges || 2 * changes > e - b || !std::isfinite(q)) return 0.0;
+    for (Index n = b + 1; n < e; ++n) {
+      const double k = std::abs(t[n] - t[n - 1]) / q;
+      if (!(std::abs(k - std::round(k)) <= kLattice)) return 0.0;
+    }
+    return q;
+  }
+
+  // The torque a quantised staircase rounded, over samples [b, e) into out[0, e - b): linear
+  // between its level crossings, each the mean of the two levels half a sample before the first
+  // sample of the new level (a rounding quantiser changes level where the load crosses the
+  // levels' midpoint), found over the record up to a segment's length either side; the
+  // samples' own level before the first crossing and after the last.
+  void staircaseTorque(Index b, Index e, double* out) const {
+    const double* t = s_.torque;
+    const Index len = e - b, lo = std::max<Index>(b - len, 1), hi = std::min(e + len, s_.n);
+    std::vector<std::pair<double, double>> cross;  // (time in samples, torque)
+    for (Index n = lo; n < hi; ++n) {
+      if (t[n] != t[n - 1]) cross.emplace_back(n - 0.5, 0.5 * (t[n] + t[n - 1]));
+    }
+    size_t k = 0;
+    for (Index n = b; n < e; ++n) {
+      const double x = static_cast<double>(n);
+      while (k < cross.size() && cross[k].first < x) ++k;
+      if (k == 0 || k == cross.size()) {
+        out[n - b] = t[n];
+        continue;
+      }
+      const auto& p = cross[k - 1];
+      const auto& q = cross[k];
+      out[n - b] = p.second + (q.second - p.second) * (x - p.first) / (q.first - p.first);
+    }
+  }
+
+  // How far the quantisation of each staircase segment's torque (loadSteps) moved its C, to
+  // first order: the model's response to the samples minus the torque they rounded
+  // (staircaseTorque) through the segment's fit (torqueErrorShift).
+  void quantisationShifts() {
+    for (size_t i = 0; i < nseg_; ++i) {
+      if (!active_[i] || !(quantum_[i] > 0.0)) continue;
+      SegmentEstimate& est = res_->segments[i];
+      est.torque_quantum = quantum_[i];
+      const Index b = ranges_[i].first, e = ranges_[i].second;
+      std::vector<double> smooth(static_cast<size_t>(e - b));
+      staircaseTorque(b, e, smooth.data());
+      est.torque_quantisation_shift = torqueErrorShift(i, [&](double* err) {
+        for (Index n = b; n < e; ++n) err[n] = s_.torque[n] - smooth[static_cast<size_t>(n - b)];
+      });
+    }
+  }
+
   // The model on a torque record of its own (noise_torque_, zero), for responses to a torque
   // perturbation (responseToTorque): the torque noise's, a glitch's.
   void makeNoiseModel() {
@@ -2518,22 +2588,31 @@ class Refinement {
   // the response the data do not hold). The shared models keep loadSteps' bound.
   void glitchShifts() {
     if (!piecewise_ || s_.torque == nullptr) return;
-    constexpr int kC = 2;  // C among the locals [y0, v0, C, ...]
     for (size_t i = 0; i < nseg_; ++i) {
       SegmentEstimate& est = res_->segments[i];
       if (!active_[i] || glitch_at_[i] < 0 || !std::isfinite(est.torque_glitch)) continue;
-      makeNoiseModel();
-      const Index b = ranges_[i].first, e = ranges_[i].second;
-      SegmentTable tab;
-      if (noise_sim_->tableApplies(substeps_)) noise_sim_->buildTable(b, e, &tab);
-      double& at = noise_torque_[static_cast<size_t>(glitch_at_[i])];
-      at = est.torque_glitch;
-      const Eigen::VectorXd g = responseToTorque(i, &tab);
-      at = 0.0;
-      const Eigen::MatrixXd Jw = whitenedSensitivities(i);
-      const Eigen::VectorXd d = (Jw.transpose() * Jw).ldlt().solve(Jw.transpose() * g);
-      if (d.size() > kC && std::isfinite(d[kC])) est.torque_glitch_shift = -d[kC];
+      est.torque_glitch_shift =
+          torqueErrorShift(i, [&](double* err) { err[glitch_at_[i]] = est.torque_glitch; });
     }
+  }
+
+  // How far an error of the torque samples (the samples minus the torque the gear felt, written
+  // by fill(err) into the record-indexed err over segment i) moved segment i's C, to first
+  // order: -(Jw' Jw)^-1 Jw' W G err, G the converged model's response from rest (the model puts
+  // the error's response into the fit, the data do not hold it). NaN where not solvable.
+  template <class Fill>
+  double torqueErrorShift(size_t i, Fill&& fill) {
+    constexpr int kC = 2;  // C among the piecewise locals [y0, v0, C, ...]
+    makeNoiseModel();
+    const Index b = ranges_[i].first, e = ranges_[i].second;
+    SegmentTable tab;
+    if (noise_sim_->tableApplies(substeps_)) noise_sim_->buildTable(b, e, &tab);
+    fill(noise_torque_.data());
+    const Eigen::VectorXd g = responseToTorque(i, &tab);
+    std::fill(noise_torque_.begin() + b, noise_torque_.begin() + e, 0.0);
+    const Eigen::MatrixXd Jw = whitenedSensitivities(i);
+    const Eigen::VectorXd d = (Jw.transpose() * Jw).ldlt().solve(Jw.transpose() * g);
+    return d.size() > kC && std::isfinite(d[kC]) ? -d[kC] : kNaN;
   }
 
   // Torque-meter noise (output_error.hpp): each segment's estimated level, and the covariance
@@ -3262,6 +3341,7 @@ class Refinement {
   std::vector<Eigen::MatrixXd> tgram_;
   std::vector<double> noise_torque_;
   std::vector<Index> glitch_at_;  // each segment's glitch sample (loadSteps; -1: none)
+  std::vector<double> quantum_;   // each segment's torque quantum (loadSteps; 0: none)
   SignalView noise_view_;
   std::unique_ptr<ForwardModel> noise_fm_;
   std::unique_ptr<SegmentSimulator> noise_sim_;

@@ -17,7 +17,7 @@ bool ownedCode(const std::string& c) {
          c == quality_code::kResidualsNotWhite || c == quality_code::kDampingVaries ||
          c == quality_code::kShapeMismatch || c == quality_code::kSwitchTiming ||
          c == quality_code::kLoadStep || c == quality_code::kTorqueGlitch ||
-         c == quality_code::kInformationConcentrated;
+         c == quality_code::kTorqueQuantised || c == quality_code::kInformationConcentrated;
 }
 
 // How many standard errors of C an unmodelled free vibration of amplitude `response` starting at
@@ -89,16 +89,16 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
   }
 }
 
-// torque_glitch: the glitch's spurious impulse moved C by more than kTorqueGlitchShare C_std
+// torque_glitch: the glitch's spurious impulse moved C by more than kTorqueErrorShare C_std
 // (its computed shift), or can move it by more than kLoadStepSE (the bound, without a shift).
 void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
   if (!std::isfinite(e.torque_glitch)) return;
   std::string effect;
   if (std::isfinite(e.torque_glitch_shift)) {
     const double se = std::abs(e.torque_glitch_shift) / e.C_std;
-    if (!(se > L::kTorqueGlitchShare)) return;
+    if (!(se > L::kTorqueErrorShare)) return;
     effect = "moved C by " + num(e.torque_glitch_shift) + " 1/s (" + num(se) +
-             " standard errors, > " + num(L::kTorqueGlitchShare) + ")";
+             " standard errors, > " + num(L::kTorqueErrorShare) + ")";
   } else {
     const double se = freeVibrationSE(e, e.torque_glitch_response, e.torque_glitch_time);
     if (!(se > L::kLoadStepSE)) return;
@@ -113,6 +113,21 @@ void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
                     num(e.torque_glitch_response) + " m) " + effect +
                     ": treat C as biased, or repair the torque sample (a meter or transmission "
                     "glitch)"});
+}
+
+// torque_quantised: the rounding error of a torque quantised without dither moved C by more than
+// kTorqueErrorShare C_std.
+void flagTorqueQuantised(const SegmentEstimate& e, QualityWarnings* w) {
+  const double se = std::abs(e.torque_quantisation_shift) / e.C_std;
+  if (!(se > L::kTorqueErrorShare)) return;
+  w->push_back({quality_code::kTorqueQuantised,
+                "the torque is a staircase of levels " + num(e.torque_quantum) +
+                    " N*m apart (quantised without dither), which the model takes as the load: "
+                    "the rounding error moved C by about " +
+                    num(e.torque_quantisation_shift) + " 1/s (" + num(se) + " standard errors, > " +
+                    num(L::kTorqueErrorShare) +
+                    "; estimated through the levels' crossings): treat C as biased, or record "
+                    "the torque with finer resolution or dither"});
 }
 
 // information_concentrated: one segment holds most of the constant model's information about C
@@ -155,7 +170,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->C_torque_std = kNaN;
     e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
     e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
-    e->torque_glitch_shift = kNaN;
+    e->torque_glitch_shift = e->torque_quantum = e->torque_quantisation_shift = kNaN;
     e->information_share = e->information_t_start = e->information_t_end = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});
@@ -185,6 +200,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
   }
   flagLoadStep(*e, &w);
   flagTorqueGlitch(*e, &w);
+  flagTorqueQuantised(*e, &w);
   if (e->refined && std::isfinite(e->residuals.whitened_lag1) && e->samples > 0 &&
       e->residuals.rms > L::kWhitenessFloor * e->signal_std &&
       std::abs(e->residuals.whitened_lag1) >

@@ -127,6 +127,10 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
     emit("torque_step_response", s.torque_step_response);
     emit("torque_step_time", s.torque_step_time);
   }
+  if (std::isfinite(s.torque_quantum)) {
+    emit("torque_quantum", s.torque_quantum);
+    emit("torque_quantisation_shift", s.torque_quantisation_shift);
+  }
   if (std::isfinite(s.torque_glitch)) {
     emit("torque_glitch", s.torque_glitch);
     emit("torque_glitch_response", s.torque_glitch_response);

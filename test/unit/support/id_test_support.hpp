@@ -148,6 +148,24 @@ inline void addTorqueNoise(Eigen::VectorXd* y, double sd, unsigned long seed) {
   for (Eigen::Index i = 0; i < y->size(); ++i) (*y)[i] += nd(gen);
 }
 
+/// `clean` with white DTE noise at snr_db (seed) and, where torque_sd > 0, white torque-meter noise
+/// of that standard deviation (torque_seed).
+inline SignalTable noisyCopy(const SignalTable& clean, double snr_db, unsigned long seed,
+                             double torque_sd, unsigned long torque_seed) {
+  SignalTable t = clean;
+  addWhiteNoise(&t.dte, snr_db, seed);
+  if (torque_sd > 0.0) addTorqueNoise(&t.torque, torque_sd, torque_seed);
+  return t;
+}
+
+/// The Table 1 case with a constant damping ratio instead of its load-dependent one.
+inline SimConfig table1ConstantRatio(double ratio) {
+  SimConfig c = table1Config();
+  c.damping.model = gear_sim::DampingProfile::ConstantRatio;
+  c.damping.ratio = ratio;
+  return c;
+}
+
 // Stationary AR(1) noise x_n = rho x_{n-1} + sqrt(1 - rho^2) sigma w_n at SNR `snr_db` (std of
 // x is sigma, as for white noise), std::mt19937_64(seed).
 inline void addAr1Noise(Eigen::VectorXd* y, double snr_db, double rho, unsigned long seed) {
