@@ -27,7 +27,8 @@ namespace qc = gear_damping_id::quality_code;
 constexpr int kSeeds = 10;
 
 struct QuantTally {
-  int segments = 0, flagged = 0, clean = 0, clean_within = 0, clean_beyond3 = 0;
+  int segments = 0, staircase = 0, flagged = 0, clean = 0, clean_within = 0, clean_beyond3 = 0;
+  double sum_fit = 0.0, sum_fit_z = 0.0;  // of the staircase segments' torque_quantisation_fit
   double worst_clean = 0.0, sum_unexplained = 0.0, sum_z2_unexplained = 0.0, sum_shift2 = 0.0;
 };
 
@@ -45,6 +46,11 @@ QuantTally overSeeds(const SimConfig& c, double q, double dither, double snr_db,
       if (!e.identifiable) continue;
       ++s.segments;
       const double z = (e.C - trueC(t, c, e.t_start, e.t_end)) / e.C_std;
+      if (std::isfinite(e.torque_quantum)) {
+        ++s.staircase;
+        s.sum_fit += e.torque_quantisation_fit;
+        s.sum_fit_z += e.torque_quantisation_fit / e.torque_quantisation_fit_std;
+      }
       if (gear_damping_id::hasCode(e.warnings, qc::kTorqueQuantised)) {
         ++s.flagged;
         const double shift = e.torque_quantisation_shift / e.C_std;
@@ -60,12 +66,14 @@ QuantTally overSeeds(const SimConfig& c, double q, double dither, double snr_db,
     }
   }
   const int f = std::max(s.flagged, 1);
-  std::cout << "[ measured ] " << label << ": " << s.segments << " segments, torque_quantised on "
-            << s.flagged << " (rms shift / C_std " << std::sqrt(s.sum_shift2 / f)
-            << ", mean and rms of z - shift / C_std " << s.sum_unexplained / f << ", "
-            << std::sqrt(s.sum_z2_unexplained / f) << "); clean " << s.clean << ", within 1.96 "
-            << s.clean_within << ", beyond 3 " << s.clean_beyond3 << ", largest |z| "
-            << s.worst_clean << "\n";
+  std::cout << "[ measured ] " << label << ": " << s.segments << " segments, " << s.staircase
+            << " staircases (mean torque_quantisation_fit " << s.sum_fit / std::max(s.staircase, 1)
+            << ", mean fit / its std " << s.sum_fit_z / std::max(s.staircase, 1)
+            << "), torque_quantised on " << s.flagged << " (rms shift / C_std "
+            << std::sqrt(s.sum_shift2 / f) << ", mean and rms of z - shift / C_std "
+            << s.sum_unexplained / f << ", " << std::sqrt(s.sum_z2_unexplained / f) << "); clean "
+            << s.clean << ", within 1.96 " << s.clean_within << ", beyond 3 " << s.clean_beyond3
+            << ", largest |z| " << s.worst_clean << "\n";
   return s;
 }
 
@@ -87,6 +95,32 @@ TEST(TorqueQuantisation, AQuantisedTorqueIsRightOrFlagged) {
       EXPECT_LT(std::abs(mean), 3.5 * rms / std::sqrt(n));
     }
   }
+}
+
+// A load that really steps by 5 N*m every 0.25 ms (up and down between 100 and 150 N*m, each step
+// between two samples): the same lattice as a quantised ramp, but the DTE holds each step's free
+// vibration, so the staircase is the load (torque_quantisation_fit near 0): no torque_quantised
+// (before the fit test: 20 of 20 segments flagged with "shifts" of 1-34 C_std, hostile review).
+TEST(TorqueQuantisation, ALoadThatReallyStepsIsNotTakenForAQuantiser) {
+  SimConfig c = table1ConstantRatio(0.05);
+  c.load.profile = gear_sim::LoadProfile::Table;
+  c.load.times.clear();
+  c.load.values.clear();
+  double level = 100.0, dir = 5.0;
+  for (int k = 0; k < 40; ++k) {
+    const double at = 0.25e-3 * k + 0.3e-6;
+    c.load.times.push_back(at);
+    c.load.values.push_back(level);
+    if (level + dir > 150.0 || level + dir < 100.0) dir = -dir;
+    level += dir;
+    c.load.times.push_back(at + 1e-9);
+    c.load.values.push_back(level);
+  }
+  const QuantTally s = overSeeds(c, 0.0, 0.0, 40.0, "a load stepping by 5 N*m");
+  EXPECT_GT(s.staircase, s.segments / 2);                 // the lattice is there,
+  EXPECT_LT(s.sum_fit / std::max(s.staircase, 1), 0.25);  // and the DTE says the steps are real
+  EXPECT_EQ(s.flagged, 0);
+  EXPECT_LT(s.worst_clean, 4.0);
 }
 
 TEST(TorqueQuantisation, AnUnquantisedOrDitheredTorqueIsNotAStaircase) {

@@ -221,6 +221,11 @@ struct SegmentEstimate {
   /// torque_quantised).
   double torque_quantum = kNaN;
   double torque_quantisation_shift = kNaN;
+  /// Which the DTE supports, the reconstructed smooth load or the staircase as the load: the
+  /// share of their difference the residual holds (1: a quantised smooth load; 0: a load that
+  /// really steps, whose steps' free vibrations are in the response), and its standard error.
+  double torque_quantisation_fit = kNaN;
+  double torque_quantisation_fit_std = kNaN;
   /// The constant model's C (refined): the largest share one segment has in the information
   /// about C [-], and that segment's span [s] (flag information_concentrated).
   double information_share = kNaN;

@@ -55,7 +55,8 @@
 //   torque_quantised     the torque is a staircase of levels torque_quantum apart (quantised
 //                        without dither; piecewise refined segments), and its rounding error moved
 //                        C by more than kTorqueErrorShare standard errors
-//                        (torque_quantisation_shift)
+//                        (torque_quantisation_shift), unless the DTE shows the steps are the load
+//                        (torque_quantisation_fit, kStairsRealZ)
 //   information_concentrated  the constant model's C: one segment holds more than
 //                        kInformationShare of the information about C (information_share)
 // Each depends on the segment's own estimate and data only, so batch, streamed and live
@@ -196,6 +197,10 @@ struct QualityLimits {
   /// beyond this many C_std (half a C_std keeps the coverage of +-1.96 C_std at 93 % or more).
   /// Other segments' glitches are flagged by the free vibration's bound (kLoadStepSE).
   static constexpr double kTorqueErrorShare = 0.5;
+  /// A torque staircase is taken as the load itself (no torque_quantised) where the DTE supports
+  /// it: SegmentEstimate::torque_quantisation_fit below 0.5 and 1 (a quantised smooth load)
+  /// this many of its standard errors away.
+  static constexpr double kStairsRealZ = 3.0;
   /// The constant model's C most of whose information comes from one segment
   /// (SegmentEstimate::information_share beyond this) is in effect that segment's damping, and
   /// its test of one damping for every segment has little power elsewhere (flag

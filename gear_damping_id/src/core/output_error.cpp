@@ -2527,35 +2527,37 @@ class Refinement {
     return q;
   }
 
-  // The torque a quantised staircase rounded, over samples [b, e) into out[0, e - b): linear
-  // between its level crossings, each the mean of the two levels half a sample before the first
-  // sample of the new level (a rounding quantiser changes level where the load crosses the
-  // levels' midpoint), found over the record up to a segment's length either side; the
-  // samples' own level before the first crossing and after the last.
-  void staircaseTorque(Index b, Index e, double* out) const {
+  // The torque a staircase of levels q apart rounded, over samples [b, e) into out[0, e - b):
+  // straight lines through its level crossings, each the mean of the two levels half a sample
+  // before the first sample of the new level (a rounding quantiser changes level where the load
+  // crosses the levels' midpoint), extended beyond the first and last crossing by the nearest
+  // two's line, and kept within each sample's rounding band (+-q/2). Only the segment's own
+  // samples are read, so a segment gets the same answer from any view of the record (batch,
+  // streamed, live).
+  void staircaseTorque(Index b, Index e, double q, double* out) const {
     const double* t = s_.torque;
-    const Index len = e - b, lo = std::max<Index>(b - len, 1), hi = std::min(e + len, s_.n);
     std::vector<std::pair<double, double>> cross;  // (time in samples, torque)
-    for (Index n = lo; n < hi; ++n) {
+    for (Index n = b + 1; n < e; ++n) {
       if (t[n] != t[n - 1]) cross.emplace_back(n - 0.5, 0.5 * (t[n] + t[n - 1]));
     }
+    const size_t nc = cross.size();  // >= 2 (torqueQuantum: at least 3 changes)
     size_t k = 0;
     for (Index n = b; n < e; ++n) {
       const double x = static_cast<double>(n);
-      while (k < cross.size() && cross[k].first < x) ++k;
-      if (k == 0 || k == cross.size()) {
-        out[n - b] = t[n];
-        continue;
-      }
-      const auto& p = cross[k - 1];
-      const auto& q = cross[k];
-      out[n - b] = p.second + (q.second - p.second) * (x - p.first) / (q.first - p.first);
+      while (k < nc && cross[k].first < x) ++k;
+      const size_t hi = std::clamp<size_t>(k, 1, nc - 1);
+      const auto& p = cross[hi - 1];
+      const auto& r = cross[hi];
+      const double v = p.second + (r.second - p.second) * (x - p.first) / (r.first - p.first);
+      out[n - b] = std::clamp(v, t[n] - 0.5 * q, t[n] + 0.5 * q);
     }
   }
 
   // How far the quantisation of each staircase segment's torque (loadSteps) moved its C, to
   // first order: the model's response to the samples minus the torque they rounded
-  // (staircaseTorque) through the segment's fit (torqueErrorShift).
+  // (staircaseTorque) through the segment's fit (torqueErrorEffect); and which of the two the
+  // DTE supports (a load that really steps leaves the free vibrations of its steps in the
+  // response, a quantised smooth load does not).
   void quantisationShifts() {
     for (size_t i = 0; i < nseg_; ++i) {
       if (!active_[i] || !(quantum_[i] > 0.0)) continue;
@@ -2563,10 +2565,12 @@ class Refinement {
       est.torque_quantum = quantum_[i];
       const Index b = ranges_[i].first, e = ranges_[i].second;
       std::vector<double> smooth(static_cast<size_t>(e - b));
-      staircaseTorque(b, e, smooth.data());
-      est.torque_quantisation_shift = torqueErrorShift(i, [&](double* err) {
+      staircaseTorque(b, e, quantum_[i], smooth.data());
+      const TorqueErrorEffect te = torqueErrorEffect(i, [&](double* err) {
         for (Index n = b; n < e; ++n) err[n] = s_.torque[n] - smooth[static_cast<size_t>(n - b)];
       });
+      est.torque_quantisation_shift = te.shift;
+      est.torque_quantisation_fit = te.fit, est.torque_quantisation_fit_std = te.fit_std;
     }
   }
 
@@ -2592,16 +2596,24 @@ class Refinement {
       SegmentEstimate& est = res_->segments[i];
       if (!active_[i] || glitch_at_[i] < 0 || !std::isfinite(est.torque_glitch)) continue;
       est.torque_glitch_shift =
-          torqueErrorShift(i, [&](double* err) { err[glitch_at_[i]] = est.torque_glitch; });
+          torqueErrorEffect(i, [&](double* err) { err[glitch_at_[i]] = est.torque_glitch; }).shift;
     }
   }
 
-  // How far an error of the torque samples (the samples minus the torque the gear felt, written
-  // by fill(err) into the record-indexed err over segment i) moved segment i's C, to first
-  // order: -(Jw' Jw)^-1 Jw' W G err, G the converged model's response from rest (the model puts
-  // the error's response into the fit, the data do not hold it). NaN where not solvable.
+  // What an error of the torque samples (the samples minus the torque the gear felt, written by
+  // fill(err) into the record-indexed err over segment i) did to segment i's fit, to first
+  // order, with g = W G err (G the converged model's response from rest, prewhitened) and the
+  // prewhitened residual r and sensitivities Jw at the solution:
+  // - shift: how far it moved C, -[(Jw' Jw)^-1 Jw' g]_C (the model puts the error's response
+  //   into the fit, the data do not hold it);
+  // - fit: the share of the error the DTE itself supports, -r' Pg / |Pg|^2 with Pg the part of g
+  //   the fit cannot absorb (1: the error is real, the data follow the corrected torque; 0: the
+  //   samples were the load), and its standard error sigma / |Pg|. NaN where not solvable.
+  struct TorqueErrorEffect {
+    double shift = kNaN, fit = kNaN, fit_std = kNaN;
+  };
   template <class Fill>
-  double torqueErrorShift(size_t i, Fill&& fill) {
+  TorqueErrorEffect torqueErrorEffect(size_t i, Fill&& fill) {
     constexpr int kC = 2;  // C among the piecewise locals [y0, v0, C, ...]
     makeNoiseModel();
     const Index b = ranges_[i].first, e = ranges_[i].second;
@@ -2610,9 +2622,19 @@ class Refinement {
     fill(noise_torque_.data());
     const Eigen::VectorXd g = responseToTorque(i, &tab);
     std::fill(noise_torque_.begin() + b, noise_torque_.begin() + e, 0.0);
-    const Eigen::MatrixXd Jw = whitenedSensitivities(i);
+    const Eigen::MatrixXd rows = whiten(solutionRows(i, true), noise_of_[i]);
+    const Eigen::VectorXd r = rows.col(0);
+    const Eigen::MatrixXd Jw = rows.rightCols(rows.cols() - 1);
     const Eigen::VectorXd d = (Jw.transpose() * Jw).ldlt().solve(Jw.transpose() * g);
-    return d.size() > kC && std::isfinite(d[kC]) ? -d[kC] : kNaN;
+    TorqueErrorEffect out;
+    if (d.size() > kC && std::isfinite(d[kC])) out.shift = -d[kC];
+    const Eigen::VectorXd pg = g - Jw * d;
+    const double den = pg.squaredNorm();
+    if (den > 0.0 && std::isfinite(den)) {
+      out.fit = -r.dot(pg) / den;
+      out.fit_std = std::sqrt(sigma2Of(i) / den);
+    }
+    return out;
   }
 
   // Torque-meter noise (output_error.hpp): each segment's estimated level, and the covariance

@@ -120,6 +120,9 @@ void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
 void flagTorqueQuantised(const SegmentEstimate& e, QualityWarnings* w) {
   const double se = std::abs(e.torque_quantisation_shift) / e.C_std;
   if (!(se > L::kTorqueErrorShare)) return;
+  // The DTE shows the steps' own free vibrations: the staircase is the load, not a quantiser's.
+  const double fit = e.torque_quantisation_fit, fit_sd = e.torque_quantisation_fit_std;
+  if (fit < 0.5 && 1.0 - fit > L::kStairsRealZ * fit_sd) return;
   w->push_back({quality_code::kTorqueQuantised,
                 "the torque is a staircase of levels " + num(e.torque_quantum) +
                     " N*m apart (quantised without dither), which the model takes as the load: "
@@ -171,6 +174,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
     e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
     e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
     e->torque_glitch_shift = e->torque_quantum = e->torque_quantisation_shift = kNaN;
+    e->torque_quantisation_fit = e->torque_quantisation_fit_std = kNaN;
     e->information_share = e->information_t_start = e->information_t_end = kNaN;
     e->refined = false;
     w.push_back({quality_code::kBelowNoise, why});

@@ -130,6 +130,8 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   if (std::isfinite(s.torque_quantum)) {
     emit("torque_quantum", s.torque_quantum);
     emit("torque_quantisation_shift", s.torque_quantisation_shift);
+    emit("torque_quantisation_fit", s.torque_quantisation_fit);
+    emit("torque_quantisation_fit_std", s.torque_quantisation_fit_std);
   }
   if (std::isfinite(s.torque_glitch)) {
     emit("torque_glitch", s.torque_glitch);
