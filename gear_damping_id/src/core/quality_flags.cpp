@@ -148,6 +148,24 @@ void flagInformationConcentrated(const SegmentEstimate& e, QualityWarnings* w) {
            "piecewise gives each segment's C with its own standard error"});
 }
 
+// A segment found below the noise keeps no estimate: every number about C and the tests on it.
+void clearEstimates(SegmentEstimate* e) {
+  e->C = e->C_std = e->c = e->xi = kNaN;
+  e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
+  e->C_integral = e->C_integral_std = kNaN;
+  e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = e->shape_shift = kNaN;
+  e->variation_spread = e->switch_timing_shift = e->switch_timing_z = kNaN;
+  e->switch_timing_power = kNaN;
+  e->C_weighted = e->C_weighted_std = kNaN;
+  e->C_torque_std = kNaN;
+  e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
+  e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
+  e->torque_glitch_shift = e->torque_quantum = e->torque_quantisation_shift = kNaN;
+  e->torque_quantisation_fit = e->torque_quantisation_fit_std = kNaN;
+  e->information_share = e->information_t_start = e->information_t_end = kNaN;
+  e->refined = false;
+}
+
 // Flags one identifiable estimate in place; `shared`: the constant model's C.
 void flagEstimate(SegmentEstimate* e, bool shared) {
   if (!e->identifiable || !std::isfinite(e->C)) return;
@@ -163,20 +181,7 @@ void flagEstimate(SegmentEstimate* e, bool shared) {
                             "): the damping-sensitive part of the response is below the noise";
     e->identifiable = false;
     e->reason = why;
-    e->C = e->C_std = e->c = e->xi = kNaN;
-    e->k_min = e->k_max = e->k_min_std = e->k_max_std = kNaN;
-    e->C_integral = e->C_integral_std = kNaN;
-    e->variation_z = e->C_mean_load = e->C_mean_load_std = e->shape_z = e->shape_shift = kNaN;
-    e->variation_spread = e->switch_timing_shift = e->switch_timing_z = kNaN;
-    e->switch_timing_power = kNaN;
-    e->C_weighted = e->C_weighted_std = kNaN;
-    e->C_torque_std = kNaN;
-    e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
-    e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
-    e->torque_glitch_shift = e->torque_quantum = e->torque_quantisation_shift = kNaN;
-    e->torque_quantisation_fit = e->torque_quantisation_fit_std = kNaN;
-    e->information_share = e->information_t_start = e->information_t_end = kNaN;
-    e->refined = false;
+    clearEstimates(e);
     w.push_back({quality_code::kBelowNoise, why});
     return;
   }
