@@ -186,7 +186,8 @@ TEST(AnalysisJson, IdentificationIsThePrimaryRunPlusSharedBlocksAndTheWriterStre
 
 // writeAnalysisJsonAtomically (the segments written from the runs, no tree of them) writes the
 // bytes of writeJsonAtomically(analysisJson(runs, input)): segments with every optional field
-// present and absent (reason, stiffness levels, torque, integral/weighted estimates, curves,
+// present and absent (reason, stiffness levels, torque and its step, glitch and quantisation,
+// integral/weighted estimates, curves,
 // warnings, NaN and infinite values as null, a text needing escapes), runs without segments,
 // and keys added to the document after analysisJson (as analyze adds metadata and STE blocks).
 TEST(AnalysisJson, SegmentsWrittenFromTheRunsGiveTheBytesOfTheDocument) {
@@ -207,6 +208,12 @@ TEST(AnalysisJson, SegmentsWrittenFromTheRunsGiveTheBytesOfTheDocument) {
   s[2].stiffness_curve_std = {0.1};
   s[2].warnings = {{"low_snr", "signal below noise"}, {"x", "y\n"}};
   s[3].noise_std = 0.25, s[3].signal_std = 2.0, s[3].residual_rms = 1e-17;
+  // The torque channel's findings (their keys sort between and around torque_noise_std).
+  s[3].torque_noise_std = 0.0, s[3].torque_step = 50.0, s[3].torque_step_time = 0.5;
+  s[3].torque_step_response = 1e-9, s[3].torque_glitch = -20.0, s[3].torque_glitch_time = 0.25;
+  s[3].torque_glitch_response = 2e-9, s[3].torque_glitch_shift = 3.5, s[3].torque_quantum = 0.5;
+  s[3].torque_quantisation_shift = -1.5, s[3].torque_quantisation_fit = 0.9;
+  s[3].torque_quantisation_fit_std = 0.1;
   runs[2].result.segments[1].identifiable = false;
   runs[2].result.constant = runs[2].result.segments.front();
   runs[2].response_error = "diverged";

@@ -22,7 +22,8 @@
 // (gear_sim/simd_clones.hpp): without FMA contraction or reassociation both clones compute the
 // same bits (each loop's accumulators are independent lanes, summed in the same order by either).
 // GEAR_FMA_CLONES (the row scans and the projected Gram): x86-64-v3 (AVX2 + FMA, contracted
-// multiply-adds) or the baseline; the two clones agree to rounding, not in every bit
+// multiply-adds; on AVX-512 processors the x86-64-v4 clone of the same code, the same bits) or
+// the baseline; the clones agree to rounding, not in every bit
 // (docs/method.md §5, numeric contract), and on one machine every run takes the same clone, so
 // any thread count gives the same bits.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)

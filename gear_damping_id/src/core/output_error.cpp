@@ -774,12 +774,13 @@ double maxChange(const NoiseModel& x, const NoiseModel& y) {
 // Gram of the whitened row, without storing the rows; the residual's autocovariances after the
 // loop from the residuals kept in reverse order. Every element is computed with the operations
 // of runTable + Accumulator in their order (no reassociation) and the sums run in sample order;
-// the baseline clone gives their bits, the x86-64-v3 clone contracts multiply-adds (FMA), the
-// same numbers to rounding (~1e-16 per step; refine_fast_path_test holds the fast path to the
+// the baseline clone gives their bits, the x86-64-v3 and v4 clones contract multiply-adds (FMA),
+// the same numbers to rounding (~1e-16 per step; refine_fast_path_test holds the fast path to the
 // generic RK4 at 1e-9). Intervals stepped in parts call back into the generic RK4.
 
-// The passes are compiled for x86-64-v3 (AVX2 + FMA) as well as the baseline, chosen at load
-// time (GEAR_FMA_CLONES, gear_sim/simd_clones.hpp; other compilers build the baseline), their
+// The passes are compiled for x86-64-v4 (AVX-512: the same code, the v3 clone's bits, more
+// registers) and x86-64-v3 (AVX2 + FMA) as well as the baseline, chosen at load time
+// (GEAR_FMA_CLONES, gear_sim/simd_clones.hpp; other compilers build the baseline), their
 // helpers inlined into each clone. On one machine every run takes the same clone, so results do
 // not depend on the run.
 #define GD_FUSED_INLINE inline __attribute__((always_inline))
@@ -2490,6 +2491,9 @@ class Refinement {
       // (torqueLevels' estimate where it made one: the load law's model has none)
       double sd = std::isfinite(torque_sd_[i]) ? torque_sd_[i] : torqueNoiseEstimate(t + b, e - b);
       if (!std::isfinite(sd)) sd = 0.0;
+      // On a staircase a load at a level's midpoint toggles one sample by q: rounding
+      // (quantisationShifts), not a glitch; the rounding's own spread q / sqrt(12) then.
+      const double glitch_sd = std::max(sd, quantum_[i] / std::sqrt(12.0));
       SegmentEstimate& est = res_->segments[i];
       const double ff = fm_.gear().force_factor;
       if (at >= 0 && std::isfinite(best) && std::abs(best) > kStepSigmas * std::sqrt(5.0) * sd) {
@@ -2498,7 +2502,7 @@ class Refinement {
         est.torque_step_response = std::abs(ff * best) * s_.dt / (2.0 * res_->omega0);
       }
       if (spike_at >= 0 && std::isfinite(spike) &&
-          std::abs(spike) > kStepSigmas * std::sqrt(1.5) * sd) {
+          std::abs(spike) > kStepSigmas * std::sqrt(1.5) * glitch_sd) {
         est.torque_glitch = spike;
         est.torque_glitch_time = s_.time(spike_at);
         est.torque_glitch_response = std::abs(ff * spike) * s_.dt / res_->omega0;

@@ -94,7 +94,7 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
 void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
   if (!std::isfinite(e.torque_glitch)) return;
   std::string effect;
-  if (std::isfinite(e.torque_glitch_shift)) {
+  if (std::isfinite(e.torque_glitch_shift) && e.C_std > 0.0 && std::isfinite(e.C_std)) {
     const double se = std::abs(e.torque_glitch_shift) / e.C_std;
     if (!(se > L::kTorqueErrorShare)) return;
     effect = "moved C by " + num(e.torque_glitch_shift) + " 1/s (" + num(se) +
@@ -118,19 +118,24 @@ void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
 // torque_quantised: the rounding error of a torque quantised without dither moved C by more than
 // kTorqueErrorShare C_std.
 void flagTorqueQuantised(const SegmentEstimate& e, QualityWarnings* w) {
-  const double se = std::abs(e.torque_quantisation_shift) / e.C_std;
-  if (!(se > L::kTorqueErrorShare)) return;
+  if (!std::isfinite(e.torque_quantum)) return;
+  // (no shift computed, or no C_std to compare it with: the flag, the staircase being there)
+  const double se = e.C_std > 0.0 ? std::abs(e.torque_quantisation_shift) / e.C_std : kNaN;
+  if (std::isfinite(se) && !(se > L::kTorqueErrorShare)) return;
   // The DTE shows the steps' own free vibrations: the staircase is the load, not a quantiser's.
   const double fit = e.torque_quantisation_fit, fit_sd = e.torque_quantisation_fit_std;
   if (fit < 0.5 && 1.0 - fit > L::kStairsRealZ * fit_sd) return;
+  const std::string effect =
+      std::isfinite(se) ? "moved C by about " + num(e.torque_quantisation_shift) + " 1/s (" +
+                              num(se) + " standard errors, > " + num(L::kTorqueErrorShare) +
+                              "; estimated through the levels' crossings)"
+                        : "moved C by an amount that could not be estimated";
   w->push_back({quality_code::kTorqueQuantised,
                 "the torque is a staircase of levels " + num(e.torque_quantum) +
                     " N*m apart (quantised without dither), which the model takes as the load: "
-                    "the rounding error moved C by about " +
-                    num(e.torque_quantisation_shift) + " 1/s (" + num(se) + " standard errors, > " +
-                    num(L::kTorqueErrorShare) +
-                    "; estimated through the levels' crossings): treat C as biased, or record "
-                    "the torque with finer resolution or dither"});
+                    "the rounding error " +
+                    effect +
+                    ": treat C as biased, or record the torque with finer resolution or dither"});
 }
 
 // information_concentrated: one segment holds most of the constant model's information about C

@@ -121,23 +121,23 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
   }
   emit("t_end", s.t_end);
   emit("t_start", s.t_start);
-  if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
-  if (std::isfinite(s.torque_step)) {
-    emit("torque_step", s.torque_step);
-    emit("torque_step_response", s.torque_step_response);
-    emit("torque_step_time", s.torque_step_time);
-  }
-  if (std::isfinite(s.torque_quantum)) {
-    emit("torque_quantum", s.torque_quantum);
-    emit("torque_quantisation_shift", s.torque_quantisation_shift);
-    emit("torque_quantisation_fit", s.torque_quantisation_fit);
-    emit("torque_quantisation_fit_std", s.torque_quantisation_fit_std);
-  }
   if (std::isfinite(s.torque_glitch)) {
     emit("torque_glitch", s.torque_glitch);
     emit("torque_glitch_response", s.torque_glitch_response);
     if (std::isfinite(s.torque_glitch_shift)) emit("torque_glitch_shift", s.torque_glitch_shift);
     emit("torque_glitch_time", s.torque_glitch_time);
+  }
+  if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
+  if (std::isfinite(s.torque_quantum)) {
+    emit("torque_quantisation_fit", s.torque_quantisation_fit);
+    emit("torque_quantisation_fit_std", s.torque_quantisation_fit_std);
+    emit("torque_quantisation_shift", s.torque_quantisation_shift);
+    emit("torque_quantum", s.torque_quantum);
+  }
+  if (std::isfinite(s.torque_step)) {
+    emit("torque_step", s.torque_step);
+    emit("torque_step_response", s.torque_step_response);
+    emit("torque_step_time", s.torque_step_time);
   }
   if (std::isfinite(s.variation_spread)) emit("variation_spread", s.variation_spread);
   if (std::isfinite(s.variation_z)) emit("variation_z", s.variation_z);
