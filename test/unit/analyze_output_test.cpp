@@ -212,6 +212,7 @@ TEST(AnalysisJson, SegmentsWrittenFromTheRunsGiveTheBytesOfTheDocument) {
   s[3].torque_noise_std = 0.0, s[3].torque_step = 50.0, s[3].torque_step_time = 0.5;
   s[3].torque_step_response = 1e-9, s[3].torque_glitch = -20.0, s[3].torque_glitch_time = 0.25;
   s[3].torque_glitch_response = 2e-9, s[3].torque_glitch_shift = 3.5, s[3].torque_quantum = 0.5;
+  s[3].torque_glitches = 2;
   s[3].torque_quantisation_shift = -1.5, s[3].torque_quantisation_fit = 0.9;
   s[3].torque_quantisation_fit_std = 0.1;
   runs[2].result.segments[1].identifiable = false;

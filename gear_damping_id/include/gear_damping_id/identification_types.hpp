@@ -211,9 +211,12 @@ struct SegmentEstimate {
   double torque_glitch = kNaN;
   double torque_glitch_time = kNaN;
   double torque_glitch_response = kNaN;
-  /// How far the glitch moved C [1/s] (piecewise refined segments: the first-order effect of the
-  /// glitch's response through the segment's fit; NaN otherwise, where the flag uses the bound).
+  /// How far the glitches moved C [1/s] (piecewise refined segments: the first-order effect of
+  /// all the segment's glitches' response through its fit; NaN otherwise, where the flag uses the
+  /// largest one's bound), and how many glitches the segment holds (the fields above: the
+  /// largest).
   double torque_glitch_shift = kNaN;
+  long torque_glitches = 0;
   /// A torque channel quantised without dither in the segment (refined piecewise segments; NaN
   /// otherwise): its level step q [N*m] (the staircase's common increment), and how far the
   /// rounding error moved C [1/s] (the first-order effect of the difference between the torque

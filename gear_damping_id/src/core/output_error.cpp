@@ -2465,7 +2465,7 @@ class Refinement {
   // load step too (the load crosses the level somewhere inside the interval).
   void loadSteps() {
     constexpr double kStepSigmas = 8.0, kStepRatio = 4.0;
-    glitch_at_.assign(nseg_, -1);
+    glitches_.assign(nseg_, {});
     quantum_.assign(nseg_, 0.0);
     if (s_.torque == nullptr) return;
     const double* t = s_.torque;
@@ -2474,6 +2474,13 @@ class Refinement {
       if (!active_[i]) continue;
       const Index b = ranges_[i].first, e = ranges_[i].second;
       if (piecewise_ && torque_sigma_[i] == 0.0) quantum_[i] = torqueQuantum(t, b, e);
+      // (torqueLevels' estimate where it made one: the load law's model has none)
+      double sd = std::isfinite(torque_sd_[i]) ? torque_sd_[i] : torqueNoiseEstimate(t + b, e - b);
+      if (!std::isfinite(sd)) sd = 0.0;
+      // On a staircase a load at a level's midpoint toggles one sample by q: rounding
+      // (quantisationShifts), not a glitch; the rounding's own spread q / sqrt(12) then.
+      const double glitch_min =
+          kStepSigmas * std::sqrt(1.5) * std::max(sd, quantum_[i] / std::sqrt(12.0));
       double best = 0.0, spike = 0.0;
       Index at = -1, spike_at = -1;
       for (Index n = b + 1; n < e; ++n) {  // the interval (n - 1, n)
@@ -2485,15 +2492,10 @@ class Refinement {
         const double g = 0.5 * (here - after);
         const double beside =
             std::max({0.5 * std::abs(here + after), std::abs(before), std::abs(inc(n + 2))});
-        if (std::abs(g) > std::abs(spike) && std::abs(g) > kStepRatio * beside)
-          spike = g, spike_at = n;
+        if (!(std::abs(g) > kStepRatio * beside && std::abs(g) > glitch_min)) continue;
+        glitches_[i].emplace_back(n, g);  // every glitch (glitchShifts), the largest reported
+        if (std::abs(g) > std::abs(spike)) spike = g, spike_at = n;
       }
-      // (torqueLevels' estimate where it made one: the load law's model has none)
-      double sd = std::isfinite(torque_sd_[i]) ? torque_sd_[i] : torqueNoiseEstimate(t + b, e - b);
-      if (!std::isfinite(sd)) sd = 0.0;
-      // On a staircase a load at a level's midpoint toggles one sample by q: rounding
-      // (quantisationShifts), not a glitch; the rounding's own spread q / sqrt(12) then.
-      const double glitch_sd = std::max(sd, quantum_[i] / std::sqrt(12.0));
       SegmentEstimate& est = res_->segments[i];
       const double ff = fm_.gear().force_factor;
       if (at >= 0 && std::isfinite(best) && std::abs(best) > kStepSigmas * std::sqrt(5.0) * sd) {
@@ -2501,12 +2503,11 @@ class Refinement {
         est.torque_step_time = s_.time(at) - 0.5 * s_.dt;
         est.torque_step_response = std::abs(ff * best) * s_.dt / (2.0 * res_->omega0);
       }
-      if (spike_at >= 0 && std::isfinite(spike) &&
-          std::abs(spike) > kStepSigmas * std::sqrt(1.5) * glitch_sd) {
+      if (spike_at >= 0 && std::isfinite(spike)) {
         est.torque_glitch = spike;
         est.torque_glitch_time = s_.time(spike_at);
         est.torque_glitch_response = std::abs(ff * spike) * s_.dt / res_->omega0;
-        glitch_at_[i] = spike_at;
+        est.torque_glitches = static_cast<long>(glitches_[i].size());
       }
     }
   }
@@ -2590,17 +2591,19 @@ class Refinement {
         *noise_fm_, !reference_, shape_ ? &o_.stiffness_shape : nullptr, nullptr);
   }
 
-  // How far each piecewise segment's torque glitch (loadSteps) moved its C, to first order: the
-  // converged model's response G to the glitch alone (from rest), prewhitened, through the
-  // segment's solve map, dtheta = -(Jw' Jw)^-1 Jw' W G (the model puts the glitch's impulse into
-  // the response the data do not hold). The shared models keep loadSteps' bound.
+  // How far each piecewise segment's torque glitches (loadSteps, all of them) moved its C, to
+  // first order: the converged model's response G to the glitches alone (from rest),
+  // prewhitened, through the segment's solve map, dtheta = -(Jw' Jw)^-1 Jw' W G (the model puts
+  // their impulses into the response the data do not hold). The shared models keep loadSteps'
+  // bound (of the largest).
   void glitchShifts() {
     if (!piecewise_ || s_.torque == nullptr) return;
     for (size_t i = 0; i < nseg_; ++i) {
       SegmentEstimate& est = res_->segments[i];
-      if (!active_[i] || glitch_at_[i] < 0 || !std::isfinite(est.torque_glitch)) continue;
-      est.torque_glitch_shift =
-          torqueErrorEffect(i, [&](double* err) { err[glitch_at_[i]] = est.torque_glitch; }).shift;
+      if (!active_[i] || glitches_[i].empty() || !std::isfinite(est.torque_glitch)) continue;
+      est.torque_glitch_shift = torqueErrorEffect(i, [&](double* err) {
+                                  for (const auto& [n, g] : glitches_[i]) err[n] = g;
+                                }).shift;
     }
   }
 
@@ -3366,8 +3369,9 @@ class Refinement {
   // Per segment, the covariance of the right-hand side's torque-noise part (torqueNoiseExact).
   std::vector<Eigen::MatrixXd> tgram_;
   std::vector<double> noise_torque_;
-  std::vector<Index> glitch_at_;  // each segment's glitch sample (loadSteps; -1: none)
-  std::vector<double> quantum_;   // each segment's torque quantum (loadSteps; 0: none)
+  // Each segment's torque glitches (loadSteps): (sample, size).
+  std::vector<std::vector<std::pair<Index, double>>> glitches_;
+  std::vector<double> quantum_;  // each segment's torque quantum (loadSteps; 0: none)
   SignalView noise_view_;
   std::unique_ptr<ForwardModel> noise_fm_;
   std::unique_ptr<SegmentSimulator> noise_sim_;

@@ -104,14 +104,16 @@ void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
     if (!(se > L::kLoadStepSE)) return;
     effect = "can move C by up to " + num(se) + " standard errors (> " + num(L::kLoadStepSE) + ")";
   }
+  const std::string which =
+      e.torque_glitches > 1 ? std::to_string(e.torque_glitches) +
+                                  " torque samples depart from both their neighbours, the largest "
+                            : "one torque sample departs from both its neighbours ";
   w->push_back({quality_code::kTorqueGlitch,
-                "one torque sample (at t = " + num(e.torque_glitch_time) + " s) departs by " +
-                    num(e.torque_glitch) +
-                    " N*m from both its neighbours, a spike the torque cannot make in one "
-                    "sample: the model's interpolated torque turns it into an impulse whose free "
-                    "vibration (up to " +
-                    num(e.torque_glitch_response) + " m) " + effect +
-                    ": treat C as biased, or repair the torque sample (a meter or transmission "
+                which + "(at t = " + num(e.torque_glitch_time) + " s) by " + num(e.torque_glitch) +
+                    " N*m, spikes the torque cannot make in one sample: the model's interpolated "
+                    "torque turns them into impulses whose free vibration (up to " +
+                    num(e.torque_glitch_response) + " m for the largest) " + effect +
+                    ": treat C as biased, or repair the torque samples (a meter or transmission "
                     "glitch)"});
 }
 
@@ -166,6 +168,7 @@ void clearEstimates(SegmentEstimate* e) {
   e->torque_step = e->torque_step_time = e->torque_step_response = kNaN;
   e->torque_glitch = e->torque_glitch_time = e->torque_glitch_response = kNaN;
   e->torque_glitch_shift = e->torque_quantum = e->torque_quantisation_shift = kNaN;
+  e->torque_glitches = 0;
   e->torque_quantisation_fit = e->torque_quantisation_fit_std = kNaN;
   e->information_share = e->information_t_start = e->information_t_end = kNaN;
   e->refined = false;

@@ -126,6 +126,7 @@ void segmentFields(const SegmentEstimate& s, Formulation f, Emit&& emit) {
     emit("torque_glitch_response", s.torque_glitch_response);
     if (std::isfinite(s.torque_glitch_shift)) emit("torque_glitch_shift", s.torque_glitch_shift);
     emit("torque_glitch_time", s.torque_glitch_time);
+    emit("torque_glitches", s.torque_glitches);
   }
   if (std::isfinite(s.torque_noise_std)) emit("torque_noise_std", s.torque_noise_std);
   if (std::isfinite(s.torque_quantum)) {
