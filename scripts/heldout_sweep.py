@@ -164,24 +164,31 @@ def simulate(bin_dir, name, text, info, free=False):
     return False
 
 
+def read_rows(path):
+    """The CSV at PATH as a list of rows (the header first)."""
+    with open(path) as f:
+        return list(csv.reader(f))
+
+
+def write_rows(path, rows):
+    """Writes ROWS to the CSV at PATH (as the simulator does: \\n line ends)."""
+    with open(path, 'w', newline='') as f:
+        csv.writer(f, lineterminator='\n').writerows(rows)
+
+
 def drop_column(path, name):
     """Rewrites the CSV at PATH without its column NAME (if it has one)."""
-    with open(path) as f:
-        rows = list(csv.reader(f))
+    rows = read_rows(path)
     if not rows or name not in rows[0]:
         return
     k = rows[0].index(name)
-    with open(path, 'w', newline='') as f:
-        w = csv.writer(f, lineterminator='\n')
-        for row in rows:
-            w.writerow(row[:k] + row[k + 1:])
+    write_rows(path, [row[:k] + row[k + 1:] for row in rows])
 
 
 def add_torque_glitches(path, r, count):
     """Adds COUNT one-sample glitches of 20-200 N*m (random sign) to the torque column of the
     CSV at PATH, at random samples; returns their (time, size)."""
-    with open(path) as f:
-        rows = list(csv.reader(f))
+    rows = read_rows(path)
     k = rows[0].index('torque')
     out = []
     for _ in range(count):
@@ -189,20 +196,17 @@ def add_torque_glitches(path, r, count):
         g = r.choice((-1, 1)) * r.uniform(20.0, 200.0)
         rows[i][k] = repr(float(rows[i][k]) + g)
         out.append((float(rows[i][0]), g))
-    with open(path, 'w', newline='') as f:
-        csv.writer(f, lineterminator='\n').writerows(rows)
+    write_rows(path, rows)
     return out
 
 
 def quantise_torque(path, q):
     """Rounds the torque column of the CSV at PATH to multiples of Q N*m (no dither)."""
-    with open(path) as f:
-        rows = list(csv.reader(f))
+    rows = read_rows(path)
     k = rows[0].index('torque')
     for row in rows[1:]:
         row[k] = repr(round(float(row[k]) / q) * q)
-    with open(path, 'w', newline='') as f:
-        csv.writer(f, lineterminator='\n').writerows(rows)
+    write_rows(path, rows)
 
 
 def read_truth(path, names=('time', 'damping')):

@@ -2597,13 +2597,12 @@ class Refinement {
   // their impulses into the response the data do not hold). The shared models keep loadSteps'
   // bound (of the largest).
   void glitchShifts() {
-    if (!piecewise_ || s_.torque == nullptr) return;
-    for (size_t i = 0; i < nseg_; ++i) {
-      SegmentEstimate& est = res_->segments[i];
-      if (!active_[i] || glitches_[i].empty() || !std::isfinite(est.torque_glitch)) continue;
-      est.torque_glitch_shift = torqueErrorEffect(i, [&](double* err) {
-                                  for (const auto& [n, g] : glitches_[i]) err[n] = g;
-                                }).shift;
+    if (!piecewise_) return;
+    for (size_t i = 0; i < nseg_; ++i) {  // (glitches_: empty without a torque or off active_)
+      if (glitches_[i].empty()) continue;
+      res_->segments[i].torque_glitch_shift = torqueErrorEffect(i, [&](double* err) {
+                                                for (const auto& [n, g] : glitches_[i]) err[n] = g;
+                                              }).shift;
     }
   }
 

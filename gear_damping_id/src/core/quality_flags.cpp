@@ -89,20 +89,27 @@ void flagLoadStep(const SegmentEstimate& e, QualityWarnings* w) {
   }
 }
 
+// How many of C's standard errors a computed shift of C is (torque_glitch_shift,
+// torque_quantisation_shift); NaN where the shift or C_std is missing.
+double shiftSE(const SegmentEstimate& e, double shift) {
+  return std::isfinite(shift) && e.C_std > 0.0 && std::isfinite(e.C_std) ? std::abs(shift) / e.C_std
+                                                                         : kNaN;
+}
+
 // torque_glitch: the glitch's spurious impulse moved C by more than kTorqueErrorShare C_std
 // (its computed shift), or can move it by more than kLoadStepSE (the bound, without a shift).
 void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
   if (!std::isfinite(e.torque_glitch)) return;
   std::string effect;
-  if (std::isfinite(e.torque_glitch_shift) && e.C_std > 0.0 && std::isfinite(e.C_std)) {
-    const double se = std::abs(e.torque_glitch_shift) / e.C_std;
+  if (const double se = shiftSE(e, e.torque_glitch_shift); std::isfinite(se)) {
     if (!(se > L::kTorqueErrorShare)) return;
     effect = "moved C by " + num(e.torque_glitch_shift) + " 1/s (" + num(se) +
              " standard errors, > " + num(L::kTorqueErrorShare) + ")";
   } else {
-    const double se = freeVibrationSE(e, e.torque_glitch_response, e.torque_glitch_time);
-    if (!(se > L::kLoadStepSE)) return;
-    effect = "can move C by up to " + num(se) + " standard errors (> " + num(L::kLoadStepSE) + ")";
+    const double bound = freeVibrationSE(e, e.torque_glitch_response, e.torque_glitch_time);
+    if (!(bound > L::kLoadStepSE)) return;
+    effect =
+        "can move C by up to " + num(bound) + " standard errors (> " + num(L::kLoadStepSE) + ")";
   }
   const std::string which =
       e.torque_glitches > 1 ? std::to_string(e.torque_glitches) +
@@ -122,7 +129,7 @@ void flagTorqueGlitch(const SegmentEstimate& e, QualityWarnings* w) {
 void flagTorqueQuantised(const SegmentEstimate& e, QualityWarnings* w) {
   if (!std::isfinite(e.torque_quantum)) return;
   // (no shift computed, or no C_std to compare it with: the flag, the staircase being there)
-  const double se = e.C_std > 0.0 ? std::abs(e.torque_quantisation_shift) / e.C_std : kNaN;
+  const double se = shiftSE(e, e.torque_quantisation_shift);
   if (std::isfinite(se) && !(se > L::kTorqueErrorShare)) return;
   // The DTE shows the steps' own free vibrations: the staircase is the load, not a quantiser's.
   const double fit = e.torque_quantisation_fit, fit_sd = e.torque_quantisation_fit_std;
