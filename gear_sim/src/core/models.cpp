@@ -3,7 +3,48 @@
 #include <algorithm>
 #include <cmath>
 
+#include "gear_sim/simd_clones.hpp"
+
 namespace gear_sim {
+
+namespace {
+
+constexpr long kAnchor = 64;  // fourierAnchored's points per exact anchor
+
+// The Fourier series k = k_mean + sum_h (ac[h] cos(2 pi h u) + as[h] sin(2 pi h u)) at the n
+// uniform phases u[0], u[0] + du, ... into out, from an exact anchor every kAnchor points rotated
+// by the table's exp(2 pi i du j) (table->c/s, j < kAnchor): per point the operations of
+// fillPiece's sum() in the same order, the points in the inner loop so that it vectorises (an
+// AVX2 clone: wider vectors, no FMA, so the same bits).
+GEAR_AVX2_CLONES void fourierAnchored(double k_mean, const double* ac, const double* as, size_t nh,
+                                      const double* u, long n, const RotationTable& table,
+                                      double* out) {
+  const double* rc = table.c;
+  const double* rs = table.s;
+  double zc[kAnchor], zs[kAnchor], pc[kAnchor], ps[kAnchor], k[kAnchor];
+  for (long i0 = 0; i0 < n; i0 += kAnchor) {
+    const double f = u[i0] - std::floor(u[i0]);
+    const double c0 = std::cos(2.0 * M_PI * f), s0 = std::sin(2.0 * M_PI * f);
+    const long m = std::min(n - i0, kAnchor);
+    for (long j = 0; j < m; ++j) {
+      zc[j] = pc[j] = c0 * rc[j] - s0 * rs[j];
+      zs[j] = ps[j] = s0 * rc[j] + c0 * rs[j];
+      k[j] = k_mean;
+    }
+    for (size_t h = 0; h < nh; ++h) {
+      const double a = ac[h], b = as[h];
+      for (long j = 0; j < m; ++j) {
+        k[j] += a * pc[j] + b * ps[j];
+        const double qc = pc[j] * zc[j] - ps[j] * zs[j];
+        ps[j] = pc[j] * zs[j] + ps[j] * zc[j];
+        pc[j] = qc;
+      }
+    }
+    std::copy(k, k + m, out + i0);
+  }
+}
+
+}  // namespace
 
 // ----------------------------------------------------------------------------- stiffness
 MeshStiffness::MeshStiffness(const MeshOptions& o) : o_(o) {
@@ -132,7 +173,6 @@ void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, 
         }
         return k;
       };
-      constexpr long kAnchor = 64;
       if (du > 0.0 && n > kAnchor) {
         static_assert(kAnchor <= RotationTable::kSize, "the anchor table fits");
         if (!(table->key == du)) {
@@ -143,32 +183,7 @@ void MeshStiffness::fillPiece(double u_ref, const double* u, long n, double du, 
           }
           table->key = du;
         }
-        const double* rc = table->c;
-        const double* rs = table->s;
-        // sum() for the kAnchor points at once, harmonic by harmonic: the same operations per
-        // point in the same order (so the same values), with the points in the inner loop so
-        // that it vectorises.
-        double zc[kAnchor], zs[kAnchor], pc[kAnchor], ps[kAnchor], k[kAnchor];
-        for (long i0 = 0; i0 < n; i0 += kAnchor) {
-          const double f = u[i0] - std::floor(u[i0]);
-          const double c0 = std::cos(2.0 * M_PI * f), s0 = std::sin(2.0 * M_PI * f);
-          const long m = std::min(n - i0, kAnchor);
-          for (long j = 0; j < m; ++j) {
-            zc[j] = pc[j] = c0 * rc[j] - s0 * rs[j];
-            zs[j] = ps[j] = s0 * rc[j] + c0 * rs[j];
-            k[j] = o_.k_mean;
-          }
-          for (size_t h = 0; h < nh; ++h) {
-            const double a = ac[h], b = as[h];
-            for (long j = 0; j < m; ++j) {
-              k[j] += a * pc[j] + b * ps[j];
-              const double qc = pc[j] * zc[j] - ps[j] * zs[j];
-              ps[j] = pc[j] * zs[j] + ps[j] * zc[j];
-              pc[j] = qc;
-            }
-          }
-          std::copy(k, k + m, out + i0);
-        }
+        fourierAnchored(o_.k_mean, ac, as, nh, u, n, *table, out);
       } else {
         for (long i = 0; i < n; ++i) {
           const double f = u[i] - std::floor(u[i]);

@@ -10,6 +10,7 @@
 #include "gear_sim/message_text.hpp"
 #include "gear_sim/models.hpp"
 #include "gear_sim/sdof_integrator.hpp"
+#include "gear_sim/simd_clones.hpp"
 
 namespace gear_sim {
 
@@ -197,8 +198,12 @@ struct AffineBlock {
   }
 };
 
+// The block passes below (deinterleave, the kernels, phaseGrid, stiffnessColumns) have AVX2
+// clones (GEAR_AVX2_CLONES: wider vectors and a rounding instruction for floor, no FMA): lane by
+// lane the same operations, so the same bits as the baseline build.
+
 // x[0], x[2], ..., x[2n] into even[0..n] and x[1], x[3], ..., x[2n-1] into odd[0..n).
-void deinterleave(const double* x, Eigen::Index n, double* even, double* odd) {
+GEAR_AVX2_CLONES void deinterleave(const double* x, Eigen::Index n, double* even, double* odd) {
   for (Eigen::Index i = 0; i < n; ++i) {
     even[i] = x[2 * i];
     odd[i] = x[2 * i + 1];
@@ -212,7 +217,7 @@ void deinterleave(const double* x, Eigen::Index n, double* even, double* odd) {
 // tm[0..n). Straight-line code over arrays, so the compiler pipelines/vectorises it. Raw __restrict
 // parameters: with pointers taken from the block's vectors inside the function GCC 12 leaves the
 // loop scalar.
-void affineRk4Kernel(Eigen::Index n, double h, double K, double ca, double cb, double ff,
+GEAR_AVX2_CLONES void affineRk4Kernel(Eigen::Index n, double h, double K, double ca, double cb, double ff,
                      const double* __restrict te, const double* __restrict tm,
                      double* __restrict m11, double* __restrict m12, double* __restrict m21,
                      double* __restrict m22, double* __restrict g1, double* __restrict g2) {
@@ -252,7 +257,7 @@ void affineRk4Block(Eigen::Index n, double h, double K, double ca, double cb, do
 // step starts and kmid[0..n) at the midpoints. Closed form of one RK4 step (derived
 // symbolically from rk4Step in the scaled variables V = h v, a = h C, k = h^2 K, f = h^2 F;
 // checked against the stage-wise integrator in the tests), in Horner form.
-void affineRk4KernelVaryingK(Eigen::Index n, double h, double ca, double cb, double ff,
+GEAR_AVX2_CLONES void affineRk4KernelVaryingK(Eigen::Index n, double h, double ca, double cb, double ff,
                              const double* __restrict te, const double* __restrict tm,
                              const double* __restrict ke, const double* __restrict kmid,
                              double* __restrict m11, double* __restrict m12, double* __restrict m21,
@@ -286,6 +291,24 @@ void affineRk4BlockVaryingK(Eigen::Index n, double h, const double* kh, double s
                           out->m12.data() + offset, out->m21.data() + offset,
                           out->m22.data() + offset, out->g1.data() + offset,
                           out->g2.data() + offset);
+}
+
+// U[j] = timing.phase(t0 + (j0 + j) * hh) for j < cnt: the phases of a smooth piece's half-step
+// grid.
+GEAR_AVX2_CLONES void phaseGrid(const MeshTiming& timing, double t0, Eigen::Index j0, double hh,
+                                Eigen::Index cnt, double* __restrict U) {
+  for (Eigen::Index j = 0; j < cnt; ++j) U[j] = timing.phase(t0 + static_cast<double>(j0 + j) * hh);
+}
+
+// The stiffness and mesh-state columns of samples [0, n) of a smooth piece: k[i] = kh[stride i]
+// (the piece's half-step grid), state[i] = the mesh state at phase u[i] nudged by kPhaseNudge.
+GEAR_AVX2_CLONES void stiffnessColumns(const MeshStiffness& stiffness, const double* __restrict kh,
+                                       int stride, const double* __restrict u, Eigen::Index n,
+                                       double* __restrict k, double* __restrict state) {
+  for (Eigen::Index i = 0; i < n; ++i) {
+    k[i] = kh[stride * i];
+    state[i] = stiffness.state(u[i] + kPhaseNudge);
+  }
 }
 
 // The 2x2 multiply-add of the block's intervals [j0, j1) (none split) from state s, writing the
@@ -543,18 +566,11 @@ class Simulation {
     const double t_piece = o_.time[n0], hh = 0.5 * h_;
     const MeshTiming& timing = model.timing;
     double* __restrict U = U_.data();
-    for (Eigen::Index j = 0; j < cnt; ++j)
-      U[j] = timing.phase(t_piece + static_cast<double>(j0 + j) * hh);
+    phaseGrid(timing, t_piece, j0, hh, cnt, U);
     double* __restrict Kp = Kh_.data() + j0;
     stiffness_.fillPiece(timing.phase(mid), U, cnt, du_, Kp, &fourier_rotation_);
-    const int stride = 2 * m_;
-    double* __restrict k_col = o_.stiffness.data();
-    double* __restrict state_col = o_.mesh_state.data();
-    const double* __restrict u_col = o_.mesh_phase.data();
-    for (Eigen::Index i = n; i < n_end; ++i) {
-      k_col[i] = Kp[stride * (i - n)];
-      state_col[i] = stiffness_.state(u_col[i] + kPhaseNudge);
-    }
+    stiffnessColumns(stiffness_, Kp, 2 * m_, o_.mesh_phase.data() + n, n_end - n,
+                     o_.stiffness.data() + n, o_.mesh_state.data() + n);
     if (fast_) {  // K = k / Me scaled while de-interleaved
       affineRk4BlockVaryingK(n_end - n, h_, Kp, inv_me_, ca, cb, ff_, Tp, &maps_, n - n0);
     } else {
