@@ -217,10 +217,12 @@ GEAR_AVX2_CLONES void deinterleave(const double* x, Eigen::Index n, double* even
 // tm[0..n). Straight-line code over arrays, so the compiler pipelines/vectorises it. Raw __restrict
 // parameters: with pointers taken from the block's vectors inside the function GCC 12 leaves the
 // loop scalar.
-GEAR_AVX2_CLONES void affineRk4Kernel(Eigen::Index n, double h, double K, double ca, double cb, double ff,
-                     const double* __restrict te, const double* __restrict tm,
-                     double* __restrict m11, double* __restrict m12, double* __restrict m21,
-                     double* __restrict m22, double* __restrict g1, double* __restrict g2) {
+GEAR_AVX2_CLONES void affineRk4Kernel(Eigen::Index n, double h, double K, double ca, double cb,
+                                      double ff, const double* __restrict te,
+                                      const double* __restrict tm, double* __restrict m11,
+                                      double* __restrict m12, double* __restrict m21,
+                                      double* __restrict m22, double* __restrict g1,
+                                      double* __restrict g2) {
   // Multiplications by reciprocals: x / 6.0 would compile to a real division per term.
   constexpr double k3 = 1.0 / 3.0, k6 = 1.0 / 6.0, k12 = 1.0 / 12.0, k24 = 1.0 / 24.0;
   const double k = h * h * K, hca = h * ca, hcb = h * cb, hff = h * ff, inv_h = 1.0 / h;
@@ -257,11 +259,11 @@ void affineRk4Block(Eigen::Index n, double h, double K, double ca, double cb, do
 // step starts and kmid[0..n) at the midpoints. Closed form of one RK4 step (derived
 // symbolically from rk4Step in the scaled variables V = h v, a = h C, k = h^2 K, f = h^2 F;
 // checked against the stage-wise integrator in the tests), in Horner form.
-GEAR_AVX2_CLONES void affineRk4KernelVaryingK(Eigen::Index n, double h, double ca, double cb, double ff,
-                             const double* __restrict te, const double* __restrict tm,
-                             const double* __restrict ke, const double* __restrict kmid,
-                             double* __restrict m11, double* __restrict m12, double* __restrict m21,
-                             double* __restrict m22, double* __restrict g1, double* __restrict g2) {
+GEAR_AVX2_CLONES void affineRk4KernelVaryingK(
+    Eigen::Index n, double h, double ca, double cb, double ff, const double* __restrict te,
+    const double* __restrict tm, const double* __restrict ke, const double* __restrict kmid,
+    double* __restrict m11, double* __restrict m12, double* __restrict m21, double* __restrict m22,
+    double* __restrict g1, double* __restrict g2) {
   const double h2 = h * h, hca = h * ca, hcb = h * cb, h2ff = h2 * ff, inv_h = 1.0 / h;
   for (Eigen::Index i = 0; i < n; ++i) {
     const double T0 = te[i], Tm = tm[i], T1 = te[i + 1];
