@@ -1,5 +1,6 @@
 // Function multiversioning for the hot loops of the package's libraries (gear_damping_id's
-// integral method and quadrature, gear_sim_ros's bag reading).
+// integral method, quadrature, refinement and wavelet rows, gear_sim's block passes,
+// gear_sim_ros's bag reading).
 //
 // GEAR_AVX2_CLONES, put before a function definition, makes GCC compile the function twice, for
 // AVX2 and for the baseline x86-64 (SSE2), and choose one when the library is loaded, by the CPU
