@@ -397,8 +397,10 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   outs.resize(ranges.size());
   std::vector<long> unlocated(ranges.size(), 0);
   // Runs of kChunk consecutive segments per claim: a worker's next segment is then mostly its
-  // own, so the samples the integral method prefetches for it are used by the same core.
-  constexpr size_t kChunk = 8;
+  // own (its samples are in that core's caches). A refined segment takes ~30 times an integral
+  // one, so there one segment per claim: with runs of 8, the workers' last claims of a group
+  // left a core idle for up to 8 refinements before the group's join.
+  const size_t kChunk = wantsRefinement(options_) ? 1 : 8;
   const size_t chunks = (ranges.size() + kChunk - 1) / kChunk;
   // The chunks are recorded in segment order while the workers run (not after them): a worker
   // that finished a chunk and finds the recorder free records every finished chunk from the first
