@@ -396,12 +396,12 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   for (int w = 0; w < limits_.threads; ++w) workers.push_back(newMethod());
   outs.resize(ranges.size());
   std::vector<long> unlocated(ranges.size(), 0);
-  // Runs of kChunk consecutive segments per claim: a worker's next segment is then mostly its
+  // Runs of run_len consecutive segments per claim: a worker's next segment is then mostly its
   // own (its samples are in that core's caches). A refined segment takes ~30 times an integral
   // one, so there one segment per claim: with runs of 8, the workers' last claims of a group
   // left a core idle for up to 8 refinements before the group's join.
-  const size_t kChunk = wantsRefinement(options_) ? 1 : 8;
-  const size_t chunks = (ranges.size() + kChunk - 1) / kChunk;
+  const size_t run_len = wantsRefinement(options_) ? 1 : 8;
+  const size_t chunks = (ranges.size() + run_len - 1) / run_len;
   // The chunks are recorded in segment order while the workers run (not after them): a worker
   // that finished a chunk and finds the recorder free records every finished chunk from the first
   // one not yet recorded on (done[c], set after chunk c's outputs were written); the calling
@@ -411,12 +411,13 @@ std::vector<SegmentDriver::SegmentOutput> SegmentDriver::addAll(const SignalView
   size_t recorded = 0;  // chunks recorded (by the holder of `recorder`)
   auto recordFinished = [&] {
     for (; recorded < chunks && done[recorded].load(std::memory_order_acquire); ++recorded) {
-      for (size_t i = recorded * kChunk; i < std::min(ranges.size(), (recorded + 1) * kChunk); ++i)
+      for (size_t i = recorded * run_len; i < std::min(ranges.size(), (recorded + 1) * run_len);
+           ++i)
         recordParallelOutput(&outs[i], ranges[i], unlocated[i], v.dt, outputs);
     }
   };
   parallelFor(chunks, limits_.threads, [&](size_t chunk, int w) {
-    for (size_t i = chunk * kChunk; i < std::min(ranges.size(), (chunk + 1) * kChunk); ++i) {
+    for (size_t i = chunk * run_len; i < std::min(ranges.size(), (chunk + 1) * run_len); ++i) {
       const auto& r = ranges[i];
       if (r.second - r.first < 1) {
         outs[i] = unusableSegment(v, r.first, r.second);

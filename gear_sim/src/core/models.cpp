@@ -13,7 +13,7 @@ constexpr long kAnchor = 64;  // fourierAnchored's points per exact anchor
 
 // The Fourier series k = k_mean + sum_h (ac[h] cos(2 pi h u) + as[h] sin(2 pi h u)) at the n
 // uniform phases u[0], u[0] + du, ... into out, from an exact anchor every kAnchor points rotated
-// by the table's exp(2 pi i du j) (table->c/s, j < kAnchor): per point the operations of
+// by the table's exp(2 pi i du j) (table.c/s, j < kAnchor): per point the operations of
 // fillPiece's sum() in the same order, the points in the inner loop so that it vectorises (an
 // AVX2 clone: wider vectors, no FMA, so the same bits).
 GEAR_AVX2_CLONES void fourierAnchored(double k_mean, const double* ac, const double* as, size_t nh,
