@@ -1,7 +1,7 @@
 // libFuzzer target: the signal CSV reader and the record checks the analysers apply after it
-// (uniform time step, sample rate against the gear model, record length). The input is written
-// to a temporary file (the reader takes a path). Any crash, sanitizer report, leak or
-// allocation beyond libFuzzer's limit is a finding.
+// (the plausibility masking, uniform time step, sample rate against the gear model, record length).
+// The input is written to a temporary file (the reader takes a path). Any crash, sanitizer report,
+// leak or allocation beyond libFuzzer's limit is a finding.
 #include <unistd.h>
 
 #include <cstdint>
@@ -25,6 +25,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
     gear_fuzz::checkMessage(error);
     return 0;
   }
+  // `analyze`'s plausibility masking (implausible values read as NaN) and its warnings.
+  const gear_sim::ImplausibleCounts counts = gear_sim::maskImplausible(&t);
+  for (const std::string& w : gear_sim::implausibleWarnings(counts, "in the file"))
+    gear_fuzz::checkMessage(w);
   // The analysers' checks on what was read: a mean step, a rate, the record length.
   const Eigen::Index n = t.size();
   const double dt = (t.time[n - 1] - t.time[0]) / static_cast<double>(n - 1);

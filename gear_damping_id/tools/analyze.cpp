@@ -969,8 +969,13 @@ int Analysis::readRecord() {
   } else if (const gear_sim::Status s = gear_sim::readSignalCsv(input, &table, {"time", "dte"},
                                                                 /*allow_non_finite=*/true);
              !s.ok()) {
-    // NaN/Inf samples are kept: the segments holding them are reported as not identifiable.
     return fail(kExitInput, s);
+  } else {
+    // NaN/Inf samples are kept and implausible values read as NaN (as a bag's): the segments
+    // holding them are reported as not identifiable.
+    for (const auto& w :
+         gear_sim::implausibleWarnings(gear_sim::maskImplausible(&table), "in the file"))
+      warn(input + ": " + w);
   }
   return kContinue;
 }

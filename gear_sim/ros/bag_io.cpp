@@ -123,18 +123,17 @@ void addPlausibilityWarnings(std::vector<double> chunk_max, BagSignalInfo* info)
       for (double m : chunk_max)
         if (m > kOutlierChunkFactor * median) ++info->outlier_chunks;
   }
-  auto warn = [&](std::int64_t n, const std::string& what) {
-    if (n > 0) info->warnings.push_back(std::to_string(n) + " " + what);
-  };
-  warn(info->non_finite_values, "NaN/Inf values in the chunks (those samples are not usable)");
-  warn(info->out_of_range_values,
-       "values outside their channel's plausible range (|dte| <= 1 m, |dte_velocity| <= 1e4 "
-       "m/s, stiffness in [0, 1e13] N/m, |torque| <= 1e9 N*m, |damping| <= 1e9 N*s/m): read "
-       "as NaN");
-  warn(info->bad_mesh_states, "mesh_state values other than 0 or 1: read as NaN");
-  warn(info->outlier_chunks, "chunks whose largest |dte| exceeds " +
-                                 gear_sim::formatNumber(kOutlierChunkFactor) +
-                                 "x the record's median chunk maximum: corrupt payloads?");
+  gear_sim::ImplausibleCounts counts;
+  counts.non_finite = info->non_finite_values;
+  counts.out_of_range = info->out_of_range_values;
+  counts.bad_mesh_states = info->bad_mesh_states;
+  for (std::string& w : gear_sim::implausibleWarnings(counts, "in the chunks"))
+    info->warnings.push_back(std::move(w));
+  if (info->outlier_chunks > 0)
+    info->warnings.push_back(std::to_string(info->outlier_chunks) +
+                             " chunks whose largest |dte| exceeds " +
+                             gear_sim::formatNumber(kOutlierChunkFactor) +
+                             "x the record's median chunk maximum: corrupt payloads?");
 }
 
 // The channels of a chunk that plausibility is checked on, in kPlausibleRanges' order.

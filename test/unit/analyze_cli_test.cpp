@@ -200,6 +200,61 @@ TEST_F(AnalyzeTool, ReportsANonFiniteSegmentAsNotIdentifiableAndKeepsTheOthers) 
   EXPECT_NE(r.out.find("not identifiable"), std::string::npos) << r.out;
 }
 
+// One absurd or missing torque sample (sample 1500, in the second 1 ms segment): 1e300 reads as
+// NaN (the bag reader's plausible range, with its warning), so both make that segment not
+// identifiable and leave the others' estimates; the modeled response restarts at the next
+// segment, so only the bad sample's segment tail (its 500 samples and the interpolation
+// stencil's reach) is not modeled, and the fit of the rest is that of the clean record's.
+TEST_F(AnalyzeTool, AnAbsurdTorqueSampleCostsItsSegmentNotTheRecordsResponse) {
+  const fs::path clean_json = dir_ / "clean_resp.json";
+  const ToolRun clean = analyze(
+      "--input " + csv_.string() + " --params " + kParams + " --output " + clean_json.string(),
+      dir_);
+  ASSERT_EQ(clean.code, 0) << clean.err;
+  const double clean_fit =
+      nlohmann::json::parse(readText(clean_json)).at("response").at("fit_percent").get<double>();
+  std::istringstream in(text_);
+  std::string l;
+  for (int i = 1; i <= 1502; ++i) std::getline(in, l);  // line 1502: sample 1500
+  std::vector<std::string> f;
+  for (std::string::size_type a = 0, b;; a = b + 1) {
+    b = l.find(',', a);
+    f.push_back(l.substr(a, b == std::string::npos ? b : b - a));
+    if (b == std::string::npos) break;
+  }
+  ASSERT_EQ(text_.substr(0, text_.find('\n')),
+            "time,dte,dte_velocity,stiffness,torque,mesh_state,mesh_phase,damping");
+  for (const char* value : {"1e300", "nan", "-inf"}) {
+    f[4] = value;
+    std::string row = f[0];
+    for (size_t k = 1; k < f.size(); ++k) row += "," + f[k];
+    const fs::path bad = dir_ / "torque.csv", json_path = dir_ / "torque.json";
+    writeText(bad, editLine(text_, 1502, row));
+    const ToolRun r = analyze(
+        "--input " + bad.string() + " --params " + kParams + " --output " + json_path.string(),
+        dir_);
+    ASSERT_EQ(r.code, 0) << value << ": " << r.err;
+    const bool absurd = std::string(value) == "1e300";
+    EXPECT_EQ(r.err.find("1 values outside their channel's plausible range") != std::string::npos,
+              absurd)
+        << r.err;
+    EXPECT_EQ(r.err.find("1 NaN/Inf values in the file") != std::string::npos, !absurd) << r.err;
+    const auto j = nlohmann::json::parse(readText(json_path));
+    const auto& segs = j.at("identification").at("segments");
+    ASSERT_EQ(segs.size(), 4u);
+    EXPECT_FALSE(segs[1].at("identifiable").get<bool>()) << value;
+    EXPECT_TRUE(segs[1].at("C").is_null()) << value;
+    for (int i : {0, 2, 3}) EXPECT_TRUE(segs[i].at("C").is_number()) << value << " " << i;
+    const auto& resp = j.at("response");
+    ASSERT_TRUE(resp.at("fit_percent").is_number()) << value << ": " << resp.dump();
+    EXPECT_NEAR(resp.at("fit_percent").get<double>(), clean_fit, 5.0) << value;
+    const auto unmodeled = resp.at("unmodeled_samples").get<long>();
+    EXPECT_GE(unmodeled, 500) << value;
+    EXPECT_LE(unmodeled, 503) << value;
+    EXPECT_NE(r.out.find("samples not modeled"), std::string::npos) << r.out;
+  }
+}
+
 TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
   const std::string p = " --params " + kParams;
   const fs::path out_json = dir_ / "must_not_exist.json";

@@ -1,9 +1,12 @@
 // gear_sim_io: YAML configuration and the docs/method.md §6 CSV.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "gear_sim/config_yaml.hpp"
 #include "gear_sim/signal_csv.hpp"
@@ -170,6 +173,51 @@ TEST(SignalCsv, AnySubsetAndOrderOfKnownColumnsIsAccepted) {
   EXPECT_EQ(t.time[1], 1e-6);
   EXPECT_EQ(t.dte[1], 2e-6);
   EXPECT_EQ(t.torque.size(), 0);
+}
+
+// The plausibility ranges (the bag reader's) applied to a table read from a CSV: a value outside
+// its channel's range reads as NaN and is counted; the range's own ends are plausible; NaN/Inf
+// already there are counted, not changed; time is not ranged.
+TEST(SignalTable, ImplausibleValuesReadAsNaNAndAreCounted) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  gear_sim::SignalTable t;
+  t.time = Eigen::VectorXd::LinSpaced(6, 0.0, 5e-6);
+  t.dte.resize(6);
+  t.dte << 1e-6, -1.0, 1.0, std::nextafter(1.0, 2.0), nan, 2e-6;  // the ends kept, 1 + ulp not
+  t.stiffness.resize(6);
+  t.stiffness << 4e8, 0.0, 1e13, -1.0, 1.5e13, 4e8;  // a negative stiffness is out of range
+  t.torque.resize(6);
+  t.torque << 100.0, 1e300, -1e9, -inf, -1.0000001e9, 100.0;
+  t.mesh_state.resize(6);
+  t.mesh_state << 0.0, 1.0, 0.5, 2.0, nan, 1.0;
+  const Eigen::VectorXd time = t.time;
+  const gear_sim::ImplausibleCounts c = gear_sim::maskImplausible(&t);
+  EXPECT_EQ(c.out_of_range, 5);  // dte 1 + ulp; stiffness -1, 1.5e13; torque 1e300, -1.0000001e9
+  EXPECT_EQ(c.non_finite, 3);    // dte NaN, torque -Inf, mesh_state NaN
+  EXPECT_EQ(c.bad_mesh_states, 2);
+  const auto masked = [](const Eigen::VectorXd& v, std::initializer_list<int> at) {
+    for (int i = 0; i < v.size(); ++i) {
+      const bool want = std::find(at.begin(), at.end(), i) != at.end();
+      if (want != std::isnan(v[i])) return false;
+    }
+    return true;
+  };
+  EXPECT_TRUE(masked(t.dte, {3, 4}));
+  EXPECT_TRUE(masked(t.stiffness, {3, 4}));
+  EXPECT_TRUE(masked(t.torque, {1, 4}));  // -Inf stays -Inf (not NaN: counted as non-finite)
+  EXPECT_EQ(t.torque[3], -inf);
+  EXPECT_TRUE(masked(t.mesh_state, {2, 3, 4}));
+  EXPECT_EQ(t.dte[1], -1.0);
+  EXPECT_EQ(t.stiffness[2], 1e13);
+  EXPECT_EQ(t.torque[2], -1e9);
+  EXPECT_EQ(t.time, time);
+  const std::vector<std::string> w = gear_sim::implausibleWarnings(c, "in the file");
+  ASSERT_EQ(w.size(), 3u);
+  EXPECT_EQ(w[0].rfind("3 NaN/Inf values in the file", 0), 0u) << w[0];
+  EXPECT_EQ(w[1].rfind("5 values outside their channel's plausible range", 0), 0u) << w[1];
+  EXPECT_EQ(w[2].rfind("2 mesh_state values other than 0 or 1", 0), 0u) << w[2];
+  EXPECT_TRUE(gear_sim::implausibleWarnings(gear_sim::ImplausibleCounts{}, "x").empty());
 }
 
 TEST(SignalCsv, BadFilesAreRejectedNamingLineAndColumn) {

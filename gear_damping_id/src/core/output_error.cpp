@@ -3919,31 +3919,26 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
 
 }  // namespace
 
-gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
-                                 const IdentificationResult& r, ModeledResponse* out,
-                                 bool fit_metrics) {
-  if (r.segments.empty()) {
-    return gear_sim::Status::notIdentifiable("modeled response: no segments");
-  }
-  std::vector<SegmentEstimate> seg;
-  if (!segmentsWithFallbacks(r, &seg)) {
-    return gear_sim::Status::notIdentifiable("modeled response: no identifiable segment");
-  }
-  const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
-  const Index end =
-      std::min<Index>(s.n, static_cast<Index>(std::llround((seg.back().t_end - s.t0) / s.dt)));
-  if (begin < 0 || end - begin < 2) {
-    return gear_sim::Status::notIdentifiable(
-        "modeled response: the segments do not lie in the record");
-  }
-  // Initial state: the first window/segment estimate at the first sample.
-  gear_sim::SdofState init{s.dte[begin], 0.0};
+namespace {
+
+// The identified state at sample `at` (the start of segment `seg`): the window estimate that
+// starts there, else the observed DTE at rest.
+gear_sim::SdofState segmentState(const SignalView& s, const IdentificationResult& r,
+                                 const SegmentEstimate& seg, Index at) {
   for (const WindowEstimate& w : r.windows) {
-    if (std::abs(w.t_start - seg.front().t_start) <= 0.5 * s.dt && std::isfinite(w.y_T)) {
-      init = {w.y_T, std::isfinite(w.velocity) ? w.velocity : 0.0};
-      break;
+    if (std::abs(w.t_start - seg.t_start) <= 0.5 * s.dt && std::isfinite(w.y_T)) {
+      return {w.y_T, std::isfinite(w.velocity) ? w.velocity : 0.0};
     }
   }
+  return {s.dte[at], 0.0};
+}
+
+// Eq. (4) re-simulated over samples [begin, end) through the segments `seg` (the first starting
+// at `begin`) from `init`, into y_out[0, end - begin).
+gear_sim::Status simulateSegments(const SignalView& s, const GearConstants& gear,
+                                  const IdentificationResult& r,
+                                  const std::vector<SegmentEstimate>& seg, Index begin, Index end,
+                                  gear_sim::SdofState init, double* y_out) {
   // Each segment's samples [lo, hi): the interpolation stencils stay inside it, as in the
   // integral method and the refinement.
   auto sampleOf = [&](double t) {
@@ -3974,18 +3969,76 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
     }
   };
   const Index n = end - begin;
+  if (const gear_sim::Status e =
+          held.on() ? heldResponse(coeffs, held, stages, bps, s.time(begin), s.dt, n, init, y_out)
+                    : gear_sim::integrateSdofAffineBlocks(coeffs, stages, bps, s.time(begin), s.dt,
+                                                          n, init, gear_sim::Integrator::Rk4,
+                                                          substeps, y_out, nullptr);
+      !e.ok())
+    return e.withContext("modeled response");
+  return {};
+}
+
+}  // namespace
+
+gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
+                                 const IdentificationResult& r, ModeledResponse* out,
+                                 bool fit_metrics) {
+  if (r.segments.empty()) {
+    return gear_sim::Status::notIdentifiable("modeled response: no segments");
+  }
+  std::vector<SegmentEstimate> seg;
+  if (!segmentsWithFallbacks(r, &seg)) {
+    return gear_sim::Status::notIdentifiable("modeled response: no identifiable segment");
+  }
+  const Index begin = static_cast<Index>(std::llround((seg.front().t_start - s.t0) / s.dt));
+  const Index end =
+      std::min<Index>(s.n, static_cast<Index>(std::llround((seg.back().t_end - s.t0) / s.dt)));
+  if (begin < 0 || end - begin < 2) {
+    return gear_sim::Status::notIdentifiable(
+        "modeled response: the segments do not lie in the record");
+  }
+  const Index n = end - begin;
   out->begin = begin;
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
-  if (const gear_sim::Status e =
-          held.on() ? heldResponse(coeffs, held, stages, bps, s.time(begin), s.dt, n, init,
-                                   out->modeled.data())
-                    : gear_sim::integrateSdofAffineBlocks(coeffs, stages, bps, s.time(begin), s.dt,
-                                                          n, init, gear_sim::Integrator::Rk4,
-                                                          substeps, out->modeled.data(), nullptr);
-      !e.ok())
-    return e.withContext("modeled response");
-  if (!finiteValues(out->modeled.data(), n)) {
+  out->unmodeled = 0;
+  // One simulation through every segment, the state carried over. Where it turns non-finite (a
+  // NaN or absurd input sample: that segment is not identifiable) the samples up to the next
+  // segment are left NaN and the simulation starts again there from that segment's identified
+  // state, so one bad sample costs its segment's tail, not the rest of the record.
+  double* y = out->modeled.data();
+  for (size_t first = 0;;) {
+    const Index from = static_cast<Index>(std::llround((seg[first].t_start - s.t0) / s.dt));
+    const std::vector<SegmentEstimate> rest(seg.begin() + static_cast<std::ptrdiff_t>(first),
+                                            seg.end());
+    if (const gear_sim::Status e = simulateSegments(
+            s, gear, r, rest, from, end, segmentState(s, r, seg[first], from), y + (from - begin));
+        !e.ok())
+      return e;
+    if (finiteValues(y + (from - begin), end - from)) break;
+    Index bad = from;
+    while (std::isfinite(y[bad - begin])) ++bad;
+    // The first later segment that starts after the bad sample (and inside the record).
+    size_t next = first + 1;
+    while (next < seg.size() &&
+           std::llround((seg[next].t_start - s.t0) / s.dt) <= static_cast<long long>(bad))
+      ++next;
+    const Index stop =
+        next < seg.size()
+            ? std::min<Index>(end,
+                              static_cast<Index>(std::llround((seg[next].t_start - s.t0) / s.dt)))
+            : end;
+    std::fill(y + (bad - begin), y + (stop - begin), kNaN);
+    out->unmodeled += stop - bad;
+    if (stop >= end - 1) {
+      out->unmodeled += end - stop;
+      std::fill(y + (stop - begin), y + n, kNaN);
+      break;
+    }
+    first = next;
+  }
+  if (out->unmodeled >= n) {
     return gear_sim::Status::notIdentifiable(
         "modeled response: the re-simulation diverged (non-finite values)");
   }

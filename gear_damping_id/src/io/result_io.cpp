@@ -210,6 +210,7 @@ json runJson(const AnalysisRun& run, bool segments) {
   if (run.response_error.empty()) {
     j["response"] = {{"nrmse", num(run.response.nrmse)},
                      {"fit_percent", num(run.response.fit_percent)}};
+    if (run.response.unmodeled > 0) j["response"]["unmodeled_samples"] = run.response.unmodeled;
   } else {
     j["response"] = {{"nrmse", nullptr}, {"fit_percent", nullptr}, {"error", run.response_error}};
   }
@@ -283,7 +284,12 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
     }
     if (run.response_error.empty()) {
       os << "  modeled response: fit " << fmt(run.response.fit_percent, 4, true) << " %, NRMSE "
-         << fmt(run.response.nrmse, 4) << "\n";
+         << fmt(run.response.nrmse, 4);
+      if (run.response.unmodeled > 0)
+        os << " (" << run.response.unmodeled
+           << " samples not modeled: the re-simulation turned non-finite and restarted at the "
+              "next segment)";
+      os << "\n";
     } else {
       os << "  modeled response: not available (" << run.response_error << ")\n";
     }

@@ -4,7 +4,9 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "gear_sim/status.hpp"
 
@@ -32,6 +34,40 @@ struct SignalTable {
   Eigen::Index size() const { return time.size(); }
   static bool has(const Eigen::VectorXd& column) { return column.size() > 0; }
 };
+
+/// Physical plausibility ranges of a record's channels (magnitudes, SI units): a DTE of a metre,
+/// a stiffness of 1e13 N/m or a torque of 1e9 N*m is a corrupt value, not a gear. The record
+/// readers read a value outside its channel's range as NaN (a bag's chunks as they are read, a
+/// CSV record in `analyze` through maskImplausible), so its segment is reported as not
+/// identifiable instead of giving an absurd estimate.
+struct PlausibleRange {
+  const char* channel;
+  double low, high;
+};
+constexpr PlausibleRange kPlausibleRanges[] = {
+    {"dte", -1.0, 1.0},
+    {"dte_velocity", -1e4, 1e4},
+    {"stiffness", 0.0, 1e13},
+    {"torque", -1e9, 1e9},
+    {"mesh_phase", -9.007199254740992e15, 9.007199254740992e15},
+    {"damping", -1e9, 1e9}};
+
+/// Counts of a record's implausible values.
+struct ImplausibleCounts {
+  std::int64_t non_finite = 0;       ///< NaN/Inf values of the ranged channels and mesh_state
+  std::int64_t out_of_range = 0;     ///< finite values outside their channel's range
+  std::int64_t bad_mesh_states = 0;  ///< finite mesh_state values other than 0 or 1
+};
+
+/// Reads as NaN the values of `table`'s ranged channels (kPlausibleRanges) outside their range
+/// and the mesh_state values other than 0 or 1, and counts them; the NaN/Inf values already there
+/// are counted as non-finite. The time, theta1 and theta2 columns are left as they are.
+ImplausibleCounts maskImplausible(SignalTable* table);
+
+/// One warning line per non-zero count of `counts` (the bag reader's and `analyze`'s wording);
+/// `where` says where the NaN/Inf values were found ("in the chunks", "in the file").
+std::vector<std::string> implausibleWarnings(const ImplausibleCounts& counts,
+                                             const std::string& where);
 
 /// Time stamps are doubles: near |t| = t_abs_max they are resolved to one unit in the last place,
 /// ulp(t_abs_max) (1.2e-10 s near 1e6 s). A check of uniform steps cannot ask for more than that.

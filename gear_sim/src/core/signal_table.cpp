@@ -1,8 +1,10 @@
-// The time-stamp resolution rule shared by every reader of a SignalTable (signal_table.hpp).
+// The time-stamp resolution rule and the plausibility ranges shared by every reader of a
+// SignalTable (signal_table.hpp).
 #include "gear_sim/signal_table.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 
 #include "gear_sim/message_text.hpp"
@@ -34,6 +36,49 @@ Status checkTimeResolution(double t_abs_max, double step) {
 
 double stepTolerance(double rel_tolerance, double step, double t_abs_max) {
   return std::max(rel_tolerance * std::abs(step), 3.0 * timeResolution(t_abs_max));
+}
+
+ImplausibleCounts maskImplausible(SignalTable* table) {
+  ImplausibleCounts counts;
+  Eigen::VectorXd* ranged[] = {&table->dte,    &table->dte_velocity, &table->stiffness,
+                               &table->torque, &table->mesh_phase,   &table->damping};
+  static_assert(std::size(ranged) == std::size(kPlausibleRanges), "one range per channel");
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  for (size_t k = 0; k < std::size(ranged); ++k) {
+    const PlausibleRange& r = kPlausibleRanges[k];
+    for (double& x : *ranged[k]) {
+      if (!std::isfinite(x)) {
+        ++counts.non_finite;
+      } else if (x < r.low || x > r.high) {
+        ++counts.out_of_range;
+        x = kNaN;
+      }
+    }
+  }
+  for (double& x : table->mesh_state) {
+    if (!std::isfinite(x)) {
+      ++counts.non_finite;
+    } else if (x != 0.0 && x != 1.0) {
+      ++counts.bad_mesh_states;
+      x = kNaN;
+    }
+  }
+  return counts;
+}
+
+std::vector<std::string> implausibleWarnings(const ImplausibleCounts& counts,
+                                             const std::string& where) {
+  std::vector<std::string> lines;
+  auto warn = [&](std::int64_t n, const std::string& what) {
+    if (n > 0) lines.push_back(std::to_string(n) + " " + what);
+  };
+  warn(counts.non_finite, "NaN/Inf values " + where + " (those samples are not usable)");
+  warn(counts.out_of_range,
+       "values outside their channel's plausible range (|dte| <= 1 m, |dte_velocity| <= 1e4 "
+       "m/s, stiffness in [0, 1e13] N/m, |torque| <= 1e9 N*m, |damping| <= 1e9 N*s/m): read as "
+       "NaN");
+  warn(counts.bad_mesh_states, "mesh_state values other than 0 or 1: read as NaN");
+  return lines;
 }
 
 }  // namespace gear_sim

@@ -38,19 +38,9 @@ constexpr std::uint64_t kMaxSampleIndex = std::uint64_t{1} << 53;
 /// record's span (gaps read as NaN), so a forward jump of the index is refused before any
 /// allocation, naming the largest gap.
 constexpr double kMaxGapRatio = 1.0;
-/// Physical plausibility ranges of bag data (magnitudes, SI units): a DTE of a metre, a
-/// stiffness of 1e13 N/m or a torque of 1e9 N*m is a corrupt payload, not a gear.
-struct PlausibleRange {
-  const char* channel;
-  double low, high;
-};
-constexpr PlausibleRange kPlausibleRanges[] = {
-    {"dte", -1.0, 1.0},
-    {"dte_velocity", -1e4, 1e4},
-    {"stiffness", 0.0, 1e13},
-    {"torque", -1e9, 1e9},
-    {"mesh_phase", -9.007199254740992e15, 9.007199254740992e15},
-    {"damping", -1e9, 1e9}};
+/// Physical plausibility ranges of bag data: the records' (gear_sim/signal_table.hpp).
+using gear_sim::kPlausibleRanges;
+using gear_sim::PlausibleRange;
 /// A chunk whose max |dte| is this many times the record's median chunk maximum is an outlier.
 constexpr double kOutlierChunkFactor = 1e6;
 
