@@ -156,23 +156,43 @@ bool anyIdentifiable(const gd::IdentificationResult& r) {
   return false;
 }
 
-// Streaming sums for the NRMSE of a response assembled from blocks (Chan's parallel update).
+// Streaming sums for the NRMSE of a response assembled from blocks (Chan's parallel update),
+// over the samples where both series are finite (as fitMetrics); the samples of segments without
+// a response and a response's own non-finite (restarted) samples are counted as not modeled.
 struct FitAccumulator {
   double n = 0, mean = 0, m2 = 0, sse = 0;
+  Eigen::Index unmodeled = 0;
   void add(const gd::ModeledResponse& r) {
-    const Eigen::Index m = r.observed.size();
+    unmodeled += r.unmodeled;
+    if (r.observed.allFinite() && r.modeled.allFinite()) return addFinite(r.observed, r.modeled);
+    Eigen::VectorXd y(r.observed.size()), yh(r.observed.size());
+    Eigen::Index m = 0;
+    for (Eigen::Index i = 0; i < r.observed.size(); ++i) {
+      if (!std::isfinite(r.observed[i]) || !std::isfinite(r.modeled[i])) continue;
+      y[m] = r.observed[i];
+      yh[m++] = r.modeled[i];
+    }
+    addFinite(y.head(m), yh.head(m));
+  }
+  void skip(Eigen::Index samples) { unmodeled += samples; }
+  void finish(gd::ModeledResponse* out) const {
+    out->nrmse = n > 0 && m2 > 0 ? std::sqrt(sse / m2) : gd::kNaN;
+    out->fit_percent = 100.0 * (1.0 - out->nrmse);
+    out->unmodeled = unmodeled;
+  }
+
+ private:
+  void addFinite(const Eigen::Ref<const Eigen::VectorXd>& y,
+                 const Eigen::Ref<const Eigen::VectorXd>& yh) {
+    const Eigen::Index m = y.size();
     if (m == 0) return;
-    const double bm = r.observed.mean();
-    const double bm2 = (r.observed.array() - bm).square().sum();
+    const double bm = y.mean();
+    const double bm2 = (y.array() - bm).square().sum();
     const double nb = static_cast<double>(m), nt = n + nb, d = bm - mean;
     mean += d * nb / nt;
     m2 += bm2 + d * d * n * nb / nt;
     n = nt;
-    sse += (r.observed - r.modeled).squaredNorm();
-  }
-  void finish(gd::ModeledResponse* out) const {
-    out->nrmse = n > 0 && m2 > 0 ? std::sqrt(sse / m2) : gd::kNaN;
-    out->fit_percent = 100.0 * (1.0 - out->nrmse);
+    sse += (y - yh).squaredNorm();
   }
 };
 
@@ -521,7 +541,10 @@ gear_sim::Status analyzeStreaming(const gear_sim_ros::BagSignalInfo& info,
       }
       identifyPublishing(&drivers[k], view, segs, threads, &responses);
       for (size_t j = 0; j < segs.size(); ++j) {  // in order: the fit's sums and the bag
-        if (!responses.has(j)) continue;
+        if (!responses.has(j)) {
+          fits[k].skip(segs[j].second - segs[j].first);
+          continue;
+        }
         fits[k].add(responses.response(j));
         if (bag->active())  // the message only when a bag is written
           bag->write(topicOf((*runs)[k], k == 0, "modeled_response"), view.time(segs[j].first),

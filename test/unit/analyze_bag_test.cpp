@@ -499,6 +499,56 @@ TEST_F(AnalyzeBag, AGapOrANanChunkMakesOnlyItsSegmentNotIdentifiable) {
   }
 }
 
+// The modeled response around a gap, a NaN DTE sample and an implausible torque sample (read as
+// NaN), whole and streamed. Read whole, the re-simulation (driven by the stiffness and torque,
+// not the DTE) turns non-finite at the gap's or the torque sample's first sample, less the stage
+// interpolation's reach of up to two samples, and restarts at the next segment; a NaN DTE sample
+// leaves it finite (the fit skips the sample). Streamed, each segment is re-simulated on its own
+// and a segment without a response (not identifiable) counts whole. The fit stays a number.
+TEST_F(AnalyzeBag, ABadSampleCostsTheResponseUpToTheNextSegmentOnly) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Case {
+    fs::path bag;
+    Eigen::Index first_bad;  // the first bad sample (1 ms segments: 1000 samples)
+    bool drives;             // in a channel that drives the re-simulation
+  };
+  const std::vector<Case> cases = {
+      {writeBag("r_gap.bag", [](size_t k, gear_damping::SignalChunk*) { return k != 3; }), 1500,
+       true},
+      {writeBag("r_dte.bag",
+                [&](size_t k, gear_damping::SignalChunk* c) {
+                  if (k == 5) c->dte[17] = nan;
+                  return true;
+                }),
+       2517, false},
+      {writeBag("r_torque.bag",
+                [&](size_t k, gear_damping::SignalChunk* c) {
+                  if (k == 5) c->torque[17] = 1e12;
+                  return true;
+                }),
+       2517, true}};
+  for (const Case& c : cases) {
+    for (const std::string mode : {"", " --max-in-memory 1500"}) {
+      const fs::path j = dir() / "resp.json";
+      const ToolRun r = analyze("--input " + c.bag.string() + mode + " --output " + j.string());
+      ASSERT_EQ(r.code, 0) << c.bag << mode << ": " << r.err;
+      const auto resp = nlohmann::json::parse(readText(j)).at("response");
+      EXPECT_TRUE(resp.at("fit_percent").is_number()) << c.bag << mode << ": " << resp.dump();
+      const Eigen::Index to_next = (c.first_bad / 1000 + 1) * 1000 - c.first_bad;
+      const Eigen::Index lo = !mode.empty() ? 1000
+                              : c.drives    ? to_next
+                                            : 0,
+                         hi = !mode.empty() ? 1000
+                              : c.drives    ? to_next + 2
+                                            : 0;
+      const Eigen::Index unmodeled =
+          resp.contains("unmodeled_samples") ? resp.at("unmodeled_samples").get<Eigen::Index>() : 0;
+      EXPECT_GE(unmodeled, lo) << c.bag << mode;
+      EXPECT_LE(unmodeled, hi) << c.bag << mode;
+    }
+  }
+}
+
 TEST_F(AnalyzeBag, RejectsBadBagsWithAOneLineMessageAndExitCode) {
   const fs::path intact = intactBag();
   const fs::path empty = dir() / "empty.bag", corrupt = dir() / "corrupt.bag",

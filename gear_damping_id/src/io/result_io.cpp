@@ -287,8 +287,8 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
          << fmt(run.response.nrmse, 4);
       if (run.response.unmodeled > 0)
         os << " (" << run.response.unmodeled
-           << " samples not modeled: the re-simulation turned non-finite and restarted at the "
-              "next segment)";
+           << " samples not modeled: a non-finite value stopped the re-simulation up to the next "
+              "segment)";
       os << "\n";
     } else {
       os << "  modeled response: not available (" << run.response_error << ")\n";
