@@ -255,6 +255,71 @@ TEST(ModeledResponse, RestartsAtTheNextSegmentAfterANonFiniteInputSample) {
   EXPECT_LT(std::sqrt(eb / var), 2.0 * std::sqrt(ec / var));
 }
 
+// The restart's other cases (found by a hostile review): (a) a NaN stiffness in a segment's last
+// sample turns the state non-finite only at the next segment's first sample, where the response
+// starts again anyway: nothing is lost; (b) a NaN DTE at the record's first sample leaves the
+// first segment without a state to start from: that segment is not modeled, the rest is;
+// (c) an estimate that makes the re-simulation diverge (here segment 3's C set to -5e4 1/s, a
+// growth by e^25 over the segment) passes through huge finite values first: from the first
+// beyond the plausible |DTE| of 1 m to the next segment the samples are not modeled, and no
+// modeled value beyond it is left.
+TEST(ModeledResponse, RestartsWhereTheStateIsLostOrTheResponseDiverges) {
+  const SimConfig c = piecewiseDefault();
+  const SignalTable clean = simulateOrFail(c);
+  const double dt = clean.time[1] - clean.time[0];
+  const Eigen::Index spm = std::lround(1e-3 / dt);
+  const auto opt =
+      options(Formulation::Known, DampingModel::Piecewise, IdentificationOptions::Refine::Never);
+  const gear_damping_id::GearConstants gear = gear_damping_id::gearConstants(c.gearModel());
+  const auto response = [&](const SignalTable& t, const IdentificationResult& r) {
+    gear_damping_id::ModeledResponse m;
+    std::string e;
+    EXPECT_TRUE(gear_test::ok(
+        gear_damping_id::modeledResponse(gear_damping_id::SignalView::of(t), gear, r, &m), &e))
+        << e;
+    return m;
+  };
+  const auto nans = [](const Eigen::VectorXd& v, Eigen::Index lo, Eigen::Index hi) {
+    Eigen::Index k = 0;
+    for (Eigen::Index i = lo; i < hi; ++i) k += std::isfinite(v[i]) ? 0 : 1;
+    return k;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  {  // (a)
+    SignalTable t = clean;
+    t.stiffness[spm - 1] = nan;
+    const IdentificationResult r = identifyOrFail(t, c, opt);
+    ASSERT_FALSE(r.segments[0].identifiable);
+    const gear_damping_id::ModeledResponse m = response(t, r);
+    EXPECT_EQ(m.unmodeled, 0);
+    EXPECT_EQ(nans(m.modeled, 0, m.modeled.size()), 0);
+  }
+  {  // (b)
+    SignalTable t = clean;
+    t.dte[0] = nan;
+    const IdentificationResult r = identifyOrFail(t, c, opt);
+    ASSERT_FALSE(r.segments[0].identifiable);
+    const gear_damping_id::ModeledResponse m = response(t, r);
+    ASSERT_EQ(m.begin, 0);
+    EXPECT_EQ(m.unmodeled, spm);
+    EXPECT_EQ(nans(m.modeled, 0, spm), spm);
+    EXPECT_EQ(nans(m.modeled, spm, m.modeled.size()), 0);
+  }
+  {  // (c)
+    IdentificationResult r = identifyOrFail(clean, c, opt);
+    ASSERT_TRUE(r.segments[3].identifiable);
+    r.segments[3].C = -5e4;
+    const gear_damping_id::ModeledResponse m = response(clean, r);
+    ASSERT_EQ(m.begin, 0);
+    EXPECT_GT(m.unmodeled, 0);
+    EXPECT_LT(m.unmodeled, spm);
+    EXPECT_EQ(nans(m.modeled, 4 * spm - m.unmodeled, 4 * spm), m.unmodeled);  // up to segment 4
+    EXPECT_EQ(nans(m.modeled, 0, m.modeled.size()), m.unmodeled);
+    EXPECT_LE(m.modeled.array().isFinite().select(m.modeled.array().abs(), 0.0).maxCoeff(), 1.0);
+    EXPECT_TRUE(std::isfinite(m.fit_percent));
+  }
+}
+
 // Paper §4.1: the constant-load (legacy) formulation cannot follow a time-varying load; its
 // modeled response is far from the measurement, while the known formulation's reproduces it.
 TEST(PaperResults, LegacyFormulationFailsOnATimeVaryingLoad) {

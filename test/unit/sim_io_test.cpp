@@ -175,6 +175,35 @@ TEST(SignalCsv, AnySubsetAndOrderOfKnownColumnsIsAccepted) {
   EXPECT_EQ(t.torque.size(), 0);
 }
 
+// Numbers beyond the double range are numbers, not malformed text: an overflow reads as +-Inf
+// (refused as not finite, or kept for an analyser that reports NaN/Inf samples, like "inf"), an
+// underflow as +-0; an explicit plus sign is accepted.
+TEST(SignalCsv, NumbersBeyondTheDoubleRangeAndPlusSigns) {
+  const std::string text =
+      "time,dte,torque\n0,+1e-6,1e309\n+1e-6,1e-400,-1e309\n2e-6,-1e-400,"
+      "0.00000000000000000000000000000000000000000000000000000000000000000000000000000000000000000"
+      "00000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000"
+      "00000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000"
+      "00000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000"
+      "0000001\n";
+  gear_sim::SignalTable t;
+  std::string e;
+  const std::string path = writeFile("range.csv", text);
+  ASSERT_TRUE(gear_test::ok(gear_sim::readSignalCsv(path, &t, {"time", "dte"}, true), &e)) << e;
+  EXPECT_EQ(t.time[1], 1e-6);
+  EXPECT_EQ(t.dte[0], 1e-6);
+  EXPECT_EQ(t.torque[0], std::numeric_limits<double>::infinity());
+  EXPECT_EQ(t.torque[1], -std::numeric_limits<double>::infinity());
+  EXPECT_EQ(t.dte[1], 0.0);
+  EXPECT_TRUE(t.dte[2] == 0.0 && std::signbit(t.dte[2]));
+  EXPECT_EQ(t.torque[2], 0.0);
+  EXPECT_FALSE(gear_test::ok(gear_sim::readSignalCsv(path, &t), &e));
+  EXPECT_NE(e.find("line 2, column 3 (torque): value is not finite (inf)"), std::string::npos) << e;
+  EXPECT_FALSE(gear_test::ok(
+      gear_sim::readSignalCsv(writeFile("plus.csv", "time,dte\n0,+-1\n1,2\n"), &t), &e));
+  EXPECT_NE(e.find("malformed number '+-1'"), std::string::npos) << e;
+}
+
 // The plausibility ranges (the bag reader's) applied to a table read from a CSV: a value outside
 // its channel's range reads as NaN and is counted; the range's own ends are plausible; NaN/Inf
 // already there are counted, not changed; time is not ranged.

@@ -1318,7 +1318,8 @@ gear_sim::Status IntegralMethod::checkFiniteInputs(const SignalView& s, Eigen::I
     for (Eigen::Index i = begin; i < end; ++i) {
       if (!std::isfinite(channels[c][i])) {
         std::ostringstream m;
-        m << "NaN/Inf in input (" << names[c] << " at t = " << s.time(i) << " s)";
+        m << "NaN/Inf or implausible value in input (" << names[c] << " at t = " << s.time(i)
+          << " s)";
         return gear_sim::Status::notIdentifiable(m.str(), names[c]);
       }
     }
@@ -1393,7 +1394,7 @@ gear_sim::Status IntegralMethod::segmentMeans(const SignalView& s, Eigen::Index 
     for (Eigen::Index i = begin; i < end; ++i) {
       if (!std::isfinite(s.mesh_phase[i])) {
         std::ostringstream m;
-        m << "NaN/Inf in input (mesh_phase at t = " << s.time(i) << " s)";
+        m << "NaN/Inf or implausible value in input (mesh_phase at t = " << s.time(i) << " s)";
         return gear_sim::Status::notIdentifiable(m.str(), "mesh_phase");
       }
       options_.stiffness_shape.basis(s.mesh_phase[i], &basis_(0, i - begin));

@@ -17,6 +17,7 @@
 #include "gear_damping_id/forward_model.hpp"
 #include "gear_damping_id/quality_flags.hpp"
 #include "gear_sim/sdof_integrator.hpp"
+#include "gear_sim/signal_table.hpp"
 #include "gear_sim/simd_clones.hpp"
 
 namespace gear_damping_id {
@@ -3766,23 +3767,6 @@ void plainForcing(const HeldKnownStages::Plain& p, double inv_h, double h2, doub
   }
 }
 
-// Whether x[0 .. n) are all finite (what Eigen's allFinite() answers): x - x is 0 for a finite
-// x and NaN otherwise, so the sum of the differences is 0 exactly when every x is finite, in any
-// order; summed in four lanes, branch-free (vectorised; AVX2 clone).
-GEAR_AVX2_CLONES
-bool finiteValues(const double* x, Index n) {
-  V4d acc = {0.0, 0.0, 0.0, 0.0};
-  Index i = 0;
-  for (; i + 4 <= n; i += 4) {
-    V4d v;
-    std::memcpy(&v, x + i, sizeof(V4d));
-    acc += v - v;
-  }
-  double sum = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-  for (; i < n; ++i) sum += x[i] - x[i];
-  return sum == 0.0;
-}
-
 // The number of leading k[0 .. len) whose product with inv_me has the bits of K (sameBits), four
 // at a time (vectorised; AVX2 clone: the same products).
 GEAR_AVX2_CLONES
@@ -3922,15 +3906,31 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
 namespace {
 
 // The identified state at sample `at` (the start of segment `seg`): the window estimate that
-// starts there, else the observed DTE at rest.
+// starts there; else, with `at_rest`, the observed DTE at rest (the record's first sample, as
+// before restarts existed), else NaN (no state to start from).
 gear_sim::SdofState segmentState(const SignalView& s, const IdentificationResult& r,
-                                 const SegmentEstimate& seg, Index at) {
+                                 const SegmentEstimate& seg, Index at, bool at_rest) {
   for (const WindowEstimate& w : r.windows) {
     if (std::abs(w.t_start - seg.t_start) <= 0.5 * s.dt && std::isfinite(w.y_T)) {
       return {w.y_T, std::isfinite(w.velocity) ? w.velocity : 0.0};
     }
   }
-  return {s.dte[at], 0.0};
+  return at_rest ? gear_sim::SdofState{s.dte[at], 0.0} : gear_sim::SdofState{kNaN, kNaN};
+}
+
+// The first of y[0, n) that is not finite or exceeds the plausible |DTE| (a re-simulation that
+// diverges passes through huge finite values first); n when there is none. Blocks of 64 counted
+// branch-free (vectorised), then one by one in the block that fails.
+Index firstImplausible(const double* y, Index n) {
+  constexpr double kMaxAbs = gear_sim::kPlausibleRanges[0].high;  // |dte| [m]
+  Index i = 0;
+  for (; i + 64 <= n; i += 64) {
+    long good = 0;
+    for (int j = 0; j < 64; ++j) good += std::abs(y[i + j]) <= kMaxAbs;
+    if (good != 64) break;
+  }
+  while (i < n && std::abs(y[i]) <= kMaxAbs) ++i;
+  return i;
 }
 
 // Eq. (4) re-simulated over samples [begin, end) through the segments `seg` (the first starting
@@ -4003,39 +4003,53 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
   out->unmodeled = 0;
-  // One simulation through every segment, the state carried over. Where it turns non-finite (a
-  // NaN or absurd input sample: that segment is not identifiable) the samples up to the next
-  // segment are left NaN and the simulation starts again there from that segment's identified
-  // state, so one bad sample costs its segment's tail, not the rest of the record.
+  // One simulation through the segments, the state carried over, up to and including the first
+  // segment that is not identifiable (simulated with its neighbour's estimate); the next part
+  // starts again from the next segment's identified state. Where a part turns non-finite or
+  // implausible (a NaN or absurd input sample, a diverging estimate) the samples from there to the
+  // next segment are left NaN and the simulation starts again there, so one bad sample costs its
+  // segment's tail, not the rest of the record. A record whose segments are all identifiable is
+  // one part, as before restarts existed; every sample is simulated at most once or twice.
+  const auto startOf = [&](size_t k) {
+    return std::clamp<Index>(static_cast<Index>(std::llround((seg[k].t_start - s.t0) / s.dt)),
+                             begin, end);
+  };
   double* y = out->modeled.data();
-  for (size_t first = 0;;) {
-    const Index from = static_cast<Index>(std::llround((seg[first].t_start - s.t0) / s.dt));
-    const std::vector<SegmentEstimate> rest(seg.begin() + static_cast<std::ptrdiff_t>(first),
-                                            seg.end());
-    if (const gear_sim::Status e = simulateSegments(
-            s, gear, r, rest, from, end, segmentState(s, r, seg[first], from), y + (from - begin));
-        !e.ok())
-      return e;
-    if (finiteValues(y + (from - begin), end - from)) break;
-    Index bad = from;
-    while (std::isfinite(y[bad - begin])) ++bad;
-    // The first later segment that starts after the bad sample (and inside the record).
-    size_t next = first + 1;
-    while (next < seg.size() &&
-           std::llround((seg[next].t_start - s.t0) / s.dt) <= static_cast<long long>(bad))
-      ++next;
-    const Index stop =
-        next < seg.size()
-            ? std::min<Index>(end,
-                              static_cast<Index>(std::llround((seg[next].t_start - s.t0) / s.dt)))
-            : end;
-    std::fill(y + (bad - begin), y + (stop - begin), kNaN);
-    out->unmodeled += stop - bad;
-    if (stop >= end - 1) {
-      out->unmodeled += end - stop;
-      std::fill(y + (stop - begin), y + n, kNaN);
-      break;
+  for (size_t first = 0; first < seg.size();) {
+    const Index from = startOf(first);
+    size_t stop = first;  // the part: segments [first, stop)
+    while (stop < seg.size() && r.segments[stop].identifiable) ++stop;
+    stop = std::min(stop + 1, seg.size());
+    const Index to = stop < seg.size() ? startOf(stop) : end;
+    if (to <= from) {  // (a segment of no samples)
+      first = stop;
+      continue;
     }
+    const gear_sim::SdofState init = segmentState(s, r, seg[first], from, first == 0);
+    Index bad = from;
+    if (std::isfinite(init.y) && std::isfinite(init.v)) {
+      if (to - from == 1) {
+        y[from - begin] = init.y;
+      } else if (const gear_sim::Status e = simulateSegments(
+                     s, gear, r,
+                     std::vector<SegmentEstimate>(seg.begin() + static_cast<std::ptrdiff_t>(first),
+                                                  seg.begin() + static_cast<std::ptrdiff_t>(stop)),
+                     from, to, init, y + (from - begin));
+                 !e.ok()) {
+        return e;
+      }
+      bad = from + firstImplausible(y + (from - begin), to - from);
+    }
+    if (bad == to) {
+      first = stop;
+      continue;
+    }
+    // Start again at the first later segment that starts at or after the bad sample.
+    size_t next = first + 1;
+    while (next < stop && startOf(next) < bad) ++next;
+    const Index resume = next < stop ? startOf(next) : to;
+    std::fill(y + (bad - begin), y + (resume - begin), kNaN);
+    out->unmodeled += resume - bad;
     first = next;
   }
   if (out->unmodeled >= n) {

@@ -72,11 +72,13 @@ std::vector<std::string> implausibleWarnings(const ImplausibleCounts& counts,
   auto warn = [&](std::int64_t n, const std::string& what) {
     if (n > 0) lines.push_back(std::to_string(n) + " " + what);
   };
-  warn(counts.non_finite, "NaN/Inf values " + where + " (those samples are not usable)");
+  warn(counts.non_finite, "NaN/Inf values " + where +
+                              " (the segments whose analysis uses those samples are not "
+                              "identifiable)");
   warn(counts.out_of_range,
        "values outside their channel's plausible range (|dte| <= 1 m, |dte_velocity| <= 1e4 "
-       "m/s, stiffness in [0, 1e13] N/m, |torque| <= 1e9 N*m, |damping| <= 1e9 N*s/m): read as "
-       "NaN");
+       "m/s, stiffness in [0, 1e13] N/m, |torque| <= 1e9 N*m, |damping| <= 1e9 N*s/m, "
+       "|mesh_phase| <= 2^53 cycles): read as NaN");
   warn(counts.bad_mesh_states, "mesh_state values other than 0 or 1: read as NaN");
   return lines;
 }
