@@ -144,6 +144,31 @@ Status writeAtomically(const std::string& path,
   return s;
 }
 
+namespace {
+
+// std::from_chars of a CSV field, and what it refuses that is still a number: an explicit plus
+// sign (as spreadsheets write it) and a number beyond the double range, read as +-Inf for an
+// overflow (then refused, or read as NaN like "inf"), +-0 for an underflow (a negative
+// exponent, or no exponent and a zero integer part).
+std::from_chars_result parseNumber(const char* p, const char* end, double* v) {
+  const char* num = *p == '+' && p + 1 < end && p[1] != '+' && p[1] != '-' ? p + 1 : p;
+  std::from_chars_result r = std::from_chars(num, end, *v);
+  if (r.ec != std::errc::result_out_of_range) return r;
+  const std::string_view s(num, static_cast<size_t>(r.ptr - num));
+  const size_t e = s.find_first_of("eE");
+  const bool negative = !s.empty() && s[0] == '-';
+  const std::string_view mantissa = s.substr(negative ? 1 : 0, e - (negative ? 1 : 0));
+  const size_t lead = std::min(mantissa.find_first_not_of('0'), mantissa.size());
+  const bool under = e != std::string_view::npos ? e + 1 < s.size() && s[e + 1] == '-'
+                                                 : lead == mantissa.size() || mantissa[lead] == '.';
+  *v = under ? 0.0 : std::numeric_limits<double>::infinity();
+  if (negative) *v = -*v;
+  r.ec = std::errc();
+  return r;
+}
+
+}  // namespace
+
 Status readSignalCsv(const std::string& path, SignalTable* out,
                      const std::vector<std::string>& required, bool allow_non_finite) {
   // Every failure past opening is the file's content; `column` names the CSV column concerned.
@@ -213,25 +238,7 @@ Status readSignalCsv(const std::string& path, SignalTable* out,
     for (size_t field = 0; field < map.size(); ++field) {
       while (p < end && *p == ' ') ++p;
       double v;
-      // (an explicit plus sign, as spreadsheets write it, is accepted: from_chars takes none)
-      const char* num = *p == '+' && p + 1 < end && p[1] != '+' && p[1] != '-' ? p + 1 : p;
-      auto r = std::from_chars(num, end, v);
-      if (r.ec == std::errc::result_out_of_range) {
-        // A well-formed number beyond the double range: +-Inf for an overflow (then refused, or
-        // read as NaN like "inf"), +-0 for an underflow (a negative exponent, or no exponent and
-        // a zero integer part).
-        const std::string_view s(num, static_cast<size_t>(r.ptr - num));
-        const size_t e = s.find_first_of("eE");
-        const bool negative = !s.empty() && s[0] == '-';
-        const std::string_view mantissa = s.substr(negative ? 1 : 0, e - (negative ? 1 : 0));
-        const size_t lead = std::min(mantissa.find_first_not_of('0'), mantissa.size());
-        const bool under = e != std::string_view::npos
-                               ? e + 1 < s.size() && s[e + 1] == '-'
-                               : lead == mantissa.size() || mantissa[lead] == '.';
-        v = under ? 0.0 : std::numeric_limits<double>::infinity();
-        if (negative) v = -v;
-        r.ec = std::errc();
-      }
+      const auto r = parseNumber(p, end, &v);
       const std::string where = "line " + std::to_string(line_no) + ", column " +
                                 std::to_string(field + 1) + " (" + names[map[field]] + ")";
       if (r.ec != std::errc() || (r.ptr < end && *r.ptr != ',' && *r.ptr != ' ')) {
