@@ -255,6 +255,35 @@ TEST_F(AnalyzeTool, AnAbsurdTorqueSampleCostsItsSegmentNotTheRecordsResponse) {
   }
 }
 
+// A NaN (or, read as NaN, an implausible) mesh_phase sample with a greybox table shape: the
+// segment is not identifiable and the modeled response's stiffness look-up there is NaN, not a
+// table index out of bounds (it crashed with a segmentation fault, table:4 to table:16).
+TEST_F(AnalyzeTool, ABadMeshPhaseSampleWithATableShapeIsNotACrash) {
+  ASSERT_EQ(text_.substr(0, text_.find('\n')),
+            "time,dte,dte_velocity,stiffness,torque,mesh_state,mesh_phase,damping");
+  std::istringstream in(text_);
+  std::string l;
+  for (int i = 1; i <= 1502; ++i) std::getline(in, l);  // line 1502: sample 1500
+  size_t at = 0;
+  for (int k = 0; k < 6; ++k) at = l.find(',', at) + 1;  // the mesh_phase field
+  for (const char* value : {"nan", "1e300"}) {
+    const std::string row = l.substr(0, at) + value + l.substr(l.find(',', at));
+    const fs::path bad = dir_ / "phase.csv", json_path = dir_ / "phase.json";
+    writeText(bad, editLine(text_, 1502, row));
+    const ToolRun r = analyze("--input " + bad.string() + " --params " + kParams +
+                                  " --formulation greybox --stiffness-shape table:8 --output " +
+                                  json_path.string(),
+                              dir_);
+    ASSERT_EQ(r.code, 0) << value << ": " << r.err;
+    const auto j = nlohmann::json::parse(readText(json_path));
+    const auto& segs = j.at("identification").at("segments");
+    ASSERT_EQ(segs.size(), 4u);
+    EXPECT_FALSE(segs[1].at("identifiable").get<bool>()) << value;
+    EXPECT_NE(segs[1].at("reason").get<std::string>().find("mesh_phase"), std::string::npos);
+    EXPECT_TRUE(j.at("response").at("fit_percent").is_number()) << j.at("response").dump();
+  }
+}
+
 TEST_F(AnalyzeTool, RejectsMalformedInputWithAMessageAndItsExitCode) {
   const std::string p = " --params " + kParams;
   const fs::path out_json = dir_ / "must_not_exist.json";

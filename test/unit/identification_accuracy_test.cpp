@@ -258,7 +258,8 @@ TEST(ModeledResponse, RestartsAtTheNextSegmentAfterANonFiniteInputSample) {
 // The restart's other cases (found by a hostile review): (a) a NaN stiffness in a segment's last
 // sample turns the state non-finite only at the next segment's first sample, where the response
 // starts again anyway: nothing is lost; (b) a NaN DTE at the record's first sample leaves the
-// first segment without a state to start from: that segment is not modeled, the rest is;
+// first segment without a state to start from (no window estimate, and the observed DTE at rest
+// is no state for a segment that is not identifiable): that segment is not modeled, the rest is;
 // (c) an estimate that makes the re-simulation diverge (here segment 3's C set to -5e4 1/s, a
 // growth by e^25 over the segment) passes through huge finite values first: from the first
 // beyond the plausible |DTE| of 1 m to the next segment the samples are not modeled, and no
@@ -287,9 +288,9 @@ TEST(ModeledResponse, RestartsWhereTheStateIsLostOrTheResponseDiverges) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   {  // (a)
     SignalTable t = clean;
-    t.stiffness[spm - 1] = nan;
+    t.stiffness[3 * spm - 1] = nan;
     const IdentificationResult r = identifyOrFail(t, c, opt);
-    ASSERT_FALSE(r.segments[0].identifiable);
+    ASSERT_FALSE(r.segments[2].identifiable);
     const gear_damping_id::ModeledResponse m = response(t, r);
     EXPECT_EQ(m.unmodeled, 0);
     EXPECT_EQ(nans(m.modeled, 0, m.modeled.size()), 0);

@@ -55,7 +55,8 @@ struct StiffnessShape {
   static constexpr int kMaxHarmonics = 16, kMaxNodes = 32;
   /// Number of stiffness unknowns: 2 (square), 2H+1 (fourier), N (table).
   int unknowns() const;
-  /// The basis functions at mesh phase u (fourier/table; `out` holds unknowns() values).
+  /// The basis functions at mesh phase u (fourier/table; `out` holds unknowns() values; NaN
+  /// values for a non-finite u).
   void basis(double u, double* out) const;
 };
 std::string toString(const StiffnessShape& s);

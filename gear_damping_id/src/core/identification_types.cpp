@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace gear_damping_id {
@@ -77,6 +78,11 @@ int StiffnessShape::unknowns() const {
 }
 
 void StiffnessShape::basis(double u, double* out) const {
+  if (!std::isfinite(u)) {  // (a NaN phase sample: an unknown stiffness, never a table index)
+    if (kind != Kind::Square)
+      std::fill(out, out + unknowns(), std::numeric_limits<double>::quiet_NaN());
+    return;
+  }
   const double frac = u - std::floor(u);  // phase within the mesh cycle, [0, 1)
   if (kind == Kind::Fourier) {
     out[0] = 1.0;

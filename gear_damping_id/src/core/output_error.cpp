@@ -3906,8 +3906,8 @@ gear_sim::Status heldResponse(const CoeffFn& coeffs, HeldKnownStages& held, cons
 namespace {
 
 // The identified state at sample `at` (the start of segment `seg`): the window estimate that
-// starts there; else, with `at_rest`, the observed DTE at rest (the record's first sample, as
-// before restarts existed), else NaN (no state to start from).
+// starts there; else, with `at_rest`, the observed DTE at rest (an identifiable first segment
+// without a window estimate), else NaN (no state to start from).
 gear_sim::SdofState segmentState(const SignalView& s, const IdentificationResult& r,
                                  const SegmentEstimate& seg, Index at, bool at_rest) {
   for (const WindowEstimate& w : r.windows) {
@@ -3931,6 +3931,13 @@ Index firstImplausible(const double* y, Index n) {
   }
   while (i < n && std::abs(y[i]) <= kMaxAbs) ++i;
   return i;
+}
+
+// Whether x[lo, hi) holds a value that is not finite (an input sample read as NaN).
+bool hasNonFinite(const double* x, Index lo, Index hi) {
+  long bad = 0;  // (an integer count vectorises)
+  for (Index i = lo; i < hi; ++i) bad += std::isfinite(x[i]) ? 0 : 1;
+  return bad != 0;
 }
 
 // Eq. (4) re-simulated over samples [begin, end) through the segments `seg` (the first starting
@@ -4003,53 +4010,73 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
   out->observed = Eigen::Map<const Eigen::VectorXd>(s.dte + begin, n);
   out->modeled.resize(n);
   out->unmodeled = 0;
-  // One simulation through the segments, the state carried over, up to and including the first
-  // segment that is not identifiable (simulated with its neighbour's estimate); the next part
-  // starts again from the next segment's identified state. Where a part turns non-finite or
-  // implausible (a NaN or absurd input sample, a diverging estimate) the samples from there to the
-  // next segment are left NaN and the simulation starts again there, so one bad sample costs its
-  // segment's tail, not the rest of the record. A record whose segments are all identifiable is
-  // one part, as before restarts existed; every sample is simulated at most once or twice.
+  // One simulation through every segment from the first one's identified state, as before
+  // restarts existed. Where it turns non-finite or implausible (a NaN or absurd input sample, a
+  // diverging estimate) the samples from there to the next segment with an identified state are
+  // left NaN and the simulation starts again there, so one bad sample costs its segment's tail,
+  // not the rest of the record. After the first such failure each part runs at most through the
+  // next segment that could fail again (non-finite driving input, a damping that is not positive
+  // or beyond RK4's stability, a greybox stiffness that is not positive), so restarts cost no
+  // more than simulating the record twice.
   const auto startOf = [&](size_t k) {
-    return std::clamp<Index>(static_cast<Index>(std::llround((seg[k].t_start - s.t0) / s.dt)),
-                             begin, end);
+    return k < seg.size()
+               ? std::clamp<Index>(static_cast<Index>(std::llround((seg[k].t_start - s.t0) / s.dt)),
+                                   begin, end)
+               : end;
+  };
+  std::vector<char> risky;  // per segment, filled at the first failure
+  const auto markRisky = [&] {
+    risky.assign(seg.size(), 0);
+    const double* driving[] = {s.stiffness, s.torque, s.mesh_state, s.mesh_phase};
+    for (size_t k = 0; k < seg.size(); ++k) {
+      const SegmentEstimate& e = seg[k];
+      bool bad = !(e.C > 0.0) || !(e.C * s.dt < 2.5) ||
+                 (r.formulation == Formulation::Greybox && !(e.k_min > 0.0));
+      for (const double* x : driving)
+        if (x != nullptr && !bad) bad = hasNonFinite(x, startOf(k), startOf(k + 1));
+      risky[k] = bad ? 1 : 0;
+    }
   };
   double* y = out->modeled.data();
   for (size_t first = 0; first < seg.size();) {
     const Index from = startOf(first);
-    size_t stop = first;  // the part: segments [first, stop)
-    while (stop < seg.size() && r.segments[stop].identifiable) ++stop;
-    stop = std::min(stop + 1, seg.size());
-    const Index to = stop < seg.size() ? startOf(stop) : end;
-    if (to <= from) {  // (a segment of no samples)
-      first = stop;
+    const gear_sim::SdofState init =
+        segmentState(s, r, seg[first], from, first == 0 && r.segments[0].identifiable);
+    if (!std::isfinite(init.y) || !std::isfinite(init.v)) {  // no state: try the next segment
+      std::fill(y + (from - begin), y + (startOf(first + 1) - begin), kNaN);
+      out->unmodeled += startOf(first + 1) - from;
+      ++first;
       continue;
     }
-    const gear_sim::SdofState init = segmentState(s, r, seg[first], from, first == 0);
-    Index bad = from;
-    if (std::isfinite(init.y) && std::isfinite(init.v)) {
-      if (to - from == 1) {
-        y[from - begin] = init.y;
-      } else if (const gear_sim::Status e = simulateSegments(
-                     s, gear, r,
-                     std::vector<SegmentEstimate>(seg.begin() + static_cast<std::ptrdiff_t>(first),
-                                                  seg.begin() + static_cast<std::ptrdiff_t>(stop)),
-                     from, to, init, y + (from - begin));
-                 !e.ok()) {
-        return e;
-      }
-      bad = from + firstImplausible(y + (from - begin), to - from);
+    size_t stop = seg.size();  // the part: segments [first, stop)
+    if (!risky.empty()) {
+      stop = first;
+      while (stop < seg.size() && !risky[stop]) ++stop;
+      stop = std::min(stop + 1, seg.size());
     }
+    const Index to = startOf(stop);
+    if (to - from == 1) {
+      y[from - begin] = init.y;
+    } else if (to > from) {
+      if (const gear_sim::Status e = simulateSegments(
+              s, gear, r,
+              std::vector<SegmentEstimate>(seg.begin() + static_cast<std::ptrdiff_t>(first),
+                                           seg.begin() + static_cast<std::ptrdiff_t>(stop)),
+              from, to, init, y + (from - begin));
+          !e.ok())
+        return e;
+    }
+    const Index bad = from + firstImplausible(y + (from - begin), to - from);
     if (bad == to) {
       first = stop;
       continue;
     }
+    if (risky.empty()) markRisky();
     // Start again at the first later segment that starts at or after the bad sample.
     size_t next = first + 1;
     while (next < stop && startOf(next) < bad) ++next;
-    const Index resume = next < stop ? startOf(next) : to;
-    std::fill(y + (bad - begin), y + (resume - begin), kNaN);
-    out->unmodeled += resume - bad;
+    std::fill(y + (bad - begin), y + (startOf(next) - begin), kNaN);
+    out->unmodeled += startOf(next) - bad;
     first = next;
   }
   if (out->unmodeled >= n) {
