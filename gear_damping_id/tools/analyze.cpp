@@ -164,7 +164,9 @@ struct FitAccumulator {
   Eigen::Index unmodeled = 0;
   void add(const gd::ModeledResponse& r) {
     unmodeled += r.unmodeled;
-    if (r.observed.allFinite() && r.modeled.allFinite()) return addFinite(r.observed, r.modeled);
+    // (a response without unmodeled samples is finite: modeledResponse checked it; the observed
+    // samples of an identifiable segment are)
+    if (r.unmodeled == 0) return addFinite(r.observed, r.modeled);
     Eigen::VectorXd y(r.observed.size()), yh(r.observed.size());
     Eigen::Index m = 0;
     for (Eigen::Index i = 0; i < r.observed.size(); ++i) {

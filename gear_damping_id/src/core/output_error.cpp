@@ -3920,7 +3920,8 @@ gear_sim::SdofState segmentState(const SignalView& s, const IdentificationResult
 
 // The first of y[0, n) that is not finite or exceeds the plausible |DTE| (a re-simulation that
 // diverges passes through huge finite values first); n when there is none. Blocks of 64 counted
-// branch-free (vectorised), then one by one in the block that fails.
+// branch-free (vectorised; AVX2 clone), then one by one in the block that fails.
+GEAR_AVX2_CLONES
 Index firstImplausible(const double* y, Index n) {
   constexpr double kMaxAbs = gear_sim::kPlausibleRanges[0].high;  // |dte| [m]
   Index i = 0;
