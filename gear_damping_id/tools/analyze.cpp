@@ -37,11 +37,13 @@
 #include <condition_variable>
 #include <cstdio>
 #include <exception>
+#include <iomanip>
 #include <iostream>
 #include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <utility>
@@ -673,13 +675,16 @@ class Analysis {
   bool wavelet_phase_from_record = false;
   std::string wavelet_context_warning;  // waveletMeshPhase's, also in the JSON
   void waveletMeshPhase();
+  std::string wavelet_stretch_warning;  // waveletFiniteStretch's, also in the JSON
+  void waveletFiniteStretch();
   // The mesh phase [cycles] at the wavelet record's sample k: the record's mesh_phase when
   // usable (wavelet_phase_from_record), else the gear parameters' speed profile at the sample's
   // time.
   double meshPhaseAt(size_t k) const {
-    if (wavelet_phase_from_record) return table.mesh_phase[first + static_cast<Eigen::Index>(k)];
+    if (wavelet_phase_from_record)
+      return table.mesh_phase[first + static_cast<Eigen::Index>(wavelet_skip + k)];
     const gear_sim::MeshTiming timing(model.speed, model.gears.pinion.teeth, 0.0);
-    return timing.phase(t_first + static_cast<double>(k) / wavelet_rate);
+    return timing.phase(wavelet_t0 + static_cast<double>(k) / wavelet_rate);
   }
   // Command line.
   std::string input, params, output, csv_out, bag_out, topic;
@@ -737,6 +742,10 @@ class Analysis {
   gd::WaveletResult wres;
   double t_first = 0.0, wavelet_rate = 0.0;
   size_t wavelet_n = 0;
+  // The wavelet's samples: wavelet_dte, its first one the wavelet record's sample wavelet_skip
+  // (waveletFiniteStretch), at time wavelet_t0 [s].
+  size_t wavelet_skip = 0;
+  double wavelet_t0 = 0.0;
 };
 
 // The record, the gear parameters, the topic and the result file; rig records (docs/rig.md):
@@ -1314,8 +1323,9 @@ int Analysis::identify() {
 void Analysis::waveletMeshPhase() {
   wavelet_phase_from_record = wavelet_on_record && !streaming && table.mesh_phase.size() > 0;
   if (!wavelet_phase_from_record || wavelet_n < 2) return;
-  const std::string problem =
-      gd::meshPhaseProblem(table.mesh_phase.data() + first, wavelet_n, wavelet_rate);
+  const std::string problem = gd::meshPhaseProblem(
+      table.mesh_phase.data() + first + static_cast<Eigen::Index>(wavelet_skip), wavelet_n,
+      wavelet_rate);
   if (problem.empty()) return;
   wavelet_phase_from_record = false;
   const bool given = !wopt.order_frequencies.empty();  // --order-freq
@@ -1329,6 +1339,37 @@ void Analysis::waveletMeshPhase() {
                   : given ? "the order frequencies of --order-freq are used, without growth rates"
                           : "no mesh frequency, so forced and modulated lines are not flagged");
   warn(wavelet_context_warning);
+}
+
+// A wavelet record holding NaN/Inf DTE samples (a bag's gap, a bad value) is validated on its
+// longest stretch without any, with a warning (the transform needs every sample).
+void Analysis::waveletFiniteStretch() {
+  const size_t n = wavelet_dte.size();
+  size_t best_a = 0, best_len = 0;
+  for (size_t a = 0; a < n;) {
+    while (a < n && !std::isfinite(wavelet_dte[a])) ++a;
+    size_t b = a;
+    while (b < n && std::isfinite(wavelet_dte[b])) ++b;
+    if (b - a > best_len) best_a = a, best_len = b - a;
+    a = b;
+  }
+  if (best_len == n || best_len == 0) return;  // (none finite: the validation says so)
+  size_t bad = 0;
+  for (double v : wavelet_dte) bad += std::isfinite(v) ? 0 : 1;
+  std::ostringstream t;  // (9 digits: the same text whole and streamed, whose t0 differ by ulps)
+  t << std::setprecision(9) << wavelet_t0 + static_cast<double>(best_a) / wavelet_rate;
+  wavelet_stretch_warning =
+      std::to_string(bad) + " of the wavelet's " + std::to_string(n) +
+      " DTE samples are NaN/Inf (gaps, bad values): validated on the longest stretch without "
+      "any, " +
+      std::to_string(best_len) + " samples from t = " + t.str() + " s";
+  warn(wavelet_stretch_warning);
+  wavelet_dte.erase(wavelet_dte.begin() + static_cast<std::ptrdiff_t>(best_a + best_len),
+                    wavelet_dte.end());
+  wavelet_dte.erase(wavelet_dte.begin(), wavelet_dte.begin() + static_cast<std::ptrdiff_t>(best_a));
+  wavelet_skip = best_a;
+  wavelet_n = best_len;
+  wavelet_t0 += static_cast<double>(best_a) / wavelet_rate;
 }
 
 int Analysis::waveletStep() {
@@ -1365,10 +1406,12 @@ int Analysis::waveletStep() {
     wavelet_rate = static_cast<double>(w.size() - 1) / (w.time[w.size() - 1] - w.time[0]);
     t_first = w.time[0];
   }
+  wavelet_t0 = t_first;
   if (wavelet) {
     if (wavelet_on_record && wavelet_n < static_cast<size_t>(analysed.back().second - first))
       warn("wavelet validation on the first " + std::to_string(wavelet_n) +
            " samples of the analysed record (--wavelet-max-samples)");
+    waveletFiniteStretch();
     // Forced lines: mesh frequency from the record's mesh_phase, else the gear parameters.
     waveletMeshPhase();
     if (wavelet_phase_from_record || identification)
@@ -1383,13 +1426,14 @@ int Analysis::waveletStep() {
       if (!identification) return fail(kExitInput, input + ": wavelet: " + wres.status.message());
       warn("wavelet validation not possible: " + wres.status.message());
     } else {
-      gd::shiftWaveletTimes(&wres, t_first);  // onto the record's time axis
+      gd::shiftWaveletTimes(&wres, wavelet_t0);  // onto the record's time axis
       if (!wavelet_context_warning.empty()) wres.warnings.push_back(wavelet_context_warning);
+      if (!wavelet_stretch_warning.empty()) wres.warnings.push_back(wavelet_stretch_warning);
       if (identification && !runs.empty())
         for (auto& m : wres.modes) m.integral_xi = integralXiOver(runs.front().result, m);
       gd::printWaveletTable(std::cout, wres);
-      const double w_end = t_first + static_cast<double>(wavelet_n) / wavelet_rate;
-      bag.write("/gear/wavelet_modes", w_end, gear_damping_ros::toMsg(wres, t_first, w_end));
+      const double w_end = wavelet_t0 + static_cast<double>(wavelet_n) / wavelet_rate;
+      bag.write("/gear/wavelet_modes", w_end, gear_damping_ros::toMsg(wres, wavelet_t0, w_end));
     }
   }
 
@@ -1437,7 +1481,7 @@ int Analysis::write() {
     if (s.ok() && !ste_results.empty()) s = gd::writeSteCsv(csv_out, ste_results.front(), &stage);
     if (s.ok() && wavelet && wres.ok())
       s = gd::writeWaveletCsv(csv_out, wres, wavelet_dte.data(), static_cast<long>(wavelet_n),
-                              wavelet_rate, t_first, 4000, &stage);
+                              wavelet_rate, wavelet_t0, 4000, &stage);
   }
   if (s.ok()) s = bag.close(&stage);
   if (s.ok()) s = stage.commit();
