@@ -1330,7 +1330,8 @@ void Analysis::waveletMeshPhase() {
   wavelet_phase_from_record = false;
   const bool given = !wopt.order_frequencies.empty();  // --order-freq
   wavelet_context_warning =
-      "mesh_phase not usable over the wavelet's samples (" + problem + "): " +
+      "mesh_phase not usable over the wavelet's samples (" + problem +
+      (wavelet_skip > 0 ? "; samples counted from the finite stretch's first" : "") + "): " +
       std::string(identification ? (given ? "the growth rates are taken from the gear parameters' "
                                             "speed profile instead (order frequencies: "
                                             "--order-freq)"
@@ -1353,7 +1354,13 @@ void Analysis::waveletFiniteStretch() {
     if (b - a > best_len) best_a = a, best_len = b - a;
     a = b;
   }
-  if (best_len == n || best_len == 0) return;  // (none finite: the validation says so)
+  if (best_len == n) return;
+  if (best_len == 0) {  // (the validation then fails, naming sample 0)
+    wavelet_stretch_warning =
+        "none of the wavelet's " + std::to_string(n) + " DTE samples is finite";
+    warn(wavelet_stretch_warning);
+    return;
+  }
   size_t bad = 0;
   for (double v : wavelet_dte) bad += std::isfinite(v) ? 0 : 1;
   std::ostringstream t;  // (9 digits: the same text whole and streamed, whose t0 differ by ulps)
@@ -1369,7 +1376,11 @@ void Analysis::waveletFiniteStretch() {
   wavelet_dte.erase(wavelet_dte.begin(), wavelet_dte.begin() + static_cast<std::ptrdiff_t>(best_a));
   wavelet_skip = best_a;
   wavelet_n = best_len;
-  wavelet_t0 += static_cast<double>(best_a) / wavelet_rate;
+  const double skip_t = static_cast<double>(best_a) / wavelet_rate;
+  wavelet_t0 += skip_t;
+  // --decay-region is measured from the wavelet record's first sample: onto the stretch's axis
+  // (a region before the stretch is then reported outside the record).
+  for (auto& r : wopt.decay_regions) r = {r.first - skip_t, r.second - skip_t};
 }
 
 int Analysis::waveletStep() {
@@ -1467,6 +1478,8 @@ int Analysis::write() {
   if (wavelet) {
     doc["wavelet"] =
         wres.ok() ? gd::waveletJson(wres) : nlohmann::json{{"error", wres.status.message()}};
+    if (!wres.ok() && !wavelet_stretch_warning.empty())
+      doc["wavelet"]["warnings"] = nlohmann::json::array({wavelet_stretch_warning});
     if (wres.ok()) {
       doc["wavelet"]["samples"] = wavelet_n;
       doc["wavelet"]["input"] = wavelet_input.empty() ? input : wavelet_input;

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iomanip>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -630,6 +631,40 @@ TEST(AnalyzeWavelet, ANanStretchLeavesTheLongestFiniteStretchValidated) {
   EXPECT_NEAR(mb.at("damping_ratio").get<double>(), ma.at("damping_ratio").get<double>(),
               0.05 * ma.at("damping_ratio").get<double>());
   EXPECT_NEAR(mb.at("t_start").get<double>(), ma.at("t_start").get<double>(), 1e-4);
+
+  // A stretch that starts later (50 NaN samples at 5 % too): --decay-region stays on the
+  // record's time axis, so the same region of the same decay gives the same mode.
+  std::string head_text = lines[0] + "\n";
+  const size_t head = n / 20;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    const size_t row = i - 1;
+    const bool nan_row = (row >= head && row < head + 50) || (row >= cut && row < cut + 50);
+    head_text += nan_row ? lines[i].substr(0, lines[i].find(',')) + ",nan" : lines[i];
+    head_text += "\n";
+  }
+  const fs::path head_csv = dir.path() / "head.csv", j3 = dir.path() / "region_clean.json",
+                 j4 = dir.path() / "region_head.json";
+  writeText(head_csv, head_text);
+  const double t0 = std::stod(lines[1].substr(0, lines[1].find(',')));
+  const double t_end = std::stod(lines.back().substr(0, lines.back().find(',')));
+  std::ostringstream region;
+  region << std::setprecision(17) << 0.1 * (t_end - t0) << "," << 0.4 * (t_end - t0);
+  const std::string opts = " --mode-freq " + std::to_string(ma.at("frequency_hz").get<double>()) +
+                           " --decay-region " + region.str() + " --output ";
+  r = analyze("--input " + td.string() + opts + j3.string(), dir.path());
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = analyze("--input " + head_csv.string() + opts + j4.string(), dir.path());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto c = nlohmann::json::parse(readText(j3)).at("wavelet");
+  const auto d = nlohmann::json::parse(readText(j4)).at("wavelet");
+  EXPECT_EQ(d.at("samples").get<size_t>(), cut - head - 50);
+  ASSERT_EQ(c.at("modes").size(), 1u);
+  ASSERT_EQ(d.at("modes").size(), 1u);
+  const auto &mc = c.at("modes")[0], &md = d.at("modes")[0];
+  EXPECT_NEAR(md.at("t_start").get<double>(), t0 + 0.1 * (t_end - t0), 2e-6);
+  EXPECT_NEAR(md.at("t_start").get<double>(), mc.at("t_start").get<double>(), 2e-6);
+  EXPECT_NEAR(md.at("sigma").get<double>(), mc.at("sigma").get<double>(),
+              0.02 * mc.at("sigma").get<double>());
 }
 
 }  // namespace
