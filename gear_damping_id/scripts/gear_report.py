@@ -235,13 +235,15 @@ class Report:
         rows = read_csv(os.path.join(self.tables, f"response_{formulation}_{model}.csv"))
         run = self.runs.get((formulation, model), {})
         fit = fval(run.get("response", {}).get("fit_percent"))
+        unmodeled = run.get("response", {}).get("unmodeled_samples") or 0
         t, y, yh = col(rows, "time"), col(rows, "observed"), col(rows, "modeled")
         fig, (a, r) = new_fig(2, height_ratios=[3, 1.3])
         a.plot(t * 1e3, y * 1e6, lw=1.2, label="observed")
         lim = np.nanmax(np.abs(y)) * 1e6
         diverged = np.nanmax(np.abs(yh)) * 1e6 > 3 * lim
         a.plot(t * 1e3, np.clip(yh * 1e6, -3 * lim, 3 * lim), "--", lw=1.0,
-               label=f"modeled, {label} (fit {fit:.1f} %)" + (", clipped" if diverged else ""))
+               label=f"modeled, {label} (fit {fit:.1f} %)" + (", clipped" if diverged else "")
+               + (f", {unmodeled} samples not modeled" if unmodeled else ""))
         a.set_ylim(-1.5 * lim if np.nanmin(y) < 0 else 0, 1.5 * lim)
         a.set_ylabel("DTE y [µm]")
         a.legend(loc="upper right", fontsize=8)

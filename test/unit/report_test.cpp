@@ -253,6 +253,44 @@ TEST(ReportStiffnessCurve, DrawsTheGreyboxShapeCurve) {
             std::string::npos);
 }
 
+// A response with samples not modeled (a NaN torque sample: response.unmodeled_samples, empty
+// fields in response_known_piecewise.csv) is drawn, with its gap, not refused.
+TEST(ReportResponse, DrawsAResponseWithUnmodeledSamples) {
+  gear_test::ScratchDir scratch("report_gap_test");
+  const fs::path dir = scratch.path(), res = dir / "result";
+  fs::create_directories(res);
+  ASSERT_EQ(gear_test::runTool("simulate",
+                               " --config " + kParams + " --duration 0.004 --output " +
+                                   (dir / "clean.csv").string(),
+                               dir)
+                .code,
+            0);
+  std::ifstream in(dir / "clean.csv");
+  std::ofstream out(res / "signal.csv");
+  std::string line;
+  for (int k = 0; std::getline(in, line); ++k) {
+    if (k == 1501) {  // sample 1500: the torque field (the fifth) NaN
+      size_t at = 0;
+      for (int f = 0; f < 4; ++f) at = line.find(',', at) + 1;
+      line = line.substr(0, at) + "nan" + line.substr(line.find(',', at));
+    }
+    out << line << "\n";
+  }
+  out.close();
+  const gear_test::ToolRun a = gear_test::runTool(
+      "analyze",
+      "--input " + (res / "signal.csv").string() + " --params " + kParams + " --output " +
+          (res / "result.json").string() + " --csv-out " + (res / "tables").string(),
+      dir);
+  ASSERT_EQ(a.code, 0) << a.err;
+  ASSERT_NE(gear_test::readText(res / "result.json").find("unmodeled_samples"), std::string::npos);
+  EXPECT_EQ(shell(kReport + res.string() + " -q >" + (dir / "out.txt").string() + " 2>&1"), 0)
+      << gear_test::readText(dir / "out.txt");
+  const fs::path fig = res / "report" / "fig09_response_piecewise.png";
+  ASSERT_TRUE(fs::is_regular_file(fig));
+  EXPECT_GT(fs::file_size(fig), 10000u);
+}
+
 TEST(ReportErrors, ExitsWithTwoWithoutAResult) {
   gear_test::ScratchDir scratch("report_missing_test");
   const fs::path out = scratch.path() / "out.txt";
