@@ -1346,9 +1346,9 @@ void Analysis::waveletMeshPhase() {
 // longest stretch without any, with a warning (the transform needs every sample).
 void Analysis::waveletFiniteStretch() {
   const size_t n = wavelet_dte.size();
-  size_t best_a = 0, best_len = 0;
+  size_t best_a = 0, best_len = 0, bad = 0;
   for (size_t a = 0; a < n;) {
-    while (a < n && !std::isfinite(wavelet_dte[a])) ++a;
+    for (; a < n && !std::isfinite(wavelet_dte[a]); ++a) ++bad;
     size_t b = a;
     while (b < n && std::isfinite(wavelet_dte[b])) ++b;
     if (b - a > best_len) best_a = a, best_len = b - a;
@@ -1361,8 +1361,6 @@ void Analysis::waveletFiniteStretch() {
     warn(wavelet_stretch_warning);
     return;
   }
-  size_t bad = 0;
-  for (double v : wavelet_dte) bad += std::isfinite(v) ? 0 : 1;
   std::ostringstream t;  // (9 digits: the same text whole and streamed, whose t0 differ by ulps)
   t << std::setprecision(9) << wavelet_t0 + static_cast<double>(best_a) / wavelet_rate;
   wavelet_stretch_warning =

@@ -134,17 +134,19 @@ struct ModeledResponse {
   Eigen::VectorXd modeled;    ///< [m]
   double nrmse = kNaN;        ///< ||y - yhat|| / ||y - mean(y)||
   double fit_percent = kNaN;  ///< 100 (1 - nrmse)
-  /// Samples of `modeled` left NaN: the re-simulation turned non-finite there (a NaN or absurd
-  /// input sample in a segment that is then not identifiable) and started again at the next
-  /// segment from its identified state. 0 when the response covers every sample.
+  /// Samples of `modeled` left NaN up to the next segment with an identified state, where the
+  /// re-simulation started again: it turned non-finite (a NaN or absurd input sample) or beyond
+  /// the plausible |DTE| of 1 m (a diverging estimate) there, or a segment had no state to start
+  /// from. 0 when the response covers every sample.
   Eigen::Index unmodeled = 0;
 };
 
 /// Computes the modeled response of `result` over the range of its segments. Where the simulation
-/// turns non-finite it is started again at the next segment (those samples NaN, counted in
-/// `unmodeled`). NotIdentifiable if no segment is identifiable or no sample could be modeled. With
-/// `fit_metrics` false, out->nrmse and out->fit_percent are left NaN (for a caller that sums its
-/// own fit over many responses, as `analyze` does for a record analysed streaming).
+/// turns non-finite or implausible it is started again at the next segment with an identified
+/// state (those samples NaN, counted in `unmodeled`). NotIdentifiable if no segment is identifiable
+/// or no sample could be modeled. With `fit_metrics` false, out->nrmse and out->fit_percent are
+/// left NaN (for a caller that sums its own fit over many responses, as `analyze` does for a record
+/// analysed streaming).
 gear_sim::Status modeledResponse(const SignalView& signal, const GearConstants& gear,
                                  const IdentificationResult& result, ModeledResponse* out,
                                  bool fit_metrics = true);

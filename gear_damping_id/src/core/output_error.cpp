@@ -3934,13 +3934,6 @@ Index firstImplausible(const double* y, Index n) {
   return i;
 }
 
-// Whether x[lo, hi) holds a value that is not finite (an input sample read as NaN).
-bool hasNonFinite(const double* x, Index lo, Index hi) {
-  long bad = 0;  // (an integer count vectorises)
-  for (Index i = lo; i < hi; ++i) bad += std::isfinite(x[i]) ? 0 : 1;
-  return bad != 0;
-}
-
 // Eq. (4) re-simulated over samples [begin, end) through the segments `seg` (the first starting
 // at `begin`) from `init`, into y_out[0, end - begin).
 gear_sim::Status simulateSegments(const SignalView& s, const GearConstants& gear,
@@ -4034,7 +4027,9 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
       bool bad = !(e.C > 0.0) || !(e.C * s.dt < 2.5) ||
                  (r.formulation == Formulation::Greybox && !(e.k_min > 0.0));
       for (const double* x : driving)
-        if (x != nullptr && !bad) bad = hasNonFinite(x, startOf(k), startOf(k + 1));
+        if (x != nullptr && !bad)
+          bad = !Eigen::Map<const Eigen::VectorXd>(x + startOf(k), startOf(k + 1) - startOf(k))
+                     .allFinite();
       risky[k] = bad ? 1 : 0;
     }
   };
@@ -4044,8 +4039,9 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
     const gear_sim::SdofState init =
         segmentState(s, r, seg[first], from, first == 0 && r.segments[0].identifiable);
     if (!std::isfinite(init.y) || !std::isfinite(init.v)) {  // no state: try the next segment
-      std::fill(y + (from - begin), y + (startOf(first + 1) - begin), kNaN);
-      out->unmodeled += startOf(first + 1) - from;
+      const Index next_start = startOf(first + 1);
+      std::fill(y + (from - begin), y + (next_start - begin), kNaN);
+      out->unmodeled += next_start - from;
       ++first;
       continue;
     }
@@ -4059,11 +4055,12 @@ gear_sim::Status modeledResponse(const SignalView& s, const GearConstants& gear,
     if (to - from == 1) {
       y[from - begin] = init.y;
     } else if (to > from) {
-      if (const gear_sim::Status e = simulateSegments(
-              s, gear, r,
-              std::vector<SegmentEstimate>(seg.begin() + static_cast<std::ptrdiff_t>(first),
-                                           seg.begin() + static_cast<std::ptrdiff_t>(stop)),
-              from, to, init, y + (from - begin));
+      std::vector<SegmentEstimate> part;  // (copied only when the part is not every segment)
+      if (first > 0 || stop < seg.size())
+        part.assign(seg.begin() + static_cast<std::ptrdiff_t>(first),
+                    seg.begin() + static_cast<std::ptrdiff_t>(stop));
+      if (const gear_sim::Status e = simulateSegments(s, gear, r, part.empty() ? seg : part, from,
+                                                      to, init, y + (from - begin));
           !e.ok())
         return e;
     }

@@ -287,8 +287,8 @@ void printRunTables(std::ostream& os, const std::vector<AnalysisRun>& runs) {
          << fmt(run.response.nrmse, 4);
       if (run.response.unmodeled > 0)
         os << " (" << run.response.unmodeled
-           << " samples not modeled: a non-finite value stopped the re-simulation up to the next "
-              "segment)";
+           << " samples not modeled: a bad input sample, a diverging estimate or a missing state "
+              "stopped the re-simulation up to the next segment)";
       os << "\n";
     } else {
       os << "  modeled response: not available (" << run.response_error << ")\n";

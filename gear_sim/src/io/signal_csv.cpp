@@ -151,7 +151,7 @@ namespace {
 // overflow (then refused, or read as NaN like "inf"), +-0 for an underflow (a negative
 // exponent, or no exponent and a zero integer part).
 std::from_chars_result parseNumber(const char* p, const char* end, double* v) {
-  const char* num = *p == '+' && p + 1 < end && p[1] != '+' && p[1] != '-' ? p + 1 : p;
+  const char* num = p + 1 < end && *p == '+' && p[1] != '+' && p[1] != '-' ? p + 1 : p;
   std::from_chars_result r = std::from_chars(num, end, *v);
   if (r.ec != std::errc::result_out_of_range) return r;
   const std::string_view s(num, static_cast<size_t>(r.ptr - num));
